@@ -1,0 +1,14 @@
+// SPDX-License-Identifier: Apache-2.0
+// Subcommands of the `texcache` program. Each Add*Command registers a CLI11 subcommand whose
+// callback stores its exit code in `exitCode`; user errors are thrown as texcache::InputError and
+// turned into a message + exit code 2 by main().
+#pragma once
+#include <CLI/CLI.hpp>
+
+namespace texcache::cli {
+
+void AddRenderCommand(CLI::App& app, int& exitCode);
+void AddCompareCommand(CLI::App& app, int& exitCode);
+void AddBenchCommand(CLI::App& app, int& exitCode);
+
+}  // namespace texcache::cli
