@@ -1,0 +1,174 @@
+// SPDX-License-Identifier: Apache-2.0
+// A fixed-size, direct-mapped, lock-free cache of caller-defined payloads keyed by TexelKey.
+//
+// Design note — ownership and threading
+// -------------------------------------
+// The cache is an array of slots, each {seq, key, payload}. It owns all memory, allocated once
+// at construction: capacityBytes / sizeof(Slot) slots, never more (the byte budget is a hard
+// bound). Payloads are stored as relaxed atomic 64-bit words, so concurrent readers and writers
+// never race in the C++ sense (ThreadSanitizer-clean) and a reader can never see a torn payload
+// it would accept.
+//
+// Each slot is a seqlock whose odd phase doubles as the "being shaded" state of Munkberg et al.
+// (Sec. 5): an entry is EMPTY (key == kEmpty, seq even), READY (key valid, seq even) or BUSY (seq
+// odd: the claiming thread is shading it; `key` says for which key).
+//   - Acquire(key): read seq (acquire). Odd -> Pending if the slot is busy with our key (another
+//     thread is shading it: defer and come back), else Conflict (shade without caching; we never
+//     wait for an unrelated key). Even and key matches -> copy the payload, then an acquire fence
+//     and re-read seq: unchanged means the copy is one consistent publication of *this* key (Hit);
+//     changed means a writer intervened: retry. Even and key differs -> CAS seq to odd; winning
+//     it claims the slot (evicting what was there) and the caller must Publish or Abandon.
+//   - Publish: store payload words, then seq+1 (release): readers that saw the new even seq see
+//     the whole payload. Abandon: key = kEmpty, seq+1.
+// So the hit path is two atomic loads of seq, one of key and the payload words: no lock, no
+// allocation, no virtual call. Synchronisation happens only when a thread claims a slot.
+//
+// Lifetime: the cache lives as long as its owner (e.g. across frames); Invalidate* evict entries
+// explicitly when the scene changes. Invalidation must not run while the same keys are being
+// shaded (call it between frames); it is still memory-safe if it does.
+#pragma once
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <type_traits>
+
+#include "texcache/texel_key.h"
+
+namespace texcache {
+
+/// Outcome of DirectMappedCache::Acquire.
+enum class AcquireResult : uint8_t {
+    Hit,       ///< payload copied out
+    Claimed,   ///< the slot is now ours (busy with our key): Publish or Abandon it
+    Pending,   ///< another thread is shading this key: defer, retry later
+    Conflict,  ///< the slot is busy with another key: shade without caching
+};
+
+/// Proof of a claimed slot, returned by Acquire and consumed by Publish/Abandon.
+struct SlotTicket {
+    size_t slot = ~size_t(0);
+    uint64_t seq = 0;   ///< the odd sequence number we set
+    bool evicted = false;  ///< the claim replaced another key's entry
+};
+
+template <typename T>
+class DirectMappedCache {
+    static_assert(std::is_trivially_copyable_v<T>, "cache payloads are copied word by word");
+    static constexpr size_t kWords = (sizeof(T) + 7) / 8;
+
+    struct Slot {
+        std::atomic<uint64_t> seq{0};
+        std::atomic<uint64_t> key{TexelKey::kEmpty};
+        std::atomic<uint64_t> words[kWords];
+    };
+
+public:
+    /// Bytes one entry costs (the unit of the capacity).
+    static constexpr size_t kSlotBytes = sizeof(Slot);
+
+    /// Allocates floor(capacityBytes / kSlotBytes) slots; at least one must fit.
+    explicit DirectMappedCache(size_t capacityBytes)
+        : numSlots_(capacityBytes / kSlotBytes),
+          slots_(std::make_unique<Slot[]>(numSlots_ ? numSlots_ : 1)) {
+        // 64-bit fast range reduction (Lemire): hash * n >> 64 needs no division.
+        for (size_t i = 0; i < numSlots_; ++i)
+            for (auto& w : slots_[i].words) w.store(0, std::memory_order_relaxed);
+    }
+
+    size_t NumSlots() const { return numSlots_; }
+    /// Bytes held by the slot array (never more than the capacity given).
+    size_t BytesUsed() const { return numSlots_ * kSlotBytes; }
+
+    /// Slot index for a hash (any 64-bit value; callers supply a well-mixed or scanline hash).
+    size_t SlotOf(uint64_t hash) const {
+        return size_t((static_cast<unsigned __int128>(hash) * numSlots_) >> 64);
+    }
+
+    /// Looks up `key` in slot SlotOf(hash): see the design note for the four outcomes.
+    AcquireResult Acquire(uint64_t key, uint64_t hash, T* out, SlotTicket* ticket) {
+        Slot& s = slots_[SlotOf(hash)];
+        for (;;) {
+            const uint64_t seq = s.seq.load(std::memory_order_acquire);
+            const uint64_t k = s.key.load(std::memory_order_relaxed);
+            if (seq & 1) return k == key ? AcquireResult::Pending : AcquireResult::Conflict;
+            if (k == key) {
+                uint64_t buf[kWords];
+                for (size_t i = 0; i < kWords; ++i) buf[i] = s.words[i].load(std::memory_order_relaxed);
+                std::atomic_thread_fence(std::memory_order_acquire);
+                if (s.seq.load(std::memory_order_relaxed) != seq) continue;  // a writer intervened
+                std::memcpy(static_cast<void*>(out), buf, sizeof(T));
+                return AcquireResult::Hit;
+            }
+            uint64_t expected = seq;
+            if (s.seq.compare_exchange_weak(expected, seq + 1, std::memory_order_acq_rel,
+                                            std::memory_order_relaxed)) {
+                s.key.store(key, std::memory_order_relaxed);
+                ticket->slot = size_t(&s - slots_.get());
+                ticket->seq = seq + 1;
+                ticket->evicted = k != TexelKey::kEmpty;
+                return AcquireResult::Claimed;
+            }
+        }
+    }
+
+    /// Read-only lookup: true and the payload on a hit; never claims.
+    bool Find(uint64_t key, uint64_t hash, T* out) const {
+        const Slot& s = slots_[SlotOf(hash)];
+        for (int attempt = 0; attempt < 4; ++attempt) {
+            const uint64_t seq = s.seq.load(std::memory_order_acquire);
+            if ((seq & 1) || s.key.load(std::memory_order_relaxed) != key) return false;
+            uint64_t buf[kWords];
+            for (size_t i = 0; i < kWords; ++i) buf[i] = s.words[i].load(std::memory_order_relaxed);
+            std::atomic_thread_fence(std::memory_order_acquire);
+            if (s.seq.load(std::memory_order_relaxed) != seq) continue;
+            std::memcpy(static_cast<void*>(out), buf, sizeof(T));
+            return true;
+        }
+        return false;
+    }
+
+    /// Stores the payload of a claimed slot and makes it visible.
+    void Publish(const SlotTicket& t, const T& value) {
+        Slot& s = slots_[t.slot];
+        uint64_t buf[kWords] = {};
+        std::memcpy(buf, static_cast<const void*>(&value), sizeof(T));
+        for (size_t i = 0; i < kWords; ++i) s.words[i].store(buf[i], std::memory_order_relaxed);
+        s.seq.store(t.seq + 1, std::memory_order_release);
+    }
+
+    /// Releases a claimed slot empty (e.g. the shader failed).
+    void Abandon(const SlotTicket& t) {
+        Slot& s = slots_[t.slot];
+        s.key.store(TexelKey::kEmpty, std::memory_order_relaxed);
+        s.seq.store(t.seq + 1, std::memory_order_release);
+    }
+
+    /// Evicts every entry whose key satisfies `pred(key)`; returns how many. Call between frames.
+    template <typename Pred>
+    size_t InvalidateIf(Pred pred) {
+        size_t n = 0;
+        for (size_t i = 0; i < numSlots_; ++i) {
+            Slot& s = slots_[i];
+            uint64_t seq = s.seq.load(std::memory_order_acquire);
+            const uint64_t k = s.key.load(std::memory_order_relaxed);
+            if ((seq & 1) || k == TexelKey::kEmpty || !pred(k)) continue;
+            if (!s.seq.compare_exchange_strong(seq, seq + 1, std::memory_order_acq_rel)) continue;
+            s.key.store(TexelKey::kEmpty, std::memory_order_relaxed);
+            s.seq.store(seq + 2, std::memory_order_release);
+            ++n;
+        }
+        return n;
+    }
+    /// Evicts everything.
+    size_t InvalidateAll() {
+        return InvalidateIf([](uint64_t) { return true; });
+    }
+
+private:
+    size_t numSlots_;
+    std::unique_ptr<Slot[]> slots_;
+};
+
+}  // namespace texcache

@@ -1,0 +1,58 @@
+// SPDX-License-Identifier: Apache-2.0
+// Shading grids of a mesh (per-face resolution and mip chain) and the filter footprint: the
+// (2r+1)^2 window of samples around a texel, continued across face edges.
+#pragma once
+#include <algorithm>
+#include <cstdint>
+#include <vector>
+
+#include "texcache/texel_key.h"
+#include "texcache/topology.h"
+
+namespace texcache {
+
+/// The shading grids of one mesh: Ptex topology + a square power-of-two grid per face whose
+/// texels have roughly equal world size, each with a mip chain down to 1x1. Global face ids are
+/// `faceOffset + ptexFace`, so several meshes can share one cache.
+class MeshGrids {
+public:
+    /// Builds topology and resolutions; throws InputError when the face ids would exceed the key.
+    MeshGrids(const ControlCage& cage, float texelSize, uint32_t faceOffset);
+
+    const PtexTopology& Topology() const { return topo_; }
+    uint32_t FaceOffset() const { return faceOffset_; }
+    int NumFaces() const { return topo_.NumPtexFaces(); }
+    /// log2 of the face's grid side at mip 0.
+    int Log2Res(int face) const { return log2Res_[face]; }
+    /// Number of mip levels of a face (mip 0 .. Log2Res).
+    int NumLevels(int face) const { return log2Res_[face] + 1; }
+    /// Grid side at a mip (levels past the chain clamp to 1).
+    int Res(int face, int mip) const { return 1 << std::max(0, log2Res_[face] - mip); }
+    /// Clamps a mip to the face's chain.
+    int ClampMip(int face, int mip) const { return std::clamp(mip, 0, int(log2Res_[face])); }
+
+private:
+    PtexTopology topo_;
+    std::vector<uint8_t> log2Res_;
+    uint32_t faceOffset_;
+};
+
+/// One sample of a footprint: its key, where it sits in its face, and its offset from the
+/// footprint's centre texel in centre-texel units.
+struct FootprintSample {
+    TexelKey key;
+    int16_t dx, dy;
+    float u, v;  ///< texel centre in its face's (u,v)
+};
+
+/// Collects the footprint of radius r around texel (face, mip, iu, iv) into `out` (cleared
+/// first; reuse the vector to avoid allocation). Faces are the mesh's local Ptex ids; keys carry
+/// global ids. Policy: a sample at offset (dx, dy) is reached by walking dx texels along u, then
+/// dy texels along the (possibly rotated) v axis, one texel at a time; crossing an edge lands in
+/// the first texel row of the neighbour, whose frame is turned to continue the same direction.
+/// Boundary and non-manifold edges end the walk (that sample is left out). Around extraordinary
+/// vertices two walks can reach the same texel; each sample is returned once (the first walk).
+void GatherFootprint(const MeshGrids& grids, int face, int mip, int iu, int iv, int radius,
+                     std::vector<FootprintSample>* out);
+
+}  // namespace texcache

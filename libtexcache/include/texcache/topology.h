@@ -1,0 +1,118 @@
+// SPDX-License-Identifier: Apache-2.0
+// Ptex-style face topology of a Catmull-Clark cage: every quad is one Ptex face, every n-gon is
+// split into n quad sub-faces with consecutive ids (OpenSubdiv's Far::PtexIndices convention).
+#pragma once
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "texcache/cage.h"
+
+namespace texcache {
+
+/// Ptex face ids of a control cage. Built once per mesh; immutable and thread-safe afterwards.
+class PtexTopology {
+public:
+    /// Builds the topology with OpenSubdiv; throws InputError for cages OpenSubdiv rejects.
+    explicit PtexTopology(const ControlCage& cage);
+    ~PtexTopology();
+    PtexTopology(PtexTopology&&) noexcept;
+    PtexTopology& operator=(PtexTopology&&) noexcept;
+
+    /// Number of Ptex faces (quads count 1, n-gons count n).
+    int NumPtexFaces() const { return int(ptexToCoarse_.size()); }
+    /// Number of coarse (cage) faces.
+    int NumCoarseFaces() const { return int(firstPtex_.size()) - 1; }
+    /// First Ptex id of a coarse face; an n-gon's sub-face i has id FirstPtexFace(f) + i.
+    int FirstPtexFace(int coarseFace) const { return firstPtex_[coarseFace]; }
+    /// True when the coarse face is a quad (one Ptex face, no sub-faces).
+    bool IsQuad(int coarseFace) const { return firstPtex_[coarseFace + 1] - firstPtex_[coarseFace] == 1; }
+    /// Coarse face a Ptex face belongs to.
+    int CoarseFace(int ptexFace) const { return ptexToCoarse_[ptexFace]; }
+    /// Sub-face index within its n-gon (0 for quads).
+    int SubFace(int ptexFace) const { return ptexFace - firstPtex_[ptexToCoarse_[ptexFace]]; }
+
+    /// What lies across one edge of a Ptex face. Edges are numbered as in Ptex: 0 (v=0), 1 (u=1),
+    /// 2 (v=1), 3 (u=0), counter-clockwise. A quad edge bordering an n-gon meets two sub-faces,
+    /// each covering half of it, hence up to two segments.
+    struct EdgeLink {
+        int8_t count = 0;    ///< 0: boundary or non-manifold edge (no neighbour)
+        int8_t edge[2] = {-1, -1};  ///< the neighbours' edge numbers
+        int face[2] = {-1, -1};     ///< the neighbours' Ptex ids
+        /// Extent of each neighbour segment along the shared cage edge, in the neighbour's own
+        /// counter-clockwise parameter (start, length); and of this edge in ours.
+        float segStart[2] = {0, 0}, segLength[2] = {1, 1};
+        float myStart = 0.0f, myLength = 1.0f;
+    };
+    /// Adjacency across edge `edge` (0..3) of a Ptex face.
+    const EdgeLink& Edge(int ptexFace, int edge) const { return edges_[size_t(ptexFace) * 4 + edge]; }
+
+    /// A point just outside edge `edge` of a Ptex face, at (u,v) in that face's (extended)
+    /// parameter, mapped into the neighbour: its face, (u,v), and the neighbour edge crossed.
+    /// False at boundaries. `outside` > 0 is how far beyond the edge the point is.
+    bool Cross(int ptexFace, int edge, float along, float outside, int* nbFace, float* nbU,
+               float* nbV, int* nbEdge, float* scale) const;
+
+    /// Valence of each coarse vertex (for tests and corner policies).
+    int Valence(int vertex) const { return valence_[vertex]; }
+
+private:
+    std::vector<int> firstPtex_;     // size numCoarseFaces + 1
+    std::vector<int> ptexToCoarse_;  // size numPtexFaces
+    std::vector<EdgeLink> edges_;    // 4 per Ptex face
+    std::vector<int> valence_;
+};
+
+/// Point on edge `edge` of a unit face at counter-clockwise parameter `along`, `inward` into the
+/// face (negative: outside): the face's (u,v).
+inline void EdgeToUv(int edge, float along, float inward, float* u, float* v) {
+    switch (edge & 3) {
+        case 0: *u = along, *v = inward; break;
+        case 1: *u = 1.0f - inward, *v = along; break;
+        case 2: *u = 1.0f - along, *v = 1.0f - inward; break;
+        default: *u = inward, *v = 1.0f - along; break;
+    }
+}
+/// Inverse of EdgeToUv.
+inline void UvToEdge(int edge, float u, float v, float* along, float* inward) {
+    switch (edge & 3) {
+        case 0: *along = u, *inward = v; break;
+        case 1: *along = v, *inward = 1.0f - u; break;
+        case 2: *along = 1.0f - u, *inward = 1.0f - v; break;
+        default: *along = 1.0f - v, *inward = u; break;
+    }
+}
+
+/// Per-Ptex-face base shading resolution (log2 of the grid side at mip 0), chosen so texels have
+/// about `texelSize` world size: side = 2^round(log2(sqrt(area) / texelSize)), clamped to
+/// [0, maxLog2]. Areas come from the cage (sub-face quads for n-gons).
+std::vector<uint8_t> ComputeFaceResolutions(const ControlCage& cage, const PtexTopology& topo,
+                                            float texelSize, int maxLog2 = 13);
+
+/// A point on the limit surface with its derivatives in Ptex (u,v) of the face it lies on.
+struct LimitPoint {
+    std::array<float, 3> P, dPdu, dPdv;
+};
+
+/// Reference limit-surface evaluator built on OpenSubdiv Far (adaptive refinement + patch table).
+/// Independent of any ray tracer: renderers with their own intersector, and tests of the Embree
+/// path, query (ptex face, u, v) here. Thread-safe for concurrent Eval calls.
+class LimitSurface {
+public:
+    /// Builds patches for the cage (positions are copied); throws InputError on bad topology.
+    explicit LimitSurface(const ControlCage& cage, int maxIsolationLevel = 6);
+    ~LimitSurface();
+    LimitSurface(LimitSurface&&) noexcept;
+    LimitSurface& operator=(LimitSurface&&) noexcept;
+
+    /// Limit position and derivatives at (u,v) in [0,1]^2 of a Ptex face; derivatives are with
+    /// respect to that face's own (u,v), also on n-gon sub-faces. False for holes/invalid faces.
+    bool Eval(int ptexFace, float u, float v, LimitPoint* out) const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace texcache

@@ -1,0 +1,131 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "texcache/footprint.h"
+
+#include <cmath>
+#include <string>
+
+#include "texcache/error.h"
+
+namespace texcache {
+
+MeshGrids::MeshGrids(const ControlCage& cage, float texelSize, uint32_t faceOffset)
+    : topo_(cage), faceOffset_(faceOffset) {
+    if (!(texelSize > 0.0f) || !std::isfinite(texelSize))
+        throw InputError(cage.sourcePath, "texel size must be a positive number");
+    if (uint64_t(faceOffset) + uint64_t(topo_.NumPtexFaces()) > TexelKey::kMaxFaces)
+        throw InputError(cage.sourcePath, std::to_string(uint64_t(faceOffset) + topo_.NumPtexFaces()) +
+                                              " Ptex faces exceed the cache key's range of " +
+                                              std::to_string(TexelKey::kMaxFaces));
+    log2Res_ = ComputeFaceResolutions(cage, topo_, texelSize, TexelKey::kCoordBits - 1);
+}
+
+namespace {
+
+// Tangent (counter-clockwise) and inward normal of each Ptex edge in (u,v).
+constexpr int kTangent[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
+constexpr int kInward[4][2] = {{0, 1}, {-1, 0}, {0, -1}, {1, 0}};
+
+// A walker: a face, a position in its texel units at the footprint's mip, and the footprint's
+// u and v axes expressed in this face's frame (axis-aligned unit vectors).
+struct Walker {
+    int face, mip, res;
+    float x, y;
+    int axis[2][2];  // axis[0] = footprint u direction, axis[1] = footprint v direction
+};
+
+// Moves one texel along footprint axis `a`; false when a boundary ends the walk.
+bool Step(const MeshGrids& g, int footprintMip, Walker* w, int a, int sign) {
+    const int dx = sign * w->axis[a][0], dy = sign * w->axis[a][1];
+    w->x += float(dx);
+    w->y += float(dy);
+    if (w->x >= 0.0f && w->x < float(w->res) && w->y >= 0.0f && w->y < float(w->res)) return true;
+    // Which edge we left through (only one coordinate moved).
+    const int edge = dx > 0 ? 1 : dx < 0 ? 3 : dy > 0 ? 2 : 0;
+    float along, inward;
+    UvToEdge(edge, w->x / float(w->res), w->y / float(w->res), &along, &inward);
+    int nbFace, nbEdge;
+    float u, v, scale;
+    if (!g.Topology().Cross(w->face, edge, along, -inward, &nbFace, &u, &v, &nbEdge, &scale)) return false;
+    float nbAlong, nbInward;
+    UvToEdge(nbEdge, u, v, &nbAlong, &nbInward);
+    const int mip = g.ClampMip(nbFace, footprintMip);
+    const int res = g.Res(nbFace, mip);
+    // Land in the centre of the neighbour's first texel row along the shared edge.
+    EdgeToUv(nbEdge, nbAlong, 0.5f / float(res), &u, &v);
+    // Turn the frame: D = a T_k + b N_k in ours is -a T_k' - b N_k' in the neighbour's.
+    for (auto& ax : w->axis) {
+        const int ta = ax[0] * kTangent[edge][0] + ax[1] * kTangent[edge][1];
+        const int nb = ax[0] * kInward[edge][0] + ax[1] * kInward[edge][1];
+        ax[0] = -ta * kTangent[nbEdge][0] - nb * kInward[nbEdge][0];
+        ax[1] = -ta * kTangent[nbEdge][1] - nb * kInward[nbEdge][1];
+    }
+    w->face = nbFace;
+    w->mip = mip;
+    w->res = res;
+    w->x = u * float(res);
+    w->y = v * float(res);
+    return true;
+}
+
+FootprintSample Emit(const MeshGrids& g, const Walker& w, int dx, int dy) {
+    const int iu = std::clamp(int(w.x), 0, w.res - 1), iv = std::clamp(int(w.y), 0, w.res - 1);
+    FootprintSample s;
+    s.key.face = g.FaceOffset() + uint32_t(w.face);
+    s.key.mip = uint8_t(w.mip);
+    s.key.iu = uint16_t(iu);
+    s.key.iv = uint16_t(iv);
+    s.dx = int16_t(dx);
+    s.dy = int16_t(dy);
+    s.u = TexelCenter(iu, w.res);
+    s.v = TexelCenter(iv, w.res);
+    return s;
+}
+
+}  // namespace
+
+void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
+                     std::vector<FootprintSample>* out) {
+    out->clear();
+    mip = g.ClampMip(face, mip);
+    const int res = g.Res(face, mip);
+    iu = std::clamp(iu, 0, res - 1);
+    iv = std::clamp(iv, 0, res - 1);
+    const uint32_t gface = g.FaceOffset() + uint32_t(face);
+    if (iu - radius >= 0 && iu + radius < res && iv - radius >= 0 && iv + radius < res) {
+        // Fast path: the window lies inside the face.
+        for (int dy = -radius; dy <= radius; ++dy)
+            for (int dx = -radius; dx <= radius; ++dx) {
+                FootprintSample s;
+                s.key = {gface, uint8_t(mip), uint16_t(iu + dx), uint16_t(iv + dy)};
+                s.dx = int16_t(dx), s.dy = int16_t(dy);
+                s.u = TexelCenter(iu + dx, res);
+                s.v = TexelCenter(iv + dy, res);
+                out->push_back(s);
+            }
+        return;
+    }
+    // Walk: u first (a row of walkers, one per dx), then v from each of them.
+    const Walker centre{face, mip, res, float(iu) + 0.5f, float(iv) + 0.5f, {{1, 0}, {0, 1}}};
+    for (int sign : {-1, 1}) {
+        Walker row = centre;
+        for (int dx = (sign < 0 ? 0 : 1); dx <= radius; ++dx) {
+            if (dx > 0 && !Step(g, mip, &row, 0, sign)) break;
+            for (int vs : {-1, 1}) {
+                Walker col = row;
+                for (int dy = (vs < 0 ? 0 : 1); dy <= radius; ++dy) {
+                    if (dy > 0 && !Step(g, mip, &col, 1, vs)) break;
+                    out->push_back(Emit(g, col, sign * dx, vs * dy));
+                }
+            }
+        }
+    }
+    // Around extraordinary vertices two walks can end in the same texel: keep the first.
+    std::stable_sort(out->begin(), out->end(), [](const FootprintSample& a, const FootprintSample& b) {
+        return a.key.Pack() < b.key.Pack();
+    });
+    out->erase(std::unique(out->begin(), out->end(),
+                           [](const FootprintSample& a, const FootprintSample& b) { return a.key == b.key; }),
+               out->end());
+}
+
+}  // namespace texcache

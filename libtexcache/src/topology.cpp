@@ -1,0 +1,302 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "texcache/topology.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <opensubdiv/far/patchMap.h>
+#include <opensubdiv/far/patchTableFactory.h>
+#include <opensubdiv/far/primvarRefiner.h>
+#include <opensubdiv/far/ptexIndices.h>
+#include <opensubdiv/far/topologyDescriptor.h>
+
+#include "osd_refiner.h"
+#include "texcache/error.h"
+
+namespace texcache {
+namespace Far = OpenSubdiv::Far;
+namespace Sdc = OpenSubdiv::Sdc;
+
+namespace internal {
+
+std::unique_ptr<Far::TopologyRefiner> CreateRefiner(const ControlCage& cage) {
+    Far::TopologyDescriptor desc;
+    desc.numVertices = cage.numVertices();
+    desc.numFaces = cage.numFaces();
+    desc.numVertsPerFace = cage.faceVertexCounts.data();
+    desc.vertIndicesPerFace = cage.faceVertexIndices.data();
+    std::vector<int> creasePairs;
+    creasePairs.reserve(cage.creaseEdges.size() * 2);
+    for (const auto& e : cage.creaseEdges) creasePairs.insert(creasePairs.end(), {e[0], e[1]});
+    desc.numCreases = int(cage.creaseEdges.size());
+    desc.creaseVertexIndexPairs = creasePairs.data();
+    desc.creaseWeights = cage.creaseWeights.data();
+    desc.numCorners = int(cage.cornerVertices.size());
+    desc.cornerVertexIndices = cage.cornerVertices.data();
+    desc.cornerWeights = cage.cornerWeights.data();
+    desc.numHoles = int(cage.holes.size());
+    desc.holeIndices = cage.holes.data();
+
+    Sdc::Options options;
+    // Always explicit: OSD defaults to VTX_BOUNDARY_NONE, which turns every boundary face into a hole.
+    switch (cage.boundary) {
+        case BoundaryInterpolation::None:
+            options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_NONE);
+            break;
+        case BoundaryInterpolation::EdgeAndCorner:
+            options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_AND_CORNER);
+            break;
+        case BoundaryInterpolation::EdgeOnly:
+            options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
+            break;
+    }
+    using Factory = Far::TopologyRefinerFactory<Far::TopologyDescriptor>;
+    std::unique_ptr<Far::TopologyRefiner> refiner(
+        Factory::Create(desc, Factory::Options(Sdc::SCHEME_CATMARK, options)));
+    if (!refiner) throw InputError(cage.sourcePath, "OpenSubdiv rejected the cage topology");
+    return refiner;
+}
+
+}  // namespace internal
+
+namespace {
+// The Ptex edges that cover cage edge `a` (from face vertex a to a+1) of a coarse face, in the
+// face's counter-clockwise direction: the quad's edge a, or for an n-gon the first half on
+// sub-face a (its edge 0) and the second half on sub-face a+1 (its edge 3).
+struct Segment {
+    int ptex, edge;
+    float start, length;
+};
+int SideSegments(int firstPtex, int numVerts, int a, Segment out[2]) {
+    if (numVerts == 4) {
+        out[0] = {firstPtex, a, 0.0f, 1.0f};
+        return 1;
+    }
+    out[0] = {firstPtex + a, 0, 0.0f, 0.5f};
+    out[1] = {firstPtex + (a + 1) % numVerts, 3, 0.5f, 0.5f};
+    return 2;
+}
+}  // namespace
+
+PtexTopology::PtexTopology(const ControlCage& cage) {
+    auto refiner = internal::CreateRefiner(cage);
+    Far::PtexIndices ptex(*refiner);
+    const int nf = cage.numFaces();
+    firstPtex_.resize(nf + 1);
+    for (int f = 0; f < nf; ++f) firstPtex_[f] = ptex.GetFaceId(f);
+    firstPtex_[nf] = ptex.GetNumFaces();
+    ptexToCoarse_.resize(ptex.GetNumFaces());
+    for (int f = 0; f < nf; ++f)
+        for (int p = firstPtex_[f]; p < firstPtex_[f + 1]; ++p) ptexToCoarse_[p] = f;
+
+    const Far::TopologyLevel& level = refiner->GetLevel(0);
+    valence_.resize(level.GetNumVertices());
+    for (int v = 0; v < level.GetNumVertices(); ++v) valence_[v] = level.GetVertexEdges(v).size();
+    std::vector<char> hole(nf, 0);
+    for (int h : cage.holes)
+        if (h >= 0 && h < nf) hole[h] = 1;
+
+    edges_.assign(size_t(ptex.GetNumFaces()) * 4, EdgeLink{});
+    for (int f = 0; f < nf; ++f) {
+        if (hole[f]) continue;
+        const auto fVerts = level.GetFaceVertices(f);
+        const auto fEdges = level.GetFaceEdges(f);
+        const int n = fVerts.size();
+        // Edges inside an n-gon: sub-face i's edge 1 meets sub-face i+1's edge 2.
+        if (n != 4) {
+            for (int i = 0; i < n; ++i) {
+                const int a = firstPtex_[f] + i, b = firstPtex_[f] + (i + 1) % n;
+                EdgeLink& ab = edges_[size_t(a) * 4 + 1];
+                ab.count = 1, ab.face[0] = b, ab.edge[0] = 2;
+                EdgeLink& ba = edges_[size_t(b) * 4 + 2];
+                ba.count = 1, ba.face[0] = a, ba.edge[0] = 1;
+            }
+        }
+        for (int a = 0; a < n; ++a) {
+            const int e = fEdges[a];
+            const auto eFaces = level.GetEdgeFaces(e);
+            if (eFaces.size() != 2) continue;  // boundary or non-manifold: no neighbour
+            const int g = eFaces[0] == f ? eFaces[1] : eFaces[0];
+            if (g == f || hole[g]) continue;
+            const auto gVerts = level.GetFaceVertices(g);
+            const auto gEdges = level.GetFaceEdges(g);
+            const int m = gVerts.size();
+            int b = -1;
+            for (int k = 0; k < m; ++k)
+                if (gEdges[k] == e) b = k;
+            // Consistently oriented neighbours traverse the shared edge in opposite directions;
+            // anything else (non-orientable) is treated as a boundary.
+            if (b < 0 || gVerts[b] != fVerts[(a + 1) % n] || gVerts[(b + 1) % m] != fVerts[a]) continue;
+            Segment mine[2], theirs[2];
+            const int nm = SideSegments(firstPtex_[f], n, a, mine);
+            const int nt = SideSegments(firstPtex_[g], m, b, theirs);
+            for (int i = 0; i < nm; ++i) {
+                EdgeLink& link = edges_[size_t(mine[i].ptex) * 4 + mine[i].edge];
+                link.myStart = mine[i].start;
+                link.myLength = mine[i].length;
+                // Our segment [s, s+l] is [1-s-l, 1-s] in the neighbour's parameter.
+                const float lo = 1.0f - mine[i].start - mine[i].length, hi = 1.0f - mine[i].start;
+                for (int j = 0; j < nt; ++j) {
+                    const float tlo = theirs[j].start, thi = theirs[j].start + theirs[j].length;
+                    if (std::min(hi, thi) - std::max(lo, tlo) <= 1e-6f) continue;
+                    const int c = link.count++;
+                    link.face[c] = theirs[j].ptex;
+                    link.edge[c] = int8_t(theirs[j].edge);
+                    link.segStart[c] = theirs[j].start;
+                    link.segLength[c] = theirs[j].length;
+                }
+            }
+        }
+    }
+}
+
+bool PtexTopology::Cross(int ptexFace, int edge, float along, float outside, int* nbFace,
+                         float* nbU, float* nbV, int* nbEdge, float* scale) const {
+    const EdgeLink& link = Edge(ptexFace, edge);
+    if (link.count == 0) return false;
+    // To the shared cage edge's parameter, across it, then into the neighbour segment.
+    const float t = 1.0f - (link.myStart + std::clamp(along, 0.0f, 1.0f) * link.myLength);
+    int j = 0;
+    if (link.count == 2 && t > link.segStart[1] - 1e-7f) j = 1;
+    if (link.count == 2 && t < link.segStart[0] + link.segLength[0]) j = 0;
+    const float s = link.myLength / link.segLength[j];
+    const float tn = std::clamp((t - link.segStart[j]) / link.segLength[j], 0.0f, 1.0f);
+    *nbFace = link.face[j];
+    *nbEdge = link.edge[j];
+    *scale = s;
+    EdgeToUv(link.edge[j], tn, outside * s, nbU, nbV);
+    return true;
+}
+
+std::vector<uint8_t> ComputeFaceResolutions(const ControlCage& cage, const PtexTopology& topo,
+                                            float texelSize, int maxLog2) {
+    std::vector<uint8_t> res(topo.NumPtexFaces(), 0);
+    auto P = [&](int i) { return cage.positions[cage.faceVertexIndices[i]]; };
+    auto quadArea = [](const std::array<float, 3>& a, const std::array<float, 3>& b,
+                       const std::array<float, 3>& c, const std::array<float, 3>& d) {
+        const float d1[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const float d2[3] = {d[0] - b[0], d[1] - b[1], d[2] - b[2]};
+        const float x = d1[1] * d2[2] - d1[2] * d2[1], y = d1[2] * d2[0] - d1[0] * d2[2],
+                    z = d1[0] * d2[1] - d1[1] * d2[0];
+        return 0.5f * std::sqrt(x * x + y * y + z * z);
+    };
+    int offset = 0;
+    for (int f = 0; f < cage.numFaces(); ++f) {
+        const int n = cage.faceVertexCounts[f];
+        std::vector<float> areas;
+        if (n == 4) {
+            areas.push_back(quadArea(P(offset), P(offset + 1), P(offset + 2), P(offset + 3)));
+        } else {
+            std::array<float, 3> c{0, 0, 0};
+            for (int i = 0; i < n; ++i)
+                for (int k = 0; k < 3; ++k) c[k] += P(offset + i)[k] / float(n);
+            auto mid = [&](int i, int j) {
+                std::array<float, 3> m;
+                for (int k = 0; k < 3; ++k) m[k] = 0.5f * (P(offset + i)[k] + P(offset + j)[k]);
+                return m;
+            };
+            for (int i = 0; i < n; ++i)
+                areas.push_back(quadArea(P(offset + i), mid(i, (i + 1) % n), c, mid((i + n - 1) % n, i)));
+        }
+        for (size_t i = 0; i < areas.size(); ++i) {
+            const float side = std::sqrt(areas[i]) / texelSize;
+            const float l = side > 1.0f ? std::round(std::log2(side)) : 0.0f;
+            res[topo.FirstPtexFace(f) + int(i)] = uint8_t(std::clamp(int(l), 0, maxLog2));
+        }
+        offset += n;
+    }
+    return res;
+}
+PtexTopology::~PtexTopology() = default;
+PtexTopology::PtexTopology(PtexTopology&&) noexcept = default;
+PtexTopology& PtexTopology::operator=(PtexTopology&&) noexcept = default;
+
+// ---------------------------------------------------------------------------------------------
+// LimitSurface: adaptive refinement to isolate irregular features, Gregory end caps, then
+// patch-map lookups. All vertices (refined + local points) are precomputed so Eval only gathers.
+
+struct LimitSurface::Impl {
+    std::unique_ptr<Far::PatchTable> patches;
+    std::unique_ptr<Far::PatchMap> map;
+    std::vector<std::array<float, 3>> points;  // refined vertices, then local points
+    std::vector<char> nonQuadPtex;             // per ptex face: belongs to an n-gon
+};
+
+namespace {
+struct Vertex {
+    float p[3];
+    void Clear(void* = nullptr) { p[0] = p[1] = p[2] = 0.0f; }
+    void AddWithWeight(const Vertex& s, float w) {
+        p[0] += w * s.p[0];
+        p[1] += w * s.p[1];
+        p[2] += w * s.p[2];
+    }
+};
+}  // namespace
+
+LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
+    : impl_(std::make_unique<Impl>()) {
+    auto refiner = internal::CreateRefiner(cage);
+    refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(maxIsolationLevel));
+
+    Far::PatchTableFactory::Options options(maxIsolationLevel);
+    options.endCapType = Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS;
+    impl_->patches.reset(Far::PatchTableFactory::Create(*refiner, options));
+    impl_->map = std::make_unique<Far::PatchMap>(*impl_->patches);
+
+    const int numRefined = refiner->GetNumVerticesTotal();
+    const Far::StencilTable* local = impl_->patches->GetLocalPointStencilTable();
+    const int numLocal = local ? local->GetNumStencils() : 0;
+    std::vector<Vertex> verts(numRefined + numLocal);
+    for (int i = 0; i < cage.numVertices(); ++i)
+        for (int k = 0; k < 3; ++k) verts[i].p[k] = cage.positions[i][k];
+    Far::PrimvarRefiner primvar(*refiner);
+    Vertex* src = verts.data();
+    for (int level = 1; level <= refiner->GetMaxLevel(); ++level) {
+        Vertex* dst = src + refiner->GetLevel(level - 1).GetNumVertices();
+        primvar.Interpolate(level, src, dst);
+        src = dst;
+    }
+    if (local) local->UpdateValues(verts.data(), verts.data() + numRefined);
+    impl_->points.resize(verts.size());
+    for (size_t i = 0; i < verts.size(); ++i)
+        impl_->points[i] = {verts[i].p[0], verts[i].p[1], verts[i].p[2]};
+
+    PtexTopology topo(cage);
+    impl_->nonQuadPtex.resize(topo.NumPtexFaces());
+    for (int p = 0; p < topo.NumPtexFaces(); ++p)
+        impl_->nonQuadPtex[p] = !topo.IsQuad(topo.CoarseFace(p));
+}
+LimitSurface::~LimitSurface() = default;
+LimitSurface::LimitSurface(LimitSurface&&) noexcept = default;
+LimitSurface& LimitSurface::operator=(LimitSurface&&) noexcept = default;
+
+bool LimitSurface::Eval(int ptexFace, float u, float v, LimitPoint* out) const {
+    if (ptexFace < 0 || ptexFace >= int(impl_->nonQuadPtex.size())) return false;
+    const Far::PatchTable::PatchHandle* h = impl_->map->FindPatch(ptexFace, u, v);
+    if (!h) return false;  // hole
+    float wP[20], wDu[20], wDv[20];
+    impl_->patches->EvaluateBasis(*h, u, v, wP, wDu, wDv);
+    Far::ConstIndexArray cvs = impl_->patches->GetPatchVertices(*h);
+    LimitPoint r{};
+    for (int i = 0; i < cvs.size(); ++i) {
+        const auto& p = impl_->points[cvs[i]];
+        for (int k = 0; k < 3; ++k) {
+            r.P[k] += wP[i] * p[k];
+            r.dPdu[k] += wDu[i] * p[k];
+            r.dPdv[k] += wDv[i] * p[k];
+        }
+    }
+    // OSD 3.5 normalizes derivatives on n-gon sub-faces to a domain twice as large as the
+    // sub-face's own (u,v) (measured against finite differences): bring them to the sub-face.
+    if (impl_->nonQuadPtex[ptexFace]) {
+        for (int k = 0; k < 3; ++k) {
+            r.dPdu[k] *= 0.5f;
+            r.dPdv[k] *= 0.5f;
+        }
+    }
+    *out = r;
+    return true;
+}
+
+}  // namespace texcache
