@@ -31,9 +31,12 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <string>
+#include <algorithm>
 #include <memory>
 #include <type_traits>
 
+#include "texcache/error.h"
 #include "texcache/texel_key.h"
 
 namespace texcache {
@@ -53,6 +56,8 @@ struct SlotTicket {
     bool evicted = false;  ///< the claim replaced another key's entry
 };
 
+__extension__ typedef unsigned __int128 Uint128;  // GCC/Clang: the 64x64->128 multiply
+
 template <typename T>
 class DirectMappedCache {
     static_assert(std::is_trivially_copyable_v<T>, "cache payloads are copied word by word");
@@ -70,9 +75,13 @@ public:
 
     /// Allocates floor(capacityBytes / kSlotBytes) slots; at least one must fit.
     explicit DirectMappedCache(size_t capacityBytes)
-        : numSlots_(capacityBytes / kSlotBytes),
-          slots_(std::make_unique<Slot[]>(numSlots_ ? numSlots_ : 1)) {
-        // 64-bit fast range reduction (Lemire): hash * n >> 64 needs no division.
+        : numSlots_(std::min<size_t>(capacityBytes / kSlotBytes, size_t(UINT32_MAX))),
+          fastmod_(~uint64_t(0) / std::max<uint64_t>(numSlots_, 1) + 1),
+          slots_(std::make_unique<Slot[]>(std::max<size_t>(numSlots_, 1))) {
+        if (numSlots_ == 0)
+            throw InputError("cache", "a capacity of " + std::to_string(capacityBytes) +
+                                          " bytes holds no entry (one entry takes " +
+                                          std::to_string(kSlotBytes) + " bytes)");
         for (size_t i = 0; i < numSlots_; ++i)
             for (auto& w : slots_[i].words) w.store(0, std::memory_order_relaxed);
     }
@@ -81,9 +90,12 @@ public:
     /// Bytes held by the slot array (never more than the capacity given).
     size_t BytesUsed() const { return numSlots_ * kSlotBytes; }
 
-    /// Slot index for a hash (any 64-bit value; callers supply a well-mixed or scanline hash).
+    /// Slot index: the low 32 bits of `hash` modulo the slot count. Callers use a scanline hash
+    /// (face/mip mixed, plus iv * res + iu) so that neighbouring texels never collide with each
+    /// other. Lemire's fastmod: a multiply instead of a division on the hit path.
     size_t SlotOf(uint64_t hash) const {
-        return size_t((static_cast<unsigned __int128>(hash) * numSlots_) >> 64);
+        const uint64_t low = fastmod_ * uint32_t(hash);
+        return size_t((static_cast<Uint128>(low) * numSlots_) >> 64);
     }
 
     /// Looks up `key` in slot SlotOf(hash): see the design note for the four outcomes.
@@ -168,6 +180,7 @@ public:
 
 private:
     size_t numSlots_;
+    uint64_t fastmod_;
     std::unique_ptr<Slot[]> slots_;
 };
 

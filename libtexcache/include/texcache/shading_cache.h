@@ -1,0 +1,347 @@
+// SPDX-License-Identifier: Apache-2.0
+// The two-level texture-space shading cache of Munkberg et al. 2016 (Sec. 4-5): a texel cache of
+// filtered results over a sample cache of shaded samples, on the Ptex grids of subdivision meshes.
+//
+// A renderer calls Lookup() at a ray hit with the hit's Ptex face, (u,v) and ray differentials,
+// a sample shader and a reconstruction filter (any callables; resolved at compile time, so there is
+// no virtual call or allocation per lookup):
+//   shade(const SampleRequest&) -> Sample      shades one sample at a texel centre
+//   filter(const FilterInput<Sample>&) -> Texel  reconstructs the centre texel from its footprint
+// See examples/embed_cache for a complete shader in a few dozen lines.
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "texcache/direct_mapped_cache.h"
+#include "texcache/error.h"
+#include "texcache/footprint.h"
+
+namespace texcache {
+
+/// Settings of a ShadingCache; Validate() rejects impossible values with a clear message.
+struct CacheSettings {
+    size_t sampleCacheBytes = size_t(64) << 20;
+    size_t texelCacheBytes = size_t(16) << 20;
+    float lodBias = 0.0f;        ///< added to eq. 1's level (Sec. 6.2 shader LOD)
+    bool referenceMode = false;  ///< unbounded caches: every sample and texel kept (overshading baseline)
+
+    /// Throws InputError naming the setting when a value is out of range.
+    void Validate() const {
+        constexpr size_t kMaxBytes = size_t(1) << 40;  // 1 TiB: anything larger is a typo
+        if (sampleCacheBytes == 0 || sampleCacheBytes > kMaxBytes)
+            throw InputError("sample cache size", "must be between 1 byte and 1 TiB, got " +
+                                                      std::to_string(sampleCacheBytes) + " bytes");
+        if (texelCacheBytes == 0 || texelCacheBytes > kMaxBytes)
+            throw InputError("texel cache size", "must be between 1 byte and 1 TiB, got " +
+                                                     std::to_string(texelCacheBytes) + " bytes");
+        if (!(lodBias >= -float(TexelKey::kMaxMipLevels) && lodBias <= float(TexelKey::kMaxMipLevels)))
+            throw InputError("lod bias", "must be within [-16, 16] (the mip chain has at most 16 levels), got " +
+                                             std::to_string(lodBias));
+    }
+};
+
+/// Per-thread counters (plain integers: each render thread owns one; merge them at the end).
+struct CacheStats {
+    uint64_t lookups = 0, texelHits = 0, texelMisses = 0, texelEvictions = 0, texelUncached = 0;
+    uint64_t sampleLookups = 0, sampleHits = 0, samplesShaded = 0, sampleEvictions = 0;
+    uint64_t deferrals = 0, waits = 0, samplesUncached = 0;
+
+    void Merge(const CacheStats& o) {
+        lookups += o.lookups, texelHits += o.texelHits, texelMisses += o.texelMisses;
+        texelEvictions += o.texelEvictions, texelUncached += o.texelUncached;
+        sampleLookups += o.sampleLookups, sampleHits += o.sampleHits;
+        samplesShaded += o.samplesShaded, sampleEvictions += o.sampleEvictions;
+        deferrals += o.deferrals, waits += o.waits, samplesUncached += o.samplesUncached;
+    }
+    double TexelHitRate() const { return lookups ? double(texelHits) / double(lookups) : 0.0; }
+};
+
+/// Where the sample shader is asked to shade: a texel centre of a mesh's Ptex face.
+struct SampleRequest {
+    int mesh;
+    int face;  ///< the mesh's local Ptex face
+    int mip;
+    float u, v;  ///< texel centre, eq. 2
+    TexelKey key;
+};
+
+/// A ray hit as the cache sees it.
+struct CacheHit {
+    int mesh;
+    int face;  ///< local Ptex face
+    float u, v;
+    float dudx, dvdx, dudy, dvdy;  ///< Ptex-space ray differentials per pixel
+};
+
+/// What a reconstruction filter gets: the footprint's samples (same order in both spans; the
+/// centre texel is `centre`), and the centre's request.
+template <typename Sample>
+struct FilterInput {
+    std::span<const FootprintSample> taps;
+    std::span<const Sample> samples;
+    int centre;  ///< index of the centre texel in taps/samples (always present)
+    SampleRequest request;
+};
+
+namespace internal {
+
+/// The reference-mode store: unbounded, sharded hash maps under mutexes. Slow on purpose-free
+/// paths only; it exists to count how much the bounded caches re-shade.
+template <typename T>
+class UnboundedCache {
+public:
+    AcquireResult Acquire(uint64_t key, T* out) {
+        Shard& s = shards_[Mix(key) % kShards];
+        std::lock_guard<std::mutex> lock(s.m);
+        auto [it, inserted] = s.map.try_emplace(key);
+        if (inserted) return AcquireResult::Claimed;
+        if (!it->second.ready) return AcquireResult::Pending;
+        *out = it->second.value;
+        return AcquireResult::Hit;
+    }
+    void Publish(uint64_t key, const T& v) {
+        Shard& s = shards_[Mix(key) % kShards];
+        std::lock_guard<std::mutex> lock(s.m);
+        auto& e = s.map[key];
+        e.value = v;
+        e.ready = true;
+    }
+    void Abandon(uint64_t key) {
+        Shard& s = shards_[Mix(key) % kShards];
+        std::lock_guard<std::mutex> lock(s.m);
+        s.map.erase(key);
+    }
+    template <typename Pred>
+    void InvalidateIf(Pred pred) {
+        for (Shard& s : shards_) {
+            std::lock_guard<std::mutex> lock(s.m);
+            std::erase_if(s.map, [&](const auto& kv) { return pred(kv.first); });
+        }
+    }
+    size_t Size() const {
+        size_t n = 0;
+        for (const Shard& s : shards_) {
+            std::lock_guard<std::mutex> lock(s.m);
+            n += s.map.size();
+        }
+        return n;
+    }
+
+private:
+    static uint64_t Mix(uint64_t x) {
+        x ^= x >> 33, x *= 0xff51afd7ed558ccdull, x ^= x >> 33;
+        return x;
+    }
+    static constexpr size_t kShards = 64;
+    struct Entry {
+        T value{};
+        bool ready = false;
+    };
+    struct Shard {
+        mutable std::mutex m;
+        std::unordered_map<uint64_t, Entry> map;
+    };
+    Shard shards_[kShards];
+};
+
+inline uint64_t MixFaceMip(uint32_t face, int mip) {
+    uint64_t x = (uint64_t(face) << 4) | uint64_t(mip);
+    x ^= x >> 31, x *= 0x7fb5d329728ea185ull, x ^= x >> 27, x *= 0x81dadef4bc2dd44dull, x ^= x >> 33;
+    return x;
+}
+
+}  // namespace internal
+
+template <typename Sample, typename Texel>
+class ShadingCache {
+public:
+    /// Allocates both caches (or the unbounded reference stores); throws InputError on bad settings.
+    explicit ShadingCache(const CacheSettings& settings) : settings_(settings) {
+        settings.Validate();
+        if (settings.referenceMode) {
+            refSamples_ = std::make_unique<internal::UnboundedCache<Sample>>();
+            refTexels_ = std::make_unique<internal::UnboundedCache<Texel>>();
+        } else {
+            samples_ = std::make_unique<DirectMappedCache<Sample>>(settings.sampleCacheBytes);
+            texels_ = std::make_unique<DirectMappedCache<Texel>>(settings.texelCacheBytes);
+        }
+    }
+
+    /// Registers a mesh with texels of about `texelSize` world units at mip 0; returns its id.
+    int AddMesh(const ControlCage& cage, float texelSize) {
+        meshes_.push_back(std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
+        nextFace_ += uint32_t(meshes_.back()->NumFaces());
+        return int(meshes_.size()) - 1;
+    }
+    const MeshGrids& Mesh(int mesh) const { return *meshes_[mesh]; }
+    int NumMeshes() const { return int(meshes_.size()); }
+    const CacheSettings& Settings() const { return settings_; }
+
+    /// The texel a hit maps to: eq. 1 (floored, plus the LOD bias) and eq. 2.
+    SampleRequest TexelAt(const CacheHit& h) const {
+        const MeshGrids& g = *meshes_[h.mesh];
+        const int mip = ComputeMip(g.Log2Res(h.face), h.dudx, h.dvdx, h.dudy, h.dvdy, settings_.lodBias);
+        const int res = g.Res(h.face, mip);
+        const int iu = QuantizeCoord(h.u, res), iv = QuantizeCoord(h.v, res);
+        SampleRequest r{h.mesh, h.face, mip, TexelCenter(iu, res), TexelCenter(iv, res), {}};
+        r.key = {g.FaceOffset() + uint32_t(h.face), uint8_t(mip), uint16_t(iu), uint16_t(iv)};
+        return r;
+    }
+
+    /// The filtered value at a hit: texel cache hit, or gather + shade missing samples + filter.
+    template <typename ShadeFn, typename FilterFn>
+    Texel Lookup(const CacheHit& h, int radius, ShadeFn&& shade, FilterFn&& filter, CacheStats& st) {
+        ++st.lookups;
+        const SampleRequest centre = TexelAt(h);
+        const uint64_t key = centre.key.Pack();
+        const uint64_t hash = Hash(centre.key);
+        Texel texel;
+        SlotTicket ticket;
+        const AcquireResult r = refTexels_ ? refTexels_->Acquire(key, &texel)
+                                           : texels_->Acquire(key, hash, &texel, &ticket);
+        if (r == AcquireResult::Hit) {
+            ++st.texelHits;
+            return texel;
+        }
+        ++st.texelMisses;
+        if (r != AcquireResult::Claimed) {
+            // Another thread is filtering this texel, or the slot is busy with another key: filter
+            // without storing rather than wait (rare; the samples are shared through the cache).
+            ++st.texelUncached;
+            return Filter(centre, radius, shade, filter, st);
+        }
+        if (ticket.evicted) ++st.texelEvictions;
+        texel = Filter(centre, radius, shade, filter, st);
+        if (refTexels_) refTexels_->Publish(key, texel);
+        else texels_->Publish(ticket, texel);
+        return texel;
+    }
+
+    /// Evicts everything (the scene changed).
+    void InvalidateAll() {
+        if (refSamples_) {
+            refSamples_->InvalidateIf([](uint64_t) { return true; });
+            refTexels_->InvalidateIf([](uint64_t) { return true; });
+        } else {
+            samples_->InvalidateAll();
+            texels_->InvalidateAll();
+        }
+    }
+    /// Evicts one mesh's samples and texels (that object was edited).
+    void InvalidateMesh(int mesh) {
+        const uint32_t lo = meshes_[mesh]->FaceOffset(), hi = lo + uint32_t(meshes_[mesh]->NumFaces());
+        auto pred = [lo, hi](uint64_t k) {
+            const uint32_t f = TexelKey::Unpack(k).face;
+            return f >= lo && f < hi;
+        };
+        if (refSamples_) {
+            refSamples_->InvalidateIf(pred);
+            refTexels_->InvalidateIf(pred);
+        } else {
+            samples_->InvalidateIf(pred);
+            texels_->InvalidateIf(pred);
+        }
+    }
+
+    /// Bytes held by the caches' storage (bounded mode: never above the configured budgets).
+    size_t BytesUsed() const {
+        if (refSamples_)
+            return refSamples_->Size() * (sizeof(Sample) + 32) + refTexels_->Size() * (sizeof(Texel) + 32);
+        return samples_->BytesUsed() + texels_->BytesUsed();
+    }
+    size_t SampleCacheBytes() const { return samples_ ? samples_->BytesUsed() : 0; }
+    size_t TexelCacheBytes() const { return texels_ ? texels_->BytesUsed() : 0; }
+
+private:
+    uint64_t Hash(const TexelKey& k) const {
+        // Scanline order within a face's mip level (Munkberg et al.'s supplemental): texels of a
+        // footprint land in distinct, consecutive slots.
+        return internal::MixFaceMip(k.face, k.mip) + uint64_t(k.iv) * 16384u + k.iu;
+    }
+
+    // Gathers the footprint, shades what is missing (deferring samples other threads are
+    // shading, revisiting them after the rest), then filters.
+    template <typename ShadeFn, typename FilterFn>
+    Texel Filter(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter, CacheStats& st) {
+        thread_local std::vector<FootprintSample> taps;
+        thread_local std::vector<Sample> values;
+        thread_local std::vector<int> deferred;
+        const MeshGrids& g = *meshes_[centre.mesh];
+        GatherFootprint(g, centre.face, centre.mip, centre.key.iu, centre.key.iv, radius, &taps);
+        values.resize(taps.size());
+        deferred.clear();
+        int centreIndex = 0;
+        for (size_t i = 0; i < taps.size(); ++i) {
+            if (taps[i].key == centre.key) centreIndex = int(i);
+            if (!FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/false)) {
+                deferred.push_back(int(i));
+                ++st.deferrals;
+            }
+        }
+        for (int i : deferred) FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/true);
+        FilterInput<Sample> in{std::span<const FootprintSample>(taps.data(), taps.size()),
+                               std::span<const Sample>(values.data(), values.size()), centreIndex, centre};
+        return filter(in);
+    }
+
+    // Returns false (without a value) when another thread is shading the sample and !wait.
+    template <typename ShadeFn>
+    bool FetchOrShade(int mesh, const FootprintSample& tap, Sample* out, ShadeFn& shade, CacheStats& st,
+                      bool wait) {
+        const uint64_t key = tap.key.Pack();
+        const uint64_t hash = Hash(tap.key);
+        const MeshGrids& g = *meshes_[mesh];
+        const int localFace = int(tap.key.face - g.FaceOffset());
+        const SampleRequest req{mesh, localFace, tap.key.mip, tap.u, tap.v, tap.key};
+        ++st.sampleLookups;
+        for (int spins = 0;; ++spins) {
+            SlotTicket ticket;
+            const AcquireResult r = refSamples_ ? refSamples_->Acquire(key, out)
+                                                : samples_->Acquire(key, hash, out, &ticket);
+            switch (r) {
+                case AcquireResult::Hit: ++st.sampleHits; return true;
+                case AcquireResult::Claimed:
+                    if (ticket.evicted) ++st.sampleEvictions;
+                    *out = shade(req);
+                    ++st.samplesShaded;
+                    if (refSamples_) refSamples_->Publish(key, *out);
+                    else samples_->Publish(ticket, *out);
+                    return true;
+                case AcquireResult::Conflict:
+                    // The slot is busy with an unrelated key: shade for this filter only.
+                    *out = shade(req);
+                    ++st.samplesShaded;
+                    ++st.samplesUncached;
+                    return true;
+                case AcquireResult::Pending:
+                    if (!wait) return false;
+                    ++st.waits;
+                    if (spins > 1000000) {  // the owner is stuck far longer than any shader takes
+                        *out = shade(req);
+                        ++st.samplesShaded;
+                        ++st.samplesUncached;
+                        return true;
+                    }
+                    std::this_thread::yield();
+                    break;
+            }
+        }
+    }
+
+    CacheSettings settings_;
+    std::vector<std::unique_ptr<MeshGrids>> meshes_;
+    uint32_t nextFace_ = 0;
+    std::unique_ptr<DirectMappedCache<Sample>> samples_;
+    std::unique_ptr<DirectMappedCache<Texel>> texels_;
+    std::unique_ptr<internal::UnboundedCache<Sample>> refSamples_;
+    std::unique_ptr<internal::UnboundedCache<Texel>> refTexels_;
+};
+
+}  // namespace texcache

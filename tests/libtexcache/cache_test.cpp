@@ -1,0 +1,356 @@
+// SPDX-License-Identifier: Apache-2.0
+// libtexcache on its own: keys, eq. 1/2, the lock-free direct-mapped cache (collisions, byte
+// budget, concurrent stress), Ptex adjacency and footprints on synthetic cages, and the two-level
+// ShadingCache (reference mode shades each sample once).
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <set>
+#include <thread>
+#include <unordered_map>
+
+#include "libtexcache/cages.h"
+#include "texcache/direct_mapped_cache.h"
+#include "texcache/footprint.h"
+#include "texcache/shading_cache.h"
+#include "texcache/texel_key.h"
+#include "texcache/topology.h"
+
+namespace texcache {
+namespace {
+
+TEST(TexelKey, PackUnpackRoundTripsAtTheLimits) {
+    for (TexelKey k : {TexelKey{0, 0, 0, 0}, TexelKey{TexelKey::kMaxFaces - 1, 15, 16383, 16383},
+                       TexelKey{12345, 7, 100, 9000}}) {
+        const TexelKey back = TexelKey::Unpack(k.Pack());
+        EXPECT_EQ(back.face, k.face);
+        EXPECT_EQ(back.mip, k.mip);
+        EXPECT_EQ(back.iu, k.iu);
+        EXPECT_EQ(back.iv, k.iv);
+        EXPECT_NE(k.Pack(), TexelKey::kEmpty);
+    }
+}
+
+TEST(Addressing, MipFromDifferentialsFollowsEquation1) {
+    // 256-texel face; a pixel covering 1/64 of the face in x and 1/16 in y: min(4, 16) -> log2 4 = 2.
+    EXPECT_EQ(ComputeMip(8, 1.0f / 64, 0.0f, 0.0f, 1.0f / 16, 0.0f), 2);
+    // Grazing: huge footprint along y, small along x: eq. 1 takes the min (higher resolution).
+    EXPECT_EQ(ComputeMip(8, 1.0f / 256, 0.0f, 0.0f, 50.0f, 0.0f), 0);
+    // Tiny footprint: finest level; huge footprint: coarsest level (1x1).
+    EXPECT_EQ(ComputeMip(8, 1e-9f, 0.0f, 0.0f, 1e-9f, 0.0f), 0);
+    EXPECT_EQ(ComputeMip(8, 1e9f, 0.0f, 0.0f, 1e9f, 0.0f), 8);
+    EXPECT_EQ(ComputeMip(8, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f), 0);
+    EXPECT_EQ(ComputeMip(8, INFINITY, 0.0f, 0.0f, INFINITY, 0.0f), 8);
+    EXPECT_EQ(ComputeMip(8, NAN, 0.0f, 0.0f, 1.0f, 0.0f), 0);
+    // Floored (towards higher resolution): log2(3.9) = 1.96 -> 1.
+    EXPECT_EQ(ComputeMip(8, 3.9f / 256, 0.0f, 0.0f, 3.9f / 256, 0.0f), 1);
+    // LOD bias shifts, and a bias beyond the chain clamps to it.
+    EXPECT_EQ(ComputeMip(8, 1.0f / 64, 0.0f, 0.0f, 1.0f / 64, 1.0f), 3);
+    EXPECT_EQ(ComputeMip(8, 1.0f / 64, 0.0f, 0.0f, 1.0f / 64, 100.0f), 8);
+    EXPECT_EQ(ComputeMip(8, 1.0f / 64, 0.0f, 0.0f, 1.0f / 64, -100.0f), 0);
+    EXPECT_EQ(ComputeMip(0, 1.0f, 0.0f, 0.0f, 1.0f, 0.0f), 0);
+}
+
+TEST(Addressing, QuantizationFollowsEquation2AndIsRobust) {
+    EXPECT_EQ(QuantizeCoord(0.0f, 16), 0);
+    EXPECT_EQ(QuantizeCoord(-4e-10f, 16), 0);  // Embree's slightly negative u
+    EXPECT_EQ(QuantizeCoord(1.0f, 16), 15);
+    EXPECT_EQ(QuantizeCoord(1.00001f, 16), 15);
+    EXPECT_EQ(QuantizeCoord(0.5f, 16), 8);
+    EXPECT_EQ(QuantizeCoord(NAN, 16), 0);
+    EXPECT_EQ(QuantizeCoord(1e30f, 16), 15);
+    EXPECT_FLOAT_EQ(TexelCenter(8, 16), 8.5f / 16.0f);
+}
+
+struct Payload {
+    uint64_t a, b, c, d;  // all derived from the key: a torn or aliased read shows up
+    static Payload Of(uint64_t k) { return {k, k * 3 + 1, ~k, k ^ 0x5555555555555555ull}; }
+    bool Matches(uint64_t k) const {
+        const Payload p = Of(k);
+        return a == p.a && b == p.b && c == p.c && d == p.d;
+    }
+};
+
+TEST(DirectMappedCache, CollidingKeyEvictsAndNeverAliases) {
+    DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes);  // exactly one slot
+    ASSERT_EQ(cache.NumSlots(), 1u);
+    Payload out;
+    SlotTicket t;
+    ASSERT_EQ(cache.Acquire(1, 1, &out, &t), AcquireResult::Claimed);
+    EXPECT_FALSE(t.evicted);
+    cache.Publish(t, Payload::Of(1));
+    ASSERT_EQ(cache.Acquire(1, 1, &out, &t), AcquireResult::Hit);
+    EXPECT_TRUE(out.Matches(1));
+    // Key 2 maps to the same (only) slot: it evicts key 1 instead of returning its data.
+    ASSERT_EQ(cache.Acquire(2, 2, &out, &t), AcquireResult::Claimed);
+    EXPECT_TRUE(t.evicted);
+    // While key 2 is being shaded: key 2 is pending, key 1 conflicts.
+    EXPECT_EQ(cache.Acquire(2, 2, &out, &t), AcquireResult::Pending);
+    SlotTicket t1;
+    EXPECT_EQ(cache.Acquire(1, 1, &out, &t1), AcquireResult::Conflict);
+    cache.Publish(t, Payload::Of(2));
+    EXPECT_FALSE(cache.Find(1, 1, &out));
+    ASSERT_TRUE(cache.Find(2, 2, &out));
+    EXPECT_TRUE(out.Matches(2));
+    // Abandon leaves the slot empty; invalidation evicts.
+    ASSERT_EQ(cache.Acquire(3, 3, &out, &t), AcquireResult::Claimed);
+    cache.Abandon(t);
+    EXPECT_FALSE(cache.Find(3, 3, &out));
+    ASSERT_EQ(cache.Acquire(4, 4, &out, &t), AcquireResult::Claimed);
+    cache.Publish(t, Payload::Of(4));
+    EXPECT_EQ(cache.InvalidateAll(), 1u);
+    EXPECT_FALSE(cache.Find(4, 4, &out));
+}
+
+TEST(DirectMappedCache, StaysWithinItsByteBudget) {
+    for (size_t bytes : {size_t(100), size_t(1000), size_t(4096), size_t(1) << 20, size_t(16) << 20,
+                         (size_t(16) << 20) + 17}) {
+        DirectMappedCache<Payload> cache(bytes);
+        EXPECT_LE(cache.BytesUsed(), bytes);
+        EXPECT_GT(cache.BytesUsed() + DirectMappedCache<Payload>::kSlotBytes, bytes);  // and uses it
+    }
+    EXPECT_THROW(DirectMappedCache<Payload>(0), InputError);
+    EXPECT_THROW(DirectMappedCache<Payload>(DirectMappedCache<Payload>::kSlotBytes - 1), InputError);
+}
+
+// Threads hammer overlapping keys through a small cache (many evictions): every hit must carry
+// exactly the payload of the key asked for. Run under ThreadSanitizer by the `tsan` build.
+TEST(DirectMappedCache, ConcurrentStressNeverReturnsAnotherKeysData) {
+    DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes * 97);
+    std::atomic<uint64_t> bad{0}, hits{0}, claims{0};
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+        threads.emplace_back([&, t] {
+            uint64_t x = 88172645463325252ull + uint64_t(t);
+            for (int i = 0; i < 200000; ++i) {
+                x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+                const uint64_t key = x % 500;
+                Payload out;
+                SlotTicket ticket;
+                switch (cache.Acquire(key, key * 2654435761u, &out, &ticket)) {
+                    case AcquireResult::Hit:
+                        ++hits;
+                        if (!out.Matches(key)) ++bad;
+                        break;
+                    case AcquireResult::Claimed:
+                        ++claims;
+                        cache.Publish(ticket, Payload::Of(key));
+                        break;
+                    default: break;
+                }
+            }
+        });
+    for (auto& th : threads) th.join();
+    EXPECT_EQ(bad.load(), 0u);
+    EXPECT_GT(hits.load(), 1000u);
+    EXPECT_GT(claims.load(), 1000u);
+}
+
+// --- topology and footprints on synthetic cages -------------------------------------------------
+
+void ExpectSymmetricAdjacency(const PtexTopology& topo) {
+    for (int f = 0; f < topo.NumPtexFaces(); ++f)
+        for (int e = 0; e < 4; ++e) {
+            const auto& link = topo.Edge(f, e);
+            for (int j = 0; j < link.count; ++j) {
+                const auto& back = topo.Edge(link.face[j], link.edge[j]);
+                bool found = false;
+                for (int k = 0; k < back.count; ++k) found |= back.face[k] == f && back.edge[k] == e;
+                EXPECT_TRUE(found) << "face " << f << " edge " << e << " -> " << link.face[j];
+            }
+        }
+}
+
+TEST(Topology, AdjacencyIsSymmetricIncludingHalfEdgesAndBoundaries) {
+    for (const ControlCage& c : {test::GridCage(3), test::CubeCage(), test::FanCage(5),
+                                 test::FanCage(12), test::PentagonCage()}) {
+        const PtexTopology topo(c);
+        ExpectSymmetricAdjacency(topo);
+    }
+    // Cube: closed, every Ptex edge has exactly one neighbour.
+    const PtexTopology cube(test::CubeCage());
+    for (int f = 0; f < 6; ++f)
+        for (int e = 0; e < 4; ++e) EXPECT_EQ(cube.Edge(f, e).count, 1);
+    // Pentagon + quad + triangle: 5 + 1 + 3 Ptex faces; the quad's edge on the pentagon meets two
+    // sub-faces, each covering half of it; the grid's outer edges have no neighbour.
+    const PtexTopology pent(test::PentagonCage());
+    ASSERT_EQ(pent.NumPtexFaces(), 9);
+    const int quad = pent.FirstPtexFace(1);
+    EXPECT_EQ(pent.Edge(quad, 0).count, 2);
+    EXPECT_FLOAT_EQ(pent.Edge(quad, 0).segLength[0], 0.5f);
+    const PtexTopology grid(test::GridCage(3));
+    EXPECT_EQ(grid.Edge(0, 0).count + grid.Edge(0, 3).count, 0);
+}
+
+TEST(Topology, CrossingAnEdgeAndBackReturnsToTheStart) {
+    for (const ControlCage& c : {test::CubeCage(), test::PentagonCage(), test::FanCage(7)}) {
+        const PtexTopology topo(c);
+        for (int f = 0; f < topo.NumPtexFaces(); ++f)
+            for (int e = 0; e < 4; ++e)
+                for (float along : {0.1f, 0.3f, 0.5f, 0.77f}) {
+                    int g, ge;
+                    float u, v, s;
+                    if (!topo.Cross(f, e, along, 0.0f, &g, &u, &v, &ge, &s)) continue;
+                    float a2, in2;
+                    UvToEdge(ge, u, v, &a2, &in2);
+                    EXPECT_NEAR(in2, 0.0f, 1e-6f);
+                    int f2, e2;
+                    float u2, v2, s2;
+                    ASSERT_TRUE(topo.Cross(g, ge, a2, 0.0f, &f2, &u2, &v2, &e2, &s2));
+                    EXPECT_EQ(f2, f);
+                    EXPECT_EQ(e2, e);
+                    float a3, in3;
+                    UvToEdge(e2, u2, v2, &a3, &in3);
+                    EXPECT_NEAR(a3, along, 1e-5f);
+                    EXPECT_NEAR(s * s2, 1.0f, 1e-6f);
+                }
+    }
+}
+
+void ExpectWellFormedFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int r) {
+    std::vector<FootprintSample> fp;
+    GatherFootprint(g, face, mip, iu, iv, r, &fp);
+    ASSERT_FALSE(fp.empty());
+    ASSERT_LE(fp.size(), size_t((2 * r + 1) * (2 * r + 1)));
+    std::set<uint64_t> keys;
+    bool centre = false;
+    for (const auto& s : fp) {
+        EXPECT_TRUE(keys.insert(s.key.Pack()).second) << "sample returned twice";
+        EXPECT_TRUE(std::isfinite(s.u) && s.u > 0.0f && s.u < 1.0f);
+        EXPECT_TRUE(std::isfinite(s.v) && s.v > 0.0f && s.v < 1.0f);
+        EXPECT_LE(std::abs(s.dx), r);
+        EXPECT_LE(std::abs(s.dy), r);
+        EXPECT_LT(s.key.face - g.FaceOffset(), uint32_t(g.NumFaces()));
+        centre |= s.dx == 0 && s.dy == 0;
+    }
+    EXPECT_TRUE(centre);
+}
+
+TEST(Footprint, InteriorWindowIsComplete) {
+    const MeshGrids g(test::GridCage(4), 1.0f / 16.0f, 0);
+    std::vector<FootprintSample> fp;
+    GatherFootprint(g, 5, 0, 8, 8, 3, &fp);
+    EXPECT_EQ(fp.size(), 49u);
+    // Across an interior edge the window continues into the neighbours with no loss.
+    GatherFootprint(g, 5, 0, 0, 8, 3, &fp);
+    EXPECT_EQ(fp.size(), 49u);
+    // At the mesh boundary the window is truncated.
+    GatherFootprint(g, 0, 0, 0, 0, 3, &fp);
+    EXPECT_EQ(fp.size(), 16u);
+}
+
+TEST(Footprint, AroundExtraordinaryVerticesEachSampleOnce) {
+    for (int valence : {3, 5, 8, 16}) {
+        const ControlCage c = valence == 3 ? test::CubeCage() : test::FanCage(valence);
+        const MeshGrids g(c, 0.05f, 100);
+        for (int f = 0; f < g.NumFaces(); ++f)
+            for (int mip = 0; mip < g.NumLevels(f); ++mip) {
+                const int res = g.Res(f, mip);
+                for (int r : {0, 1, 6, 10}) {
+                    ExpectWellFormedFootprint(g, f, mip, 0, 0, r);
+                    ExpectWellFormedFootprint(g, f, mip, res - 1, res - 1, r);
+                    ExpectWellFormedFootprint(g, f, mip, res / 2, 0, r);
+                }
+            }
+    }
+    const MeshGrids pent(test::PentagonCage(), 0.05f, 0);
+    for (int f = 0; f < pent.NumFaces(); ++f)
+        for (int r : {1, 4, 8}) ExpectWellFormedFootprint(pent, f, 0, 0, 0, r);
+}
+
+TEST(MeshGrids, ResolutionFollowsAreaAndRejectsKeyOverflow) {
+    const MeshGrids g(test::GridCage(2), 1.0f / 32.0f, 0);  // unit faces, 1/32 texels -> 32 = 2^5
+    for (int f = 0; f < g.NumFaces(); ++f) EXPECT_EQ(g.Log2Res(f), 5);
+    EXPECT_THROW(MeshGrids(test::GridCage(2), 0.1f, TexelKey::kMaxFaces - 2), InputError);
+    EXPECT_THROW(MeshGrids(test::GridCage(2), 0.0f, 0), InputError);
+    EXPECT_THROW(MeshGrids(test::GridCage(2), NAN, 0), InputError);
+}
+
+// --- the two-level cache ------------------------------------------------------------------------
+
+struct AoSample {
+    float value;
+    float n[3];
+};
+
+TEST(ShadingCache, RejectsImpossibleSettings) {
+    CacheSettings s;
+    s.sampleCacheBytes = 0;
+    EXPECT_THROW((ShadingCache<AoSample, float>(s)), InputError);
+    s = {};
+    s.texelCacheBytes = size_t(1) << 50;
+    EXPECT_THROW((ShadingCache<AoSample, float>(s)), InputError);
+    s = {};
+    s.lodBias = 1000.0f;
+    EXPECT_THROW((ShadingCache<AoSample, float>(s)), InputError);
+    s = {};
+    s.lodBias = NAN;
+    EXPECT_THROW((ShadingCache<AoSample, float>(s)), InputError);
+}
+
+// Reference mode keeps everything: with overlapping footprints from several threads, no sample
+// is ever shaded twice, and every texel is filtered exactly from its footprint.
+TEST(ShadingCache, ReferenceModeShadesEachSampleOnce) {
+    CacheSettings s;
+    s.referenceMode = true;
+    ShadingCache<AoSample, float> cache(s);
+    const int mesh = cache.AddMesh(test::FanCage(5), 0.05f);
+    std::mutex m;
+    std::unordered_map<uint64_t, int> shadeCount;
+    auto shade = [&](const SampleRequest& r) {
+        {
+            std::lock_guard<std::mutex> lock(m);
+            ++shadeCount[r.key.Pack()];
+        }
+        return AoSample{r.u + r.v, {0, 1, 0}};
+    };
+    auto filter = [](const FilterInput<AoSample>& in) {
+        float sum = 0.0f;
+        for (const auto& x : in.samples) sum += x.value;
+        return sum / float(in.samples.size());
+    };
+    std::vector<std::thread> threads;
+    std::atomic<int> nonFinite{0};
+    for (int t = 0; t < 4; ++t)
+        threads.emplace_back([&, t] {
+            CacheStats st;
+            for (int i = 0; i < 3000; ++i) {
+                const int face = (i + t) % cache.Mesh(mesh).NumFaces();
+                const float u = float((i * 7 + t) % 97) / 97.0f, v = float((i * 13) % 89) / 89.0f;
+                const float val = cache.Lookup({mesh, face, u, v, 0.01f, 0, 0, 0.01f}, 3, shade, filter, st);
+                if (!std::isfinite(val)) ++nonFinite;
+            }
+        });
+    for (auto& th : threads) th.join();
+    EXPECT_EQ(nonFinite.load(), 0);
+    ASSERT_FALSE(shadeCount.empty());
+    for (const auto& [key, count] : shadeCount) ASSERT_EQ(count, 1) << "sample shaded twice";
+}
+
+// A bounded cache far too small for the working set still returns correct values (it re-shades).
+TEST(ShadingCache, TinyBoundedCacheStaysCorrect) {
+    CacheSettings s;
+    s.sampleCacheBytes = 4096;
+    s.texelCacheBytes = 1024;
+    ShadingCache<AoSample, float> cache(s);
+    const int mesh = cache.AddMesh(test::GridCage(4), 0.1f);
+    auto shade = [](const SampleRequest& r) { return AoSample{float(r.key.face) + r.u, {0, 1, 0}}; };
+    auto centreOnly = [](const FilterInput<AoSample>& in) { return in.samples[in.centre].value; };
+    CacheStats st;
+    for (int pass = 0; pass < 3; ++pass)
+        for (int face = 0; face < 16; ++face)
+            for (float u : {0.05f, 0.5f, 0.95f}) {
+                const CacheHit h{mesh, face, u, 0.5f, 0.001f, 0, 0, 0.001f};
+                const SampleRequest req = cache.TexelAt(h);
+                const float got = cache.Lookup(h, 2, shade, centreOnly, st);
+                EXPECT_FLOAT_EQ(got, float(req.key.face) + req.u);
+            }
+    EXPECT_GT(st.sampleEvictions + st.texelEvictions, 0u);
+    EXPECT_LE(cache.BytesUsed(), 4096u + 1024u);
+}
+
+}  // namespace
+}  // namespace texcache
