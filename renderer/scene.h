@@ -65,6 +65,9 @@ struct Material {
     ColorParam albedo;       ///< diffuse albedo (Diffuse), or diffuse base under the coat (GGX)
     FloatParam roughness;    ///< GGX alpha = roughness^2
     glm::vec3 specular{0.04f};  ///< GGX Schlick F0
+    /// Texture-space filter of this material's cached term ("" = the render's default).
+    std::string cacheFilter;
+    int cacheRadius = -1;  ///< footprint radius override (-1 = the render's default)
 };
 
 struct Object {

@@ -237,6 +237,9 @@ struct Vertex {
 LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
     : impl_(std::make_unique<Impl>()) {
     auto refiner = internal::CreateRefiner(cage);
+    // Infinitely sharp features are isolated and end-capped, not given OSD's inf-sharp patches:
+    // measured, that is what matches Embree on the regression shapes (the inf-sharp patches
+    // differ from Embree near sharp extraordinary vertices of the bishop and rook).
     refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(maxIsolationLevel));
 
     Far::PatchTableFactory::Options options(maxIsolationLevel);

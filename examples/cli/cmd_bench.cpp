@@ -1,0 +1,167 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache bench rays`: the AO integrator's ray throughput against a raw Embree loop
+// (rtcIntersect1 + rtcOccluded1) over exactly the same rays, measured in the same process and
+// interleaved so that a noisy shared machine affects both alike.
+#include <xmmintrin.h>
+#include <pmmintrin.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstdio>
+#include <memory>
+
+#include <embree3/rtcore.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include "cli_util.h"
+#include "commands.h"
+#include "renderer/camera.h"
+#include "renderer/integrator.h"
+#include "renderer/sampling.h"
+
+namespace texcache::cli {
+
+namespace {
+
+struct BenchArgs {
+    std::string scene = std::string(TEXCACHE_SCENES_DIR) + "/car.json";
+    std::string resolution = "640x360";
+    int aoSamples = 4;
+    int spp = 1;
+    int repeats = 5;
+    int threads = 0;
+};
+
+/// Replays the AO integrator's sampling (same seeds, same order) and records every ray it casts.
+void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<RTCRay>* cam,
+                  std::vector<RTCRay>* occ) {
+    const CameraModel camera(rs.scene().camera, opt.frameTime, opt.width, opt.height);
+    auto toRtc = [](const Ray& r) {
+        RTCRay q{};
+        q.org_x = r.org.x, q.org_y = r.org.y, q.org_z = r.org.z;
+        q.dir_x = r.dir.x, q.dir_y = r.dir.y, q.dir_z = r.dir.z;
+        q.tnear = r.tnear, q.tfar = r.tfar, q.time = r.time, q.mask = 0xFFFFFFFFu;
+        return q;
+    };
+    const bool blur = rs.scene().camera.shutterClose > rs.scene().camera.shutterOpen;
+    for (int y = 0; y < opt.height; ++y)
+        for (int x = 0; x < opt.width; ++x)
+            for (int s = 0; s < opt.spp; ++s) {
+                Rng rng(PixelSeed(opt.seed, x, y, opt.width), uint64_t(s));
+                const glm::vec2 jitter = rng.Next2D(), lens = rng.Next2D();
+                Ray ray = camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+                ray.time = blur ? rng.Next1D() : 0.0f;
+                cam->push_back(toRtc(ray));
+                Hit hit;
+                if (!rs.Intersect(ray, &hit) || hit.object < 0) continue;
+                const SurfaceInteraction si = rs.Interact(ray, hit);
+                const Frame frame = Frame::FromZ(si.N);
+                for (int i = 0; i < opt.aoSamples; ++i) {
+                    const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
+                    if (glm::dot(wi, si.Ng) <= 0.0f) continue;
+                    const float scale = std::max({1.0f, std::abs(si.P.x), std::abs(si.P.y), std::abs(si.P.z)});
+                    Ray r{si.P + 2e-5f * scale * si.Ng, wi, 0.0f, opt.aoDistance, ray.time};
+                    occ->push_back(toRtc(r));
+                }
+            }
+}
+
+/// Traces the recorded rays with the plain Embree API, parallel over the same TBB scheduler.
+double RawLoop(RTCScene scene, const std::vector<RTCRay>& cam, const std::vector<RTCRay>& occ) {
+    const double t0 = NowSeconds();
+    std::atomic<unsigned> sink{0};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, cam.size(), 1024), [&](const auto& r) {
+        _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+        _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+        RTCIntersectContext ctx;
+        rtcInitIntersectContext(&ctx);
+        unsigned hits = 0;
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+            RTCRayHit rh;
+            rh.ray = cam[i];
+            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+            rtcIntersect1(scene, &ctx, &rh);
+            hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+        }
+        sink += hits;
+    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, occ.size(), 1024), [&](const auto& r) {
+        _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+        _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+        RTCIntersectContext ctx;
+        rtcInitIntersectContext(&ctx);
+        unsigned blocked = 0;
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+            RTCRay q = occ[i];
+            rtcOccluded1(scene, &ctx, &q);
+            blocked += q.tfar < 0.0f;
+        }
+        sink += blocked;
+    });
+    return NowSeconds() - t0;
+}
+
+int RunBench(const BenchArgs& a) {
+    std::vector<std::string> warnings;
+    Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    RenderOptions opt;
+    opt.integrator = IntegratorKind::AO;
+    ParseResolution(a.resolution, &opt.width, &opt.height);
+    opt.spp = CheckRange("--spp", a.spp, 1, 4096);
+    opt.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1024);
+    opt.aoDistance = scene.settings.aoDistance;
+    opt.seed = scene.settings.seed;
+    opt.frameTime = scene.settings.time;
+    opt.progress = false;
+    CheckRange("--repeats", a.repeats, 1, 100);
+    std::unique_ptr<tbb::global_control> limit;
+    if (a.threads > 0)
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      CheckRange("--threads", a.threads, 1, 4096));
+    RenderSceneOptions ro;
+    ro.needLights = ro.needEnvironment = false;
+    ro.threads = a.threads;
+    RenderScene rs(scene, ro);
+
+    std::vector<RTCRay> cam, occ;
+    RecordAoRays(rs, opt, &cam, &occ);
+    const double rays = double(cam.size() + occ.size());
+    std::printf("scene %s, %dx%d, %d spp, %d AO rays per hit: %zu camera + %zu occlusion rays\n",
+                a.scene.c_str(), opt.width, opt.height, opt.spp, opt.aoSamples, cam.size(), occ.size());
+
+    Render(rs, opt);                                             // warm-up
+    RawLoop(static_cast<RTCScene>(rs.EmbreeScene()), cam, occ);  // warm-up
+    double bestIntegrator = 1e30, bestRaw = 1e30;
+    for (int i = 0; i < a.repeats; ++i) {
+        const RenderResult r = Render(rs, opt);
+        if (double(r.stats.TotalRays()) != rays)
+            std::fprintf(stderr, "bench: warning: integrator cast %llu rays, recording has %.0f\n",
+                         (unsigned long long)r.stats.TotalRays(), rays);
+        bestIntegrator = std::min(bestIntegrator, r.stats.seconds);
+        bestRaw = std::min(bestRaw, RawLoop(static_cast<RTCScene>(rs.EmbreeScene()), cam, occ));
+    }
+    const double integratorRate = rays / bestIntegrator * 1e-6, rawRate = rays / bestRaw * 1e-6;
+    std::printf("AO integrator      : %8.3f Mrays/s (best of %d: %.4f s)\n", integratorRate, a.repeats, bestIntegrator);
+    std::printf("raw Embree loop    : %8.3f Mrays/s (best of %d: %.4f s)\n", rawRate, a.repeats, bestRaw);
+    std::printf("integrator / raw   : %8.1f %% (goal >= 70 %%)\n", 100.0 * integratorRate / rawRate);
+    return 0;
+}
+
+}  // namespace
+
+void AddBenchCommand(CLI::App& app, int& exitCode) {
+    auto args = std::make_shared<BenchArgs>();
+    CLI::App* bench = app.add_subcommand("bench", "Benchmarks (ratios against a baseline in the same run)");
+    bench->require_subcommand(1);
+    CLI::App* rays = bench->add_subcommand("rays", "AO integrator rays/s vs a raw rtcIntersect1/rtcOccluded1 loop");
+    rays->add_option("scene", args->scene, "Scene file or OBJ")->capture_default_str();
+    rays->add_option("--resolution", args->resolution, "Image size WxH")->capture_default_str();
+    rays->add_option("--ao-samples", args->aoSamples, "AO rays per hit")->capture_default_str();
+    rays->add_option("--spp", args->spp, "Camera samples per pixel")->capture_default_str();
+    rays->add_option("--repeats", args->repeats, "Timed repetitions (best is reported)")->capture_default_str();
+    rays->add_option("--threads", args->threads, "Worker threads (0 = all)");
+    rays->callback([args, &exitCode] { exitCode = RunBench(*args); });
+}
+
+}  // namespace texcache::cli

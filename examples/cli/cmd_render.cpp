@@ -1,0 +1,237 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache render`: render a scene file or a bare OBJ to EXR (+ a tone-mapped PNG beside it).
+#include <sys/resource.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+
+#include <tbb/global_control.h>
+
+#include "cli_util.h"
+#include "commands.h"
+#include "renderer/integrator.h"
+#include "renderer/texture_space.h"
+#include "renderer/scene_loader.h"
+#include "texcache/error.h"
+
+namespace texcache::cli {
+
+namespace {
+
+struct RenderArgs {
+    std::string scene;
+    std::string output = "out/render.exr";
+    int spp = -1;
+    float seconds = -1.0f;
+    std::string resolution;
+    int threads = 0;
+    long long seed = -1;
+    std::string integrator;
+    int maxDepth = -1;
+    int aoSamples = -1;
+    float aoDistance = -1.0f;
+    float tessellationRate = -1.0f;
+    float time = NAN;
+    std::vector<std::string> aovs;
+    float exposure = 0.0f;
+    bool quiet = false;
+    bool noPng = false;
+    // Texture-space shading (libtexcache).
+    std::string shading = "hit";
+    std::string filter = "normal";
+    int filterRadius = 6;
+    double sampleCacheMb = 64.0, texelCacheMb = 16.0;
+    float lodBias = 0.0f;
+    bool referenceCache = false;
+    int indirectSamples = 1;
+    std::string statsFile;
+};
+
+TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
+    TextureSpaceOptions t;
+    if (a.shading != "hit" && a.shading != "texture")
+        throw InputError("--shading", "unknown mode '" + a.shading + "' (valid: hit, texture)");
+    t.enabled = a.shading == "texture";
+    t.filter = ParseTextureFilter(a.filter, "--filter");
+    CheckFilterRadius(a.filterRadius, "--filter-radius");
+    t.radius = a.filterRadius;
+    auto bytes = [](const char* opt, double mb) {
+        CheckRange(opt, mb, 1.0 / 1024.0, 1024.0 * 1024.0);
+        return size_t(mb * 1024.0 * 1024.0);
+    };
+    t.cache.sampleCacheBytes = bytes("--sample-cache-mb", a.sampleCacheMb);
+    t.cache.texelCacheBytes = bytes("--texel-cache-mb", a.texelCacheMb);
+    t.cache.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
+    t.cache.referenceMode = a.referenceCache;
+    t.indirectSamples = CheckRange("--indirect-samples", a.indirectSamples, 1, 1 << 16);
+    t.cache.Validate();
+    return t;
+}
+
+void WriteStatsJson(const std::string& path, const RenderStats& s, const TextureSpaceCache* cache,
+                    const RenderOptions& opt) {
+    const CacheStats& c = s.cache;
+    std::string json = "{\n";
+    auto add = [&](const char* k, double v, bool last = false) {
+        char buf[128];
+        std::snprintf(buf, sizeof buf, "  \"%s\": %.10g%s\n", k, v, last ? "" : ",");
+        json += buf;
+    };
+    add("seconds", s.seconds);
+    add("spp", s.sppDone);
+    add("rays", double(s.TotalRays()));
+    add("lookups", double(c.lookups));
+    add("texel_hits", double(c.texelHits));
+    add("texel_misses", double(c.texelMisses));
+    add("texel_hit_rate", c.TexelHitRate());
+    add("texel_evictions", double(c.texelEvictions));
+    add("texels_uncached", double(c.texelUncached));
+    add("sample_lookups", double(c.sampleLookups));
+    add("sample_hits", double(c.sampleHits));
+    add("samples_shaded", double(c.samplesShaded));
+    add("sample_evictions", double(c.sampleEvictions));
+    add("samples_uncached", double(c.samplesUncached));
+    add("deferrals", double(c.deferrals));
+    add("waits", double(c.waits));
+    add("reference_mode", opt.texture.cache.referenceMode ? 1.0 : 0.0);
+    add("sample_cache_bytes", cache ? double(cache->cache().SampleCacheBytes()) : 0.0);
+    add("texel_cache_bytes", cache ? double(cache->cache().TexelCacheBytes()) : 0.0);
+    add("bytes_used", cache ? double(cache->cache().BytesUsed()) : 0.0, true);
+    json += "}\n";
+    WriteTextAtomic(path, json);
+}
+
+AovFlags ParseAovs(const std::vector<std::string>& names) {
+    AovFlags f;
+    for (const std::string& n : names) {
+        if (n == "albedo") f.albedo = true;
+        else if (n == "normal") f.normal = true;
+        else if (n == "depth") f.depth = true;
+        else if (n == "ptex") f.ptex = true;
+        else if (n == "motion") f.motion = true;
+        else if (n == "all") f.albedo = f.normal = f.depth = f.ptex = f.motion = true;
+        else
+            throw InputError("--aov", "unknown layer '" + n +
+                                          "' (valid: albedo, normal, depth, ptex, motion, all)");
+    }
+    return f;
+}
+
+int RunRender(const RenderArgs& a) {
+    std::vector<std::string> warnings;
+    Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    for (const std::string& w : warnings) std::fprintf(stderr, "texcache: warning: %s\n", w.c_str());
+
+    // Command-line values override the scene's render settings.
+    RenderSettings& s = scene.settings;
+    if (a.spp >= 0) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
+    if (a.seconds >= 0.0f) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
+    if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
+    if (a.seed >= 0) s.seed = uint64_t(a.seed);
+    if (!a.integrator.empty()) s.integrator = a.integrator;
+    if (a.maxDepth >= 0) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
+    if (a.aoSamples >= 0) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
+    if (a.aoDistance >= 0.0f) s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
+    if (a.tessellationRate >= 0.0f)
+        s.tessellationRate = CheckRange("--tessellation-rate", a.tessellationRate, 1.0f, 64.0f);
+    if (!std::isnan(a.time)) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
+    CheckRange("--threads", a.threads, 0, 4096);
+
+    RenderOptions opt;
+    opt.integrator = ParseIntegrator(s.integrator, a.integrator.empty() ? scene.path + ": key 'render.integrator'" : "--integrator");
+    opt.width = s.width;
+    opt.height = s.height;
+    opt.spp = s.spp;
+    opt.seconds = s.seconds;
+    opt.seed = s.seed;
+    opt.maxDepth = s.maxDepth;
+    opt.aoSamples = s.aoSamples;
+    opt.aoDistance = s.aoDistance;
+    opt.frameTime = s.time;
+    opt.aovs = ParseAovs(a.aovs);
+    opt.texture = ParseTextureOptions(a);
+    opt.progress = !a.quiet;
+    OutputPaths out = PlanOutputs(a.output, !a.noPng);
+
+    std::unique_ptr<tbb::global_control> limit;
+    if (a.threads > 0)
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, a.threads);
+
+    const double t0 = NowSeconds();
+    RenderSceneOptions ro;
+    ro.frameTime = s.time;
+    ro.threads = a.threads;
+    ro.needLights = IntegratorUsesLights(opt.integrator);
+    ro.needEnvironment = ro.needLights;
+    ro.needTextures = true;
+    RenderScene rs(scene, ro);
+    const double buildSeconds = NowSeconds() - t0;
+
+    std::unique_ptr<TextureSpaceCache> cache;
+    if (opt.texture.enabled) cache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
+    RenderResult r = Render(rs, opt, cache.get());
+    WriteOutputs(out, r.beauty, r.aovs, a.exposure);
+    if (!a.statsFile.empty()) {
+        WriteStatsJson(a.statsFile, r.stats, cache.get(), opt);
+        out.written.push_back(a.statsFile);
+    }
+
+    std::printf("rendered %s: %dx%d, %d spp, integrator %s\n", scene.path.c_str(), opt.width,
+                opt.height, r.stats.sppDone, s.integrator.c_str());
+    std::printf("time: %.3f s render + %.3f s scene build; %.2f Mrays/s (%llu rays)\n",
+                r.stats.seconds, buildSeconds, double(r.stats.TotalRays()) / r.stats.seconds * 1e-6,
+                (unsigned long long)r.stats.TotalRays());
+    if (cache) {
+        const CacheStats& c = r.stats.cache;
+        std::printf("texture-space cache: %llu lookups, %.1f%% texel hits, %llu samples shaded "
+                    "(%llu evictions, %llu deferrals), %.1f MiB\n",
+                    (unsigned long long)c.lookups, 100.0 * c.TexelHitRate(),
+                    (unsigned long long)c.samplesShaded, (unsigned long long)c.sampleEvictions,
+                    (unsigned long long)c.deferrals, double(cache->cache().BytesUsed()) / (1 << 20));
+    }
+    std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
+    for (const std::string& f : out.written) std::printf("wrote %s\n", f.c_str());
+    return 0;
+}
+
+}  // namespace
+
+void AddRenderCommand(CLI::App& app, int& exitCode) {
+    auto args = std::make_shared<RenderArgs>();
+    CLI::App* cmd = app.add_subcommand("render", "Render a scene file (.json) or a bare OBJ cage");
+    cmd->add_option("scene", args->scene, "Scene file (.json) or OBJ control cage (.obj)")->required();
+    cmd->add_option("-o,--output", args->output, "Output image (.exr writes a .png beside it; .png only)")
+        ->capture_default_str();
+    cmd->add_option("--spp", args->spp, "Samples per pixel (a cap when --seconds is given)");
+    cmd->add_option("--seconds", args->seconds, "Time budget in seconds (progressive passes)");
+    cmd->add_option("--resolution", args->resolution, "Image size WxH, e.g. 1280x720");
+    cmd->add_option("--threads", args->threads, "Worker threads (0 = all cores)");
+    cmd->add_option("--seed", args->seed, "Random seed (same seed, same image for any --threads)");
+    cmd->add_option("--integrator", args->integrator, std::string("One of: ") + IntegratorNames());
+    cmd->add_option("--max-depth", args->maxDepth, "Path tracer bounce limit");
+    cmd->add_option("--ao-samples", args->aoSamples, "AO rays per camera sample");
+    cmd->add_option("--ao-distance", args->aoDistance, "AO ray length (world units)");
+    cmd->add_option("--tessellation-rate", args->tessellationRate, "Embree subdivision tessellation rate");
+    cmd->add_option("--time", args->time, "Scene time of the frame (shutter open)");
+    cmd->add_option("--aov", args->aovs, "Extra EXR layers: albedo, normal, depth, ptex, motion, all")
+        ->delimiter(',');
+    cmd->add_option("--exposure", args->exposure, "PNG exposure in stops");
+    cmd->add_flag("-q,--quiet", args->quiet, "No progress bar");
+    cmd->add_flag("--no-png", args->noPng, "Do not write a PNG beside an EXR output");
+    cmd->add_option("--shading", args->shading, "hit: shade every hit; texture: cache AO / diffuse indirect in texture space")
+        ->capture_default_str();
+    cmd->add_option("--filter", args->filter, std::string("Texture-space filter: ") + TextureFilterNames())
+        ->capture_default_str();
+    cmd->add_option("--filter-radius", args->filterRadius, "Footprint radius r: (2r+1)^2 samples")->capture_default_str();
+    cmd->add_option("--sample-cache-mb", args->sampleCacheMb, "Sample cache size (MiB)")->capture_default_str();
+    cmd->add_option("--texel-cache-mb", args->texelCacheMb, "Texel cache size (MiB)")->capture_default_str();
+    cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")->capture_default_str();
+    cmd->add_option("--indirect-samples", args->indirectSamples, "Paths per cached indirect sample")->capture_default_str();
+    cmd->add_flag("--reference-cache", args->referenceCache, "Unbounded caches (the overshading baseline)");
+    cmd->add_option("--stats", args->statsFile, "Write cache statistics as JSON to FILE");
+    cmd->callback([args, &exitCode] { exitCode = RunRender(*args); });
+}
+
+}  // namespace texcache::cli

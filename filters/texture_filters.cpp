@@ -1,0 +1,16 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "filters/texture_filters.h"
+
+#include "texcache/error.h"
+
+namespace texcache {
+
+TextureFilterKind ParseTextureFilter(const std::string& name, const std::string& where) {
+    if (name == "none") return TextureFilterKind::None;
+    if (name == "normal") return TextureFilterKind::Normal;
+    throw InputError(where, "unknown filter '" + name + "' (valid: " + TextureFilterNames() + ")");
+}
+
+const char* TextureFilterNames() { return "none, normal"; }
+
+}  // namespace texcache

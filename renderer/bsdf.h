@@ -1,0 +1,85 @@
+// SPDX-License-Identifier: Apache-2.0
+// The two materials the scenes need: Lambertian diffuse, and a GGX specular layer over a
+// diffuse base. Evaluated in the shading frame (z = shading normal); header-only for inlining.
+#pragma once
+#include <algorithm>
+
+#include <glm/glm.hpp>
+
+#include "renderer/sampling.h"
+
+namespace texcache {
+
+inline float Luminance(glm::vec3 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+
+class Bsdf {
+public:
+    /// Diffuse when `ggx` is false; otherwise specular GGX (alpha = roughness^2) + (1 - F0) diffuse.
+    Bsdf(glm::vec3 n, glm::vec3 ng, glm::vec3 albedo, bool ggx, float roughness, glm::vec3 f0)
+        : frame_(Frame::FromZ(n)), ng_(ng), albedo_(albedo), ggx_(ggx), f0_(f0) {
+        alpha_ = std::max(roughness * roughness, 1e-3f);
+        kd_ = ggx ? 1.0f - std::max({f0.x, f0.y, f0.z}) : 1.0f;
+    }
+
+    /// BSDF value f(wo, wi) for world directions (both pointing away from the surface).
+    glm::vec3 Eval(glm::vec3 woW, glm::vec3 wiW) const {
+        if (glm::dot(wiW, ng_) <= 0.0f) return glm::vec3(0.0f);
+        const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
+        if (wi.z <= 0.0f || wo.z <= 0.0f) return glm::vec3(0.0f);
+        glm::vec3 f = kd_ * albedo_ * kInvPi;
+        if (ggx_) {
+            const glm::vec3 wm = glm::normalize(wo + wi);
+            const glm::vec3 F = FresnelSchlick(f0_, glm::dot(wo, wm));
+            f += F * (GgxD(wm, alpha_) * GgxG(wo, wi, alpha_) / (4.0f * wo.z * wi.z));
+        }
+        return f;
+    }
+
+    /// Solid-angle pdf of Sample() producing wiW.
+    float Pdf(glm::vec3 woW, glm::vec3 wiW) const {
+        const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
+        if (wi.z <= 0.0f || wo.z <= 0.0f) return 0.0f;
+        const float pDiffuse = CosineHemispherePdf(wi.z);
+        if (!ggx_) return pDiffuse;
+        const float ps = SpecularProbability(wo);
+        return ps * GgxPdfReflect(wo, wi, alpha_) + (1.0f - ps) * pDiffuse;
+    }
+
+    /// Samples wi; returns false when no direction was produced. `weight` = f * cos / pdf.
+    bool Sample(glm::vec3 woW, float uChoice, glm::vec2 u, glm::vec3* wiW, glm::vec3* weight,
+                float* pdf) const {
+        const glm::vec3 wo = frame_.ToLocal(woW);
+        if (wo.z <= 0.0f) return false;
+        glm::vec3 wi;
+        if (ggx_ && uChoice < SpecularProbability(wo)) {
+            const glm::vec3 wm = GgxSampleVisibleNormal(wo, alpha_, u);
+            wi = glm::reflect(-wo, wm);
+        } else {
+            wi = SampleCosineHemisphere(u);
+        }
+        if (wi.z <= 0.0f) return false;
+        *wiW = frame_.FromLocal(wi);
+        *pdf = Pdf(woW, *wiW);
+        if (!(*pdf > 0.0f)) return false;
+        *weight = Eval(woW, *wiW) * (std::abs(wi.z) / *pdf);
+        return true;
+    }
+
+    const Frame& frame() const { return frame_; }
+
+private:
+    float SpecularProbability(glm::vec3 wo) const {
+        const float s = Luminance(FresnelSchlick(f0_, wo.z));
+        const float d = kd_ * Luminance(albedo_);
+        return std::clamp(s / std::max(s + d, 1e-6f), 0.1f, 0.9f);
+    }
+    static constexpr float kInvPi = 0.31830988618379067f;
+
+    Frame frame_;
+    glm::vec3 ng_, albedo_;
+    bool ggx_;
+    glm::vec3 f0_;
+    float alpha_, kd_;
+};
+
+}  // namespace texcache

@@ -1,0 +1,31 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+#include <glm/glm.hpp>
+
+#include "renderer/render_scene.h"
+#include "renderer/scene.h"
+
+namespace texcache {
+
+/// A perspective (pinhole or thin-lens) camera posed at one scene time.
+class CameraModel {
+public:
+    /// Poses `cam` at scene time `time` for an image of width x height pixels.
+    CameraModel(const Camera& cam, float time, int width, int height);
+
+    /// Primary ray through film position (px, py) in pixels (y down), lens sample in [0,1)^2,
+    /// with differentials for one-pixel steps in x and y.
+    Ray Generate(float px, float py, glm::vec2 lens, RayDifferentials* diff) const;
+    /// World point -> film position in pixels (x right, y down); false when behind the camera.
+    bool Project(glm::vec3 world, glm::vec2* film) const;
+
+    glm::vec3 Position() const { return glm::vec3(camToWorld_[3]); }
+
+private:
+    glm::mat4 camToWorld_, worldToCam_;
+    float tanHalfY_, aspect_;
+    int width_, height_;
+    float lensRadius_, focusDistance_;
+};
+
+}  // namespace texcache

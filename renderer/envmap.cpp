@@ -1,0 +1,121 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/envmap.h"
+
+#include <cmath>
+
+#include "renderer/image.h"
+#include "renderer/sampling.h"
+#include "texcache/error.h"
+
+namespace texcache {
+
+EnvironmentMap EnvironmentMap::Load(const std::string& path, float intensity, float rotationDegrees) {
+    const Image img = ReadImageRGB(path);
+    if (img.width != 2 * img.height)
+        throw InputError(path, "environment map is not lat-long (expected width = 2 x height, got " +
+                                   std::to_string(img.width) + "x" + std::to_string(img.height) + ")");
+    if (!(intensity >= 0.0f) || !std::isfinite(intensity))
+        throw InputError(path, "environment intensity must be a finite number >= 0");
+    EnvironmentMap e;
+    e.isConstant_ = false;
+    e.width_ = img.width;
+    e.height_ = img.height;
+    e.rotation_ = glm::radians(rotationDegrees);
+    e.texels_.resize(img.NumPixels());
+    std::vector<float> weights(img.NumPixels());
+    for (int y = 0; y < img.height; ++y) {
+        const float sinTheta = std::sin(kPiF * (float(y) + 0.5f) / float(img.height));
+        for (int x = 0; x < img.width; ++x) {
+            const float* p = img.At(x, y);
+            // Lossy EXRs carry slightly negative texels (and NaN would poison sums): clamp.
+            glm::vec3 c(p[0], p[1], p[2]);
+            for (int k = 0; k < 3; ++k) c[k] = std::isfinite(c[k]) ? std::max(c[k], 0.0f) * intensity : 0.0f;
+            e.texels_[size_t(y) * img.width + x] = c;
+            weights[size_t(y) * img.width + x] = (0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z) * sinTheta;
+        }
+    }
+    // Sampling picks a texel and a uniform point in it, while Eval interpolates bilinearly: the
+    // texel's own value drives the pdf; both are consistent estimators (pdf > 0 wherever the
+    // bilinear radiance is non-zero, since neighbours of a bright texel get its weight too).
+    std::vector<float> blurred(weights);
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x) {
+            float m = 0.0f;
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const int yy = std::clamp(y + dy, 0, img.height - 1);
+                    const int xx = (x + dx + img.width) % img.width;
+                    m = std::max(m, weights[size_t(yy) * img.width + xx]);
+                }
+            blurred[size_t(y) * img.width + x] = m;
+        }
+    e.dist_ = Distribution2D(blurred, img.width, img.height);
+    return e;
+}
+
+EnvironmentMap EnvironmentMap::Constant(glm::vec3 radiance) {
+    EnvironmentMap e;
+    e.constant_ = radiance;
+    return e;
+}
+
+glm::vec2 EnvironmentMap::DirToUv(glm::vec3 d) const {
+    float phi = std::atan2(d.x, -d.z) - rotation_;
+    float u = phi / (2.0f * kPiF);
+    u -= std::floor(u);
+    const float v = std::acos(std::clamp(d.y, -1.0f, 1.0f)) / kPiF;
+    return {std::min(u, 0x1.fffffep-1f), std::min(v, 0x1.fffffep-1f)};
+}
+
+glm::vec3 EnvironmentMap::UvToDir(glm::vec2 uv) const {
+    const float phi = uv.x * 2.0f * kPiF + rotation_, theta = uv.y * kPiF;
+    const float st = std::sin(theta);
+    return {st * std::sin(phi), std::cos(theta), -st * std::cos(phi)};
+}
+
+glm::vec3 EnvironmentMap::Eval(glm::vec3 dir) const {
+    if (isConstant_) return constant_;
+    const glm::vec2 uv = DirToUv(dir);
+    const float x = uv.x * float(width_) - 0.5f, y = uv.y * float(height_) - 0.5f;
+    const int x0 = int(std::floor(x)), y0 = int(std::floor(y));
+    const float fx = x - float(x0), fy = y - float(y0);
+    auto at = [&](int xi, int yi) {
+        return Texel((xi % width_ + width_) % width_, std::clamp(yi, 0, height_ - 1));
+    };
+    return glm::mix(glm::mix(at(x0, y0), at(x0 + 1, y0), fx), glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx), fy);
+}
+
+glm::vec3 EnvironmentMap::Sample(glm::vec2 u, glm::vec3* dir, float* pdf) const {
+    if (isConstant_) {
+        *dir = SampleUniformSphere(u);
+        *pdf = kUniformSpherePdf;
+        return constant_;
+    }
+    float pdfUv;
+    const glm::vec2 uv = dist_.Sample(u, &pdfUv);
+    const float sinTheta = std::sin(uv.y * kPiF);
+    *dir = UvToDir(uv);
+    // dω = 2π² sinθ du dv
+    *pdf = sinTheta > 0.0f ? pdfUv / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;
+    return Eval(*dir);
+}
+
+float EnvironmentMap::Pdf(glm::vec3 dir) const {
+    if (isConstant_) return kUniformSpherePdf;
+    const glm::vec2 uv = DirToUv(dir);
+    const float sinTheta = std::sin(uv.y * kPiF);
+    return sinTheta > 0.0f ? dist_.Pdf(uv) / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;
+}
+
+glm::vec3 EnvironmentMap::AverageRadiance() const {
+    if (isConstant_) return constant_;
+    glm::dvec3 sum(0.0);
+    double wsum = 0.0;
+    for (int y = 0; y < height_; ++y) {
+        const double w = std::sin(kPiF * (y + 0.5) / height_);
+        for (int x = 0; x < width_; ++x) sum += w * glm::dvec3(Texel(x, y)), wsum += w;
+    }
+    return glm::vec3(sum / wsum);
+}
+
+}  // namespace texcache

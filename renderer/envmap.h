@@ -1,0 +1,46 @@
+// SPDX-License-Identifier: Apache-2.0
+// Lat-long environment light with importance sampling.
+//
+// Convention: world +Y is up. A direction d maps to phi = atan2(d.x, -d.z) - rotation and
+// theta = acos(d.y); u = phi / 2pi wrapped to [0,1), v = theta / pi; image row 0 is the top
+// (v = 0 looks along +Y). A positive rotation turns the map counter-clockwise seen from above.
+#pragma once
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "renderer/distribution.h"
+
+namespace texcache {
+
+class EnvironmentMap {
+public:
+    /// Loads a lat-long image (width == 2 * height); throws InputError otherwise.
+    static EnvironmentMap Load(const std::string& path, float intensity, float rotationDegrees);
+    /// A uniform environment of the given radiance (white-furnace tests).
+    static EnvironmentMap Constant(glm::vec3 radiance);
+
+    /// Radiance arriving from direction `dir` (bilinear in the texels).
+    glm::vec3 Eval(glm::vec3 dir) const;
+    /// Samples a direction proportionally to max(0, luminance) * sin(theta); returns Eval(dir).
+    glm::vec3 Sample(glm::vec2 u, glm::vec3* dir, float* pdfSolidAngle) const;
+    /// Solid-angle density of Sample() at `dir`.
+    float Pdf(glm::vec3 dir) const;
+    /// Mean radiance over the sphere.
+    glm::vec3 AverageRadiance() const;
+
+private:
+    glm::vec2 DirToUv(glm::vec3 d) const;
+    glm::vec3 UvToDir(glm::vec2 uv) const;
+    glm::vec3 Texel(int x, int y) const { return texels_[size_t(y) * width_ + x]; }
+
+    int width_ = 0, height_ = 0;
+    std::vector<glm::vec3> texels_;
+    glm::vec3 constant_{0.0f};
+    bool isConstant_ = true;
+    float rotation_ = 0.0f;  // radians
+    Distribution2D dist_;
+};
+
+}  // namespace texcache

@@ -1,0 +1,623 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/integrator.h"
+
+#include <xmmintrin.h>
+#include <pmmintrin.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include <tbb/blocked_range2d.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include "renderer/bsdf.h"
+#include "renderer/camera.h"
+#include "renderer/envmap.h"
+#include "renderer/sampling.h"
+#include "texcache/error.h"
+
+namespace texcache {
+
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+
+struct Named {
+    const char* name;
+    IntegratorKind kind;
+};
+constexpr Named kIntegrators[] = {
+    {"normal", IntegratorKind::Normal}, {"ptex", IntegratorKind::Ptex},
+    {"uv", IntegratorKind::Uv},         {"eyelight", IntegratorKind::EyeLight},
+    {"ao", IntegratorKind::AO},         {"direct", IntegratorKind::Direct},
+    {"path", IntegratorKind::Path},
+};
+
+struct RayCounts {
+    uint64_t camera = 0, shadow = 0, bounce = 0;
+};
+
+/// Offsets a ray origin off the surface along the geometric normal, scaled to the coordinates'
+/// magnitude so that float rounding of large scenes cannot re-hit the surface.
+glm::vec3 OffsetOrigin(glm::vec3 p, glm::vec3 ng, glm::vec3 dir) {
+    const float scale = std::max({1.0f, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+    const float eps = 2e-5f * scale;
+    return p + (glm::dot(dir, ng) >= 0.0f ? eps : -eps) * ng;
+}
+
+glm::vec3 HashColor(uint32_t id) {
+    uint64_t h = MixBits(uint64_t(id) + 0x9E3779B97F4A7C15ull);
+    return glm::vec3(float(h & 0xFF), float((h >> 8) & 0xFF), float((h >> 16) & 0xFF)) / 255.0f;
+}
+
+// One light sample for next-event estimation.
+struct LightSample {
+    glm::vec3 wi;      // towards the light
+    float dist;        // to the light (inf for env/distant)
+    glm::vec3 Li;      // incident radiance (irradiance for delta lights)
+    float pdf;         // solid angle, includes light selection; 0 for delta lights (no MIS)
+    bool delta;
+};
+
+/// Everything the per-sample code reads, resolved once per frame.
+struct Context {
+    const RenderScene& rs;
+    const Scene& scene;
+    const RenderOptions& opt;
+    const EnvironmentMap* env;
+    CameraModel camera;
+    std::vector<glm::vec3> distantDir;  // towards the light, world space at frame time
+    std::vector<glm::vec3> distantE;
+    struct Quad {
+        glm::vec3 corner, e1, e2, n, L;
+        float area;
+        bool twoSided;
+    };
+    std::vector<Quad> quads;
+    int numLights = 0;
+    float shutterLength;
+    TextureSpaceCache* tsc = nullptr;
+    tbb::enumerable_thread_specific<CacheStats>* cacheStats = nullptr;
+    std::optional<CameraModel> cameraOpen, cameraClose;  // for motion vectors
+    bool cameraMoves = false;
+
+    Context(const RenderScene& r, const RenderOptions& o)
+        : rs(r), scene(r.scene()), opt(o), env(r.environment()),
+          camera(r.scene().camera, o.frameTime, o.width, o.height) {
+        shutterLength = scene.camera.shutterClose - scene.camera.shutterOpen;
+        if (shutterLength > 0.0f) {
+            cameraOpen.emplace(scene.camera, o.frameTime, o.width, o.height);
+            cameraClose.emplace(scene.camera, o.frameTime + shutterLength, o.width, o.height);
+            cameraMoves = scene.camera.pose.IsAnimated();
+        }
+        if (!IntegratorUsesLights(o.integrator)) return;
+        for (const DistantLight& d : scene.distantLights) {
+            const glm::mat3 M(d.transform.Eval(o.frameTime));
+            distantDir.push_back(-glm::normalize(M * d.direction));
+            distantE.push_back(d.irradiance);
+        }
+        for (const QuadLight& q : scene.quadLights) {
+            const glm::mat4 M = q.transform.Eval(o.frameTime);
+            Quad w;
+            w.corner = glm::vec3(M * glm::vec4(q.corner, 1.0f));
+            w.e1 = glm::mat3(M) * q.edge1;
+            w.e2 = glm::mat3(M) * q.edge2;
+            const glm::vec3 c = glm::cross(w.e1, w.e2);
+            w.area = glm::length(c);
+            w.n = c / w.area;
+            w.L = q.radiance;
+            w.twoSided = q.twoSided;
+            quads.push_back(w);
+        }
+        numLights = int(quads.size() + distantDir.size()) + (env ? 1 : 0);
+    }
+
+    float PickPdf() const { return numLights > 0 ? 1.0f / float(numLights) : 0.0f; }
+
+    // Radiance emitted by quad light `l` towards -dir, seen from a surface.
+    glm::vec3 QuadEmission(int l, glm::vec3 dir) const {
+        const Quad& q = quads[l];
+        const float c = glm::dot(q.n, -dir);
+        return (c > 0.0f || q.twoSided) ? q.L : glm::vec3(0.0f);
+    }
+    float QuadPdf(int l, glm::vec3 dir, float dist) const {
+        const Quad& q = quads[l];
+        const float c = std::abs(glm::dot(q.n, dir));
+        return c > 0.0f ? dist * dist / (q.area * c) * PickPdf() : 0.0f;
+    }
+
+    bool SampleLight(glm::vec3 p, float uPick, glm::vec2 u, LightSample* s) const {
+        if (numLights == 0) return false;
+        int i = std::min(int(uPick * float(numLights)), numLights - 1);
+        if (i < int(quads.size())) {
+            const Quad& q = quads[i];
+            const glm::vec3 x = q.corner + u.x * q.e1 + u.y * q.e2;
+            glm::vec3 d = x - p;
+            const float dist2 = glm::dot(d, d);
+            if (!(dist2 > 0.0f)) return false;
+            s->dist = std::sqrt(dist2);
+            s->wi = d / s->dist;
+            s->Li = QuadEmission(i, s->wi);
+            s->pdf = QuadPdf(i, s->wi, s->dist);
+            s->delta = false;
+            return s->pdf > 0.0f && s->Li != glm::vec3(0.0f);
+        }
+        i -= int(quads.size());
+        if (i < int(distantDir.size())) {
+            s->wi = distantDir[i];
+            s->dist = INFINITY;
+            s->Li = distantE[i] * float(numLights);  // divided by the pick probability
+            s->pdf = 0.0f;
+            s->delta = true;
+            return true;
+        }
+        float pdf;
+        s->Li = env->Sample(u, &s->wi, &pdf);
+        s->pdf = pdf * PickPdf();
+        s->dist = INFINITY;
+        s->delta = false;
+        return s->pdf > 0.0f;
+    }
+};
+
+Bsdf MakeBsdf(const Context& c, const SurfaceInteraction& si) {
+    const Material& m = c.scene.materials[si.material];
+    const bool ggx = m.type == Material::Type::GGX;
+    return Bsdf(si.N, si.Ng, c.rs.Albedo(si), ggx, ggx ? c.rs.Roughness(si) : 1.0f, m.specular);
+}
+
+struct NoCachedTerm {
+    bool operator()(const SurfaceInteraction&, const Ray&, glm::vec3*) const { return false; }
+};
+
+/// Direct lighting (depth 1) and path tracing: NEE with MIS against BSDF sampling.
+/// `emitFirst` = false drops emission seen by the first ray (a cached indirect sample must not
+/// count what NEE at the camera hit already did). `cached(si, ray, &term)` may replace the
+/// indirect light at the first surface: it returns true with the term to add, and the path then
+/// stops after the first BSDF ray's direct hit.
+template <typename CachedIndirect = NoCachedTerm>
+glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, Rng& rng,
+                 int maxDepth, RayCounts& rays, bool emitFirst = true,
+                 const CachedIndirect& cached = CachedIndirect()) {
+    glm::vec3 L(0.0f), beta(1.0f);
+    float prevPdf = 0.0f;  // BSDF pdf of the ray being traced (0: camera ray, no MIS)
+    Hit hit = firstHit;
+    bool found = hitFirst;
+    for (int depth = 0;; ++depth) {
+        if (depth > 0) {
+            ++rays.bounce;
+            found = c.rs.Intersect(ray, &hit);
+        }
+        if (depth == 0 && !emitFirst && (!found || hit.light >= 0)) break;
+        if (!found) {
+            if (c.env) {
+                const glm::vec3 Le = c.env->Eval(ray.dir);
+                float w = 1.0f;
+                if (prevPdf > 0.0f) w = PowerHeuristic(1, prevPdf, 1, c.env->Pdf(ray.dir) * c.PickPdf());
+                L += beta * Le * w;
+            }
+            break;
+        }
+        if (hit.light >= 0) {
+            const glm::vec3 Le = c.QuadEmission(hit.light, ray.dir);
+            float w = 1.0f;
+            if (prevPdf > 0.0f) w = PowerHeuristic(1, prevPdf, 1, c.QuadPdf(hit.light, ray.dir, hit.t));
+            L += beta * Le * w;
+            break;
+        }
+        if (depth >= maxDepth) break;
+        const SurfaceInteraction si = c.rs.Interact(ray, hit);
+        const Bsdf bsdf = MakeBsdf(c, si);
+        const glm::vec3 wo = -ray.dir;
+        if (depth == 0) {
+            glm::vec3 term;
+            if (cached(si, ray, &term)) {
+                L += term;
+                maxDepth = 1;  // the BSDF ray below still finds direct light (MIS), then stops
+            }
+        }
+
+        LightSample ls;
+        if (c.SampleLight(si.P, rng.Next1D(), rng.Next2D(), &ls)) {
+            const glm::vec3 f = bsdf.Eval(wo, ls.wi);
+            if (f != glm::vec3(0.0f)) {
+                Ray shadow;
+                shadow.org = OffsetOrigin(si.P, si.Ng, ls.wi);
+                shadow.dir = ls.wi;
+                shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
+                shadow.time = ray.time;
+                ++rays.shadow;
+                if (!c.rs.Occluded(shadow)) {
+                    const float cosi = std::abs(glm::dot(ls.wi, si.N));
+                    if (ls.delta) {
+                        L += beta * f * ls.Li * cosi;
+                    } else {
+                        const float w = PowerHeuristic(1, ls.pdf, 1, bsdf.Pdf(wo, ls.wi));
+                        L += beta * f * ls.Li * (cosi * w / ls.pdf);
+                    }
+                }
+            }
+        }
+
+        glm::vec3 wi, weight;
+        float pdf;
+        const float uChoice = rng.Next1D();
+        if (!bsdf.Sample(wo, uChoice, rng.Next2D(), &wi, &weight, &pdf)) break;
+        beta *= weight;
+        prevPdf = pdf;
+        ray.org = OffsetOrigin(si.P, si.Ng, wi);
+        ray.dir = wi;
+        ray.tnear = 0.0f;
+        ray.tfar = INFINITY;
+        if (depth >= 3) {
+            // Russian roulette once paths are long enough to matter little.
+            const float q = std::max(0.05f, 1.0f - std::max({beta.x, beta.y, beta.z}));
+            if (rng.Next1D() < q) break;
+            beta /= 1.0f - q;
+        }
+        if (!std::isfinite(beta.x + beta.y + beta.z)) break;
+    }
+    return L;
+}
+
+glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
+               RayCounts& rays) {
+    const Frame frame = Frame::FromZ(si.N);
+    int open = 0;
+    for (int i = 0; i < c.opt.aoSamples; ++i) {
+        const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
+        // Directions below the tessellated surface are blocked by it.
+        if (glm::dot(wi, si.Ng) <= 0.0f) continue;
+        Ray r;
+        r.org = OffsetOrigin(si.P, si.Ng, wi);
+        r.dir = wi;
+        r.tfar = c.opt.aoDistance;
+        r.time = ray.time;
+        ++rays.shadow;
+        if (!c.rs.Occluded(r)) ++open;
+    }
+    return glm::vec3(float(open) / float(c.opt.aoSamples));
+}
+
+struct PixelAovs {
+    glm::vec3 albedo{0.0f}, normal{0.0f}, ptex{0.0f};
+    float depth = 0.0f;
+    glm::vec2 motion{0.0f};
+    int hits = 0;
+};
+
+// ---- texture-space shading (libtexcache) ---------------------------------------------------
+
+/// Random stream of a cache sample: a function of its key, so the same texel gets the same
+/// shading whichever thread shades it, and a re-shade after eviction reproduces it.
+Rng SampleRng(const Context& c, const SampleRequest& r) {
+    return Rng(MixBits(c.opt.seed ^ (r.key.Pack() * 0x9E3779B97F4A7C15ull)), 0x7ca7);
+}
+
+/// Limit-surface point of a cache sample, and a ray-origin offset that clears the tessellated
+/// surface (which lies within ~1.4% of an edge of the limit surface at the default rate).
+bool SamplePoint(const Context& c, int object, const SampleRequest& r, SurfaceSample* ss, float* offset) {
+    if (!c.rs.EvalSurface(object, {r.face, r.u, r.v}, 0.0f, ss)) return false;
+    const float edge = std::max(glm::length(ss->dPdu), glm::length(ss->dPdv));
+    const float scale = std::max({1.0f, std::abs(ss->P.x), std::abs(ss->P.y), std::abs(ss->P.z)});
+    *offset = 0.02f * edge + 2e-5f * scale;
+    return std::isfinite(ss->P.x + ss->P.y + ss->P.z + ss->N.x + ss->N.y + ss->N.z);
+}
+
+ShadedSample ShadeAoSample(const Context& c, int object, const SampleRequest& r, RayCounts& rays) {
+    SurfaceSample ss;
+    float offset;
+    if (!SamplePoint(c, object, r, &ss, &offset)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
+    Rng rng = SampleRng(c, r);
+    const Frame frame = Frame::FromZ(ss.N);
+    const int n = c.opt.aoSamples;
+    int open = 0;
+    for (int i = 0; i < n; ++i) {
+        Ray ray;
+        ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
+        ray.org = ss.P + offset * ss.N;
+        ray.tfar = c.opt.aoDistance;
+        ++rays.shadow;
+        if (!c.rs.Occluded(ray)) ++open;
+    }
+    const float p = float(open) / float(n);
+    return {glm::vec3(p), ss.N, p * (1.0f - p) / float(std::max(n - 1, 1))};
+}
+
+ShadedSample ShadeIndirectSample(const Context& c, int object, const SampleRequest& r, RayCounts& rays) {
+    SurfaceSample ss;
+    float offset;
+    if (!SamplePoint(c, object, r, &ss, &offset)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
+    Rng rng = SampleRng(c, r);
+    const Frame frame = Frame::FromZ(ss.N);
+    const int n = c.opt.texture.indirectSamples;
+    glm::vec3 sum(0.0f);
+    float sum2 = 0.0f;
+    for (int i = 0; i < n; ++i) {
+        // Cosine sampling: the estimate of (1/pi) * integral of L cos is the mean incident
+        // radiance, which the hit multiplies by its albedo.
+        Ray ray;
+        ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
+        ray.org = ss.P + offset * ss.N;
+        ++rays.bounce;
+        Hit hit;
+        const bool found = c.rs.Intersect(ray, &hit);
+        glm::vec3 L = LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
+        if (!std::isfinite(L.x + L.y + L.z)) L = glm::vec3(0.0f);
+        sum += L;
+        const float y = Luminance(L);
+        sum2 += y * y;
+    }
+    const glm::vec3 mean = sum / float(n);
+    const float ym = Luminance(mean);
+    return {mean, ss.N, std::max(0.0f, sum2 / float(n) - ym * ym) / float(std::max(n - 1, 1))};
+}
+
+/// The cached term at a camera hit: texel-cache lookup with the material's filter.
+template <typename ShadeFn>
+glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&& shade) {
+    const TextureSpaceOptions& t = c.tsc->options();
+    const CacheHit h{c.tsc->MeshOf(si.object), si.ptex.face, si.ptex.u, si.ptex.v,
+                     si.dudx, si.dvdx, si.dudy, si.dvdy};
+    CacheStats& st = c.cacheStats->local();
+    auto sampleShader = [&](const SampleRequest& r) { return shade(si.object, r); };
+    if (t.filter == TextureFilterKind::None)
+        return c.tsc->cache().Lookup(h, 0, sampleShader, CentreFilter{}, st);
+    return c.tsc->cache().Lookup(h, t.radius, sampleShader, NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
+}
+
+void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInteraction& si,
+              PixelAovs* aov) {
+    aov->albedo += c.rs.Albedo(si);
+    aov->normal += si.N;
+    aov->depth += hit.t;
+    if (aov->hits++ == 0) aov->ptex = {float(si.ptex.face), si.ptex.u, si.ptex.v};
+    if (c.shutterLength > 0.0f) {
+        // Where this surface point is at shutter open and close, in film pixels.
+        const glm::mat4 M = c.rs.ObjectToWorld(hit.object, ray.time);
+        const glm::vec4 pObj = glm::inverse(M) * glm::vec4(si.P, 1.0f);
+        glm::vec2 f0, f1;
+        if (c.cameraOpen->Project(glm::vec3(c.rs.ObjectToWorld(hit.object, 0.0f) * pObj), &f0) &&
+            c.cameraClose->Project(glm::vec3(c.rs.ObjectToWorld(hit.object, 1.0f) * pObj), &f1))
+            aov->motion += f1 - f0;
+    }
+}
+
+glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCounts& rays) {
+    Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
+    const glm::vec2 jitter = rng.Next2D();
+    const glm::vec2 lens = rng.Next2D();
+    const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
+    RayDifferentials diff;
+    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, &diff);
+    if (c.cameraMoves) {
+        // Camera motion blur: blend the rays of the open and close poses (rigid, short shutter).
+        const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+        ray.org = glm::mix(ray.org, r1.org, time);
+        ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
+    }
+    ray.time = time;
+    ++rays.camera;
+    Hit hit;
+    const bool found = c.rs.Intersect(ray, &hit);
+
+    const IntegratorKind k = c.opt.integrator;
+    if (k == IntegratorKind::Direct || k == IntegratorKind::Path) {
+        if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
+        if (c.tsc && k == IntegratorKind::Path) {
+            // Diffuse indirect from the cache; glossy materials stay per hit (view-dependent).
+            auto cached = [&](const SurfaceInteraction& si0, const Ray& r0, glm::vec3* term) {
+                if (c.scene.materials[si0.material].type != Material::Type::Diffuse) return false;
+                const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
+                const glm::vec3 E = CachedLookup(c, sd, [&](int object, const SampleRequest& r) {
+                    return ShadeIndirectSample(c, object, r, rays);
+                });
+                *term = c.rs.Albedo(si0) * E;
+                return true;
+            };
+            return LiPath(c, ray, hit, found, rng, c.opt.maxDepth, rays, true, cached);
+        }
+        return LiPath(c, ray, hit, found, rng, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth, rays);
+    }
+    if (!found) return glm::vec3(0.0f);
+    if (hit.object < 0) return glm::vec3(1.0f);  // a light seen by a debug view: white
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, &diff);
+    if (aov) FillAovs(c, ray, hit, si, aov);
+    switch (k) {
+        case IntegratorKind::Normal: return si.N * 0.5f + 0.5f;
+        case IntegratorKind::Ptex: return HashColor(uint32_t(si.ptex.face) * 7919u + uint32_t(si.object));
+        case IntegratorKind::Uv: return glm::vec3(si.ptex.u, si.ptex.v, 0.0f);
+        case IntegratorKind::EyeLight: return c.rs.Albedo(si) * std::abs(glm::dot(si.N, ray.dir));
+        case IntegratorKind::AO:
+            if (c.tsc)
+                return CachedLookup(c, si, [&](int object, const SampleRequest& r) {
+                    return ShadeAoSample(c, object, r, rays);
+                });
+            return LiAO(c, ray, si, rng, rays);
+        default: return glm::vec3(0.0f);
+    }
+}
+
+/// Prints a progress bar on stderr once a render has run for a second.
+class Progress {
+public:
+    Progress(bool enabled, std::function<double()> fraction)
+        : fraction_(std::move(fraction)), start_(Clock::now()) {
+        if (enabled) thread_ = std::thread([this] { Loop(); });
+    }
+    ~Progress() {
+        {
+            std::lock_guard<std::mutex> lock(m_);
+            done_ = true;
+        }
+        cv_.notify_all();
+        if (thread_.joinable()) thread_.join();
+        if (printed_) std::fprintf(stderr, "\n");
+    }
+
+private:
+    using Clock = std::chrono::steady_clock;
+    void Loop() {
+        std::unique_lock<std::mutex> lock(m_);
+        while (!cv_.wait_for(lock, std::chrono::milliseconds(250), [this] { return done_; })) {
+            const double t = std::chrono::duration<double>(Clock::now() - start_).count();
+            if (t < 1.0) continue;
+            const double f = std::clamp(fraction_(), 0.0, 1.0);
+            const int w = 30, n = int(f * w);
+            const double eta = f > 0.0 ? t / f - t : 0.0;
+            std::fprintf(stderr, "\rrender [%.*s%*s] %3d%%  %.1fs elapsed, %.1fs left  ", n,
+                         "==============================", w - n, "", int(f * 100.0), t, eta);
+            std::fflush(stderr);
+            printed_ = true;
+        }
+    }
+    std::function<double()> fraction_;
+    Clock::time_point start_;
+    std::thread thread_;
+    std::mutex m_;
+    std::condition_variable cv_;
+    bool done_ = false, printed_ = false;
+};
+
+}  // namespace
+
+uint64_t PixelSeed(uint64_t seed, int x, int y, int width) {
+    return MixBits(seed * 0x9E3779B97F4A7C15ull + uint64_t(y) * uint64_t(width) + uint64_t(x));
+}
+
+IntegratorKind ParseIntegrator(const std::string& name, const std::string& where) {
+    for (const Named& n : kIntegrators)
+        if (name == n.name) return n.kind;
+    throw InputError(where, "unknown integrator '" + name + "' (valid: " + IntegratorNames() + ")");
+}
+
+const char* IntegratorNames() { return "normal, ptex, uv, eyelight, ao, direct, path"; }
+
+bool IntegratorUsesLights(IntegratorKind k) {
+    return k == IntegratorKind::Direct || k == IntegratorKind::Path;
+}
+
+RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpaceCache* cache) {
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    Context ctx(rs, opt);
+    std::unique_ptr<TextureSpaceCache> frameCache;
+    tbb::enumerable_thread_specific<CacheStats> cacheStats;
+    const bool cachedIntegrator = opt.integrator == IntegratorKind::AO || opt.integrator == IntegratorKind::Path;
+    if (opt.texture.enabled && cachedIntegrator) {
+        if (!cache) {
+            frameCache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
+            cache = frameCache.get();
+        }
+        ctx.tsc = cache;
+        ctx.cacheStats = &cacheStats;
+    }
+    const int W = opt.width, H = opt.height;
+    const size_t numPixels = size_t(W) * H;
+
+    std::vector<double> sum(numPixels * 3, 0.0);
+    std::vector<PixelAovs> aovs(opt.aovs.Any() ? numPixels : 0);
+    tbb::enumerable_thread_specific<RayCounts> counts;
+
+    // Passes of whole sample indices: a pixel's result depends only on its sample indices, so
+    // the image is the same for any thread count or pass split.
+    const int sppCap = std::max(opt.spp, 1);
+    std::atomic<uint64_t> pixelSamplesDone{0};
+    const double totalWork = double(numPixels) * sppCap;
+    auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
+    int done = 0;
+    {
+        Progress progress(opt.progress, [&] {
+            if (opt.seconds > 0.0f) return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
+            return double(pixelSamplesDone.load()) / totalWork;
+        });
+        int passSpp = opt.seconds > 0.0f ? 1 : sppCap;
+        while (done < sppCap) {
+            const int s0 = done, s1 = std::min(sppCap, done + passSpp);
+            const auto passStart = Clock::now();
+            tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8), [&](const tbb::blocked_range2d<int>& r) {
+                // Denormals off in every worker: Embree wants it and it saves stalls in shading.
+                _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                RayCounts& rc = counts.local();
+                for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+                    for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+                        const size_t p = size_t(y) * W + x;
+                        PixelAovs* aov = aovs.empty() ? nullptr : &aovs[p];
+                        glm::dvec3 acc(0.0);
+                        for (int s = s0; s < s1; ++s) {
+                            glm::vec3 L = Sample(ctx, x, y, s, aov, rc);
+                            // A NaN/Inf sample would poison the pixel forever: drop it.
+                            if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z)) acc += glm::dvec3(L);
+                        }
+                        sum[3 * p] += acc.x, sum[3 * p + 1] += acc.y, sum[3 * p + 2] += acc.z;
+                    }
+                pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+            });
+            done = s1;
+            if (opt.seconds > 0.0f) {
+                const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();
+                const double left = opt.seconds - elapsed();
+                if (left <= 0.0) break;
+                // Size the next pass to fit the remaining budget (at most doubling).
+                const double perSample = passTime / double(s1 - s0);
+                passSpp = std::clamp(int(left / std::max(perSample, 1e-9)), 0, 2 * (s1 - s0));
+                if (passSpp == 0) break;
+            }
+        }
+    }
+
+    RenderResult result;
+    result.beauty = Image(W, H, 3);
+    for (size_t p = 0; p < numPixels * 3; ++p) result.beauty.data[p] = float(sum[p] / done);
+    if (!aovs.empty()) {
+        auto layer = [&](const char* name, int ch, std::vector<std::string> names, auto fill) {
+            ImageLayer l{name, Image(W, H, ch), std::move(names)};
+            for (size_t p = 0; p < numPixels; ++p) fill(aovs[p], &l.image.data[p * ch]);
+            result.aovs.push_back(std::move(l));
+        };
+        const float inv = 1.0f / float(done);
+        if (opt.aovs.albedo)
+            layer("albedo", 3, {"R", "G", "B"}, [&](const PixelAovs& a, float* o) {
+                for (int k = 0; k < 3; ++k) o[k] = a.albedo[k] * inv;
+            });
+        if (opt.aovs.normal)
+            layer("normal", 3, {"X", "Y", "Z"}, [&](const PixelAovs& a, float* o) {
+                const float l = glm::length(a.normal);
+                for (int k = 0; k < 3; ++k) o[k] = l > 0.0f ? a.normal[k] / l : 0.0f;
+            });
+        if (opt.aovs.depth)
+            layer("depth", 1, {"Z"}, [&](const PixelAovs& a, float* o) {
+                o[0] = a.hits ? a.depth / float(a.hits) : INFINITY;
+            });
+        if (opt.aovs.ptex)
+            layer("ptex", 3, {"face", "u", "v"}, [&](const PixelAovs& a, float* o) {
+                o[0] = a.hits ? a.ptex.x : -1.0f, o[1] = a.ptex.y, o[2] = a.ptex.z;
+            });
+        if (opt.aovs.motion)
+            layer("motion", 2, {"X", "Y"}, [&](const PixelAovs& a, float* o) {
+                o[0] = a.hits ? a.motion.x / float(a.hits) : 0.0f;
+                o[1] = a.hits ? a.motion.y / float(a.hits) : 0.0f;
+            });
+    }
+    for (const RayCounts& rc : counts) {
+        result.stats.cameraRays += rc.camera;
+        result.stats.shadowRays += rc.shadow;
+        result.stats.bounceRays += rc.bounce;
+    }
+    for (const CacheStats& cs : cacheStats) result.stats.cache.Merge(cs);
+    result.stats.sppDone = done;
+    result.stats.seconds = elapsed();
+    return result;
+}
+
+}  // namespace texcache

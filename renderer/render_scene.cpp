@@ -1,0 +1,437 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/render_scene.h"
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <unordered_map>
+
+#include <embree3/rtcore.h>
+
+#include "renderer/envmap.h"
+#include "renderer/texture.h"
+#include "texcache/error.h"
+
+namespace texcache {
+
+namespace {
+
+// Steps of an instance's motion over the shutter: enough for slerped rotations to look round.
+constexpr int kMotionSteps = 5;
+
+void EmbreeError(void*, RTCError code, const char* str) {
+    // Called from inside Embree's C code, where no exception may pass: report and go on.
+    if (code != RTC_ERROR_NONE) std::fprintf(stderr, "texcache: Embree error %d: %s\n", int(code), str ? str : "");
+}
+
+RTCSubdivisionMode ToEmbree(BoundaryInterpolation b) {
+    switch (b) {
+        case BoundaryInterpolation::None: return RTC_SUBDIVISION_MODE_NO_BOUNDARY;
+        // Measured: PIN_CORNERS matches OSD EDGE_AND_CORNER to ~3e-6.
+        case BoundaryInterpolation::EdgeAndCorner: return RTC_SUBDIVISION_MODE_PIN_CORNERS;
+        // SMOOTH_BOUNDARY differs from OSD EDGE_ONLY by up to 2e-3 near valence-2 corners.
+        case BoundaryInterpolation::EdgeOnly: return RTC_SUBDIVISION_MODE_SMOOTH_BOUNDARY;
+    }
+    return RTC_SUBDIVISION_MODE_SMOOTH_BOUNDARY;
+}
+
+float ToEmbreeSharpness(float s) {
+    // OpenSubdiv treats sharpness >= 10 as infinitely sharp; Embree needs +inf for that.
+    return s >= 10.0f ? std::numeric_limits<float>::infinity() : s;
+}
+
+void RejectHoleHits(const RTCFilterFunctionNArguments* args) {
+    const auto* isHole = static_cast<const uint8_t*>(args->geometryUserPtr);
+    for (unsigned i = 0; i < args->N; ++i)
+        if (args->valid[i] == -1 && isHole[RTCHitN_primID(args->hit, args->N, i)]) args->valid[i] = 0;
+}
+
+}  // namespace
+
+struct RenderScene::Impl {
+    RTCDevice device = nullptr;
+    RTCScene top = nullptr;
+
+    struct Mesh {
+        RTCScene scene = nullptr;
+        RTCGeometry geom = nullptr;
+        std::unique_ptr<PtexTopology> topo;
+        bool hasUv = false;
+        std::vector<uint8_t> isHole;  // per coarse face, only for cages with holes
+    };
+    std::vector<Mesh> meshes;  // by Scene::meshes index; unused meshes stay empty
+
+    struct Instance {
+        int mesh = -1;
+        std::vector<glm::mat4> steps;  // 1 (static) or kMotionSteps over the shutter
+    };
+    std::vector<Instance> objects;              // by Scene::objects index
+    std::unordered_map<unsigned, int> geomToObject;  // instance geomID -> object
+    std::unordered_map<unsigned, int> geomToLight;   // quad light geomID -> light
+    std::vector<std::unique_ptr<TextureImage>> textures;
+
+    ~Impl() {
+        for (auto& m : meshes)
+            if (m.scene) rtcReleaseScene(m.scene);
+        if (top) rtcReleaseScene(top);
+        if (device) rtcReleaseDevice(device);
+    }
+
+    glm::mat4 Transform(int object, float time) const {
+        const auto& steps = objects[object].steps;
+        if (steps.size() == 1) return steps[0];
+        // Embree interpolates instance matrices linearly between time steps; match it exactly.
+        const float x = glm::clamp(time, 0.0f, 1.0f) * float(steps.size() - 1);
+        const int i = std::min(int(x), int(steps.size()) - 2);
+        const float f = x - float(i);
+        return steps[i] * (1.0f - f) + steps[i + 1] * f;
+    }
+};
+
+static bool MaterialUsesTextures(const Material& m) {
+    return m.albedo.texture >= 0 || m.roughness.texture >= 0;
+}
+
+RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
+    : scene_(scene), impl_(std::make_unique<Impl>()) {
+    Impl& I = *impl_;
+    std::string config = options.threads > 0 ? "threads=" + std::to_string(options.threads) : "";
+    I.device = rtcNewDevice(config.c_str());
+    if (!I.device) throw std::runtime_error("cannot create Embree device");
+    rtcSetDeviceErrorFunction(I.device, EmbreeError, nullptr);
+    I.top = rtcNewScene(I.device);
+
+    // Which meshes are used, and which of them need face-varying uvs (textured materials only).
+    const size_t numMeshes = scene.meshes.size();
+    std::vector<char> used(numMeshes, 0), needUv(numMeshes, 0);
+    for (const Object& o : scene.objects) {
+        used[o.mesh] = 1;
+        if (options.needTextures && MaterialUsesTextures(scene.materials[o.material]))
+            needUv[o.mesh] = 1;
+    }
+
+    I.meshes.resize(numMeshes);
+    for (size_t m = 0; m < numMeshes; ++m) {
+        if (!used[m]) continue;
+        const ControlCage& cage = scene.meshes[m];
+        Impl::Mesh& mesh = I.meshes[m];
+        mesh.topo = std::make_unique<PtexTopology>(cage);
+        mesh.scene = rtcNewScene(I.device);
+        RTCGeometry g = rtcNewGeometry(I.device, RTC_GEOMETRY_TYPE_SUBDIVISION);
+        auto* faces = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+            g, RTC_BUFFER_TYPE_FACE, 0, RTC_FORMAT_UINT, sizeof(unsigned), cage.faceVertexCounts.size()));
+        for (size_t i = 0; i < cage.faceVertexCounts.size(); ++i) faces[i] = unsigned(cage.faceVertexCounts[i]);
+        auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+            g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT, sizeof(unsigned), cage.faceVertexIndices.size()));
+        for (size_t i = 0; i < cage.faceVertexIndices.size(); ++i) idx[i] = unsigned(cage.faceVertexIndices[i]);
+        // 16-byte stride with w = 0: Embree loads vertices as 4-wide vectors, and garbage in the
+        // 4th lane (the buffer's padding after the last vertex) made rtcInterpolate read
+        // uninitialised memory and, at random, reject valid patches.
+        auto* pos = static_cast<float*>(rtcSetNewGeometryBuffer(
+            g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), cage.positions.size()));
+        for (size_t i = 0; i < cage.positions.size(); ++i) {
+            for (int k = 0; k < 3; ++k) pos[4 * i + k] = cage.positions[i][k];
+            pos[4 * i + 3] = 0.0f;
+        }
+        if (!cage.creaseEdges.empty()) {
+            auto* ce = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_EDGE_CREASE_INDEX, 0, RTC_FORMAT_UINT2, 2 * sizeof(unsigned),
+                cage.creaseEdges.size()));
+            auto* cw = static_cast<float*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_EDGE_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT, sizeof(float),
+                cage.creaseEdges.size()));
+            for (size_t i = 0; i < cage.creaseEdges.size(); ++i) {
+                ce[2 * i] = unsigned(cage.creaseEdges[i][0]);
+                ce[2 * i + 1] = unsigned(cage.creaseEdges[i][1]);
+                cw[i] = ToEmbreeSharpness(cage.creaseWeights[i]);
+            }
+        }
+        if (!cage.cornerVertices.empty()) {
+            auto* vi = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_VERTEX_CREASE_INDEX, 0, RTC_FORMAT_UINT, sizeof(unsigned),
+                cage.cornerVertices.size()));
+            auto* vw = static_cast<float*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_VERTEX_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT, sizeof(float),
+                cage.cornerVertices.size()));
+            for (size_t i = 0; i < cage.cornerVertices.size(); ++i) {
+                vi[i] = unsigned(cage.cornerVertices[i]);
+                vw[i] = ToEmbreeSharpness(cage.cornerWeights[i]);
+            }
+        }
+        if (!cage.holes.empty()) {
+            // OpenSubdiv's holes hide a face but leave its neighbours' limit surface unchanged;
+            // Embree's hole buffer turns the hole's edges into boundaries instead (measured: up
+            // to 0.5 units on catmark_hole_test1). So keep the face and reject its hits.
+            mesh.isHole.assign(cage.faceVertexCounts.size(), 0);
+            for (int h : cage.holes) mesh.isHole[h] = 1;
+            rtcSetGeometryUserData(g, mesh.isHole.data());
+            rtcSetGeometryIntersectFilterFunction(g, RejectHoleHits);
+            rtcSetGeometryOccludedFilterFunction(g, RejectHoleHits);
+        }
+        rtcSetGeometrySubdivisionMode(g, 0, ToEmbree(cage.boundary));
+        rtcSetGeometryTessellationRate(g, scene.settings.tessellationRate);
+        if (needUv[m] && !cage.uvs.empty()) {
+            // Face-varying uvs: a second topology (uv indices) with linear boundaries, as OBJ uvs
+            // are authored on the cage.
+            rtcSetGeometryTopologyCount(g, 2);
+            auto* uidx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT, sizeof(unsigned), cage.faceUvIndices.size()));
+            for (size_t i = 0; i < cage.faceUvIndices.size(); ++i) uidx[i] = unsigned(cage.faceUvIndices[i]);
+            rtcSetGeometrySubdivisionMode(g, 1, RTC_SUBDIVISION_MODE_PIN_BOUNDARY);
+            rtcSetGeometryVertexAttributeCount(g, 1);
+            rtcSetGeometryVertexAttributeTopology(g, 0, 1);
+            auto* uv = static_cast<float*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, RTC_FORMAT_FLOAT2, 4 * sizeof(float), cage.uvs.size()));
+            for (size_t i = 0; i < cage.uvs.size(); ++i) {
+                uv[4 * i] = cage.uvs[i][0];
+                uv[4 * i + 1] = cage.uvs[i][1];
+                uv[4 * i + 2] = uv[4 * i + 3] = 0.0f;
+            }
+            mesh.hasUv = true;
+        }
+        rtcCommitGeometry(g);
+        rtcAttachGeometry(mesh.scene, g);
+        mesh.geom = g;  // owned by mesh.scene from here on
+        rtcReleaseGeometry(g);
+        rtcCommitScene(mesh.scene);
+    }
+
+    // Objects become instances; only animated objects with an open shutter get motion steps.
+    const Camera& cam = scene.camera;
+    const bool blur = cam.shutterClose > cam.shutterOpen;
+    I.objects.resize(scene.objects.size());
+    for (size_t o = 0; o < scene.objects.size(); ++o) {
+        const Object& obj = scene.objects[o];
+        Impl::Instance& inst = I.objects[o];
+        inst.mesh = obj.mesh;
+        const int steps = blur && obj.transform.IsAnimated() ? kMotionSteps : 1;
+        RTCGeometry g = rtcNewGeometry(I.device, RTC_GEOMETRY_TYPE_INSTANCE);
+        rtcSetGeometryInstancedScene(g, I.meshes[obj.mesh].scene);
+        rtcSetGeometryTimeStepCount(g, unsigned(steps));
+        for (int s = 0; s < steps; ++s) {
+            const float t = steps == 1 ? options.frameTime
+                                       : options.frameTime + (cam.shutterClose - cam.shutterOpen) *
+                                                                  float(s) / float(steps - 1);
+            inst.steps.push_back(obj.transform.Eval(t));
+            rtcSetGeometryTransform(g, unsigned(s), RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
+                                    &inst.steps.back()[0][0]);
+        }
+        rtcCommitGeometry(g);
+        I.geomToObject[rtcAttachGeometry(I.top, g)] = int(o);
+        rtcReleaseGeometry(g);
+    }
+
+    // Quad lights are real geometry so camera and BSDF rays see them (posed at the frame time).
+    if (options.needLights) {
+        for (size_t l = 0; l < scene.quadLights.size(); ++l) {
+            const QuadLight& ql = scene.quadLights[l];
+            const glm::mat4 M = ql.transform.Eval(options.frameTime);
+            RTCGeometry g = rtcNewGeometry(I.device, RTC_GEOMETRY_TYPE_QUAD);
+            auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 4));
+            const glm::vec3 c[4] = {ql.corner, ql.corner + ql.edge1, ql.corner + ql.edge1 + ql.edge2,
+                                    ql.corner + ql.edge2};
+            for (int i = 0; i < 4; ++i) {
+                glm::vec3 w = glm::vec3(M * glm::vec4(c[i], 1.0f));
+                v[3 * i] = w.x, v[3 * i + 1] = w.y, v[3 * i + 2] = w.z;
+            }
+            auto* q = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+                g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), 1));
+            q[0] = 0, q[1] = 1, q[2] = 2, q[3] = 3;
+            rtcCommitGeometry(g);
+            I.geomToLight[rtcAttachGeometry(I.top, g)] = int(l);
+            rtcReleaseGeometry(g);
+        }
+        if (options.needEnvironment && !scene.environments.empty()) {
+            const EnvironmentLight& e = scene.environments.front();
+            env_ = std::make_unique<EnvironmentMap>(
+                e.path.empty() ? EnvironmentMap::Constant(e.constant * e.intensity)
+                               : EnvironmentMap::Load(e.path, e.intensity, e.rotationDegrees));
+        }
+    }
+    rtcCommitScene(I.top);
+
+    if (options.needTextures) {
+        // Only textures some object's material references are loaded.
+        std::vector<char> texUsed(scene.textures.size(), 0);
+        for (const Object& o : scene.objects) {
+            const Material& m = scene.materials[o.material];
+            if (m.albedo.texture >= 0) texUsed[m.albedo.texture] = 1;
+            if (m.roughness.texture >= 0) texUsed[m.roughness.texture] = 1;
+        }
+        I.textures.resize(scene.textures.size());
+        for (size_t t = 0; t < scene.textures.size(); ++t)
+            if (texUsed[t]) I.textures[t] = std::make_unique<TextureImage>(scene.textures[t]);
+    }
+}
+
+RenderScene::~RenderScene() = default;
+
+void* RenderScene::EmbreeScene() const { return impl_->top; }
+
+const PtexTopology& RenderScene::Topology(int object) const {
+    return *impl_->meshes[impl_->objects[object].mesh].topo;
+}
+
+size_t RenderScene::NumPtexFaces() const {
+    size_t n = 0;
+    for (const auto& m : impl_->meshes)
+        if (m.topo) n += size_t(m.topo->NumPtexFaces());
+    return n;
+}
+
+glm::mat4 RenderScene::ObjectToWorld(int object, float time) const {
+    return impl_->Transform(object, time);
+}
+
+static void ToRtcRay(const Ray& ray, RTCRay* r) {
+    r->org_x = ray.org.x, r->org_y = ray.org.y, r->org_z = ray.org.z;
+    r->dir_x = ray.dir.x, r->dir_y = ray.dir.y, r->dir_z = ray.dir.z;
+    r->tnear = ray.tnear;
+    r->tfar = ray.tfar;
+    r->time = ray.time;
+    r->mask = 0xFFFFFFFFu;
+    r->id = 0;
+    r->flags = 0;
+}
+
+bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    ToRtcRay(ray, &rh.ray);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(impl_->top, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+    hit->t = rh.ray.tfar;
+    hit->primID = rh.hit.primID;
+    hit->U = rh.hit.u;
+    hit->V = rh.hit.v;
+    if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
+        hit->object = impl_->geomToObject.find(rh.hit.instID[0])->second;
+        hit->light = -1;
+        // Embree returns instance hits' Ng in object space.
+        const glm::mat3 M(impl_->Transform(hit->object, ray.time));
+        hit->Ng = glm::transpose(glm::inverse(M)) * glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+    } else {
+        hit->object = -1;
+        hit->light = impl_->geomToLight.find(rh.hit.geomID)->second;
+        hit->Ng = glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+    }
+    return true;
+}
+
+bool RenderScene::Occluded(const Ray& ray) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRay r;
+    ToRtcRay(ray, &r);
+    rtcOccluded1(impl_->top, &ctx, &r);
+    return r.tfar < 0.0f;
+}
+
+namespace {
+// Least-squares (a, b) with a*X + b*Y ~= D (the normal equations of a 3x2 system).
+void SolveTangent(glm::vec3 X, glm::vec3 Y, glm::vec3 D, float* a, float* b) {
+    const float xx = glm::dot(X, X), xy = glm::dot(X, Y), yy = glm::dot(Y, Y);
+    const float dx = glm::dot(D, X), dy = glm::dot(D, Y);
+    const float det = xx * yy - xy * xy;
+    if (!(std::abs(det) > 1e-20f * xx * yy) || !std::isfinite(det)) {
+        *a = *b = 0.0f;
+        return;
+    }
+    *a = (yy * dx - xy * dy) / det;
+    *b = (xx * dy - xy * dx) / det;
+}
+}  // namespace
+
+SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
+                                         const RayDifferentials* diff) const {
+    const Impl& I = *impl_;
+    const Impl::Mesh& mesh = I.meshes[I.objects[hit.object].mesh];
+    SurfaceInteraction si;
+    si.object = hit.object;
+    si.material = scene_.objects[hit.object].material;
+    si.P = ray.org + hit.t * ray.dir;
+
+    alignas(16) float P[4], du[4], dv[4];
+    rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
+    const glm::mat4 M = I.Transform(hit.object, ray.time);
+    const glm::mat3 L(M);
+    si.dPdu = L * glm::vec3(du[0], du[1], du[2]);
+    si.dPdv = L * glm::vec3(dv[0], dv[1], dv[2]);
+
+    si.Ng = glm::normalize(hit.Ng);
+    if (glm::dot(si.Ng, ray.dir) > 0.0f) si.Ng = -si.Ng;
+    glm::vec3 n = glm::cross(si.dPdu, si.dPdv);
+    const float len = glm::length(n);
+    // Limit derivatives can be parallel at a few extraordinary points: fall back to Ng there.
+    si.N = len > 1e-12f && std::isfinite(len) ? n / len : si.Ng;
+    if (glm::dot(si.N, si.Ng) < 0.0f) si.N = -si.N;
+
+    si.ptex = EmbreeToPtex(*mesh.topo, hit.primID, hit.U, hit.V);
+    if (mesh.hasUv) {
+        alignas(16) float uv[4];
+        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, uv,
+                        nullptr, nullptr, 2);
+        si.uv = {uv[0], uv[1]};
+    } else {
+        si.uv = {si.ptex.u, si.ptex.v};
+    }
+
+    if (diff) {
+        // Igehy: move the offset rays to the tangent plane at the hit, then express the offsets
+        // in the (dP/du, dP/dv) basis.
+        const float d = glm::dot(si.N, si.P);
+        auto planeOffset = [&](glm::vec3 dO, glm::vec3 dD) {
+            const glm::vec3 o = ray.org + dO, dir = ray.dir + dD;
+            const float denom = glm::dot(si.N, dir);
+            if (std::abs(denom) < 1e-12f) return glm::vec3(0.0f);
+            const float t = (d - glm::dot(si.N, o)) / denom;
+            return o + t * dir - si.P;
+        };
+        const glm::vec3 dPdx = planeOffset(diff->dOdx, diff->dDdx);
+        const glm::vec3 dPdy = planeOffset(diff->dOdy, diff->dDdy);
+        SolveTangent(si.dPdu, si.dPdv, dPdx, &si.dudx, &si.dvdx);
+        SolveTangent(si.dPdu, si.dPdv, dPdy, &si.dudy, &si.dvdy);
+    }
+    return si;
+}
+
+bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time, SurfaceSample* out) const {
+    const Impl& I = *impl_;
+    const Impl::Mesh& mesh = I.meshes[I.objects[object].mesh];
+    if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
+    unsigned prim;
+    float U, V;
+    PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
+    alignas(16) float P[4], du[4], dv[4];
+    rtcInterpolate1(mesh.geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
+    const glm::mat4 M = I.Transform(object, time);
+    const glm::mat3 L(M);
+    out->P = glm::vec3(M * glm::vec4(P[0], P[1], P[2], 1.0f));
+    out->dPdu = L * glm::vec3(du[0], du[1], du[2]);
+    out->dPdv = L * glm::vec3(dv[0], dv[1], dv[2]);
+    const glm::vec3 n = glm::cross(out->dPdu, out->dPdv);
+    const float len = glm::length(n);
+    out->N = len > 1e-12f && std::isfinite(len) ? n / len : glm::vec3(0.0f, 1.0f, 0.0f);
+    return true;
+}
+
+glm::vec3 RenderScene::Albedo(const SurfaceInteraction& si) const {
+    const ColorParam& a = scene_.materials[si.material].albedo;
+    if (a.texture >= 0 && impl_->textures[a.texture]) return impl_->textures[a.texture]->Eval(si.uv);
+    return a.value;
+}
+
+float RenderScene::Roughness(const SurfaceInteraction& si) const {
+    const FloatParam& r = scene_.materials[si.material].roughness;
+    if (r.texture >= 0 && impl_->textures[r.texture]) {
+        const glm::vec3 c = impl_->textures[r.texture]->Eval(si.uv);
+        return glm::clamp(0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z, 0.0f, 1.0f);
+    }
+    return r.value;
+}
+
+}  // namespace texcache

@@ -1,0 +1,109 @@
+// SPDX-License-Identifier: Apache-2.0
+// The ray-traceable form of a Scene: Embree subdivision geometry per mesh (object space), one
+// instance per object, quad-light geometry, the environment and textures — each built only when
+// the render uses it.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "renderer/ptex_mapping.h"
+#include "renderer/scene.h"
+
+namespace texcache {
+
+class EnvironmentMap;
+class TextureImage;
+
+struct Ray {
+    glm::vec3 org, dir;
+    float tnear = 0.0f, tfar = 1e30f;
+    float time = 0.0f;  ///< normalized shutter time in [0,1]
+};
+
+/// Ray differentials (Igehy 1999): origin and direction derivatives per pixel step in x and y.
+struct RayDifferentials {
+    glm::vec3 dOdx{0.0f}, dOdy{0.0f}, dDdx{0.0f}, dDdy{0.0f};
+};
+
+/// What a ray hit, before shading.
+struct Hit {
+    float t = 0.0f;
+    int object = -1;  ///< index into Scene::objects, -1 for lights
+    int light = -1;   ///< index into Scene::quadLights when a light was hit
+    unsigned primID = 0;
+    float U = 0.0f, V = 0.0f;  ///< Embree's hit parameters (encoded on n-gons)
+    glm::vec3 Ng{0.0f};        ///< world-space geometric normal of the tessellated surface
+};
+
+/// A shading point: everything the integrators and the cache need.
+struct SurfaceInteraction {
+    glm::vec3 P;         ///< hit point on the tessellated surface (spawn rays from here)
+    glm::vec3 Ng;        ///< geometric normal, facing the incoming ray
+    glm::vec3 N;         ///< limit-surface shading normal, facing the incoming ray
+    glm::vec3 dPdu, dPdv;  ///< world-space limit derivatives in Ptex (u,v)
+    PtexCoord ptex;
+    glm::vec2 uv;        ///< texture coordinates (face-varying OBJ uvs, else Ptex (u,v))
+    float dudx = 0, dudy = 0, dvdx = 0, dvdy = 0;  ///< Ptex-space footprint of a pixel
+    int object = -1;
+    int material = 0;
+};
+
+/// A limit-surface sample at a Ptex location (the cache's surface query).
+struct SurfaceSample {
+    glm::vec3 P, N, dPdu, dPdv;  ///< world space at the queried time
+};
+
+struct RenderSceneOptions {
+    float frameTime = 0.0f;      ///< scene time of shutter open
+    bool needLights = true;      ///< build light geometry / env map
+    bool needTextures = true;    ///< load textures and face-varying uvs
+    bool needEnvironment = true;
+    int threads = 0;             ///< Embree build threads (0 = all)
+};
+
+/// Embree device + scene for one frame of a Scene. Thread-safe for queries after construction.
+class RenderScene {
+public:
+    /// Builds everything the options ask for; throws InputError on bad input files.
+    RenderScene(const Scene& scene, const RenderSceneOptions& options);
+    ~RenderScene();
+    RenderScene(const RenderScene&) = delete;
+    RenderScene& operator=(const RenderScene&) = delete;
+
+    /// Closest hit; false on a miss.
+    bool Intersect(const Ray& ray, Hit* hit) const;
+    /// True when anything blocks the segment (tnear, tfar) along the ray.
+    bool Occluded(const Ray& ray) const;
+    /// Shading data at a hit (limit normal, derivatives, Ptex coordinates, uvs); the footprint
+    /// fields are filled when `diff` is given.
+    SurfaceInteraction Interact(const Ray& ray, const Hit& hit,
+                                const RayDifferentials* diff = nullptr) const;
+    /// Limit surface at (ptex face, u, v) of an object at normalized shutter time `time`.
+    bool EvalSurface(int object, const PtexCoord& c, float time, SurfaceSample* out) const;
+
+    const Scene& scene() const { return scene_; }
+    const PtexTopology& Topology(int object) const;
+    const EnvironmentMap* environment() const { return env_.get(); }
+    /// Albedo at a shading point (constant or texture).
+    glm::vec3 Albedo(const SurfaceInteraction& si) const;
+    /// Roughness at a shading point (constant or texture luminance), in [0,1].
+    float Roughness(const SurfaceInteraction& si) const;
+    /// Object-to-world transform at normalized shutter time.
+    glm::mat4 ObjectToWorld(int object, float time) const;
+    /// Embree scene handle (for raw-throughput benchmarks).
+    void* EmbreeScene() const;
+    /// Bytes Embree reports for BVH + tessellation (approximate), for memory reporting.
+    size_t NumPtexFaces() const;
+
+private:
+    struct Impl;
+    const Scene& scene_;
+    std::unique_ptr<Impl> impl_;
+    std::unique_ptr<EnvironmentMap> env_;
+};
+
+}  // namespace texcache

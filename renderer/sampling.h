@@ -1,0 +1,165 @@
+// SPDX-License-Identifier: Apache-2.0
+// Random numbers, warps and the GGX microfacet distribution: header-only hot-path code.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include <glm/glm.hpp>
+
+namespace texcache {
+
+constexpr float kOneMinusEpsilon = 0x1.fffffep-1f;
+constexpr float kPiF = 3.14159265358979323846f;
+constexpr float kInvPiF = 0.31830988618379067154f;
+
+/// SplitMix64's finalizer: a strong 64-bit mix for seeding streams from (pixel, sample) ids.
+inline uint64_t MixBits(uint64_t v) {
+    v ^= v >> 31;
+    v *= 0x7fb5d329728ea185ull;
+    v ^= v >> 27;
+    v *= 0x81dadef4bc2dd44dull;
+    v ^= v >> 33;
+    return v;
+}
+
+/// PCG32 (O'Neill 2014): small state, good statistics, independent streams.
+class Rng {
+public:
+    Rng(uint64_t seed, uint64_t stream) {
+        state_ = 0u;
+        inc_ = (stream << 1u) | 1u;
+        NextU32();
+        state_ += seed;
+        NextU32();
+    }
+    uint32_t NextU32() {
+        const uint64_t old = state_;
+        state_ = old * 0x5851f42d4c957f2dull + inc_;
+        const uint32_t xorshifted = uint32_t(((old >> 18u) ^ old) >> 27u);
+        const uint32_t rot = uint32_t(old >> 59u);
+        return (xorshifted >> rot) | (xorshifted << ((~rot + 1u) & 31));
+    }
+    /// Uniform in [0, 1), never 1.
+    float Next1D() { return std::min(float(NextU32()) * 0x1p-32f, kOneMinusEpsilon); }
+    glm::vec2 Next2D() {
+        const float a = Next1D();
+        return {a, Next1D()};
+    }
+
+private:
+    uint64_t state_, inc_;
+};
+
+/// Orthonormal basis around a unit normal (Duff et al. 2017, branchless).
+struct Frame {
+    glm::vec3 s, t, n;
+    static Frame FromZ(glm::vec3 n) {
+        const float sign = std::copysign(1.0f, n.z);
+        const float a = -1.0f / (sign + n.z);
+        const float b = n.x * n.y * a;
+        return {glm::vec3(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x),
+                glm::vec3(b, sign + n.y * n.y * a, -n.y), n};
+    }
+    glm::vec3 ToLocal(glm::vec3 v) const { return {glm::dot(v, s), glm::dot(v, t), glm::dot(v, n)}; }
+    glm::vec3 FromLocal(glm::vec3 v) const { return v.x * s + v.y * t + v.z * n; }
+};
+
+/// Concentric map of the unit square to the unit disk (Shirley-Chiu).
+inline glm::vec2 SampleUniformDiskConcentric(glm::vec2 u) {
+    const glm::vec2 o = 2.0f * u - 1.0f;
+    if (o.x == 0.0f && o.y == 0.0f) return {0.0f, 0.0f};
+    float r, theta;
+    if (std::abs(o.x) > std::abs(o.y)) {
+        r = o.x;
+        theta = 0.25f * kPiF * (o.y / o.x);
+    } else {
+        r = o.y;
+        theta = 0.5f * kPiF - 0.25f * kPiF * (o.x / o.y);
+    }
+    return r * glm::vec2(std::cos(theta), std::sin(theta));
+}
+
+/// Cosine-weighted direction about +z; pdf = cos(theta) / pi.
+inline glm::vec3 SampleCosineHemisphere(glm::vec2 u) {
+    const glm::vec2 d = SampleUniformDiskConcentric(u);
+    const float z = std::sqrt(std::max(0.0f, 1.0f - d.x * d.x - d.y * d.y));
+    return {d.x, d.y, z};
+}
+inline float CosineHemispherePdf(float cosTheta) { return std::max(cosTheta, 0.0f) * kInvPiF; }
+
+/// Uniform direction on the sphere; pdf = 1 / (4 pi).
+inline glm::vec3 SampleUniformSphere(glm::vec2 u) {
+    const float z = 1.0f - 2.0f * u.x;
+    const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    const float phi = 2.0f * kPiF * u.y;
+    return {r * std::cos(phi), r * std::sin(phi), z};
+}
+constexpr float kUniformSpherePdf = 1.0f / (4.0f * kPiF);
+
+/// Veach's power heuristic (beta = 2).
+inline float PowerHeuristic(int nf, float fPdf, int ng, float gPdf) {
+    const float f = float(nf) * fPdf, g = float(ng) * gPdf;
+    if (std::isinf(f * f)) return 1.0f;
+    const float d = f * f + g * g;
+    return d > 0.0f ? f * f / d : 0.0f;
+}
+
+// ---- GGX (Trowbridge-Reitz), isotropic, in the local frame (z = normal) ------------------------
+
+/// Normal distribution D(m); 0 below the horizon.
+inline float GgxD(glm::vec3 m, float alpha) {
+    if (m.z <= 0.0f) return 0.0f;
+    const float a2 = alpha * alpha;
+    const float c2 = m.z * m.z;
+    const float d = c2 * (a2 - 1.0f) + 1.0f;
+    return a2 / (kPiF * d * d);
+}
+/// Smith Lambda for direction w.
+inline float GgxLambda(glm::vec3 w, float alpha) {
+    const float c2 = w.z * w.z;
+    if (c2 <= 0.0f) return 1e30f;  // grazing: fully shadowed
+    const float t2 = std::max(0.0f, 1.0f - c2) / c2;
+    return 0.5f * (std::sqrt(1.0f + alpha * alpha * t2) - 1.0f);
+}
+inline float GgxG1(glm::vec3 w, float alpha) { return 1.0f / (1.0f + GgxLambda(w, alpha)); }
+/// Height-correlated masking-shadowing.
+inline float GgxG(glm::vec3 wo, glm::vec3 wi, float alpha) {
+    return 1.0f / (1.0f + GgxLambda(wo, alpha) + GgxLambda(wi, alpha));
+}
+
+/// Visible-normal sampling (Heitz 2018); wo.z > 0.
+inline glm::vec3 GgxSampleVisibleNormal(glm::vec3 wo, float alpha, glm::vec2 u) {
+    const glm::vec3 vh = glm::normalize(glm::vec3(alpha * wo.x, alpha * wo.y, wo.z));
+    const float lensq = vh.x * vh.x + vh.y * vh.y;
+    const glm::vec3 t1 = lensq > 0.0f ? glm::vec3(-vh.y, vh.x, 0.0f) / std::sqrt(lensq) : glm::vec3(1, 0, 0);
+    const glm::vec3 t2 = glm::cross(vh, t1);
+    const float r = std::sqrt(u.x);
+    const float phi = 2.0f * kPiF * u.y;
+    const float p1 = r * std::cos(phi);
+    float p2 = r * std::sin(phi);
+    const float s = 0.5f * (1.0f + vh.z);
+    p2 = (1.0f - s) * std::sqrt(std::max(0.0f, 1.0f - p1 * p1)) + s * p2;
+    const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(std::max(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
+    return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, std::max(1e-6f, nh.z)));
+}
+
+/// Solid-angle pdf of wi = reflect(-wo, m) with m ~ visible normals: D_wo(m) / (4 |wo.m|).
+inline float GgxPdfReflect(glm::vec3 wo, glm::vec3 wi, float alpha) {
+    if (wo.z <= 0.0f || wi.z <= 0.0f) return 0.0f;
+    const glm::vec3 m = glm::normalize(wo + wi);
+    const float dotWoM = glm::dot(wo, m);
+    if (dotWoM <= 0.0f) return 0.0f;
+    // D_wo(m) = G1(wo) max(0, wo.m) D(m) / wo.z
+    const float dwo = GgxG1(wo, alpha) * dotWoM * GgxD(m, alpha) / wo.z;
+    return dwo / (4.0f * dotWoM);
+}
+
+/// Schlick's Fresnel approximation.
+inline glm::vec3 FresnelSchlick(glm::vec3 f0, float cosTheta) {
+    const float m = std::clamp(1.0f - cosTheta, 0.0f, 1.0f);
+    const float m2 = m * m;
+    return f0 + (glm::vec3(1.0f) - f0) * (m2 * m2 * m);
+}
+
+}  // namespace texcache

@@ -1,0 +1,35 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/texture_space.h"
+
+#include <string>
+
+#include "texcache/error.h"
+
+namespace texcache {
+
+void CheckFilterRadius(int radius, const std::string& where) {
+    // 2r+1 = 65 texels a side is far past any useful kernel (the paper uses up to 21).
+    if (radius < 0 || radius > 32)
+        throw InputError(where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
+}
+
+TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options)
+    : options_(options), cache_(options.cache) {
+    CheckFilterRadius(options.radius, "filter radius");
+    if (!(options.cosThreshold >= -1.0f && options.cosThreshold <= 1.0f))
+        throw InputError("normal threshold", "must be a cosine in [-1, 1]");
+    const Scene& scene = rs.scene();
+    for (size_t o = 0; o < scene.objects.size(); ++o) {
+        const ControlCage& cage = scene.meshes[scene.objects[o].mesh];
+        glm::vec3 lo(1e30f), hi(-1e30f);
+        const glm::mat4 M = scene.objects[o].transform.Eval(0.0f);
+        for (const auto& p : cage.positions) {
+            const glm::vec3 w = glm::vec3(M * glm::vec4(p[0], p[1], p[2], 1.0f));
+            lo = glm::min(lo, w), hi = glm::max(hi, w);
+        }
+        const float diag = glm::length(hi - lo);
+        meshOf_.push_back(cache_.AddMesh(cage, std::max(diag * options.texelFraction, 1e-12f)));
+    }
+}
+
+}  // namespace texcache

@@ -1,0 +1,236 @@
+// SPDX-License-Identifier: Apache-2.0
+// Embree's subdivision hits and limit evaluation against OpenSubdiv (the independent reference),
+// on every bundled mesh.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "renderer/ptex_mapping.h"
+#include "renderer/render_scene.h"
+#include "test_util.h"
+#include "texcache/topology.h"
+
+namespace texcache {
+namespace {
+
+float BBoxDiagonal(const ControlCage& c) {
+    glm::vec3 lo(1e30f), hi(-1e30f);
+    for (const auto& p : c.positions) {
+        lo = glm::min(lo, glm::vec3(p[0], p[1], p[2]));
+        hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
+    }
+    return glm::length(hi - lo);
+}
+
+glm::vec3 V(const std::array<float, 3>& a) { return {a[0], a[1], a[2]}; }
+
+class PtexMappingTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(PtexMappingTest, EncodeDecodeRoundTrip) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    const PtexTopology topo(cage);
+    std::mt19937 gen(1);
+    std::uniform_real_distribution<float> U01(0.0f, 1.0f);
+    for (int f = 0; f < topo.NumPtexFaces(); ++f) {
+        const PtexCoord c{f, U01(gen), U01(gen)};
+        unsigned prim;
+        float U, V;
+        PtexToEmbree(topo, c, &prim, &U, &V);
+        const PtexCoord back = EmbreeToPtex(topo, prim, U, V);
+        ASSERT_EQ(back.face, c.face);
+        EXPECT_NEAR(back.u, c.u, 1e-6f);  // a few ulps of the +0.5 shift
+        EXPECT_NEAR(back.v, c.v, 1e-6f);
+    }
+}
+
+/// Drops creases and corners with fractional sharpness (< 1), which Embree and OpenSubdiv
+/// subdivide differently (see FractionalCreasesDifferBetweenEmbreeAndOpenSubdiv).
+ControlCage WithoutFractionalSharpness(ControlCage c) {
+    ControlCage out = c;
+    out.creaseEdges.clear(), out.creaseWeights.clear();
+    for (size_t i = 0; i < c.creaseEdges.size(); ++i)
+        if (c.creaseWeights[i] >= 1.0f) out.creaseEdges.push_back(c.creaseEdges[i]), out.creaseWeights.push_back(c.creaseWeights[i]);
+    out.cornerVertices.clear(), out.cornerWeights.clear();
+    for (size_t i = 0; i < c.cornerVertices.size(); ++i)
+        if (c.cornerWeights[i] >= 1.0f) out.cornerVertices.push_back(c.cornerVertices[i]), out.cornerWeights.push_back(c.cornerWeights[i]);
+    return out;
+}
+
+// rtcInterpolate (through our Ptex -> Embree mapping) must agree with OpenSubdiv's Far limit
+// evaluation, including creases, corners, holes and boundaries. Both libraries approximate the
+// limit near extraordinary vertices (OSD with Gregory end caps at isolation level 6), where they
+// differ most: measured worst 2.5e-4 of the bounding-box diagonal (bishop's valence-24 pole),
+// 1e-7 on the simple shapes. Tolerance: 5e-4 of the diagonal. (Derivatives are checked against
+// each library's own finite differences below: near extraordinary vertices the two libraries'
+// patch approximations differ by up to 30% in derivatives while agreeing in position.)
+TEST_P(PtexMappingTest, LimitPositionsAgreeWithOpenSubdiv) {
+    ControlCage cage = WithoutFractionalSharpness(test::LoadMesh(GetParam()));
+    const float diag = BBoxDiagonal(cage);
+    const float tol = 5e-4f * diag;
+    // Isolation level 10: OSD's end caps round infinitely sharp corners by ~2^-level.
+    const LimitSurface osd(cage, 10);
+    Scene scene = test::OneObjectScene(cage);
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    RenderScene rs(scene, ro);
+    const PtexTopology& topo = rs.Topology(0);
+    std::mt19937 gen(7);
+    std::uniform_real_distribution<float> U01(0.0f, 1.0f);
+    int evaluated = 0;
+    for (int f = 0; f < topo.NumPtexFaces(); ++f) {
+        for (int k = 0; k < 4; ++k) {
+            const PtexCoord c{f, U01(gen), U01(gen)};
+            LimitPoint ref;
+            if (!osd.Eval(f, c.u, c.v, &ref)) continue;  // hole
+            SurfaceSample s;
+            ASSERT_TRUE(rs.EvalSurface(0, c, 0.0f, &s));
+            ASSERT_LE(glm::length(s.P - V(ref.P)), tol)
+                << GetParam() << " ptex face " << f << " (" << c.u << "," << c.v << ")";
+            ++evaluated;
+        }
+    }
+    EXPECT_GT(evaluated, 0);
+}
+
+// The reference's derivatives are those of its own positions (central differences, h = 1e-3,
+// tolerance 2% of the derivative's size): this pins the n-gon sub-face derivative scale.
+TEST_P(PtexMappingTest, OpenSubdivDerivativesMatchFiniteDifferences) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    const LimitSurface osd(cage);
+    const PtexTopology topo(cage);
+    const float h = 1e-3f;
+    for (int f = 0; f < topo.NumPtexFaces(); f += 3) {
+        LimitPoint p, pu0, pu1, pv0, pv1;
+        const float u = 0.37f, v = 0.61f;
+        if (!osd.Eval(f, u, v, &p) || !osd.Eval(f, u + h, v, &pu1) || !osd.Eval(f, u, v + h, &pv1) ||
+            !osd.Eval(f, u - h, v, &pu0) || !osd.Eval(f, u, v - h, &pv0))
+            continue;
+        const glm::vec3 fdU = (V(pu1.P) - V(pu0.P)) / (2 * h), fdV = (V(pv1.P) - V(pv0.P)) / (2 * h);
+        // Plus float rounding of the positions amplified by 1/h (faces with tiny derivatives).
+        const glm::vec3 P = V(p.P);
+        const float pmag = std::max({1.0f, std::abs(P.x), std::abs(P.y), std::abs(P.z)});
+        const float scale = glm::length(fdU) + glm::length(fdV) + 50.0f * 1.2e-7f * pmag / h;
+        EXPECT_LE(glm::length(fdU - V(p.dPdu)), 2e-2f * scale) << GetParam() << " face " << f;
+        EXPECT_LE(glm::length(fdV - V(p.dPdv)), 2e-2f * scale) << GetParam() << " face " << f;
+    }
+}
+
+// Rays that hit the mesh: the decoded Ptex location's limit point lies near the tessellated hit
+// (at tessellation rate 8 the surfaces differ by well under 1% of the diagonal).
+TEST_P(PtexMappingTest, RayHitsDecodeToTheirPtexLocation) {
+    ControlCage cage = WithoutFractionalSharpness(test::LoadMesh(GetParam()));
+    const float diag = BBoxDiagonal(cage);
+    const LimitSurface osd(cage);
+    Scene scene = test::OneObjectScene(cage);
+    scene.settings.tessellationRate = 8.0f;
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    RenderScene rs(scene, ro);
+    glm::vec3 lo(1e30f), hi(-1e30f);
+    for (const auto& p : cage.positions) lo = glm::min(lo, V(p)), hi = glm::max(hi, V(p));
+    const glm::vec3 center = 0.5f * (lo + hi);
+    std::mt19937 gen(3);
+    std::uniform_real_distribution<float> U11(-1.0f, 1.0f);
+    int hits = 0;
+    for (int i = 0; i < 400; ++i) {
+        glm::vec3 d(U11(gen), U11(gen), U11(gen));
+        if (glm::length(d) < 0.1f) continue;
+        d = glm::normalize(d);
+        Ray ray;
+        ray.org = center - d * diag * 2.0f + glm::vec3(U11(gen), U11(gen), U11(gen)) * 0.2f * diag;
+        ray.dir = d;
+        Hit hit;
+        if (!rs.Intersect(ray, &hit)) continue;
+        const SurfaceInteraction si = rs.Interact(ray, hit);
+        LimitPoint ref;
+        ASSERT_TRUE(osd.Eval(si.ptex.face, si.ptex.u, si.ptex.v, &ref));
+        EXPECT_LE(glm::length(si.P - V(ref.P)), 1e-2f * diag) << GetParam() << " ray " << i;
+        EXPECT_TRUE(std::isfinite(si.N.x + si.N.y + si.N.z));
+        EXPECT_NEAR(glm::length(si.N), 1.0f, 1e-4f);
+        ++hits;
+    }
+    EXPECT_GT(hits, 20) << GetParam();
+}
+
+// Embree's derivatives (what ray differentials and the cache's surface query use) are those of
+// its own positions: central differences, h = 1e-3, within 2% of the derivative's size.
+TEST_P(PtexMappingTest, EmbreeDerivativesMatchFiniteDifferences) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    Scene scene = test::OneObjectScene(cage);
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    RenderScene rs(scene, ro);
+    const PtexTopology& topo = rs.Topology(0);
+    const float h = 1e-3f;
+    int checked = 0;
+    for (int f = 0; f < topo.NumPtexFaces(); f += 3) {
+        SurfaceSample p, pu0, pu1, pv0, pv1;
+        const float u = 0.37f, v = 0.61f;
+        rs.EvalSurface(0, {f, u, v}, 0, &p);
+        rs.EvalSurface(0, {f, u - h, v}, 0, &pu0);
+        rs.EvalSurface(0, {f, u + h, v}, 0, &pu1);
+        rs.EvalSurface(0, {f, u, v - h}, 0, &pv0);
+        rs.EvalSurface(0, {f, u, v + h}, 0, &pv1);
+        const glm::vec3 fdU = (pu1.P - pu0.P) / (2 * h), fdV = (pv1.P - pv0.P) / (2 * h);
+        // Plus float rounding of the positions amplified by 1/h (faces with tiny derivatives).
+        const float pmag = std::max({1.0f, std::abs(p.P.x), std::abs(p.P.y), std::abs(p.P.z)});
+        const float scale = glm::length(fdU) + glm::length(fdV) + 50.0f * 1.2e-7f * pmag / h;
+        EXPECT_LE(glm::length(fdU - p.dPdu), 2e-2f * scale) << GetParam() << " face " << f;
+        EXPECT_LE(glm::length(fdV - p.dPdv), 2e-2f * scale) << GetParam() << " face " << f;
+        ++checked;
+    }
+    EXPECT_GT(checked, 0);
+}
+
+// Fractional sharpness is where the two libraries part: OpenSubdiv blends crease and smooth
+// rules for sharpness < 1, Embree does not reproduce that (measured: up to 0.2 units on
+// catmark_cube_creases1's 0.1 crease, 6% of its size). We render with Embree; this test pins
+// the size of the difference so a change in either library shows up.
+TEST(PtexMapping, FractionalCreasesDifferBetweenEmbreeAndOpenSubdiv) {
+    const ControlCage cage = test::LoadMesh("catmark_cube_creases1");
+    const LimitSurface osd(cage);
+    Scene scene = test::OneObjectScene(cage);
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    RenderScene rs(scene, ro);
+    float worst = 0.0f;
+    for (int f = 0; f < 6; ++f) {
+        LimitPoint ref;
+        SurfaceSample s;
+        ASSERT_TRUE(osd.Eval(f, 0.5f, 0.5f, &ref));
+        ASSERT_TRUE(rs.EvalSurface(0, {f, 0.5f, 0.5f}, 0.0f, &s));
+        worst = std::max(worst, glm::length(s.P - V(ref.P)));
+    }
+    EXPECT_TRUE(std::isfinite(worst));
+    EXPECT_LT(worst, 0.1f * BBoxDiagonal(cage));
+}
+
+// Rays through a hole face pass through it; no hit decodes to it.
+TEST(PtexMapping, HoleFacesAreNeverHit) {
+    const ControlCage cage = test::LoadMesh("catmark_hole_test1");
+    ASSERT_EQ(cage.holes.size(), 1u);
+    Scene scene = test::OneObjectScene(cage);
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    RenderScene rs(scene, ro);
+    const PtexTopology& topo = rs.Topology(0);
+    int hits = 0;
+    for (int i = 0; i < 2000; ++i) {
+        const float a = 6.2831853f * float(i) / 2000.0f, b = 3.14159f * float((i * 37) % 100) / 100.0f;
+        const glm::vec3 d(std::sin(b) * std::cos(a), std::cos(b), std::sin(b) * std::sin(a));
+        Ray ray;
+        ray.org = -4.0f * d;
+        ray.dir = d;
+        Hit hit;
+        if (!rs.Intersect(ray, &hit)) continue;
+        ++hits;
+        ASSERT_NE(topo.CoarseFace(EmbreeToPtex(topo, hit.primID, hit.U, hit.V).face), cage.holes[0]);
+    }
+    EXPECT_GT(hits, 1000);
+}
+
+INSTANTIATE_TEST_SUITE_P(BundledMeshes, PtexMappingTest, ::testing::ValuesIn(test::BundledMeshes()),
+                         [](const auto& info) { return info.param; });
+
+}  // namespace
+}  // namespace texcache
