@@ -60,7 +60,7 @@ EnvironmentMap EnvironmentMap::Constant(glm::vec3 radiance) {
 }
 
 glm::vec2 EnvironmentMap::DirToUv(glm::vec3 d) const {
-    float phi = std::atan2(d.x, -d.z) - rotation_;
+    float phi = std::atan2(d.x, -d.z) + rotation_;
     float u = phi / (2.0f * kPiF);
     u -= std::floor(u);
     const float v = std::acos(std::clamp(d.y, -1.0f, 1.0f)) / kPiF;
@@ -68,7 +68,7 @@ glm::vec2 EnvironmentMap::DirToUv(glm::vec3 d) const {
 }
 
 glm::vec3 EnvironmentMap::UvToDir(glm::vec2 uv) const {
-    const float phi = uv.x * 2.0f * kPiF + rotation_, theta = uv.y * kPiF;
+    const float phi = uv.x * 2.0f * kPiF - rotation_, theta = uv.y * kPiF;
     const float st = std::sin(theta);
     return {st * std::sin(phi), std::cos(theta), -st * std::cos(phi)};
 }

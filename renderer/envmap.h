@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
 // Lat-long environment light with importance sampling.
 //
-// Convention: world +Y is up. A direction d maps to phi = atan2(d.x, -d.z) - rotation and
+// Convention: world +Y is up. A direction d maps to phi = atan2(d.x, -d.z) + rotation and
 // theta = acos(d.y); u = phi / 2pi wrapped to [0,1), v = theta / pi; image row 0 is the top
-// (v = 0 looks along +Y). A positive rotation turns the map counter-clockwise seen from above.
+// (v = 0 looks along +Y). A rotation of r degrees turns the map by the right-handed rotation
+// R_y(r): what was seen along d is seen along R_y(r) d.
 #pragma once
 #include <string>
 #include <vector>

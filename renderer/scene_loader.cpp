@@ -42,6 +42,8 @@ public:
     }
     const json& raw() const { return j_; }
     const std::string& path() const { return path_; }
+    /// "file: key 'path'" for messages raised outside Node.
+    std::string Where() const { return file_ + ": key '" + path_ + "'"; }
 
     void Object(std::initializer_list<const char*> allowed) const {
         if (!j_.is_object()) Fail("expected an object, got " + TypeName(j_));
@@ -155,7 +157,7 @@ TransformTrack ParseTrack(const Node& obj) {
 
 Keyframe CameraLookAt(glm::vec3 position, glm::vec3 target, glm::vec3 up, const std::string& where) {
     const glm::vec3 f = target - position;
-    if (glm::length(f) < 1e-9f) throw InputError(where, "look_at equals position");
+    if (!(glm::length(f) >= 1e-9f)) throw InputError(where, "look_at equals position");
     const glm::vec3 fn = glm::normalize(f);
     const glm::vec3 r = glm::cross(fn, up);
     if (glm::length(r) < 1e-6f * glm::length(up) || glm::length(up) == 0.0f)
@@ -189,7 +191,7 @@ void ParseCamera(const Node& n, Camera* cam) {
             const Node k = ks.At(i);
             k.Object({"time", "position", "look_at", "up"});
             Keyframe kf = CameraLookAt(k["position"].Vec3(), k["look_at"].Vec3(),
-                                       k.Has("up") ? k["up"].Vec3() : defUp, "key '" + k.path() + "'");
+                                       k.Has("up") ? k["up"].Vec3() : defUp, k.Where());
             kf.time = k["time"].Number();
             cam->pose.keys.push_back(kf);
         }
@@ -197,7 +199,7 @@ void ParseCamera(const Node& n, Camera* cam) {
         if (cam->pose.keys.empty()) ks.Fail("needs at least one keyframe");
     } else {
         if (!n.Has("position") || !n.Has("look_at")) n.Fail("camera needs 'position' and 'look_at' (or 'keyframes')");
-        cam->pose.keys.push_back(CameraLookAt(n["position"].Vec3(), n["look_at"].Vec3(), defUp, "key '" + n.path() + "'"));
+        cam->pose.keys.push_back(CameraLookAt(n["position"].Vec3(), n["look_at"].Vec3(), defUp, n.Where()));
     }
 }
 

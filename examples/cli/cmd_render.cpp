@@ -3,6 +3,7 @@
 #include <sys/resource.h>
 
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -23,16 +24,18 @@ namespace {
 struct RenderArgs {
     std::string scene;
     std::string output = "out/render.exr";
-    int spp = -1;
-    float seconds = -1.0f;
+    // Unset options keep the scene's settings: kUnset / NaN mark "not given".
+    static constexpr int kUnset = std::numeric_limits<int>::min();
+    int spp = kUnset;
+    float seconds = NAN;
     std::string resolution;
     int threads = 0;
-    long long seed = -1;
+    long long seed = std::numeric_limits<long long>::min();
     std::string integrator;
-    int maxDepth = -1;
-    int aoSamples = -1;
-    float aoDistance = -1.0f;
-    float tessellationRate = -1.0f;
+    int maxDepth = kUnset;
+    int aoSamples = kUnset;
+    float aoDistance = NAN;
+    float tessellationRate = NAN;
     float time = NAN;
     std::vector<std::string> aovs;
     float exposure = 0.0f;
@@ -126,15 +129,17 @@ int RunRender(const RenderArgs& a) {
 
     // Command-line values override the scene's render settings.
     RenderSettings& s = scene.settings;
-    if (a.spp >= 0) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
-    if (a.seconds >= 0.0f) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
+    constexpr int kUnset = RenderArgs::kUnset;
+    if (a.spp != kUnset) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
+    if (!std::isnan(a.seconds)) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
     if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
-    if (a.seed >= 0) s.seed = uint64_t(a.seed);
+    if (a.seed != std::numeric_limits<long long>::min())
+        s.seed = uint64_t(CheckRange("--seed", a.seed, 0LL, std::numeric_limits<long long>::max()));
     if (!a.integrator.empty()) s.integrator = a.integrator;
-    if (a.maxDepth >= 0) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
-    if (a.aoSamples >= 0) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
-    if (a.aoDistance >= 0.0f) s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
-    if (a.tessellationRate >= 0.0f)
+    if (a.maxDepth != kUnset) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
+    if (a.aoSamples != kUnset) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
+    if (!std::isnan(a.aoDistance)) s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
+    if (!std::isnan(a.tessellationRate))
         s.tessellationRate = CheckRange("--tessellation-rate", a.tessellationRate, 1.0f, 64.0f);
     if (!std::isnan(a.time)) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     CheckRange("--threads", a.threads, 0, 4096);

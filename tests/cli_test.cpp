@@ -1,0 +1,130 @@
+// SPDX-License-Identifier: Apache-2.0
+// The `texcache` program end to end: outputs, exit codes, error messages, and that a failed run
+// never replaces a good output.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "renderer/image.h"
+#include "test_util.h"
+
+namespace texcache {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+    int code;
+    std::string out;  // stdout + stderr
+};
+
+CliRun Texcache(const std::string& args) {
+    const std::string cmd = std::string(TEXCACHE_BIN_DIR) + "/texcache " + args + " 2>&1";
+    FILE* p = popen(cmd.c_str(), "r");
+    CliRun r{-1, ""};
+    std::array<char, 4096> buf;
+    size_t n;
+    while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
+    const int status = pclose(p);
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
+}
+
+fs::path Dir() {
+    const fs::path d = fs::path(::testing::TempDir()) / "texcache_cli";
+    fs::create_directories(d);
+    return d;
+}
+
+TEST(Cli, RendersAnObjToExrAndPng) {
+    const fs::path out = Dir() / "cube.exr";
+    const CliRun r = Texcache("render " + test::MeshPath("catmark_cube") +
+                           " --spp 2 --resolution 64x32 --integrator ao -q -o " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("Mrays/s"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("peak memory"), std::string::npos) << r.out;
+    const Image img = ReadImageRGB(out.string());
+    EXPECT_EQ(img.width, 64);
+    EXPECT_TRUE(fs::exists(Dir() / "cube.png"));
+}
+
+TEST(Cli, WritesRequestedAovLayers) {
+    const fs::path out = Dir() / "aov.exr";
+    const CliRun r = Texcache("render " + test::MeshPath("catmark_torus") +
+                           " --spp 1 --resolution 32x32 --integrator normal --aov albedo,depth,ptex -q -o " +
+                           out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(ReadImage(out.string()).channels, 3 + 3 + 1 + 3);
+}
+
+TEST(Cli, HelpOnEverySubcommand) {
+    for (const char* c : {"--help", "render --help", "compare --help", "bench --help", "bench rays --help"}) {
+        const CliRun r = Texcache(c);
+        EXPECT_EQ(r.code, 0) << c << ": " << r.out;
+        EXPECT_NE(r.out.find("Usage"), std::string::npos) << c;
+    }
+}
+
+TEST(Cli, BadInputExitsTwoWithAClearMessage) {
+    const fs::path bad = Dir() / "bad.obj";
+    std::ofstream(bad) << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n";
+    const fs::path notLatLong = Dir() / "square.exr";
+    WriteImage(notLatLong.string(), Image(16, 16, 3, 1.0f));
+    const fs::path scene = Dir() / "env.json";
+    std::ofstream(scene) << R"({"camera": {"position": [0,0,5], "look_at": [0,0,0]},
+        "objects": [{"mesh": ")" << test::MeshPath("catmark_cube") << R"("}],
+        "lights": [{"type": "environment", "file": ")" << notLatLong.string() << R"("}]})";
+    struct Case {
+        std::string args, expect;
+    };
+    const std::string cube = test::MeshPath("catmark_cube");
+    for (const Case& c : {Case{"render /no/such/scene.json", "/no/such/scene.json"},
+                          Case{"render " + bad.string(), "bad.obj:4"},
+                          Case{"render " + cube + " --spp -5", "--spp"},
+                          Case{"render " + cube + " --resolution 10", "--resolution"},
+                          Case{"render " + cube + " --integrator magic", "valid: normal"},
+                          Case{"render " + cube + " -o out.tiff", "--output"},
+                          Case{"render " + cube + " --shading texture --filter fancy", "valid: none, normal"},
+                          Case{"render " + cube + " --shading texture --filter-radius -1", "--filter-radius"},
+                          Case{"render " + cube + " --shading texture --sample-cache-mb 0", "--sample-cache-mb"},
+                          Case{"render " + cube + " --shading texture --lod-bias 99", "--lod-bias"},
+                          Case{"render " + scene.string() + " -o " + (Dir() / "x.exr").string(), "lat-long"},
+                          Case{"compare /no/a.exr /no/b.exr", "/no/a.exr"},
+                          Case{"render", "scene"}}) {
+        const CliRun r = Texcache(c.args);
+        EXPECT_EQ(r.code, 2) << c.args << ": " << r.out;
+        EXPECT_NE(r.out.find(c.expect), std::string::npos) << c.args << ": " << r.out;
+    }
+}
+
+TEST(Cli, FailedRenderKeepsTheGoodOutput) {
+    const fs::path out = Dir() / "keep.png";
+    WriteImage(out.string(), Image(8, 8, 3, 0.5f));
+    const auto size = fs::file_size(out);
+    const fs::path bad = Dir() / "bad2.obj";
+    std::ofstream(bad) << "v 0 0 nan\n";
+    EXPECT_EQ(Texcache("render " + bad.string() + " -o " + out.string()).code, 2);
+    EXPECT_EQ(fs::file_size(out), size);
+    EXPECT_EQ(ReadImageRGB(out.string()).width, 8);
+}
+
+TEST(Cli, CompareReportsMetrics) {
+    const fs::path a = Dir() / "a.exr", b = Dir() / "b.exr", c = Dir() / "c.exr";
+    WriteImage(a.string(), Image(16, 8, 3, 0.5f));
+    WriteImage(b.string(), Image(16, 8, 3, 0.6f));
+    WriteImage(c.string(), Image(8, 8, 3, 0.6f));
+    const CliRun r = Texcache("compare " + a.string() + " " + b.string() + " --error-image " + (Dir() / "err.png").string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("relMSE"), std::string::npos);
+    EXPECT_NE(r.out.find("SSIM"), std::string::npos);
+    EXPECT_TRUE(fs::exists(Dir() / "err.png"));
+    EXPECT_EQ(Texcache("compare " + a.string() + " " + c.string()).code, 2);
+}
+
+}  // namespace
+}  // namespace texcache

@@ -1,0 +1,184 @@
+// SPDX-License-Identifier: Apache-2.0
+// Sampling: RNG, warps, GGX, piecewise-constant distributions and the environment light.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "renderer/distribution.h"
+#include "renderer/envmap.h"
+#include "renderer/image.h"
+#include "renderer/sampling.h"
+#include "test_util.h"
+#include "texcache/error.h"
+
+namespace texcache {
+namespace {
+
+TEST(Sampling, RngIsDeterministicAndBelowOne) {
+    Rng a(7, 3), b(7, 3), c(7, 4);
+    bool differ = false;
+    for (int i = 0; i < 100000; ++i) {
+        const float x = a.Next1D();
+        ASSERT_EQ(x, b.Next1D());
+        ASSERT_LT(x, 1.0f);
+        ASSERT_GE(x, 0.0f);
+        differ |= x != c.Next1D();
+    }
+    EXPECT_TRUE(differ);
+}
+
+// Monte Carlo with 2^18 samples: statistical tolerance ~5 sigma.
+TEST(Sampling, CosineHemispherePdfIntegratesToOne) {
+    Rng rng(1, 1);
+    double meanZ = 0.0;
+    const int n = 1 << 18;
+    for (int i = 0; i < n; ++i) {
+        const glm::vec3 d = SampleCosineHemisphere(rng.Next2D());
+        ASSERT_NEAR(glm::length(d), 1.0f, 1e-5f);
+        ASSERT_GE(d.z, 0.0f);
+        meanZ += d.z;
+    }
+    EXPECT_NEAR(meanZ / n, 2.0 / 3.0, 5e-3);  // E[cos] under cos/pi
+    // Uniform sphere directions integrate the pdf of the cosine lobe to 1.
+    double integral = 0.0;
+    for (int i = 0; i < n; ++i) {
+        const glm::vec3 d = SampleUniformSphere(rng.Next2D());
+        integral += CosineHemispherePdf(d.z) / kUniformSpherePdf;
+    }
+    EXPECT_NEAR(integral / n, 1.0, 1e-2);
+}
+
+TEST(Sampling, GgxNormalsAreNormalizedAndVndfMatchesItsPdf) {
+    for (float alpha : {0.001f, 0.1f, 0.5f, 1.0f}) {
+        // ∫ D(m) cos(m) dm = 1 (uniform-sphere estimate; narrow lobes need many samples).
+        Rng rng(2, 0);
+        if (alpha >= 0.1f) {
+            double s = 0.0;
+            const int n = 1 << 20;
+            for (int i = 0; i < n; ++i) {
+                const glm::vec3 m = SampleUniformSphere(rng.Next2D());
+                s += GgxD(m, alpha) * std::max(m.z, 0.0f) / kUniformSpherePdf;
+            }
+            EXPECT_NEAR(s / n, 1.0, 0.05) << alpha;
+        }
+        // VNDF sampling + the reflection pdf estimate ∫ pdf(wi) dwi = (fraction above horizon) <= 1
+        // and every sampled direction has a finite positive pdf.
+        const glm::vec3 wo = glm::normalize(glm::vec3(0.4f, 0.1f, 0.6f));
+        for (int i = 0; i < 10000; ++i) {
+            const glm::vec3 m = GgxSampleVisibleNormal(wo, alpha, rng.Next2D());
+            ASSERT_TRUE(std::isfinite(m.x + m.y + m.z));
+            const glm::vec3 wi = glm::reflect(-wo, m);
+            if (wi.z <= 0.0f) continue;
+            const float pdf = GgxPdfReflect(wo, wi, alpha);
+            ASSERT_TRUE(std::isfinite(pdf));
+            ASSERT_GT(pdf, 0.0f);
+        }
+    }
+    // Grazing and below-horizon directions: zero, never NaN.
+    const glm::vec3 grazing(1.0f, 0.0f, 1e-6f), below(0.0f, 0.6f, -0.8f);
+    EXPECT_EQ(GgxPdfReflect(grazing, below, 0.3f), 0.0f);
+    EXPECT_TRUE(std::isfinite(GgxG(grazing, glm::vec3(0, 0, 1), 0.3f)));
+    EXPECT_TRUE(std::isfinite(GgxPdfReflect(glm::normalize(glm::vec3(1, 0, 1e-6f)), glm::vec3(0, 0, 1), 0.3f)));
+    EXPECT_EQ(GgxD(below, 0.3f), 0.0f);
+}
+
+TEST(Distribution, PdfIntegratesAndMatchesSamples) {
+    const Distribution1D d({1.0f, 0.0f, 3.0f, -2.0f, NAN, 4.0f});
+    EXPECT_EQ(d.clampedCount, 2u);
+    double integral = 0.0;
+    for (int i = 0; i < 6000; ++i) integral += d.Pdf((i + 0.5f) / 6000.0f) / 6000.0;
+    EXPECT_NEAR(integral, 1.0, 1e-5);
+    for (float u : {0.0f, 0.1f, 0.5f, 0.9999999f, 0x1.fffffep-1f}) {
+        float pdf;
+        int off;
+        const float x = d.Sample(u, &pdf, &off);
+        EXPECT_GE(x, 0.0f);
+        EXPECT_LT(x, 1.0f);
+        EXPECT_NE(off, 1);  // zero-weight bins are never chosen
+        EXPECT_FLOAT_EQ(pdf, d.Pdf(x));
+    }
+    const Distribution1D zero({0.0f, 0.0f});  // all zero: uniform
+    EXPECT_FLOAT_EQ(zero.Pdf(0.3f), 1.0f);
+}
+
+std::string WriteEnv(int w, int h, int bx, int by, float bright) {
+    Image img(w, h, 3, 0.01f);
+    for (int k = 0; k < 3; ++k) img.At(bx, by)[k] = bright;
+    const auto dir = std::filesystem::path(::testing::TempDir()) / "texcache_env";
+    std::filesystem::create_directories(dir);
+    const std::string path = (dir / ("env_" + std::to_string(w) + "x" + std::to_string(h) + ".exr")).string();
+    WriteImage(path, img);
+    return path;
+}
+
+TEST(EnvironmentMap, SamplingConcentratesOnTheSunAndPdfsAgree) {
+    const EnvironmentMap env = EnvironmentMap::Load(WriteEnv(64, 32, 40, 10, 1000.0f), 1.0f, 0.0f);
+    Rng rng(3, 0);
+    int nearSun = 0;
+    const int n = 20000;
+    for (int i = 0; i < n; ++i) {
+        glm::vec3 dir;
+        float pdf;
+        const glm::vec3 L = env.Sample(rng.Next2D(), &dir, &pdf);
+        ASSERT_GT(pdf, 0.0f);
+        EXPECT_NEAR(env.Pdf(dir), pdf, 2e-3f * pdf);
+        EXPECT_TRUE(std::isfinite(L.x));
+        nearSun += L.x > 100.0f;
+    }
+    EXPECT_GT(nearSun, n / 4);
+}
+
+// E[L / pdf] with importance sampling equals the uniform-sphere estimate of ∫ L dω on the real
+// bundled map (8 sigma of the uniform estimate's noise).
+TEST(EnvironmentMap, ImportanceSamplingIsUnbiasedOnABundledMap) {
+    const EnvironmentMap env =
+        EnvironmentMap::Load(test::SceneDir() + "/envmaps/sunset.exr", 1.0f, 30.0f);
+    Rng rng(4, 0);
+    const int n = 1 << 18;
+    double is = 0.0, uni = 0.0, uni2 = 0.0;
+    for (int i = 0; i < n; ++i) {
+        glm::vec3 dir;
+        float pdf;
+        const glm::vec3 L = env.Sample(rng.Next2D(), &dir, &pdf);
+        if (pdf > 0.0f) is += double(L.y) / pdf;
+        const glm::vec3 d = SampleUniformSphere(rng.Next2D());
+        const double u = double(env.Eval(d).y) / kUniformSpherePdf;
+        uni += u;
+        uni2 += u * u;
+    }
+    is /= n, uni /= n;
+    const double sigma = std::sqrt((uni2 / n - uni * uni) / n);
+    EXPECT_NEAR(is, uni, 8.0 * sigma + 1e-3 * uni);
+    EXPECT_NEAR(uni / (4.0 * 3.14159265), env.AverageRadiance().y, 0.05 * uni / (4.0 * 3.14159265));
+}
+
+TEST(EnvironmentMap, RotationTurnsTheMapAboutUp) {
+    const std::string path = WriteEnv(64, 32, 16, 16, 500.0f);
+    const EnvironmentMap a = EnvironmentMap::Load(path, 1.0f, 0.0f), b = EnvironmentMap::Load(path, 1.0f, 90.0f);
+    Rng rng(5, 0);
+    glm::vec3 da, db;
+    float pdf;
+    for (int i = 0; i < 50; ++i) a.Sample(rng.Next2D(), &da, &pdf);  // any sample: the sun dominates
+    a.Sample({0.5f, 0.5f}, &da, &pdf);
+    b.Sample({0.5f, 0.5f}, &db, &pdf);
+    // Rotating by +90 degrees is the right-handed R_y(90): (x, y, z) -> (z, y, -x).
+    const glm::vec3 rotated(da.z, da.y, -da.x);
+    EXPECT_NEAR(glm::dot(glm::normalize(rotated), db), 1.0f, 1e-3f);
+    EXPECT_NEAR(glm::length(a.Eval(da) - b.Eval(db)), 0.0f, 1e-2f * glm::length(a.Eval(da)));
+}
+
+TEST(EnvironmentMap, BadFilesAreClearErrors) {
+    try {
+        EnvironmentMap::Load(WriteEnv(64, 64, 1, 1, 1.0f), 1.0f, 0.0f);
+        FAIL();
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("lat-long"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(EnvironmentMap::Load("/no/such/env.exr", 1.0f, 0.0f), InputError);
+    const EnvironmentMap c = EnvironmentMap::Constant(glm::vec3(2.0f));
+    EXPECT_EQ(c.Eval(glm::vec3(0, 1, 0)), glm::vec3(2.0f));
+    EXPECT_FLOAT_EQ(c.Pdf(glm::vec3(1, 0, 0)), kUniformSpherePdf);
+}
+
+}  // namespace
+}  // namespace texcache
