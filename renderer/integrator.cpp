@@ -397,8 +397,11 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
     const glm::vec2 jitter = rng.Next2D();
     const glm::vec2 lens = rng.Next2D();
     const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
+    // Differentials feed the cache's mip selection and the debug views; skip them otherwise.
+    const bool needDiff = c.tsc != nullptr || c.opt.integrator == IntegratorKind::Normal ||
+                          c.opt.integrator == IntegratorKind::Ptex || c.opt.integrator == IntegratorKind::Uv;
     RayDifferentials diff;
-    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, &diff);
+    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, needDiff ? &diff : nullptr);
     if (c.cameraMoves) {
         // Camera motion blur: blend the rays of the open and close poses (rigid, short shutter).
         const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
@@ -430,7 +433,7 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
     }
     if (!found) return glm::vec3(0.0f);
     if (hit.object < 0) return glm::vec3(1.0f);  // a light seen by a debug view: white
-    const SurfaceInteraction si = c.rs.Interact(ray, hit, &diff);
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, needDiff ? &diff : nullptr);
     if (aov) FillAovs(c, ray, hit, si, aov);
     switch (k) {
         case IntegratorKind::Normal: return si.N * 0.5f + 0.5f;

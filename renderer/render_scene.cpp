@@ -355,8 +355,9 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     si.material = scene_.objects[hit.object].material;
     si.P = ray.org + hit.t * ray.dir;
 
-    alignas(16) float P[4], du[4], dv[4];
-    rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
+    alignas(16) float du[4], dv[4];
+    // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
+    rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, nullptr, du, dv, 3);
     const glm::mat4 M = I.Transform(hit.object, ray.time);
     const glm::mat3 L(M);
     si.dPdu = L * glm::vec3(du[0], du[1], du[2]);
