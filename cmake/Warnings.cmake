@@ -1,6 +1,7 @@
 # Warnings and sanitizers as INTERFACE targets, linked by every project target.
 add_library(texcache_warnings INTERFACE)
-target_compile_options(texcache_warnings INTERFACE -Wall -Wextra -Wpedantic -Wno-unused-parameter)
+# -Wno-restrict: GCC 12 false positive in libstdc++ string concatenation (GCC PR 105329).
+target_compile_options(texcache_warnings INTERFACE -Wall -Wextra -Wpedantic -Wno-unused-parameter -Wno-restrict)
 
 add_library(texcache_sanitizers INTERFACE)
 if(TEXCACHE_SANITIZE STREQUAL "address")
