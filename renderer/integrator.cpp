@@ -303,20 +303,36 @@ Rng SampleRng(const Context& c, const SampleRequest& r) {
     return Rng(MixBits(c.opt.seed ^ (r.key.Pack() * 0x9E3779B97F4A7C15ull)), 0x7ca7);
 }
 
-/// Limit-surface point of a cache sample, and a ray-origin offset that clears the tessellated
-/// surface (which lies within ~1.4% of an edge of the limit surface at the default rate).
-bool SamplePoint(const Context& c, int object, const SampleRequest& r, SurfaceSample* ss, float* offset) {
+/// Limit-surface point of a cache sample, and the origin its secondary rays start from. The
+/// rays hit the tessellated surface, which lies up to ~1.4% of an edge off the limit surface:
+/// one short ray along -N finds the tessellated surface under the sample, and rays start just
+/// above it (a fixed offset large enough for curved faces would lift samples on big flat faces
+/// off the ground and lose their contact occlusion).
+bool SamplePoint(const Context& c, int object, const SampleRequest& r, SurfaceSample* ss,
+                 glm::vec3* origin, RayCounts& rays) {
     if (!c.rs.EvalSurface(object, {r.face, r.u, r.v}, 0.0f, ss)) return false;
+    if (!std::isfinite(ss->P.x + ss->P.y + ss->P.z + ss->N.x + ss->N.y + ss->N.z)) return false;
     const float edge = std::max(glm::length(ss->dPdu), glm::length(ss->dPdv));
     const float scale = std::max({1.0f, std::abs(ss->P.x), std::abs(ss->P.y), std::abs(ss->P.z)});
-    *offset = 0.02f * edge + 2e-5f * scale;
-    return std::isfinite(ss->P.x + ss->P.y + ss->P.z + ss->N.x + ss->N.y + ss->N.z);
+    const float eps = 2e-5f * scale;
+    const float lift = 0.03f * edge + eps;
+    Ray snap;
+    snap.org = ss->P + lift * ss->N;
+    snap.dir = -ss->N;
+    snap.tfar = 2.0f * lift;
+    Hit hit;
+    ++rays.bounce;
+    if (c.rs.Intersect(snap, &hit) && hit.object == object)
+        *origin = snap.org + hit.t * snap.dir + eps * ss->N;
+    else
+        *origin = ss->P + lift * ss->N;
+    return true;
 }
 
 ShadedSample ShadeAoSample(const Context& c, int object, const SampleRequest& r, RayCounts& rays) {
     SurfaceSample ss;
-    float offset;
-    if (!SamplePoint(c, object, r, &ss, &offset)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
+    glm::vec3 origin;
+    if (!SamplePoint(c, object, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
     Rng rng = SampleRng(c, r);
     const Frame frame = Frame::FromZ(ss.N);
     const int n = c.opt.aoSamples;
@@ -324,7 +340,7 @@ ShadedSample ShadeAoSample(const Context& c, int object, const SampleRequest& r,
     for (int i = 0; i < n; ++i) {
         Ray ray;
         ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
-        ray.org = ss.P + offset * ss.N;
+        ray.org = origin;
         ray.tfar = c.opt.aoDistance;
         ++rays.shadow;
         if (!c.rs.Occluded(ray)) ++open;
@@ -335,8 +351,8 @@ ShadedSample ShadeAoSample(const Context& c, int object, const SampleRequest& r,
 
 ShadedSample ShadeIndirectSample(const Context& c, int object, const SampleRequest& r, RayCounts& rays) {
     SurfaceSample ss;
-    float offset;
-    if (!SamplePoint(c, object, r, &ss, &offset)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
+    glm::vec3 origin;
+    if (!SamplePoint(c, object, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
     Rng rng = SampleRng(c, r);
     const Frame frame = Frame::FromZ(ss.N);
     const int n = c.opt.texture.indirectSamples;
@@ -347,7 +363,7 @@ ShadedSample ShadeIndirectSample(const Context& c, int object, const SampleReque
         // radiance, which the hit multiplies by its albedo.
         Ray ray;
         ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
-        ray.org = ss.P + offset * ss.N;
+        ray.org = origin;
         ++rays.bounce;
         Hit hit;
         const bool found = c.rs.Intersect(ray, &hit);
@@ -370,9 +386,11 @@ glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&&
                      si.dudx, si.dvdx, si.dudy, si.dvdy};
     CacheStats& st = c.cacheStats->local();
     auto sampleShader = [&](const SampleRequest& r) { return shade(si.object, r); };
-    if (t.filter == TextureFilterKind::None)
+    // One branch per lookup picks the material's filter; the filters themselves are inlined.
+    if (c.tsc->FilterOf(si.object) == TextureFilterKind::None)
         return c.tsc->cache().Lookup(h, 0, sampleShader, CentreFilter{}, st);
-    return c.tsc->cache().Lookup(h, t.radius, sampleShader, NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
+    return c.tsc->cache().Lookup(h, c.tsc->RadiusOf(si.object), sampleShader,
+                                 NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
 }
 
 void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInteraction& si,

@@ -21,14 +21,19 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
     const Scene& scene = rs.scene();
     for (size_t o = 0; o < scene.objects.size(); ++o) {
         const ControlCage& cage = scene.meshes[scene.objects[o].mesh];
+        // Grids live in the cage's own (object) space, so texel size is relative to the cage.
         glm::vec3 lo(1e30f), hi(-1e30f);
-        const glm::mat4 M = scene.objects[o].transform.Eval(0.0f);
         for (const auto& p : cage.positions) {
-            const glm::vec3 w = glm::vec3(M * glm::vec4(p[0], p[1], p[2], 1.0f));
-            lo = glm::min(lo, w), hi = glm::max(hi, w);
+            lo = glm::min(lo, glm::vec3(p[0], p[1], p[2]));
+            hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
         }
         const float diag = glm::length(hi - lo);
         meshOf_.push_back(cache_.AddMesh(cage, std::max(diag * options.texelFraction, 1e-12f)));
+        const Material& m = scene.materials[scene.objects[o].material];
+        const std::string where = scene.path + ": material '" + m.name + "'";
+        filterOf_.push_back(m.cacheFilter.empty() ? options.filter : ParseTextureFilter(m.cacheFilter, where));
+        radiusOf_.push_back(m.cacheRadius >= 0 ? m.cacheRadius : options.radius);
+        CheckFilterRadius(radiusOf_.back(), where);
     }
 }
 

@@ -41,11 +41,17 @@ public:
     const TextureSpaceOptions& options() const { return options_; }
     /// Cache mesh id of a scene object.
     int MeshOf(int object) const { return meshOf_[object]; }
+    /// The filter of an object's material (its override, else the render's default).
+    TextureFilterKind FilterOf(int object) const { return filterOf_[object]; }
+    /// Footprint radius of an object's material (its override, else the render's default).
+    int RadiusOf(int object) const { return radiusOf_[object]; }
 
 private:
     TextureSpaceOptions options_;
     RenderShadingCache cache_;
     std::vector<int> meshOf_;
+    std::vector<TextureFilterKind> filterOf_;
+    std::vector<int> radiusOf_;
 };
 
 }  // namespace texcache
