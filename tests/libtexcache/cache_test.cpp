@@ -330,6 +330,79 @@ TEST(ShadingCache, ReferenceModeShadesEachSampleOnce) {
     for (const auto& [key, count] : shadeCount) ASSERT_EQ(count, 1) << "sample shaded twice";
 }
 
+// Threads filter overlapping footprints through small bounded caches (evictions, deferrals,
+// conflicts all happen): every result equals the single-threaded answer. Run under
+// ThreadSanitizer by scripts/test.sh (label `cache`).
+TEST(ShadingCache, ConcurrentOverlappingFootprintsMatchSingleThreaded) {
+    auto shade = [](const SampleRequest& r) {
+        const float v = float(r.key.Pack() % 1009) / 1009.0f;
+        return AoSample{v, {0, 1, 0}};
+    };
+    auto mean = [](const FilterInput<AoSample>& in) {
+        float sum = 0.0f;
+        for (const auto& x : in.samples) sum += x.value;
+        return sum / float(in.samples.size());
+    };
+    std::vector<CacheHit> hits;
+    for (int i = 0; i < 4000; ++i)
+        hits.push_back({0, i % 16, float((i * 37) % 101) / 101.0f, float((i * 53) % 97) / 97.0f, 0.004f, 0, 0, 0.004f});
+    std::vector<float> expected(hits.size());
+    {
+        CacheSettings s;
+        s.referenceMode = true;
+        ShadingCache<AoSample, float> ref(s);
+        ref.AddMesh(test::GridCage(4), 0.02f);
+        CacheStats st;
+        for (size_t i = 0; i < hits.size(); ++i) expected[i] = ref.Lookup(hits[i], 3, shade, mean, st);
+    }
+    CacheSettings s;
+    s.sampleCacheBytes = 64 * 1024;
+    s.texelCacheBytes = 8 * 1024;
+    ShadingCache<AoSample, float> cache(s);
+    cache.AddMesh(test::GridCage(4), 0.02f);
+    std::atomic<int> mismatches{0};
+    std::vector<std::thread> threads;
+    std::vector<CacheStats> stats(4);
+    for (int t = 0; t < 4; ++t)
+        threads.emplace_back([&, t] {
+            for (int pass = 0; pass < 3; ++pass)
+                for (size_t k = 0; k < hits.size(); ++k) {
+                    const size_t i = (k * (2 * t + 1) + size_t(t) * 997) % hits.size();
+                    if (cache.Lookup(hits[i], 3, shade, mean, stats[t]) != expected[i]) ++mismatches;
+                }
+        });
+    for (auto& th : threads) th.join();
+    EXPECT_EQ(mismatches.load(), 0);
+    CacheStats total;
+    for (const auto& st : stats) total.Merge(st);
+    EXPECT_GT(total.sampleEvictions, 0u);
+    EXPECT_GT(total.texelHits, 0u);
+    EXPECT_LE(cache.BytesUsed(), s.sampleCacheBytes + s.texelCacheBytes);
+}
+
+TEST(ShadingCache, InvalidationEvictsOneMeshOrAll) {
+    ShadingCache<AoSample, float> cache(CacheSettings{});
+    const int a = cache.AddMesh(test::GridCage(2), 0.1f), b = cache.AddMesh(test::CubeCage(), 0.1f);
+    int shaded = 0;
+    auto shade = [&](const SampleRequest& r) {
+        ++shaded;
+        return AoSample{float(r.mesh), {0, 1, 0}};
+    };
+    auto centre = [](const FilterInput<AoSample>& in) { return in.samples[in.centre].value; };
+    CacheStats st;
+    const CacheHit ha{a, 0, 0.5f, 0.5f, 0.01f, 0, 0, 0.01f}, hb{b, 0, 0.5f, 0.5f, 0.01f, 0, 0, 0.01f};
+    cache.Lookup(ha, 0, shade, centre, st);
+    cache.Lookup(hb, 0, shade, centre, st);
+    EXPECT_EQ(shaded, 2);
+    cache.InvalidateMesh(a);
+    cache.Lookup(ha, 0, shade, centre, st);  // re-shaded
+    cache.Lookup(hb, 0, shade, centre, st);  // still cached
+    EXPECT_EQ(shaded, 3);
+    cache.InvalidateAll();
+    cache.Lookup(hb, 0, shade, centre, st);
+    EXPECT_EQ(shaded, 4);
+}
+
 // A bounded cache far too small for the working set still returns correct values (it re-shades).
 TEST(ShadingCache, TinyBoundedCacheStaysCorrect) {
     CacheSettings s;
