@@ -308,9 +308,11 @@ Rng SampleRng(const Context& c, const SampleRequest& r) {
 /// one short ray along -N finds the tessellated surface under the sample, and rays start just
 /// above it (a fixed offset large enough for curved faces would lift samples on big flat faces
 /// off the ground and lose their contact occlusion).
-bool SamplePoint(const Context& c, int object, const SampleRequest& r, SurfaceSample* ss,
-                 glm::vec3* origin, RayCounts& rays) {
+bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, glm::vec3* origin,
+                 RayCounts& rays) {
+    const int object = c.tsc->ObjectOfMesh(r.mesh);
     if (!c.rs.EvalSurface(object, {r.face, r.u, r.v}, 0.0f, ss)) return false;
+    if (c.tsc->IsBackMesh(r.mesh)) ss->N = -ss->N;  // the back side of an open surface
     if (!std::isfinite(ss->P.x + ss->P.y + ss->P.z + ss->N.x + ss->N.y + ss->N.z)) return false;
     const float edge = std::max(glm::length(ss->dPdu), glm::length(ss->dPdv));
     const float scale = std::max({1.0f, std::abs(ss->P.x), std::abs(ss->P.y), std::abs(ss->P.z)});
@@ -329,10 +331,10 @@ bool SamplePoint(const Context& c, int object, const SampleRequest& r, SurfaceSa
     return true;
 }
 
-ShadedSample ShadeAoSample(const Context& c, int object, const SampleRequest& r, RayCounts& rays) {
+ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
     SurfaceSample ss;
     glm::vec3 origin;
-    if (!SamplePoint(c, object, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
+    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
     Rng rng = SampleRng(c, r);
     const Frame frame = Frame::FromZ(ss.N);
     const int n = c.opt.aoSamples;
@@ -349,10 +351,10 @@ ShadedSample ShadeAoSample(const Context& c, int object, const SampleRequest& r,
     return {glm::vec3(p), ss.N, p * (1.0f - p) / float(std::max(n - 1, 1))};
 }
 
-ShadedSample ShadeIndirectSample(const Context& c, int object, const SampleRequest& r, RayCounts& rays) {
+ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
     SurfaceSample ss;
     glm::vec3 origin;
-    if (!SamplePoint(c, object, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
+    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
     Rng rng = SampleRng(c, r);
     const Frame frame = Frame::FromZ(ss.N);
     const int n = c.opt.texture.indirectSamples;
@@ -382,14 +384,13 @@ ShadedSample ShadeIndirectSample(const Context& c, int object, const SampleReque
 template <typename ShadeFn>
 glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&& shade) {
     const TextureSpaceOptions& t = c.tsc->options();
-    const CacheHit h{c.tsc->MeshOf(si.object), si.ptex.face, si.ptex.u, si.ptex.v,
+    const CacheHit h{c.tsc->MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
                      si.dudx, si.dvdx, si.dudy, si.dvdy};
     CacheStats& st = c.cacheStats->local();
-    auto sampleShader = [&](const SampleRequest& r) { return shade(si.object, r); };
     // One branch per lookup picks the material's filter; the filters themselves are inlined.
     if (c.tsc->FilterOf(si.object) == TextureFilterKind::None)
-        return c.tsc->cache().Lookup(h, 0, sampleShader, CentreFilter{}, st);
-    return c.tsc->cache().Lookup(h, c.tsc->RadiusOf(si.object), sampleShader,
+        return c.tsc->cache().Lookup(h, 0, shade, CentreFilter{}, st);
+    return c.tsc->cache().Lookup(h, c.tsc->RadiusOf(si.object), shade,
                                  NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
 }
 
@@ -439,8 +440,8 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
             auto cached = [&](const SurfaceInteraction& si0, const Ray& r0, glm::vec3* term) {
                 if (c.scene.materials[si0.material].type != Material::Type::Diffuse) return false;
                 const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
-                const glm::vec3 E = CachedLookup(c, sd, [&](int object, const SampleRequest& r) {
-                    return ShadeIndirectSample(c, object, r, rays);
+                const glm::vec3 E = CachedLookup(c, sd, [&](const SampleRequest& r) {
+                    return ShadeIndirectSample(c, r, rays);
                 });
                 *term = c.rs.Albedo(si0) * E;
                 return true;
@@ -460,8 +461,8 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
         case IntegratorKind::EyeLight: return c.rs.Albedo(si) * std::abs(glm::dot(si.N, ray.dir));
         case IntegratorKind::AO:
             if (c.tsc)
-                return CachedLookup(c, si, [&](int object, const SampleRequest& r) {
-                    return ShadeAoSample(c, object, r, rays);
+                return CachedLookup(c, si, [&](const SampleRequest& r) {
+                    return ShadeAoSample(c, r, rays);
                 });
             return LiAO(c, ray, si, rng, rays);
         default: return glm::vec3(0.0f);

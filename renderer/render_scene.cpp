@@ -369,7 +369,8 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     const float len = glm::length(n);
     // Limit derivatives can be parallel at a few extraordinary points: fall back to Ng there.
     si.N = len > 1e-12f && std::isfinite(len) ? n / len : si.Ng;
-    if (glm::dot(si.N, si.Ng) < 0.0f) si.N = -si.N;
+    si.backFacing = glm::dot(si.N, si.Ng) < 0.0f;
+    if (si.backFacing) si.N = -si.N;
 
     si.ptex = EmbreeToPtex(*mesh.topo, hit.primID, hit.U, hit.V);
     if (mesh.hasUv) {

@@ -50,6 +50,7 @@ struct SurfaceInteraction {
     float dudx = 0, dudy = 0, dvdx = 0, dvdy = 0;  ///< Ptex-space footprint of a pixel
     int object = -1;
     int material = 0;
+    bool backFacing = false;  ///< the ray sees the side opposite to cross(dPdu, dPdv)
 };
 
 /// A limit-surface sample at a Ptex location (the cache's surface query).

@@ -28,7 +28,19 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
             hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
         }
         const float diag = glm::length(hi - lo);
-        meshOf_.push_back(cache_.AddMesh(cage, std::max(diag * options.texelFraction, 1e-12f)));
+        const float texel = std::max(diag * options.texelFraction, 1e-12f);
+        meshOf_.push_back(cache_.AddMesh(cage, texel));
+        meshObject_.push_back(int(o));
+        meshIsBack_.push_back(0);
+        // Open surfaces get a second set of grids for their back side (model only what is
+        // needed: closed surfaces are never seen from inside).
+        if (cache_.Mesh(meshOf_.back()).Topology().HasBoundary()) {
+            backMeshOf_.push_back(cache_.AddMesh(cage, texel));
+            meshObject_.push_back(int(o));
+            meshIsBack_.push_back(1);
+        } else {
+            backMeshOf_.push_back(-1);
+        }
         const Material& m = scene.materials[scene.objects[o].material];
         const std::string where = scene.path + ": material '" + m.name + "'";
         filterOf_.push_back(m.cacheFilter.empty() ? options.filter : ParseTextureFilter(m.cacheFilter, where));

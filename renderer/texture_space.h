@@ -39,8 +39,14 @@ public:
     RenderShadingCache& cache() { return cache_; }
     const RenderShadingCache& cache() const { return cache_; }
     const TextureSpaceOptions& options() const { return options_; }
-    /// Cache mesh id of a scene object.
-    int MeshOf(int object) const { return meshOf_[object]; }
+    /// Cache mesh id of a scene object's front side, or of its back side (open surfaces are
+    /// seen from both sides and shade differently on each; closed ones have no back mesh).
+    int MeshOf(int object, bool backFacing = false) const {
+        return backFacing && backMeshOf_[object] >= 0 ? backMeshOf_[object] : meshOf_[object];
+    }
+    /// The object a cache mesh belongs to, and whether it is that object's back side.
+    int ObjectOfMesh(int mesh) const { return meshObject_[mesh]; }
+    bool IsBackMesh(int mesh) const { return meshIsBack_[mesh]; }
     /// The filter of an object's material (its override, else the render's default).
     TextureFilterKind FilterOf(int object) const { return filterOf_[object]; }
     /// Footprint radius of an object's material (its override, else the render's default).
@@ -49,7 +55,9 @@ public:
 private:
     TextureSpaceOptions options_;
     RenderShadingCache cache_;
-    std::vector<int> meshOf_;
+    std::vector<int> meshOf_, backMeshOf_;
+    std::vector<int> meshObject_;
+    std::vector<char> meshIsBack_;
     std::vector<TextureFilterKind> filterOf_;
     std::vector<int> radiusOf_;
 };

@@ -261,9 +261,10 @@ public:
 
 private:
     uint64_t Hash(const TexelKey& k) const {
-        // Scanline order within a face's mip level (Munkberg et al.'s supplemental): texels of a
-        // footprint land in distinct, consecutive slots.
-        return internal::MixFaceMip(k.face, k.mip) + uint64_t(k.iv) * 16384u + k.iu;
+        // Scanline order within a row (Munkberg et al.'s supplemental): a footprint's texels in
+        // a row land in consecutive slots. Rows are scattered by an odd multiplier: a power-of-two
+        // row stride aliased every 32nd row onto the same slots of a 2^k-slot cache.
+        return internal::MixFaceMip(k.face, k.mip) + uint64_t(k.iv) * 2654435761u + k.iu;
     }
 
     // Gathers the footprint, shades what is missing (deferring samples other threads are

@@ -54,6 +54,14 @@ public:
     bool Cross(int ptexFace, int edge, float along, float outside, int* nbFace, float* nbU,
                float* nbV, int* nbEdge, float* scale) const;
 
+    /// True when some Ptex edge has no neighbour (an open boundary, a hole or a non-manifold
+    /// edge): such surfaces can be seen from both sides.
+    bool HasBoundary() const {
+        for (const EdgeLink& l : edges_)
+            if (l.count == 0) return true;
+        return false;
+    }
+
     /// Valence of each coarse vertex (for tests and corner policies).
     int Valence(int vertex) const { return valence_[vertex]; }
 

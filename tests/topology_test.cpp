@@ -1,0 +1,99 @@
+// SPDX-License-Identifier: Apache-2.0
+// Ptex adjacency and footprints on every bundled mesh: symmetry, round trips across edges
+// (including quad <-> n-gon half edges), geometric continuity against OpenSubdiv's limit
+// surface, and footprints around extraordinary vertices.
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "test_util.h"
+#include "texcache/footprint.h"
+#include "texcache/topology.h"
+
+namespace texcache {
+namespace {
+
+class TopologyTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(TopologyTest, AdjacencyIsSymmetricAndRoundTrips) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    const PtexTopology topo(cage);
+    int links = 0;
+    for (int f = 0; f < topo.NumPtexFaces(); ++f)
+        for (int e = 0; e < 4; ++e) {
+            const auto& link = topo.Edge(f, e);
+            for (int j = 0; j < link.count; ++j) {
+                const auto& back = topo.Edge(link.face[j], link.edge[j]);
+                bool found = false;
+                for (int k = 0; k < back.count; ++k) found |= back.face[k] == f && back.edge[k] == e;
+                ASSERT_TRUE(found) << GetParam() << " face " << f << " edge " << e;
+                ++links;
+            }
+            for (float along : {0.2f, 0.5f, 0.8f}) {
+                int g, ge, f2, e2;
+                float u, v, s, u2, v2, s2, a2, in2, a3, in3;
+                if (!topo.Cross(f, e, along, 0.0f, &g, &u, &v, &ge, &s)) continue;
+                UvToEdge(ge, u, v, &a2, &in2);
+                ASSERT_TRUE(topo.Cross(g, ge, a2, 0.0f, &f2, &u2, &v2, &e2, &s2));
+                ASSERT_EQ(f2, f);
+                UvToEdge(e2, u2, v2, &a3, &in3);
+                EXPECT_NEAR(a3, along, 1e-5f);
+            }
+        }
+    EXPECT_GT(links, 0);
+}
+
+// A point on a shared edge is the same limit point seen from either face: checks that the
+// adjacency's edge numbering and orientation (and the half-edge scale) match the surface.
+// Tolerance 5e-4 of the bounding-box diagonal (OpenSubdiv's end caps near extraordinary
+// vertices; elsewhere ~1e-6).
+TEST_P(TopologyTest, SharedEdgesAreContinuousOnTheLimitSurface) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    const PtexTopology topo(cage);
+    const LimitSurface osd(cage, 8);
+    glm::vec3 lo(1e30f), hi(-1e30f);
+    for (const auto& p : cage.positions) lo = glm::min(lo, glm::vec3(p[0], p[1], p[2])), hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
+    const float tol = 5e-4f * glm::length(hi - lo);
+    for (int f = 0; f < topo.NumPtexFaces(); ++f)
+        for (int e = 0; e < 4; ++e)
+            for (float along : {0.25f, 0.5f, 0.75f}) {
+                int g, ge;
+                float u, v, s, fu, fv;
+                if (!topo.Cross(f, e, along, 0.0f, &g, &u, &v, &ge, &s)) continue;
+                EdgeToUv(e, along, 0.0f, &fu, &fv);
+                LimitPoint a, b;
+                if (!osd.Eval(f, fu, fv, &a) || !osd.Eval(g, u, v, &b)) continue;
+                const float d = glm::length(glm::vec3(a.P[0] - b.P[0], a.P[1] - b.P[1], a.P[2] - b.P[2]));
+                ASSERT_LE(d, tol) << GetParam() << " face " << f << " edge " << e << " -> " << g;
+            }
+}
+
+// Footprints at every corner of every face (where extraordinary vertices and n-gon centres
+// sit): each sample once, all finite, inside their faces.
+TEST_P(TopologyTest, FootprintsAtEveryCornerAreWellFormed) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    const MeshGrids grids(cage, 0.01f, 7);
+    std::vector<FootprintSample> fp;
+    for (int f = 0; f < grids.NumFaces(); ++f)
+        for (int mip : {0, 2, 100}) {
+            const int m = grids.ClampMip(f, mip), res = grids.Res(f, m);
+            for (auto [iu, iv] : {std::pair{0, 0}, std::pair{res - 1, 0}, std::pair{0, res - 1}, std::pair{res - 1, res - 1}}) {
+                GatherFootprint(grids, f, m, iu, iv, 6, &fp);
+                ASSERT_FALSE(fp.empty());
+                ASSERT_LE(fp.size(), 169u);
+                std::set<uint64_t> keys;
+                for (const auto& s : fp) {
+                    ASSERT_TRUE(keys.insert(s.key.Pack()).second) << GetParam() << " face " << f;
+                    ASSERT_TRUE(s.u > 0.0f && s.u < 1.0f && s.v > 0.0f && s.v < 1.0f);
+                    ASSERT_LT(s.key.face - 7, uint32_t(grids.NumFaces()));
+                    ASSERT_LT(int(s.key.iu), grids.Res(int(s.key.face) - 7, s.key.mip));
+                }
+            }
+        }
+}
+
+INSTANTIATE_TEST_SUITE_P(BundledMeshes, TopologyTest, ::testing::ValuesIn(test::BundledMeshes()),
+                         [](const auto& info) { return info.param; });
+
+}  // namespace
+}  // namespace texcache
