@@ -23,6 +23,9 @@ struct TextureSpaceOptions {
     /// Mip-0 texel size as a fraction of each object's bounding-box diagonal; eq. 1 then picks
     /// the level whose texels are about a pixel.
     float texelFraction = 1.0f / 4096.0f;
+    /// Benchmark baseline: the cached term is replaced by this constant (no lookup at all) when
+    /// >= 0, so a frame measures primary visibility and the uncached terms alone.
+    float constantTerm = -1.0f;
 };
 
 /// Throws InputError when a filter radius is negative or larger than the footprint allows.

@@ -18,6 +18,8 @@
 #include "commands.h"
 #include "renderer/camera.h"
 #include "renderer/integrator.h"
+#include "renderer/metrics.h"
+#include "renderer/scene_loader.h"
 #include "renderer/sampling.h"
 
 namespace texcache::cli {
@@ -148,6 +150,101 @@ int RunBench(const BenchArgs& a) {
     return 0;
 }
 
+struct CacheBenchArgs {
+    std::string scene = std::string(TEXCACHE_SCENES_DIR) + "/car.json";
+    std::string resolution = "640x360";
+    int aoSamples = 4;
+    int spp = 4;
+    int referenceSpp = 512;
+    int repeats = 3;
+    std::string out = "out/bench_cache";
+};
+
+double TimedRender(const RenderScene& rs, const RenderOptions& o, TextureSpaceCache* cache, int repeats,
+                   RenderResult* last = nullptr) {
+    double best = 1e30;
+    for (int i = 0; i < repeats; ++i) {
+        RenderResult r = Render(rs, o, cache);
+        best = std::min(best, r.stats.seconds);
+        if (last) *last = std::move(r);
+    }
+    return best;
+}
+
+int RunCacheBench(const CacheBenchArgs& a) {
+    std::vector<std::string> warnings;
+    Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    RenderOptions o;
+    o.integrator = IntegratorKind::AO;
+    ParseResolution(a.resolution, &o.width, &o.height);
+    o.spp = CheckRange("--spp", a.spp, 1, 4096);
+    o.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1024);
+    o.aoDistance = scene.settings.aoDistance;
+    o.progress = false;
+    CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
+    CheckRange("--repeats", a.repeats, 1, 100);
+    const OutputPaths plan = PlanOutputs(a.out + "_ref.exr", false);
+    (void)plan;
+    RenderSceneOptions ro;
+    ro.needLights = ro.needEnvironment = false;
+    RenderScene rs(scene, ro);
+    std::printf("scene %s, %dx%d, %d spp, %d AO rays per hit / per cached sample\n", a.scene.c_str(),
+                o.width, o.height, o.spp, o.aoSamples);
+
+    // 1. Warm-cache frame against the same frame with the cached term replaced by a constant.
+    RenderOptions tex = o;
+    tex.texture.enabled = true;
+    tex.texture.filter = TextureFilterKind::Normal;
+    TextureSpaceCache cache(rs, tex.texture);
+    RenderResult first = Render(rs, tex, &cache);  // cold: fills the caches
+    RenderOptions constant = tex;
+    constant.texture.constantTerm = 0.5f;
+    double tConst = 1e30, tWarm = 1e30;
+    RenderResult warm;
+    for (int i = 0; i < a.repeats; ++i) {  // interleaved: both see the same machine noise
+        tConst = std::min(tConst, TimedRender(rs, constant, &cache, 1));
+        tWarm = std::min(tWarm, TimedRender(rs, tex, &cache, 1, &warm));
+    }
+    std::printf("cold frame (fills caches)    : %8.4f s, %llu samples shaded, texel hit rate %.1f%%\n",
+                first.stats.seconds, (unsigned long long)first.stats.cache.samplesShaded,
+                100.0 * first.stats.cache.TexelHitRate());
+    std::printf("warm frame (texel hits)      : %8.4f s, texel hit rate %.2f%%\n", tWarm,
+                100.0 * warm.stats.cache.TexelHitRate());
+    std::printf("constant term (no lookup)    : %8.4f s\n", tConst);
+    std::printf("warm / constant              : %8.3f x (goal <= 1.1)\n", tWarm / tConst);
+
+    // 2. Equal time: texture-space AO (trivial filter, cold cache) against per-hit AO given the
+    //    same wall-clock time, both against a high-sample per-hit reference.
+    RenderOptions ref = o;
+    ref.spp = a.referenceSpp;
+    ref.progress = true;
+    std::printf("reference: per-hit AO, %d spp ...\n", ref.spp);
+    const RenderResult reference = Render(rs, ref);
+    RenderResult texResult;
+    double tTex = 1e30;
+    for (int i = 0; i < a.repeats; ++i) {
+        TextureSpaceCache fresh(rs, tex.texture);  // cold each time: the whole cost is counted
+        RenderResult r = Render(rs, tex, &fresh);
+        if (r.stats.seconds < tTex) tTex = r.stats.seconds, texResult = std::move(r);
+    }
+    RenderOptions hit = o;
+    hit.spp = 1 << 16;
+    hit.seconds = float(tTex);
+    const RenderResult hitResult = Render(rs, hit);
+    const double eTex = RelMSE(texResult.beauty, reference.beauty);
+    const double eHit = RelMSE(hitResult.beauty, reference.beauty);
+    std::printf("texture-space AO (normal 13x13): %.4f s, relMSE %.5f\n", tTex, eTex);
+    std::printf("per-hit AO, same time (%3d spp): %.4f s, relMSE %.5f\n", hitResult.stats.sppDone,
+                hitResult.stats.seconds, eHit);
+    std::printf("relMSE per-hit / texture-space  : %.2f x\n", eHit / eTex);
+    std::vector<ImageLayer> none;
+    WriteImage(a.out + "_ref.png", reference.beauty);
+    WriteImage(a.out + "_texture.png", texResult.beauty);
+    WriteImage(a.out + "_hit.png", hitResult.beauty);
+    std::printf("wrote %s_{ref,texture,hit}.png\n", a.out.c_str());
+    return 0;
+}
+
 }  // namespace
 
 void AddBenchCommand(CLI::App& app, int& exitCode) {
@@ -162,6 +259,18 @@ void AddBenchCommand(CLI::App& app, int& exitCode) {
     rays->add_option("--repeats", args->repeats, "Timed repetitions (best is reported)")->capture_default_str();
     rays->add_option("--threads", args->threads, "Worker threads (0 = all)");
     rays->callback([args, &exitCode] { exitCode = RunBench(*args); });
+
+    auto cargs = std::make_shared<CacheBenchArgs>();
+    CLI::App* cache = bench->add_subcommand(
+        "cache", "Warm-cache frame vs a constant term, and texture-space vs per-hit AO at equal time");
+    cache->add_option("scene", cargs->scene, "Scene file or OBJ")->capture_default_str();
+    cache->add_option("--resolution", cargs->resolution, "Image size WxH")->capture_default_str();
+    cache->add_option("--ao-samples", cargs->aoSamples, "AO rays per hit / per cached sample")->capture_default_str();
+    cache->add_option("--spp", cargs->spp, "Camera samples per pixel")->capture_default_str();
+    cache->add_option("--reference-spp", cargs->referenceSpp, "Samples of the per-hit reference")->capture_default_str();
+    cache->add_option("--repeats", cargs->repeats, "Timed repetitions (best is reported)")->capture_default_str();
+    cache->add_option("--out", cargs->out, "Prefix of the images written")->capture_default_str();
+    cache->callback([cargs, &exitCode] { exitCode = RunCacheBench(*cargs); });
 }
 
 }  // namespace texcache::cli
