@@ -56,6 +56,7 @@ struct RenderScene::Impl {
         RTCScene scene = nullptr;
         RTCGeometry geom = nullptr;
         std::unique_ptr<PtexTopology> topo;
+        std::unique_ptr<RegularPatches> regular;  // fast path for rtcInterpolate
         bool hasUv = false;
         std::vector<uint8_t> isHole;  // per coarse face, only for cages with holes
     };
@@ -116,6 +117,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         const ControlCage& cage = scene.meshes[m];
         Impl::Mesh& mesh = I.meshes[m];
         mesh.topo = std::make_unique<PtexTopology>(cage);
+        mesh.regular = std::make_unique<RegularPatches>(cage);
         mesh.scene = rtcNewScene(I.device);
         RTCGeometry g = rtcNewGeometry(I.device, RTC_GEOMETRY_TYPE_SUBDIVISION);
         auto* faces = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
@@ -355,9 +357,15 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     si.material = scene_.objects[hit.object].material;
     si.P = ray.org + hit.t * ray.dir;
 
-    alignas(16) float du[4], dv[4];
-    // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
-    rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, nullptr, du, dv, 3);
+    si.ptex = EmbreeToPtex(*mesh.topo, hit.primID, hit.U, hit.V);
+    alignas(16) float P[4], du[4], dv[4];
+    if (mesh.regular->Has(si.ptex.face)) {
+        // Regular patches: our bicubic evaluation, ~10x cheaper than rtcInterpolate (same surface).
+        mesh.regular->Eval(si.ptex.face, si.ptex.u, si.ptex.v, P, du, dv);
+    } else {
+        // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
+        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, nullptr, du, dv, 3);
+    }
     const glm::mat4 M = I.Transform(hit.object, ray.time);
     const glm::mat3 L(M);
     si.dPdu = L * glm::vec3(du[0], du[1], du[2]);
@@ -372,7 +380,6 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     si.backFacing = glm::dot(si.N, si.Ng) < 0.0f;
     if (si.backFacing) si.N = -si.N;
 
-    si.ptex = EmbreeToPtex(*mesh.topo, hit.primID, hit.U, hit.V);
     if (mesh.hasUv) {
         alignas(16) float uv[4];
         rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, uv,
@@ -405,11 +412,15 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time, Surfac
     const Impl& I = *impl_;
     const Impl::Mesh& mesh = I.meshes[I.objects[object].mesh];
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
-    unsigned prim;
-    float U, V;
-    PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
     alignas(16) float P[4], du[4], dv[4];
-    rtcInterpolate1(mesh.geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
+    if (mesh.regular->Has(c.face)) {
+        mesh.regular->Eval(c.face, c.u, c.v, P, du, dv);
+    } else {
+        unsigned prim;
+        float U, V;
+        PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
+        rtcInterpolate1(mesh.geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
+    }
     const glm::mat4 M = I.Transform(object, time);
     const glm::mat3 L(M);
     out->P = glm::vec3(M * glm::vec4(P[0], P[1], P[2], 1.0f));

@@ -168,6 +168,96 @@ bool PtexTopology::Cross(int ptexFace, int edge, float along, float outside, int
     return true;
 }
 
+RegularPatches::RegularPatches(const ControlCage& cage) {
+    auto refiner = internal::CreateRefiner(cage);
+    // One adaptive level is enough to tell regular faces (depth-0 regular patches) from the rest.
+    refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(1));
+    Far::PatchTableFactory::Options options(1);
+    options.endCapType = Far::PatchTableFactory::Options::ENDCAP_BILINEAR_BASIS;
+    std::unique_ptr<Far::PatchTable> table(Far::PatchTableFactory::Create(*refiner, options));
+    Far::PtexIndices ptex(*refiner);
+    index_.assign(ptex.GetNumFaces(), -1);
+    const int numCoarse = cage.numVertices();
+    for (int a = 0; a < table->GetNumPatchArrays(); ++a) {
+        if (table->GetPatchArrayDescriptor(a).GetType() != Far::PatchDescriptor::REGULAR) continue;
+        for (int p = 0; p < table->GetNumPatches(a); ++p) {
+            const Far::PatchParam param = table->GetPatchParam(a, p);
+            if (param.GetDepth() != 0 || param.NonQuadRoot()) continue;
+            const Far::ConstIndexArray cv = table->GetPatchVertices(a, p);
+            const int boundary = param.GetBoundary();
+            // Control points outside a boundary are not part of the patch: only the others must
+            // be coarse vertices.
+            auto outside = [boundary](int i) {
+                const int iu = i % 4, iv = i / 4;
+                return ((boundary & 1) && iv == 0) || ((boundary & 2) && iu == 3) ||
+                       ((boundary & 4) && iv == 3) || ((boundary & 8) && iu == 0);
+            };
+            bool coarse = cv.size() == 16;
+            for (int i = 0; i < cv.size() && coarse; ++i) coarse = outside(i) || (cv[i] >= 0 && cv[i] < numCoarse);
+            const int face = param.GetFaceId();
+            if (!coarse || face < 0 || face >= int(index_.size())) continue;
+            float c[16][3];
+            for (int i = 0; i < 16; ++i)
+                for (int k = 0; k < 3; ++k) c[i][k] = outside(i) ? 0.0f : cage.positions[cv[i]][k];
+            // Boundary patches use phantom points mirrored across the boundary (OpenSubdiv's
+            // B-spline boundary rule, P0 = 2 P1 - P2), substituted here in the transposed order
+            // of OSD's weight adjustment (left, top, right, bottom) so corners come out the same.
+            auto mirror = [&](int dst, int p1, int p2) {
+                for (int k = 0; k < 3; ++k) c[dst][k] = 2.0f * c[p1][k] - c[p2][k];
+            };
+            if (boundary & 8)
+                for (int j = 0; j < 4; ++j) mirror(4 * j, 4 * j + 1, 4 * j + 2);
+            if (boundary & 4)
+                for (int i = 0; i < 4; ++i) mirror(12 + i, 8 + i, 4 + i);
+            if (boundary & 2)
+                for (int j = 0; j < 4; ++j) mirror(4 * j + 3, 4 * j + 2, 4 * j + 1);
+            if (boundary & 1)
+                for (int i = 0; i < 4; ++i) mirror(i, 4 + i, 8 + i);
+            index_[face] = int(cvs_.size() / 48);
+            for (int i = 0; i < 16; ++i)
+                for (int k = 0; k < 3; ++k) cvs_.push_back(c[i][k]);
+        }
+    }
+}
+
+namespace {
+// Uniform cubic B-spline basis and its derivative at t.
+inline void BSpline(float t, float w[4], float d[4]) {
+    const float s = 1.0f - t, t2 = t * t, t3 = t2 * t;
+    w[0] = s * s * s / 6.0f;
+    w[1] = (3.0f * t3 - 6.0f * t2 + 4.0f) / 6.0f;
+    w[2] = (-3.0f * t3 + 3.0f * t2 + 3.0f * t + 1.0f) / 6.0f;
+    w[3] = t3 / 6.0f;
+    d[0] = -0.5f * s * s;
+    d[1] = 1.5f * t2 - 2.0f * t;
+    d[2] = -1.5f * t2 + t + 0.5f;
+    d[3] = 0.5f * t2;
+}
+}  // namespace
+
+void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu[3], float dPdv[3]) const {
+    const float* cv = &cvs_[size_t(index_[ptexFace]) * 48];
+    float wu[4], du[4], wv[4], dv[4];
+    BSpline(u, wu, du);
+    BSpline(v, wv, dv);
+    for (int k = 0; k < 3; ++k) P[k] = dPdu[k] = dPdv[k] = 0.0f;
+    for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+            const float* c = cv + 3 * (4 * j + i);
+            const float w = wu[i] * wv[j], wdu = du[i] * wv[j], wdv = wu[i] * dv[j];
+            for (int k = 0; k < 3; ++k) {
+                P[k] += w * c[k];
+                dPdu[k] += wdu * c[k];
+                dPdv[k] += wdv * c[k];
+            }
+        }
+}
+
+float RegularPatches::Coverage() const {
+    if (index_.empty()) return 0.0f;
+    return float(std::count_if(index_.begin(), index_.end(), [](int i) { return i >= 0; })) / float(index_.size());
+}
+
 std::vector<uint8_t> ComputeFaceResolutions(const ControlCage& cage, const PtexTopology& topo,
                                             float texelSize, int maxLog2) {
     std::vector<uint8_t> res(topo.NumPtexFaces(), 0);
