@@ -48,6 +48,7 @@ struct RenderArgs {
     double sampleCacheMb = 64.0, texelCacheMb = 16.0;
     float lodBias = 0.0f;
     bool referenceCache = false;
+    bool overshading = false;
     int indirectSamples = 1;
     std::string statsFile;
 };
@@ -74,7 +75,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
 }
 
 void WriteStatsJson(const std::string& path, const RenderStats& s, const TextureSpaceCache* cache,
-                    const RenderOptions& opt) {
+                    const RenderOptions& opt, double overshading) {
     const CacheStats& c = s.cache;
     std::string json = "{\n";
     auto add = [&](const char* k, double v, bool last = false) {
@@ -99,6 +100,7 @@ void WriteStatsJson(const std::string& path, const RenderStats& s, const Texture
     add("deferrals", double(c.deferrals));
     add("waits", double(c.waits));
     add("reference_mode", opt.texture.cache.referenceMode ? 1.0 : 0.0);
+    if (overshading >= 0.0) add("overshading", overshading);
     add("sample_cache_bytes", cache ? double(cache->cache().SampleCacheBytes()) : 0.0);
     add("texel_cache_bytes", cache ? double(cache->cache().TexelCacheBytes()) : 0.0);
     add("bytes_used", cache ? double(cache->cache().BytesUsed()) : 0.0, true);
@@ -174,12 +176,24 @@ int RunRender(const RenderArgs& a) {
     RenderScene rs(scene, ro);
     const double buildSeconds = NowSeconds() - t0;
 
+    // Overshading: samples shaded beyond what an unbounded cache shades for the same frame.
+    double overshading = -1.0;
+    uint64_t referenceShaded = 0;
+    if (a.overshading) {
+        if (!opt.texture.enabled) throw InputError("--overshading", "needs --shading texture");
+        RenderOptions ref = opt;
+        ref.texture.cache.referenceMode = true;
+        ref.progress = false;
+        referenceShaded = Render(rs, ref).stats.cache.samplesShaded;
+    }
     std::unique_ptr<TextureSpaceCache> cache;
     if (opt.texture.enabled) cache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
     RenderResult r = Render(rs, opt, cache.get());
+    if (a.overshading && referenceShaded > 0)
+        overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
     WriteOutputs(out, r.beauty, r.aovs, a.exposure);
     if (!a.statsFile.empty()) {
-        WriteStatsJson(a.statsFile, r.stats, cache.get(), opt);
+        WriteStatsJson(a.statsFile, r.stats, cache.get(), opt, overshading);
         out.written.push_back(a.statsFile);
     }
 
@@ -195,6 +209,9 @@ int RunRender(const RenderArgs& a) {
                     (unsigned long long)c.lookups, 100.0 * c.TexelHitRate(),
                     (unsigned long long)c.samplesShaded, (unsigned long long)c.sampleEvictions,
                     (unsigned long long)c.deferrals, double(cache->cache().BytesUsed()) / (1 << 20));
+        if (overshading >= 0.0)
+            std::printf("overshading: %.2f%% more samples than an unbounded cache (%llu)\n",
+                        100.0 * overshading, (unsigned long long)referenceShaded);
     }
     std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
     for (const std::string& f : out.written) std::printf("wrote %s\n", f.c_str());
@@ -235,6 +252,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")->capture_default_str();
     cmd->add_option("--indirect-samples", args->indirectSamples, "Paths per cached indirect sample")->capture_default_str();
     cmd->add_flag("--reference-cache", args->referenceCache, "Unbounded caches (the overshading baseline)");
+    cmd->add_flag("--overshading", args->overshading,
+                  "Also render with unbounded caches and report the extra shading of the bounded ones");
     cmd->add_option("--stats", args->statsFile, "Write cache statistics as JSON to FILE");
     cmd->callback([args, &exitCode] { exitCode = RunRender(*args); });
 }
