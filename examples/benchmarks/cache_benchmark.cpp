@@ -7,6 +7,7 @@
 #include <cmath>
 #include <vector>
 
+#include "libtexcache/cages.h"  // the tests' small cages
 #include "texcache/shading_cache.h"
 
 namespace {
@@ -17,26 +18,12 @@ struct Sample {
     float v[4];
 };
 
-ControlCage Grid(int n) {
-    ControlCage c;
-    for (int j = 0; j <= n; ++j)
-        for (int i = 0; i <= n; ++i) c.positions.push_back({float(i), 0.0f, float(j)});
-    for (int j = 0; j < n; ++j)
-        for (int i = 0; i < n; ++i) {
-            const int a = j * (n + 1) + i;
-            c.faceVertexCounts.push_back(4);
-            c.faceVertexIndices.insert(c.faceVertexIndices.end(), {a, a + n + 1, a + n + 2, a + 1});
-        }
-    c.boundary = BoundaryInterpolation::EdgeAndCorner;
-    return c;
-}
-
 // One cache shared by all benchmark threads, warmed with a 64x64-texel region.
 struct Fixture {
     ShadingCache<Sample, float> cache{CacheSettings{}};
     std::vector<CacheHit> hits;
     Fixture() {
-        const int mesh = cache.AddMesh(Grid(4), 1.0f / 256.0f);  // 256 texels a face at mip 0
+        const int mesh = cache.AddMesh(test::GridCage(4), 1.0f / 256.0f);  // 256 texels a face at mip 0
         for (int i = 0; i < 4096; ++i) {
             const float u = (float(i % 64) + 0.5f) / 256.0f, v = (float(i / 64) + 0.5f) / 256.0f;
             hits.push_back({mesh, 5, u, v, 1.0f / 256.0f, 0.0f, 0.0f, 1.0f / 256.0f});

@@ -104,19 +104,26 @@ double RawLoop(RTCScene scene, const std::vector<RTCRay>& cam, const std::vector
     return NowSeconds() - t0;
 }
 
+/// AO render options shared by the benchmarks, checked like the render command's.
+RenderOptions AoBenchOptions(const Scene& scene, const std::string& resolution, int spp, int aoSamples,
+                             int repeats) {
+    RenderOptions o;
+    o.integrator = IntegratorKind::AO;
+    ParseResolution(resolution, &o.width, &o.height);
+    o.spp = CheckRange("--spp", spp, 1, 4096);
+    o.aoSamples = CheckRange("--ao-samples", aoSamples, 1, 1024);
+    o.aoDistance = scene.settings.aoDistance;
+    o.seed = scene.settings.seed;
+    o.frameTime = scene.settings.time;
+    o.progress = false;
+    CheckRange("--repeats", repeats, 1, 100);
+    return o;
+}
+
 int RunBench(const BenchArgs& a) {
     std::vector<std::string> warnings;
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
-    RenderOptions opt;
-    opt.integrator = IntegratorKind::AO;
-    ParseResolution(a.resolution, &opt.width, &opt.height);
-    opt.spp = CheckRange("--spp", a.spp, 1, 4096);
-    opt.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1024);
-    opt.aoDistance = scene.settings.aoDistance;
-    opt.seed = scene.settings.seed;
-    opt.frameTime = scene.settings.time;
-    opt.progress = false;
-    CheckRange("--repeats", a.repeats, 1, 100);
+    const RenderOptions opt = AoBenchOptions(scene, a.resolution, a.spp, a.aoSamples, a.repeats);
     std::unique_ptr<tbb::global_control> limit;
     if (a.threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -174,15 +181,8 @@ double TimedRender(const RenderScene& rs, const RenderOptions& o, TextureSpaceCa
 int RunCacheBench(const CacheBenchArgs& a) {
     std::vector<std::string> warnings;
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
-    RenderOptions o;
-    o.integrator = IntegratorKind::AO;
-    ParseResolution(a.resolution, &o.width, &o.height);
-    o.spp = CheckRange("--spp", a.spp, 1, 4096);
-    o.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1024);
-    o.aoDistance = scene.settings.aoDistance;
-    o.progress = false;
+    const RenderOptions o = AoBenchOptions(scene, a.resolution, a.spp, a.aoSamples, a.repeats);
     CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
-    CheckRange("--repeats", a.repeats, 1, 100);
     const OutputPaths plan = PlanOutputs(a.out + "_ref.exr", false);
     (void)plan;
     RenderSceneOptions ro;

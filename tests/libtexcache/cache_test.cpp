@@ -151,24 +151,11 @@ TEST(DirectMappedCache, ConcurrentStressNeverReturnsAnotherKeysData) {
 
 // --- topology and footprints on synthetic cages -------------------------------------------------
 
-void ExpectSymmetricAdjacency(const PtexTopology& topo) {
-    for (int f = 0; f < topo.NumPtexFaces(); ++f)
-        for (int e = 0; e < 4; ++e) {
-            const auto& link = topo.Edge(f, e);
-            for (int j = 0; j < link.count; ++j) {
-                const auto& back = topo.Edge(link.face[j], link.edge[j]);
-                bool found = false;
-                for (int k = 0; k < back.count; ++k) found |= back.face[k] == f && back.edge[k] == e;
-                EXPECT_TRUE(found) << "face " << f << " edge " << e << " -> " << link.face[j];
-            }
-        }
-}
-
 TEST(Topology, AdjacencyIsSymmetricIncludingHalfEdgesAndBoundaries) {
     for (const ControlCage& c : {test::GridCage(3), test::CubeCage(), test::FanCage(5),
                                  test::FanCage(12), test::PentagonCage()}) {
         const PtexTopology topo(c);
-        ExpectSymmetricAdjacency(topo);
+        test::ExpectSymmetricAdjacency(topo, c.sourcePath);
     }
     // Cube: closed, every Ptex edge has exactly one neighbour.
     const PtexTopology cube(test::CubeCage());
