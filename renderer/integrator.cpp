@@ -384,7 +384,7 @@ ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCo
 template <typename ShadeFn>
 glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&& shade) {
     const TextureSpaceOptions& t = c.tsc->options();
-    if (t.constantTerm >= 0.0f) return glm::vec3(t.constantTerm);
+    if (c.opt.texture.constantTerm >= 0.0f) return glm::vec3(c.opt.texture.constantTerm);
     const CacheHit h{c.tsc->MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
                      si.dudx, si.dvdx, si.dudy, si.dvdy};
     CacheStats& st = c.cacheStats->local();

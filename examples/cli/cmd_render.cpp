@@ -45,10 +45,11 @@ struct RenderArgs {
     std::string shading = "hit";
     std::string filter = "normal";
     int filterRadius = 6;
-    double sampleCacheMb = 64.0, texelCacheMb = 16.0;
+    double sampleCacheMb = 64.0, texelCacheMb = 64.0;
     float lodBias = 0.0f;
     bool referenceCache = false;
     bool overshading = false;
+    bool directMapped = false;
     int indirectSamples = 1;
     std::string statsFile;
 };
@@ -69,6 +70,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     t.cache.texelCacheBytes = bytes("--texel-cache-mb", a.texelCacheMb);
     t.cache.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
     t.cache.referenceMode = a.referenceCache;
+    t.cache.texelTwoChoices = !a.directMapped;
     t.indirectSamples = CheckRange("--indirect-samples", a.indirectSamples, 1, 1 << 16);
     t.cache.Validate();
     return t;
@@ -252,6 +254,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")->capture_default_str();
     cmd->add_option("--indirect-samples", args->indirectSamples, "Paths per cached indirect sample")->capture_default_str();
     cmd->add_flag("--reference-cache", args->referenceCache, "Unbounded caches (the overshading baseline)");
+    cmd->add_flag("--direct-mapped", args->directMapped,
+                  "Strictly direct-mapped texel cache (the paper's; default: two choices per texel)");
     cmd->add_flag("--overshading", args->overshading,
                   "Also render with unbounded caches and report the extra shading of the bounded ones");
     cmd->add_option("--stats", args->statsFile, "Write cache statistics as JSON to FILE");

@@ -35,7 +35,8 @@ TEST(TexelKey, PackUnpackRoundTripsAtTheLimits) {
 }
 
 TEST(Addressing, MipFromDifferentialsFollowsEquation1) {
-    // 256-texel face; a pixel covering 1/64 of the face in x and 1/16 in y: min(4, 16) -> log2 4 = 2.
+    // 256-texel face; a pixel covering 1/64 of the face in x and 1/16 in y: min(4, 16) -> log2 4
+    // = 2.
     EXPECT_EQ(ComputeMip(8, 1.0f / 64, 0.0f, 0.0f, 1.0f / 16, 0.0f), 2);
     // Grazing: huge footprint along y, small along x: eq. 1 takes the min (higher resolution).
     EXPECT_EQ(ComputeMip(8, 1.0f / 256, 0.0f, 0.0f, 50.0f, 0.0f), 0);
@@ -105,21 +106,52 @@ TEST(DirectMappedCache, CollidingKeyEvictsAndNeverAliases) {
     EXPECT_FALSE(cache.Find(4, 4, &out));
 }
 
+// With two choices, two keys whose first slots coincide both stay cached (when their second
+// slots differ), and lookups still never alias.
+TEST(DirectMappedCache, TwoChoicesKeepCollidingKeys) {
+    DirectMappedCache<Payload> direct(DirectMappedCache<Payload>::kSlotBytes * 64, false);
+    DirectMappedCache<Payload> two(DirectMappedCache<Payload>::kSlotBytes * 64, true);
+    Payload out;
+    SlotTicket t;
+    int keptDirect = 0, keptTwo = 0;
+    for (uint64_t k = 1; k <= 40; ++k) {
+        // Every key hashes to the same first slot (hash 7).
+        if (direct.Acquire(k, 7, &out, &t) == AcquireResult::Claimed)
+            direct.Publish(t, Payload::Of(k));
+        if (two.Acquire(k, 7, &out, &t) == AcquireResult::Claimed) two.Publish(t, Payload::Of(k));
+    }
+    for (uint64_t k = 1; k <= 40; ++k) {
+        if (direct.Find(k, 7, &out)) {
+            EXPECT_TRUE(out.Matches(k));
+            ++keptDirect;
+        }
+        if (two.Find(k, 7, &out)) {
+            EXPECT_TRUE(out.Matches(k));
+            ++keptTwo;
+        }
+    }
+    EXPECT_EQ(keptDirect, 1);  // direct mapped: the last key only
+    EXPECT_EQ(keptTwo, 2);     // the last two: one in the shared slot, one in its own second slot
+}
+
 TEST(DirectMappedCache, StaysWithinItsByteBudget) {
     for (size_t bytes : {size_t(100), size_t(1000), size_t(4096), size_t(1) << 20, size_t(16) << 20,
                          (size_t(16) << 20) + 17}) {
         DirectMappedCache<Payload> cache(bytes);
         EXPECT_LE(cache.BytesUsed(), bytes);
-        EXPECT_GT(cache.BytesUsed() + DirectMappedCache<Payload>::kSlotBytes, bytes);  // and uses it
+        EXPECT_GT(cache.BytesUsed() + DirectMappedCache<Payload>::kSlotBytes,
+                  bytes);  // and uses it
     }
     EXPECT_THROW(DirectMappedCache<Payload>(0), InputError);
-    EXPECT_THROW(DirectMappedCache<Payload>(DirectMappedCache<Payload>::kSlotBytes - 1), InputError);
+    EXPECT_THROW(DirectMappedCache<Payload>(DirectMappedCache<Payload>::kSlotBytes - 1),
+                 InputError);
 }
 
 // Threads hammer overlapping keys through a small cache (many evictions): every hit must carry
 // exactly the payload of the key asked for. Run under ThreadSanitizer by the `tsan` build.
-TEST(DirectMappedCache, ConcurrentStressNeverReturnsAnotherKeysData) {
-    DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes * 97);
+class ConcurrentStress : public ::testing::TestWithParam<bool> {};
+TEST_P(ConcurrentStress, NeverReturnsAnotherKeysData) {
+    DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes * 97, GetParam());
     std::atomic<uint64_t> bad{0}, hits{0}, claims{0};
     std::vector<std::thread> threads;
     for (int t = 0; t < 4; ++t)
@@ -139,7 +171,8 @@ TEST(DirectMappedCache, ConcurrentStressNeverReturnsAnotherKeysData) {
                         ++claims;
                         cache.Publish(ticket, Payload::Of(key));
                         break;
-                    default: break;
+                    default:
+                        break;
                 }
             }
         });
@@ -148,6 +181,10 @@ TEST(DirectMappedCache, ConcurrentStressNeverReturnsAnotherKeysData) {
     EXPECT_GT(hits.load(), 1000u);
     EXPECT_GT(claims.load(), 1000u);
 }
+INSTANTIATE_TEST_SUITE_P(DirectMappedCache, ConcurrentStress, ::testing::Values(false, true),
+                         [](const auto& info) {
+                             return info.param ? "TwoChoices" : "DirectMapped";
+                         });
 
 // --- topology and footprints on synthetic cages -------------------------------------------------
 
@@ -307,7 +344,8 @@ TEST(ShadingCache, ReferenceModeShadesEachSampleOnce) {
             for (int i = 0; i < 3000; ++i) {
                 const int face = (i + t) % cache.Mesh(mesh).NumFaces();
                 const float u = float((i * 7 + t) % 97) / 97.0f, v = float((i * 13) % 89) / 89.0f;
-                const float val = cache.Lookup({mesh, face, u, v, 0.01f, 0, 0, 0.01f}, 3, shade, filter, st);
+                const float val =
+                    cache.Lookup({mesh, face, u, v, 0.01f, 0, 0, 0.01f}, 3, shade, filter, st);
                 if (!std::isfinite(val)) ++nonFinite;
             }
         });
@@ -332,7 +370,8 @@ TEST(ShadingCache, ConcurrentOverlappingFootprintsMatchSingleThreaded) {
     };
     std::vector<CacheHit> hits;
     for (int i = 0; i < 4000; ++i)
-        hits.push_back({0, i % 16, float((i * 37) % 101) / 101.0f, float((i * 53) % 97) / 97.0f, 0.004f, 0, 0, 0.004f});
+        hits.push_back({0, i % 16, float((i * 37) % 101) / 101.0f, float((i * 53) % 97) / 97.0f,
+                        0.004f, 0, 0, 0.004f});
     std::vector<float> expected(hits.size());
     {
         CacheSettings s;
@@ -340,31 +379,36 @@ TEST(ShadingCache, ConcurrentOverlappingFootprintsMatchSingleThreaded) {
         ShadingCache<AoSample, float> ref(s);
         ref.AddMesh(test::GridCage(4), 0.02f);
         CacheStats st;
-        for (size_t i = 0; i < hits.size(); ++i) expected[i] = ref.Lookup(hits[i], 3, shade, mean, st);
+        for (size_t i = 0; i < hits.size(); ++i)
+            expected[i] = ref.Lookup(hits[i], 3, shade, mean, st);
     }
-    CacheSettings s;
-    s.sampleCacheBytes = 64 * 1024;
-    s.texelCacheBytes = 8 * 1024;
-    ShadingCache<AoSample, float> cache(s);
-    cache.AddMesh(test::GridCage(4), 0.02f);
-    std::atomic<int> mismatches{0};
-    std::vector<std::thread> threads;
-    std::vector<CacheStats> stats(4);
-    for (int t = 0; t < 4; ++t)
-        threads.emplace_back([&, t] {
-            for (int pass = 0; pass < 3; ++pass)
-                for (size_t k = 0; k < hits.size(); ++k) {
-                    const size_t i = (k * (2 * t + 1) + size_t(t) * 997) % hits.size();
-                    if (cache.Lookup(hits[i], 3, shade, mean, stats[t]) != expected[i]) ++mismatches;
-                }
-        });
-    for (auto& th : threads) th.join();
-    EXPECT_EQ(mismatches.load(), 0);
-    CacheStats total;
-    for (const auto& st : stats) total.Merge(st);
-    EXPECT_GT(total.sampleEvictions, 0u);
-    EXPECT_GT(total.texelHits, 0u);
-    EXPECT_LE(cache.BytesUsed(), s.sampleCacheBytes + s.texelCacheBytes);
+    for (bool twoChoices : {false, true}) {
+        CacheSettings s;
+        s.sampleCacheBytes = 64 * 1024;
+        s.texelCacheBytes = 8 * 1024;
+        s.texelTwoChoices = twoChoices;
+        ShadingCache<AoSample, float> cache(s);
+        cache.AddMesh(test::GridCage(4), 0.02f);
+        std::atomic<int> mismatches{0};
+        std::vector<std::thread> threads;
+        std::vector<CacheStats> stats(4);
+        for (int t = 0; t < 4; ++t)
+            threads.emplace_back([&, t] {
+                for (int pass = 0; pass < 3; ++pass)
+                    for (size_t k = 0; k < hits.size(); ++k) {
+                        const size_t i = (k * (2 * t + 1) + size_t(t) * 997) % hits.size();
+                        if (cache.Lookup(hits[i], 3, shade, mean, stats[t]) != expected[i])
+                            ++mismatches;
+                    }
+            });
+        for (auto& th : threads) th.join();
+        EXPECT_EQ(mismatches.load(), 0);
+        CacheStats total;
+        for (const auto& st : stats) total.Merge(st);
+        EXPECT_GT(total.sampleEvictions, 0u);
+        EXPECT_GT(total.texelHits, 0u);
+        EXPECT_LE(cache.BytesUsed(), s.sampleCacheBytes + s.texelCacheBytes);
+    }
 }
 
 TEST(ShadingCache, InvalidationEvictsOneMeshOrAll) {
@@ -377,7 +421,8 @@ TEST(ShadingCache, InvalidationEvictsOneMeshOrAll) {
     };
     auto centre = [](const FilterInput<AoSample>& in) { return in.samples[in.centre].value; };
     CacheStats st;
-    const CacheHit ha{a, 0, 0.5f, 0.5f, 0.01f, 0, 0, 0.01f}, hb{b, 0, 0.5f, 0.5f, 0.01f, 0, 0, 0.01f};
+    const CacheHit ha{a, 0, 0.5f, 0.5f, 0.01f, 0, 0, 0.01f},
+        hb{b, 0, 0.5f, 0.5f, 0.01f, 0, 0, 0.01f};
     cache.Lookup(ha, 0, shade, centre, st);
     cache.Lookup(hb, 0, shade, centre, st);
     EXPECT_EQ(shaded, 2);
@@ -397,7 +442,9 @@ TEST(ShadingCache, TinyBoundedCacheStaysCorrect) {
     s.texelCacheBytes = 1024;
     ShadingCache<AoSample, float> cache(s);
     const int mesh = cache.AddMesh(test::GridCage(4), 0.1f);
-    auto shade = [](const SampleRequest& r) { return AoSample{float(r.key.face) + r.u, {0, 1, 0}}; };
+    auto shade = [](const SampleRequest& r) {
+        return AoSample{float(r.key.face) + r.u, {0, 1, 0}};
+    };
     auto centreOnly = [](const FilterInput<AoSample>& in) { return in.samples[in.centre].value; };
     CacheStats st;
     for (int pass = 0; pass < 3; ++pass)

@@ -23,6 +23,12 @@
 // So the hit path is two atomic loads of seq, one of key and the payload words: no lock, no
 // allocation, no virtual call. Synchronisation happens only when a thread claims a slot.
 //
+// Two choices (optional): a key may also live in a second, hashed slot. Acquire reads both slots
+// (each with the seqlock check above) and, on a miss, claims an idle one (an empty one first).
+// Two threads missing the same key may claim one slot each: both then hold the same key's
+// payload, which is harmless. A colliding key still evicts, never aliases. Direct mapping (the
+// paper's) is the one-choice case.
+//
 // Lifetime: the cache lives as long as its owner (e.g. across frames); Invalidate* evict entries
 // explicitly when the scene changes. Invalidation must not run while the same keys are being
 // shaded (call it between frames); it is still memory-safe if it does.
@@ -73,9 +79,12 @@ public:
     /// Bytes one entry costs (the unit of the capacity).
     static constexpr size_t kSlotBytes = sizeof(Slot);
 
-    /// Allocates floor(capacityBytes / kSlotBytes) slots; at least one must fit.
-    explicit DirectMappedCache(size_t capacityBytes)
-        : numSlots_(std::min<size_t>(capacityBytes / kSlotBytes, size_t(UINT32_MAX))),
+    /// Allocates floor(capacityBytes / kSlotBytes) slots; at least one must fit. With
+    /// `twoChoices`, a key may live in one of two slots (its scanline slot, or a second hashed
+    /// one): two reads per miss instead of one, far fewer conflict misses when the cache is full.
+    explicit DirectMappedCache(size_t capacityBytes, bool twoChoices = false)
+        : twoChoices_(twoChoices),
+          numSlots_(std::min<size_t>(capacityBytes / kSlotBytes, size_t(UINT32_MAX))),
           fastmod_(~uint64_t(0) / std::max<uint64_t>(numSlots_, 1) + 1),
           slots_(std::make_unique<Slot[]>(std::max<size_t>(numSlots_, 1))) {
         if (numSlots_ == 0)
@@ -98,28 +107,44 @@ public:
         return size_t((static_cast<Uint128>(low) * numSlots_) >> 64);
     }
 
-    /// Looks up `key` in slot SlotOf(hash): see the design note for the four outcomes.
+    /// Looks up `key` in slot SlotOf(hash) (and, with two choices, in its second slot): see the
+    /// design note for the four outcomes.
     AcquireResult Acquire(uint64_t key, uint64_t hash, T* out, SlotTicket* ticket) {
-        Slot& s = slots_[SlotOf(hash)];
-        for (;;) {
-            const uint64_t seq = s.seq.load(std::memory_order_acquire);
-            const uint64_t k = s.key.load(std::memory_order_relaxed);
-            if (seq & 1) return k == key ? AcquireResult::Pending : AcquireResult::Conflict;
-            if (k == key) {
-                uint64_t buf[kWords];
-                for (size_t i = 0; i < kWords; ++i) buf[i] = s.words[i].load(std::memory_order_relaxed);
-                std::atomic_thread_fence(std::memory_order_acquire);
-                if (s.seq.load(std::memory_order_relaxed) != seq) continue;  // a writer intervened
-                std::memcpy(static_cast<void*>(out), buf, sizeof(T));
+        Slot* s1 = &slots_[SlotOf(hash)];
+        {
+            // Hit in the first slot: touch no other cache line.
+            const uint64_t q1 = s1->seq.load(std::memory_order_acquire);
+            if (!(q1 & 1) && s1->key.load(std::memory_order_relaxed) == key && TryRead(*s1, q1, out) == kHit)
                 return AcquireResult::Hit;
+        }
+        Slot* s2 = twoChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1;
+        for (;;) {
+            const uint64_t q1 = s1->seq.load(std::memory_order_acquire);
+            const uint64_t k1 = s1->key.load(std::memory_order_relaxed);
+            const uint64_t q2 = s2->seq.load(std::memory_order_acquire);
+            const uint64_t k2 = s2->key.load(std::memory_order_relaxed);
+            int r = k1 == key ? TryRead(*s1, q1, out) : kAbsent;
+            if (r == kAbsent && s2 != s1 && k2 == key) r = TryRead(*s2, q2, out);
+            if (r == kRetry) continue;
+            if (r == kHit) return AcquireResult::Hit;
+            if (r == kBusy) return AcquireResult::Pending;  // our key, being shaded
+            // Absent: claim an idle slot, preferring an empty one, else the key's own choice.
+            const bool idle1 = !(q1 & 1), idle2 = !(q2 & 1);
+            if (!idle1 && !idle2) return AcquireResult::Conflict;
+            Slot* victim;
+            uint64_t seq, old;
+            if (idle1 && (!idle2 || k1 == TexelKey::kEmpty || (k2 != TexelKey::kEmpty && !(key & 1)))) {
+                victim = s1, seq = q1, old = k1;
+            } else {
+                victim = s2, seq = q2, old = k2;
             }
             uint64_t expected = seq;
-            if (s.seq.compare_exchange_weak(expected, seq + 1, std::memory_order_acq_rel,
-                                            std::memory_order_relaxed)) {
-                s.key.store(key, std::memory_order_relaxed);
-                ticket->slot = size_t(&s - slots_.get());
+            if (victim->seq.compare_exchange_weak(expected, seq + 1, std::memory_order_acq_rel,
+                                                  std::memory_order_relaxed)) {
+                victim->key.store(key, std::memory_order_relaxed);
+                ticket->slot = size_t(victim - slots_.get());
                 ticket->seq = seq + 1;
-                ticket->evicted = k != TexelKey::kEmpty;
+                ticket->evicted = old != TexelKey::kEmpty;
                 return AcquireResult::Claimed;
             }
         }
@@ -127,16 +152,15 @@ public:
 
     /// Read-only lookup: true and the payload on a hit; never claims.
     bool Find(uint64_t key, uint64_t hash, T* out) const {
-        const Slot& s = slots_[SlotOf(hash)];
+        const Slot* s1 = &slots_[SlotOf(hash)];
+        const Slot* s2 = twoChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1;
         for (int attempt = 0; attempt < 4; ++attempt) {
-            const uint64_t seq = s.seq.load(std::memory_order_acquire);
-            if ((seq & 1) || s.key.load(std::memory_order_relaxed) != key) return false;
-            uint64_t buf[kWords];
-            for (size_t i = 0; i < kWords; ++i) buf[i] = s.words[i].load(std::memory_order_relaxed);
-            std::atomic_thread_fence(std::memory_order_acquire);
-            if (s.seq.load(std::memory_order_relaxed) != seq) continue;
-            std::memcpy(static_cast<void*>(out), buf, sizeof(T));
-            return true;
+            for (const Slot* s : {s1, s2}) {
+                const uint64_t seq = s->seq.load(std::memory_order_acquire);
+                if (s->key.load(std::memory_order_relaxed) != key) continue;
+                const int r = TryRead(*s, seq, out);
+                if (r == kHit) return true;
+            }
         }
         return false;
     }
@@ -179,6 +203,23 @@ public:
     }
 
 private:
+    enum { kHit, kBusy, kRetry, kAbsent };
+    // Seqlock read of a slot whose key matched at sequence `seq`.
+    int TryRead(const Slot& s, uint64_t seq, T* out) const {
+        if (seq & 1) return kBusy;
+        uint64_t buf[kWords];
+        for (size_t i = 0; i < kWords; ++i) buf[i] = s.words[i].load(std::memory_order_relaxed);
+        std::atomic_thread_fence(std::memory_order_acquire);
+        if (s.seq.load(std::memory_order_relaxed) != seq) return kRetry;  // a writer intervened
+        std::memcpy(static_cast<void*>(out), buf, sizeof(T));
+        return kHit;
+    }
+    static uint64_t SecondHash(uint64_t h) {
+        h ^= h >> 29, h *= 0xbf58476d1ce4e5b9ull, h ^= h >> 32;
+        return h;
+    }
+
+    bool twoChoices_ = false;
     size_t numSlots_;
     uint64_t fastmod_;
     std::unique_ptr<Slot[]> slots_;
