@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <unordered_map>
 
 #include <embree3/rtcore.h>
 
@@ -65,10 +64,15 @@ struct RenderScene::Impl {
     struct Instance {
         int mesh = -1;
         std::vector<glm::mat4> steps;  // 1 (static) or kMotionSteps over the shutter
+        glm::mat3 normalMatrix{1.0f};  // of steps[0]
     };
     std::vector<Instance> objects;              // by Scene::objects index
-    std::unordered_map<unsigned, int> geomToObject;  // instance geomID -> object
-    std::unordered_map<unsigned, int> geomToLight;   // quad light geomID -> light
+    // Top-level geomID -> object or quad light (-1: not that kind); geomIDs are small and dense.
+    std::vector<int> geomToObject, geomToLight;
+    static void Map(std::vector<int>& v, unsigned id, int value) {
+        if (v.size() <= id) v.resize(id + 1, -1);
+        v[id] = value;
+    }
     std::vector<std::unique_ptr<TextureImage>> textures;
 
     ~Impl() {
@@ -219,7 +223,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
                                     &inst.steps.back()[0][0]);
         }
         rtcCommitGeometry(g);
-        I.geomToObject[rtcAttachGeometry(I.top, g)] = int(o);
+        Impl::Map(I.geomToObject, rtcAttachGeometry(I.top, g), int(o));
+        // Static instances keep their normal matrix (a 3x3 inverse per hit otherwise).
+        inst.normalMatrix = glm::transpose(glm::inverse(glm::mat3(inst.steps[0])));
         rtcReleaseGeometry(g);
     }
 
@@ -241,7 +247,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
                 g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), 1));
             q[0] = 0, q[1] = 1, q[2] = 2, q[3] = 3;
             rtcCommitGeometry(g);
-            I.geomToLight[rtcAttachGeometry(I.top, g)] = int(l);
+            Impl::Map(I.geomToLight, rtcAttachGeometry(I.top, g), int(l));
             rtcReleaseGeometry(g);
         }
         if (options.needEnvironment && !scene.environments.empty()) {
@@ -311,14 +317,17 @@ bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
     hit->U = rh.hit.u;
     hit->V = rh.hit.v;
     if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
-        hit->object = impl_->geomToObject.find(rh.hit.instID[0])->second;
+        hit->object = impl_->geomToObject[rh.hit.instID[0]];
         hit->light = -1;
         // Embree returns instance hits' Ng in object space.
-        const glm::mat3 M(impl_->Transform(hit->object, ray.time));
-        hit->Ng = glm::transpose(glm::inverse(M)) * glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+        const Impl::Instance& inst = impl_->objects[hit->object];
+        const glm::mat3 N = inst.steps.size() == 1
+                                ? inst.normalMatrix
+                                : glm::transpose(glm::inverse(glm::mat3(impl_->Transform(hit->object, ray.time))));
+        hit->Ng = N * glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
     } else {
         hit->object = -1;
-        hit->light = impl_->geomToLight.find(rh.hit.geomID)->second;
+        hit->light = impl_->geomToLight[rh.hit.geomID];
         hit->Ng = glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
     }
     return true;
