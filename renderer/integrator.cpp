@@ -470,6 +470,49 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
     }
 }
 
+/// Per-hit AO for a tile in two phases: all camera rays first, then the AO rays of every hit.
+/// Same samples, same random numbers, same result as Sample(); tracing like rays together keeps
+/// Embree's working set (and the traversal's caches) warm, as a wavefront renderer would.
+void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
+                    std::vector<double>& sum, RayCounts& rays) {
+    struct Pending {
+        Ray ray;
+        Hit hit;
+        Rng rng;
+        int pixel;
+        bool found;
+    };
+    thread_local std::vector<Pending> queue;
+    queue.clear();
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x)
+            for (int s = s0; s < s1; ++s) {
+                Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
+                const glm::vec2 jitter = rng.Next2D();
+                const glm::vec2 lens = rng.Next2D();
+                const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
+                Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+                if (c.cameraMoves) {
+                    const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+                    ray.org = glm::mix(ray.org, r1.org, time);
+                    ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
+                }
+                ray.time = time;
+                ++rays.camera;
+                Pending p{ray, Hit{}, rng, y * c.opt.width + x, false};
+                p.found = c.rs.Intersect(ray, &p.hit);
+                queue.push_back(p);
+            }
+    for (Pending& p : queue) {
+        glm::vec3 L(0.0f);
+        if (p.found) {
+            L = p.hit.object < 0 ? glm::vec3(1.0f) : LiAO(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, rays);
+        }
+        double* px = &sum[3 * size_t(p.pixel)];
+        px[0] += L.x, px[1] += L.y, px[2] += L.z;
+    }
+}
+
 /// Prints a progress bar on stderr once a render has run for a second.
 class Progress {
 public:
@@ -549,6 +592,8 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
 
     std::vector<double> sum(numPixels * 3, 0.0);
     std::vector<PixelAovs> aovs(opt.aovs.Any() ? numPixels : 0);
+    // Per-hit AO traces a tile's camera rays first, then its AO rays (see AoTileTwoPhase).
+    const bool twoPhaseAo = opt.integrator == IntegratorKind::AO && !ctx.tsc && aovs.empty();
     tbb::enumerable_thread_specific<RayCounts> counts;
 
     // Passes of whole sample indices: a pixel's result depends only on its sample indices, so
@@ -572,6 +617,12 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
                 _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
                 _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
                 RayCounts& rc = counts.local();
+                if (twoPhaseAo) {
+                    AoTileTwoPhase(ctx, r.rows().begin(), r.rows().end(), r.cols().begin(), r.cols().end(),
+                                   s0, s1, sum, rc);
+                    pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+                    return;
+                }
                 for (int y = r.rows().begin(); y < r.rows().end(); ++y)
                     for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
                         const size_t p = size_t(y) * W + x;
