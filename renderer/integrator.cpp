@@ -381,17 +381,25 @@ ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCo
 }
 
 /// The cached term at a camera hit: texel-cache lookup with the material's filter.
+/// The texel a shading point maps to (eq. 1 and 2) in its object's (front or back) grids.
+SampleRequest TexelOf(const Context& c, const SurfaceInteraction& si) {
+    return c.tsc->cache().TexelAt({c.tsc->MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u,
+                                   si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy});
+}
+
 template <typename ShadeFn>
-glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&& shade) {
+glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&& shade,
+                       CacheStats* stats = nullptr, const SampleRequest* texel = nullptr) {
     const TextureSpaceOptions& t = c.tsc->options();
     if (c.opt.texture.constantTerm >= 0.0f) return glm::vec3(c.opt.texture.constantTerm);
-    const CacheHit h{c.tsc->MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
-                     si.dudx, si.dvdx, si.dudy, si.dvdy};
-    CacheStats& st = c.cacheStats->local();
+    const SampleRequest h = texel ? *texel : TexelOf(c, si);
+    // enumerable_thread_specific::local() hashes the thread id: callers with many lookups pass
+    // their thread's stats in.
+    CacheStats& st = stats ? *stats : c.cacheStats->local();
     // One branch per lookup picks the material's filter; the filters themselves are inlined.
     if (c.tsc->FilterOf(si.object) == TextureFilterKind::None)
-        return c.tsc->cache().Lookup(h, 0, shade, CentreFilter{}, st);
-    return c.tsc->cache().Lookup(h, c.tsc->RadiusOf(si.object), shade,
+        return c.tsc->cache().LookupTexel(h, 0, shade, CentreFilter{}, st);
+    return c.tsc->cache().LookupTexel(h, c.tsc->RadiusOf(si.object), shade,
                                  NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
 }
 
@@ -481,6 +489,7 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         Rng rng;
         int pixel;
         bool found;
+        RayDifferentials diff;
     };
     thread_local std::vector<Pending> queue;
     queue.clear();
@@ -491,7 +500,9 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
                 const glm::vec2 jitter = rng.Next2D();
                 const glm::vec2 lens = rng.Next2D();
                 const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
-                Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+                Pending p{Ray{}, Hit{}, rng, y * c.opt.width + x, false, {}};
+                Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens,
+                                            c.tsc ? &p.diff : nullptr);
                 if (c.cameraMoves) {
                     const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
                     ray.org = glm::mix(ray.org, r1.org, time);
@@ -499,17 +510,50 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
                 }
                 ray.time = time;
                 ++rays.camera;
-                Pending p{ray, Hit{}, rng, y * c.opt.width + x, false};
+                p.ray = ray;
                 p.found = c.rs.Intersect(ray, &p.hit);
                 queue.push_back(p);
             }
-    for (Pending& p : queue) {
-        glm::vec3 L(0.0f);
-        if (p.found) {
-            L = p.hit.object < 0 ? glm::vec3(1.0f) : LiAO(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, rays);
-        }
+    auto add = [&](const Pending& p, glm::vec3 L) {
         double* px = &sum[3 * size_t(p.pixel)];
         px[0] += L.x, px[1] += L.y, px[2] += L.z;
+    };
+    if (!c.tsc) {
+        for (Pending& p : queue) {
+            glm::vec3 L(0.0f);
+            if (p.found)
+                L = p.hit.object < 0 ? glm::vec3(1.0f) : LiAO(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, rays);
+            add(p, L);
+        }
+        return;
+    }
+    // Texture space: all shading points first, prefetching their texel slots, then the lookups,
+    // so the latency of a large texel table overlaps instead of stalling every hit.
+    thread_local std::vector<SurfaceInteraction> points;
+    thread_local std::vector<SampleRequest> texels;
+    points.resize(queue.size());
+    texels.resize(queue.size());
+    const bool lookups = c.opt.texture.constantTerm < 0.0f;
+    for (size_t i = 0; i < queue.size(); ++i) {
+        const Pending& p = queue[i];
+        if (!p.found || p.hit.object < 0) continue;
+        points[i] = c.rs.Interact(p.ray, p.hit, &p.diff);
+        if (lookups) {
+            texels[i] = TexelOf(c, points[i]);
+            c.tsc->cache().Prefetch(texels[i]);
+        }
+    }
+    CacheStats& stats = c.cacheStats->local();
+    for (size_t i = 0; i < queue.size(); ++i) {
+        const Pending& p = queue[i];
+        glm::vec3 L(0.0f);
+        if (p.found)
+            L = p.hit.object < 0 ? glm::vec3(1.0f)
+                                 : CachedLookup(
+                                       c, points[i],
+                                       [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
+                                       &stats, lookups ? &texels[i] : nullptr);
+        add(p, L);
     }
 }
 
@@ -593,7 +637,7 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     std::vector<double> sum(numPixels * 3, 0.0);
     std::vector<PixelAovs> aovs(opt.aovs.Any() ? numPixels : 0);
     // Per-hit AO traces a tile's camera rays first, then its AO rays (see AoTileTwoPhase).
-    const bool twoPhaseAo = opt.integrator == IntegratorKind::AO && !ctx.tsc && aovs.empty();
+    bool twoPhaseAo = opt.integrator == IntegratorKind::AO && aovs.empty();
     tbb::enumerable_thread_specific<RayCounts> counts;
 
     // Passes of whole sample indices: a pixel's result depends only on its sample indices, so

@@ -200,11 +200,23 @@ public:
         return r;
     }
 
+    /// Starts fetching a texel's slot into the CPU cache: call it for a batch of texels before
+    /// their lookups to overlap the memory latency of a large texel table.
+    void Prefetch(const SampleRequest& texel) const {
+        if (texels_) texels_->Prefetch(Hash(texel.key));
+    }
+
     /// The filtered value at a hit: texel cache hit, or gather + shade missing samples + filter.
     template <typename ShadeFn, typename FilterFn>
     Texel Lookup(const CacheHit& h, int radius, ShadeFn&& shade, FilterFn&& filter, CacheStats& st) {
+        return LookupTexel(TexelAt(h), radius, shade, filter, st);
+    }
+
+    /// Lookup() for a texel already addressed with TexelAt().
+    template <typename ShadeFn, typename FilterFn>
+    Texel LookupTexel(const SampleRequest& centre, int radius, ShadeFn&& shade, FilterFn&& filter,
+                      CacheStats& st) {
         ++st.lookups;
-        const SampleRequest centre = TexelAt(h);
         const uint64_t key = centre.key.Pack();
         const uint64_t hash = Hash(centre.key);
         Texel texel;
