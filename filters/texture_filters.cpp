@@ -11,6 +11,8 @@ TextureFilterKind ParseTextureFilter(const std::string& name, const std::string&
     throw InputError(where, "unknown filter '" + name + "' (valid: " + TextureFilterNames() + ")");
 }
 
-const char* TextureFilterNames() { return "none, normal"; }
+const char* TextureFilterNames() {
+    return "none, normal";
+}
 
 }  // namespace texcache

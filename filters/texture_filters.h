@@ -43,7 +43,8 @@ struct NormalWeightedFilter {
             if (!std::isfinite(s.value.x + s.value.y + s.value.z)) continue;
             float w = 1.0f;
             if (sigma > 0.0f) {
-                const float d2 = float(in.taps[i].dx * in.taps[i].dx + in.taps[i].dy * in.taps[i].dy);
+                const float d2 =
+                    float(in.taps[i].dx * in.taps[i].dx + in.taps[i].dy * in.taps[i].dy);
                 w = std::exp(-d2 / (2.0f * sigma * sigma));
             }
             sum += w * s.value;

@@ -10,11 +10,14 @@
 
 namespace texcache {
 
-inline float Luminance(glm::vec3 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+inline float Luminance(glm::vec3 c) {
+    return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+}
 
 class Bsdf {
 public:
-    /// Diffuse when `ggx` is false; otherwise specular GGX (alpha = roughness^2) + (1 - F0) diffuse.
+    /// Diffuse when `ggx` is false; otherwise specular GGX (alpha = roughness^2) + (1 - F0)
+    /// diffuse.
     Bsdf(glm::vec3 n, glm::vec3 ng, glm::vec3 albedo, bool ggx, float roughness, glm::vec3 f0)
         : frame_(Frame::FromZ(n)), ng_(ng), albedo_(albedo), ggx_(ggx), f0_(f0) {
         alpha_ = std::max(roughness * roughness, 1e-3f);

@@ -6,7 +6,8 @@
 
 namespace texcache {
 
-Distribution1D::Distribution1D(const std::vector<float>& weights) : func_(weights), cdf_(weights.size() + 1) {
+Distribution1D::Distribution1D(const std::vector<float>& weights)
+    : func_(weights), cdf_(weights.size() + 1) {
     const size_t n = func_.size();
     for (float& f : func_)
         if (!(f >= 0.0f) || !std::isfinite(f)) f = 0.0f, ++clampedCount;
@@ -40,11 +41,13 @@ float Distribution1D::Pdf(float x) const {
     return (cdf_[o + 1] - cdf_[o]) * float(n);
 }
 
-Distribution2D::Distribution2D(const std::vector<float>& weights, int nu, int nv) : nu_(nu), nv_(nv) {
+Distribution2D::Distribution2D(const std::vector<float>& weights, int nu, int nv)
+    : nu_(nu), nv_(nv) {
     std::vector<float> rowSums(nv);
     conditional_.reserve(nv);
     for (int v = 0; v < nv; ++v) {
-        std::vector<float> row(weights.begin() + size_t(v) * nu, weights.begin() + size_t(v + 1) * nu);
+        std::vector<float> row(weights.begin() + size_t(v) * nu,
+                               weights.begin() + size_t(v + 1) * nu);
         conditional_.emplace_back(row);
         double s = 0.0;
         for (float w : row) s += (w >= 0.0f && std::isfinite(w)) ? w : 0.0f;

@@ -9,11 +9,13 @@
 
 namespace texcache {
 
-EnvironmentMap EnvironmentMap::Load(const std::string& path, float intensity, float rotationDegrees) {
+EnvironmentMap EnvironmentMap::Load(const std::string& path, float intensity,
+                                    float rotationDegrees) {
     const Image img = ReadImageRGB(path);
     if (img.width != 2 * img.height)
-        throw InputError(path, "environment map is not lat-long (expected width = 2 x height, got " +
-                                   std::to_string(img.width) + "x" + std::to_string(img.height) + ")");
+        throw InputError(path,
+                         "environment map is not lat-long (expected width = 2 x height, got " +
+                             std::to_string(img.width) + "x" + std::to_string(img.height) + ")");
     if (!(intensity >= 0.0f) || !std::isfinite(intensity))
         throw InputError(path, "environment intensity must be a finite number >= 0");
     EnvironmentMap e;
@@ -29,9 +31,11 @@ EnvironmentMap EnvironmentMap::Load(const std::string& path, float intensity, fl
             const float* p = img.At(x, y);
             // Lossy EXRs carry slightly negative texels (and NaN would poison sums): clamp.
             glm::vec3 c(p[0], p[1], p[2]);
-            for (int k = 0; k < 3; ++k) c[k] = std::isfinite(c[k]) ? std::max(c[k], 0.0f) * intensity : 0.0f;
+            for (int k = 0; k < 3; ++k)
+                c[k] = std::isfinite(c[k]) ? std::max(c[k], 0.0f) * intensity : 0.0f;
             e.texels_[size_t(y) * img.width + x] = c;
-            weights[size_t(y) * img.width + x] = (0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z) * sinTheta;
+            weights[size_t(y) * img.width + x] =
+                (0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z) * sinTheta;
         }
     }
     // Sampling picks a texel and a uniform point in it, while Eval interpolates bilinearly: the
@@ -82,7 +86,8 @@ glm::vec3 EnvironmentMap::Eval(glm::vec3 dir) const {
     auto at = [&](int xi, int yi) {
         return Texel((xi % width_ + width_) % width_, std::clamp(yi, 0, height_ - 1));
     };
-    return glm::mix(glm::mix(at(x0, y0), at(x0 + 1, y0), fx), glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx), fy);
+    return glm::mix(glm::mix(at(x0, y0), at(x0 + 1, y0), fx),
+                    glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx), fy);
 }
 
 glm::vec3 EnvironmentMap::Sample(glm::vec2 u, glm::vec3* dir, float* pdf) const {

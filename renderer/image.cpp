@@ -25,10 +25,12 @@ std::string Lower(std::string s) {
 }
 
 // Writes `pixels` with `spec` to a temporary file next to `path`, then renames it over `path`.
-void WriteAtomic(const std::string& path, const ImageSpec& spec, const void* pixels, TypeDesc type) {
+void WriteAtomic(const std::string& path, const ImageSpec& spec, const void* pixels,
+                 TypeDesc type) {
     const fs::path dir = fs::path(path).parent_path();
     if (!dir.empty() && !fs::is_directory(dir))
-        throw InputError(path, "cannot write image: directory '" + dir.string() + "' does not exist");
+        throw InputError(path,
+                         "cannot write image: directory '" + dir.string() + "' does not exist");
     const std::string ext = fs::path(path).extension().string();
     // Keep the real extension last so OIIO picks the right writer for the temporary file.
     const std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + ext;
@@ -71,12 +73,14 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
         std::vector<uint8_t> px(beauty.NumPixels() * c);
         const float scale = std::exp2(exposure);
         for (size_t p = 0; p < beauty.NumPixels(); ++p)
-            for (int k = 0; k < c; ++k) px[p * c + k] = LinearToSrgb8(beauty.data[p * beauty.channels + k] * scale);
+            for (int k = 0; k < c; ++k)
+                px[p * c + k] = LinearToSrgb8(beauty.data[p * beauty.channels + k] * scale);
         ImageSpec spec(beauty.width, beauty.height, c, TypeDesc::UINT8);
         WriteAtomic(path, spec, px.data(), TypeDesc::UINT8);
         return;
     }
-    if (ext != ".exr") throw InputError(path, "unsupported image type '" + ext + "' (supported: .exr, .png)");
+    if (ext != ".exr")
+        throw InputError(path, "unsupported image type '" + ext + "' (supported: .exr, .png)");
     int total = beauty.channels;
     for (const ImageLayer& l : layers) {
         if (l.image.width != beauty.width || l.image.height != beauty.height ||
@@ -98,7 +102,8 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
         float* o = &px[p * total];
         for (int k = 0; k < beauty.channels; ++k) *o++ = beauty.data[p * beauty.channels + k];
         for (const ImageLayer& l : layers)
-            for (int k = 0; k < l.image.channels; ++k) *o++ = l.image.data[p * l.image.channels + k];
+            for (int k = 0; k < l.image.channels; ++k)
+                *o++ = l.image.data[p * l.image.channels + k];
     }
     WriteAtomic(path, spec, px.data(), TypeDesc::FLOAT);
 }
@@ -122,7 +127,8 @@ Image ReadImageRGB(const std::string& path) {
     if (src.channels == 3) return src;
     Image rgb(src.width, src.height, 3);
     for (size_t p = 0; p < src.NumPixels(); ++p)
-        for (int k = 0; k < 3; ++k) rgb.data[p * 3 + k] = src.data[p * src.channels + (src.channels < 3 ? 0 : k)];
+        for (int k = 0; k < 3; ++k)
+            rgb.data[p * 3 + k] = src.data[p * src.channels + (src.channels < 3 ? 0 : k)];
     return rgb;
 }
 

@@ -31,8 +31,8 @@ struct ImageLayer {
 /// (exposure in stops, clamp, exact sRGB OETF, 8-bit; layers ignored), chosen by extension.
 /// Writes "<path>.tmp-<pid>" and renames it, so a failed write never clobbers a good file.
 /// Throws InputError naming the path on failure.
-void WriteImage(const std::string& path, const Image& beauty, const std::vector<ImageLayer>& layers = {},
-                float exposure = 0.0f);
+void WriteImage(const std::string& path, const Image& beauty,
+                const std::vector<ImageLayer>& layers = {}, float exposure = 0.0f);
 /// Reads any image OpenImageIO reads as float RGB (1 channel is replicated); throws InputError.
 Image ReadImageRGB(const std::string& path);
 /// Reads all channels as stored; throws InputError.

@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "renderer/integrator.h"
 
-#include <xmmintrin.h>
 #include <pmmintrin.h>
+#include <xmmintrin.h>
 
 #include <atomic>
 #include <chrono>
@@ -61,10 +61,10 @@ glm::vec3 HashColor(uint32_t id) {
 
 // One light sample for next-event estimation.
 struct LightSample {
-    glm::vec3 wi;      // towards the light
-    float dist;        // to the light (inf for env/distant)
-    glm::vec3 Li;      // incident radiance (irradiance for delta lights)
-    float pdf;         // solid angle, includes light selection; 0 for delta lights (no MIS)
+    glm::vec3 wi;  // towards the light
+    float dist;    // to the light (inf for env/distant)
+    glm::vec3 Li;  // incident radiance (irradiance for delta lights)
+    float pdf;     // solid angle, includes light selection; 0 for delta lights (no MIS)
     bool delta;
 };
 
@@ -91,7 +91,10 @@ struct Context {
     bool cameraMoves = false;
 
     Context(const RenderScene& r, const RenderOptions& o)
-        : rs(r), scene(r.scene()), opt(o), env(r.environment()),
+        : rs(r),
+          scene(r.scene()),
+          opt(o),
+          env(r.environment()),
           camera(r.scene().camera, o.frameTime, o.width, o.height) {
         shutterLength = scene.camera.shutterClose - scene.camera.shutterOpen;
         if (shutterLength > 0.0f) {
@@ -202,7 +205,8 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
             if (c.env) {
                 const glm::vec3 Le = c.env->Eval(ray.dir);
                 float w = 1.0f;
-                if (prevPdf > 0.0f) w = PowerHeuristic(1, prevPdf, 1, c.env->Pdf(ray.dir) * c.PickPdf());
+                if (prevPdf > 0.0f)
+                    w = PowerHeuristic(1, prevPdf, 1, c.env->Pdf(ray.dir) * c.PickPdf());
                 L += beta * Le * w;
             }
             break;
@@ -210,7 +214,8 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         if (hit.light >= 0) {
             const glm::vec3 Le = c.QuadEmission(hit.light, ray.dir);
             float w = 1.0f;
-            if (prevPdf > 0.0f) w = PowerHeuristic(1, prevPdf, 1, c.QuadPdf(hit.light, ray.dir, hit.t));
+            if (prevPdf > 0.0f)
+                w = PowerHeuristic(1, prevPdf, 1, c.QuadPdf(hit.light, ray.dir, hit.t));
             L += beta * Le * w;
             break;
         }
@@ -400,7 +405,7 @@ glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&&
     if (c.tsc->FilterOf(si.object) == TextureFilterKind::None)
         return c.tsc->cache().LookupTexel(h, 0, shade, CentreFilter{}, st);
     return c.tsc->cache().LookupTexel(h, c.tsc->RadiusOf(si.object), shade,
-                                 NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
+                                      NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
 }
 
 void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInteraction& si,
@@ -427,12 +432,15 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
     const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
     // Differentials feed the cache's mip selection and the debug views; skip them otherwise.
     const bool needDiff = c.tsc != nullptr || c.opt.integrator == IntegratorKind::Normal ||
-                          c.opt.integrator == IntegratorKind::Ptex || c.opt.integrator == IntegratorKind::Uv;
+                          c.opt.integrator == IntegratorKind::Ptex ||
+                          c.opt.integrator == IntegratorKind::Uv;
     RayDifferentials diff;
-    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, needDiff ? &diff : nullptr);
+    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens,
+                                needDiff ? &diff : nullptr);
     if (c.cameraMoves) {
         // Camera motion blur: blend the rays of the open and close poses (rigid, short shutter).
-        const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+        const Ray r1 =
+            c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
         ray.org = glm::mix(ray.org, r1.org, time);
         ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
     }
@@ -449,32 +457,36 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
             auto cached = [&](const SurfaceInteraction& si0, const Ray& r0, glm::vec3* term) {
                 if (c.scene.materials[si0.material].type != Material::Type::Diffuse) return false;
                 const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
-                const glm::vec3 E = CachedLookup(c, sd, [&](const SampleRequest& r) {
-                    return ShadeIndirectSample(c, r, rays);
-                });
+                const glm::vec3 E = CachedLookup(
+                    c, sd, [&](const SampleRequest& r) { return ShadeIndirectSample(c, r, rays); });
                 *term = c.rs.Albedo(si0) * E;
                 return true;
             };
             return LiPath(c, ray, hit, found, rng, c.opt.maxDepth, rays, true, cached);
         }
-        return LiPath(c, ray, hit, found, rng, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth, rays);
+        return LiPath(c, ray, hit, found, rng, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
+                      rays);
     }
     if (!found) return glm::vec3(0.0f);
     if (hit.object < 0) return glm::vec3(1.0f);  // a light seen by a debug view: white
     const SurfaceInteraction si = c.rs.Interact(ray, hit, needDiff ? &diff : nullptr);
     if (aov) FillAovs(c, ray, hit, si, aov);
     switch (k) {
-        case IntegratorKind::Normal: return si.N * 0.5f + 0.5f;
-        case IntegratorKind::Ptex: return HashColor(uint32_t(si.ptex.face) * 7919u + uint32_t(si.object));
-        case IntegratorKind::Uv: return glm::vec3(si.ptex.u, si.ptex.v, 0.0f);
-        case IntegratorKind::EyeLight: return c.rs.Albedo(si) * std::abs(glm::dot(si.N, ray.dir));
+        case IntegratorKind::Normal:
+            return si.N * 0.5f + 0.5f;
+        case IntegratorKind::Ptex:
+            return HashColor(uint32_t(si.ptex.face) * 7919u + uint32_t(si.object));
+        case IntegratorKind::Uv:
+            return glm::vec3(si.ptex.u, si.ptex.v, 0.0f);
+        case IntegratorKind::EyeLight:
+            return c.rs.Albedo(si) * std::abs(glm::dot(si.N, ray.dir));
         case IntegratorKind::AO:
             if (c.tsc)
-                return CachedLookup(c, si, [&](const SampleRequest& r) {
-                    return ShadeAoSample(c, r, rays);
-                });
+                return CachedLookup(
+                    c, si, [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); });
             return LiAO(c, ray, si, rng, rays);
-        default: return glm::vec3(0.0f);
+        default:
+            return glm::vec3(0.0f);
     }
 }
 
@@ -504,7 +516,8 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
                 Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens,
                                             c.tsc ? &p.diff : nullptr);
                 if (c.cameraMoves) {
-                    const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+                    const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y,
+                                                           lens, nullptr);
                     ray.org = glm::mix(ray.org, r1.org, time);
                     ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
                 }
@@ -522,7 +535,8 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         for (Pending& p : queue) {
             glm::vec3 L(0.0f);
             if (p.found)
-                L = p.hit.object < 0 ? glm::vec3(1.0f) : LiAO(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, rays);
+                L = p.hit.object < 0 ? glm::vec3(1.0f)
+                                     : LiAO(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, rays);
             add(p, L);
         }
         return;
@@ -548,11 +562,12 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         const Pending& p = queue[i];
         glm::vec3 L(0.0f);
         if (p.found)
-            L = p.hit.object < 0 ? glm::vec3(1.0f)
-                                 : CachedLookup(
-                                       c, points[i],
-                                       [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
-                                       &stats, lookups ? &texels[i] : nullptr);
+            L = p.hit.object < 0
+                    ? glm::vec3(1.0f)
+                    : CachedLookup(
+                          c, points[i],
+                          [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); }, &stats,
+                          lookups ? &texels[i] : nullptr);
         add(p, L);
     }
 }
@@ -610,7 +625,9 @@ IntegratorKind ParseIntegrator(const std::string& name, const std::string& where
     throw InputError(where, "unknown integrator '" + name + "' (valid: " + IntegratorNames() + ")");
 }
 
-const char* IntegratorNames() { return "normal, ptex, uv, eyelight, ao, direct, path"; }
+const char* IntegratorNames() {
+    return "normal, ptex, uv, eyelight, ao, direct, path";
+}
 
 bool IntegratorUsesLights(IntegratorKind k) {
     return k == IntegratorKind::Direct || k == IntegratorKind::Path;
@@ -622,7 +639,8 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     Context ctx(rs, opt);
     std::unique_ptr<TextureSpaceCache> frameCache;
     tbb::enumerable_thread_specific<CacheStats> cacheStats;
-    const bool cachedIntegrator = opt.integrator == IntegratorKind::AO || opt.integrator == IntegratorKind::Path;
+    const bool cachedIntegrator =
+        opt.integrator == IntegratorKind::AO || opt.integrator == IntegratorKind::Path;
     if (opt.texture.enabled && cachedIntegrator) {
         if (!cache) {
             frameCache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
@@ -649,41 +667,49 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     int done = 0;
     {
         Progress progress(opt.progress, [&] {
-            if (opt.seconds > 0.0f) return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
+            if (opt.seconds > 0.0f)
+                return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
             return double(pixelSamplesDone.load()) / totalWork;
         });
         int passSpp = opt.seconds > 0.0f ? 1 : sppCap;
         while (done < sppCap) {
             const int s0 = done, s1 = std::min(sppCap, done + passSpp);
             const auto passStart = Clock::now();
-            tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8), [&](const tbb::blocked_range2d<int>& r) {
-                // Denormals off in every worker: Embree wants it and it saves stalls in shading.
-                _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-                _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-                RayCounts& rc = counts.local();
-                if (twoPhaseAo) {
-                    AoTileTwoPhase(ctx, r.rows().begin(), r.rows().end(), r.cols().begin(), r.cols().end(),
-                                   s0, s1, sum, rc);
-                    pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
-                    return;
-                }
-                for (int y = r.rows().begin(); y < r.rows().end(); ++y)
-                    for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
-                        const size_t p = size_t(y) * W + x;
-                        PixelAovs* aov = aovs.empty() ? nullptr : &aovs[p];
-                        glm::dvec3 acc(0.0);
-                        for (int s = s0; s < s1; ++s) {
-                            glm::vec3 L = Sample(ctx, x, y, s, aov, rc);
-                            // A NaN/Inf sample would poison the pixel forever: drop it.
-                            if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z)) acc += glm::dvec3(L);
-                        }
-                        sum[3 * p] += acc.x, sum[3 * p + 1] += acc.y, sum[3 * p + 2] += acc.z;
+            tbb::parallel_for(
+                tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
+                [&](const tbb::blocked_range2d<int>& r) {
+                    // Denormals off in every worker: Embree wants it and it saves stalls in
+                    // shading.
+                    _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                    _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                    RayCounts& rc = counts.local();
+                    if (twoPhaseAo) {
+                        AoTileTwoPhase(ctx, r.rows().begin(), r.rows().end(), r.cols().begin(),
+                                       r.cols().end(), s0, s1, sum, rc);
+                        pixelSamplesDone +=
+                            uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+                        return;
                     }
-                pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
-            });
+                    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+                        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+                            const size_t p = size_t(y) * W + x;
+                            PixelAovs* aov = aovs.empty() ? nullptr : &aovs[p];
+                            glm::dvec3 acc(0.0);
+                            for (int s = s0; s < s1; ++s) {
+                                glm::vec3 L = Sample(ctx, x, y, s, aov, rc);
+                                // A NaN/Inf sample would poison the pixel forever: drop it.
+                                if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z))
+                                    acc += glm::dvec3(L);
+                            }
+                            sum[3 * p] += acc.x, sum[3 * p + 1] += acc.y, sum[3 * p + 2] += acc.z;
+                        }
+                    pixelSamplesDone +=
+                        uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+                });
             done = s1;
             if (opt.seconds > 0.0f) {
-                const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();
+                const double passTime =
+                    std::chrono::duration<double>(Clock::now() - passStart).count();
                 const double left = opt.seconds - elapsed();
                 if (left <= 0.0) break;
                 // Size the next pass to fit the remaining budget (at most doubling).

@@ -39,7 +39,7 @@ struct RenderOptions {
     float frameTime = 0.0f;  ///< scene time at shutter open
     AovFlags aovs;
     TextureSpaceOptions texture;  ///< cached AO / diffuse indirect when texture.enabled
-    bool progress = true;  ///< progress bar on stderr for renders longer than a second
+    bool progress = true;         ///< progress bar on stderr for renders longer than a second
 };
 
 struct RenderStats {
@@ -51,8 +51,8 @@ struct RenderStats {
 };
 
 struct RenderResult {
-    Image beauty;                   ///< linear RGB
-    std::vector<ImageLayer> aovs;   ///< only the requested layers
+    Image beauty;                  ///< linear RGB
+    std::vector<ImageLayer> aovs;  ///< only the requested layers
     RenderStats stats;
 };
 

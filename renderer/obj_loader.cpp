@@ -34,7 +34,8 @@ struct Cursor {
 
 class Parser {
 public:
-    Parser(const std::string& name, std::vector<std::string>* warnings) : name_(name), warnings_(warnings) {}
+    Parser(const std::string& name, std::vector<std::string>* warnings)
+        : name_(name), warnings_(warnings) {}
 
     [[noreturn]] void Fail(const std::string& what) const {
         throw InputError(name_ + ":" + std::to_string(line_), what);
@@ -60,7 +61,8 @@ public:
     long Int(std::string_view t) const {
         long v;
         const auto r = std::from_chars(t.data(), t.data() + t.size(), v);
-        if (r.ec != std::errc() || r.ptr != t.data() + t.size()) Fail("malformed integer '" + std::string(t) + "'");
+        if (r.ec != std::errc() || r.ptr != t.data() + t.size())
+            Fail("malformed integer '" + std::string(t) + "'");
         return v;
     }
     // OBJ index (1-based, or negative = relative to the count so far) -> 0-based.
@@ -68,8 +70,8 @@ public:
         const long i = Int(t);
         long r = i > 0 ? i - 1 : long(count) + i;
         if (i == 0 || r < 0 || r >= long(count))
-            Fail(std::string(what) + " index " + std::string(t) + " is out of range (" + std::to_string(count) +
-                 " defined so far)");
+            Fail(std::string(what) + " index " + std::string(t) + " is out of range (" +
+                 std::to_string(count) + " defined so far)");
         return int(r);
     }
 
@@ -104,7 +106,8 @@ public:
                     x = Float(t);
                 }
                 cage_.uvs.push_back(uv);
-            } else if (kw == "vn" || kw == "o" || kw == "g" || kw == "s" || kw == "usemtl" || kw == "mtllib") {
+            } else if (kw == "vn" || kw == "o" || kw == "g" || kw == "s" || kw == "usemtl" ||
+                       kw == "mtllib") {
                 // Facet normals are ignored (the limit surface defines normals); groups too.
             } else if (kw == "f") {
                 int n = 0;
@@ -114,12 +117,14 @@ public:
                     const std::string_view t = c.Token();
                     const size_t s1 = t.find('/');
                     const int v = Index(t.substr(0, s1), cage_.positions.size(), "vertex");
-                    if (!seen.insert(v).second) Fail("face repeats vertex " + std::to_string(v + 1));
+                    if (!seen.insert(v).second)
+                        Fail("face repeats vertex " + std::to_string(v + 1));
                     cage_.faceVertexIndices.push_back(v);
                     int vt = -1;
                     if (s1 != std::string_view::npos) {
                         const size_t s2 = t.find('/', s1 + 1);
-                        const std::string_view tt = t.substr(s1 + 1, s2 == std::string_view::npos ? t.npos : s2 - s1 - 1);
+                        const std::string_view tt =
+                            t.substr(s1 + 1, s2 == std::string_view::npos ? t.npos : s2 - s1 - 1);
                         if (!tt.empty()) vt = Index(tt, cage_.uvs.size(), "texture coordinate");
                     }
                     (vt >= 0 ? hasUv : noUv) = true;
@@ -127,7 +132,8 @@ public:
                     ++n;
                 }
                 if (n < 3) Fail("face has " + std::to_string(n) + " vertices (at least 3 needed)");
-                if (hasUv && noUv) Fail("face gives texture coordinates for some corners but not others");
+                if (hasUv && noUv)
+                    Fail("face gives texture coordinates for some corners but not others");
                 anyFaceUv |= hasUv;
                 anyFaceNoUv |= noUv;
                 cage_.faceVertexCounts.push_back(n);
@@ -167,16 +173,22 @@ private:
         tag.name = std::string(c.Token());
         const std::string_view counts = c.Token();
         int ni, nf, ns;
-        if (std::sscanf(std::string(counts).c_str(), "%d/%d/%d", &ni, &nf, &ns) != 3 || ni < 0 || nf < 0 || ns < 0)
-            Fail("tag '" + tag.name + "' needs counts as nInts/nFloats/nStrings, got '" + std::string(counts) + "'");
+        if (std::sscanf(std::string(counts).c_str(), "%d/%d/%d", &ni, &nf, &ns) != 3 || ni < 0 ||
+            nf < 0 || ns < 0)
+            Fail("tag '" + tag.name + "' needs counts as nInts/nFloats/nStrings, got '" +
+                 std::string(counts) + "'");
         for (int i = 0; i < ni; ++i) {
             const auto t = c.Token();
-            if (t.empty()) Fail("tag '" + tag.name + "' declares " + std::to_string(ni) + " integers but has fewer");
+            if (t.empty())
+                Fail("tag '" + tag.name + "' declares " + std::to_string(ni) +
+                     " integers but has fewer");
             tag.ints.push_back(Int(t));
         }
         for (int i = 0; i < nf; ++i) {
             const auto t = c.Token();
-            if (t.empty()) Fail("tag '" + tag.name + "' declares " + std::to_string(nf) + " floats but has fewer");
+            if (t.empty())
+                Fail("tag '" + tag.name + "' declares " + std::to_string(nf) +
+                     " floats but has fewer");
             tag.floats.push_back(Float(t));
         }
         for (int i = 0; i < ns; ++i) c.Token();
@@ -190,7 +202,8 @@ private:
         size_t off = 0;
         for (int n : cage_.faceVertexCounts) {
             for (int i = 0; i < n; ++i) {
-                const int a = cage_.faceVertexIndices[off + i], b = cage_.faceVertexIndices[off + (i + 1) % n];
+                const int a = cage_.faceVertexIndices[off + i],
+                          b = cage_.faceVertexIndices[off + (i + 1) % n];
                 edges.insert({std::min(a, b), std::max(a, b)});
             }
             off += n;
@@ -245,10 +258,17 @@ private:
             } else if (t.name == "interpolateboundary") {
                 if (t.ints.size() != 1) Fail("interpolateboundary needs one integer");
                 switch (t.ints[0]) {
-                    case 0: cage_.boundary = BoundaryInterpolation::None; break;
-                    case 1: cage_.boundary = BoundaryInterpolation::EdgeAndCorner; break;
-                    case 2: cage_.boundary = BoundaryInterpolation::EdgeOnly; break;
-                    default: Fail("interpolateboundary must be 0, 1 or 2");
+                    case 0:
+                        cage_.boundary = BoundaryInterpolation::None;
+                        break;
+                    case 1:
+                        cage_.boundary = BoundaryInterpolation::EdgeAndCorner;
+                        break;
+                    case 2:
+                        cage_.boundary = BoundaryInterpolation::EdgeOnly;
+                        break;
+                    default:
+                        Fail("interpolateboundary must be 0, 1 or 2");
                 }
             } else {
                 Warn("unknown tag '" + t.name + "' skipped");
@@ -276,7 +296,8 @@ private:
 
 }  // namespace
 
-ControlCage ParseObj(std::string_view text, const std::string& name, std::vector<std::string>* warnings) {
+ControlCage ParseObj(std::string_view text, const std::string& name,
+                     std::vector<std::string>* warnings) {
     return Parser(name, warnings).Parse(text);
 }
 

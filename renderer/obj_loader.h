@@ -14,6 +14,7 @@ namespace texcache {
 /// edges, vertices or faces, and unknown tags, add a warning ("file:line: ...") and are skipped.
 ControlCage LoadObj(const std::string& path, std::vector<std::string>* warnings);
 /// Parses OBJ text (for tests); `name` is used in messages.
-ControlCage ParseObj(std::string_view text, const std::string& name, std::vector<std::string>* warnings);
+ControlCage ParseObj(std::string_view text, const std::string& name,
+                     std::vector<std::string>* warnings);
 
 }  // namespace texcache

@@ -20,16 +20,20 @@ constexpr int kMotionSteps = 5;
 
 void EmbreeError(void*, RTCError code, const char* str) {
     // Called from inside Embree's C code, where no exception may pass: report and go on.
-    if (code != RTC_ERROR_NONE) std::fprintf(stderr, "texcache: Embree error %d: %s\n", int(code), str ? str : "");
+    if (code != RTC_ERROR_NONE)
+        std::fprintf(stderr, "texcache: Embree error %d: %s\n", int(code), str ? str : "");
 }
 
 RTCSubdivisionMode ToEmbree(BoundaryInterpolation b) {
     switch (b) {
-        case BoundaryInterpolation::None: return RTC_SUBDIVISION_MODE_NO_BOUNDARY;
+        case BoundaryInterpolation::None:
+            return RTC_SUBDIVISION_MODE_NO_BOUNDARY;
         // Measured: PIN_CORNERS matches OSD EDGE_AND_CORNER to ~3e-6.
-        case BoundaryInterpolation::EdgeAndCorner: return RTC_SUBDIVISION_MODE_PIN_CORNERS;
+        case BoundaryInterpolation::EdgeAndCorner:
+            return RTC_SUBDIVISION_MODE_PIN_CORNERS;
         // SMOOTH_BOUNDARY differs from OSD EDGE_ONLY by up to 2e-3 near valence-2 corners.
-        case BoundaryInterpolation::EdgeOnly: return RTC_SUBDIVISION_MODE_SMOOTH_BOUNDARY;
+        case BoundaryInterpolation::EdgeOnly:
+            return RTC_SUBDIVISION_MODE_SMOOTH_BOUNDARY;
     }
     return RTC_SUBDIVISION_MODE_SMOOTH_BOUNDARY;
 }
@@ -42,7 +46,8 @@ float ToEmbreeSharpness(float s) {
 void RejectHoleHits(const RTCFilterFunctionNArguments* args) {
     const auto* isHole = static_cast<const uint8_t*>(args->geometryUserPtr);
     for (unsigned i = 0; i < args->N; ++i)
-        if (args->valid[i] == -1 && isHole[RTCHitN_primID(args->hit, args->N, i)]) args->valid[i] = 0;
+        if (args->valid[i] == -1 && isHole[RTCHitN_primID(args->hit, args->N, i)])
+            args->valid[i] = 0;
 }
 
 }  // namespace
@@ -66,7 +71,7 @@ struct RenderScene::Impl {
         std::vector<glm::mat4> steps;  // 1 (static) or kMotionSteps over the shutter
         glm::mat3 normalMatrix{1.0f};  // of steps[0]
     };
-    std::vector<Instance> objects;              // by Scene::objects index
+    std::vector<Instance> objects;  // by Scene::objects index
     // Top-level geomID -> object or quad light (-1: not that kind); geomIDs are small and dense.
     std::vector<int> geomToObject, geomToLight;
     static void Map(std::vector<int>& v, unsigned id, int value) {
@@ -124,28 +129,33 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         mesh.regular = std::make_unique<RegularPatches>(cage);
         mesh.scene = rtcNewScene(I.device);
         RTCGeometry g = rtcNewGeometry(I.device, RTC_GEOMETRY_TYPE_SUBDIVISION);
-        auto* faces = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-            g, RTC_BUFFER_TYPE_FACE, 0, RTC_FORMAT_UINT, sizeof(unsigned), cage.faceVertexCounts.size()));
-        for (size_t i = 0; i < cage.faceVertexCounts.size(); ++i) faces[i] = unsigned(cage.faceVertexCounts[i]);
-        auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-            g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT, sizeof(unsigned), cage.faceVertexIndices.size()));
-        for (size_t i = 0; i < cage.faceVertexIndices.size(); ++i) idx[i] = unsigned(cage.faceVertexIndices[i]);
+        auto* faces = static_cast<unsigned*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0, RTC_FORMAT_UINT, sizeof(unsigned),
+                                    cage.faceVertexCounts.size()));
+        for (size_t i = 0; i < cage.faceVertexCounts.size(); ++i)
+            faces[i] = unsigned(cage.faceVertexCounts[i]);
+        auto* idx = static_cast<unsigned*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT, sizeof(unsigned),
+                                    cage.faceVertexIndices.size()));
+        for (size_t i = 0; i < cage.faceVertexIndices.size(); ++i)
+            idx[i] = unsigned(cage.faceVertexIndices[i]);
         // 16-byte stride with w = 0: Embree loads vertices as 4-wide vectors, and garbage in the
         // 4th lane (the buffer's padding after the last vertex) made rtcInterpolate read
         // uninitialised memory and, at random, reject valid patches.
-        auto* pos = static_cast<float*>(rtcSetNewGeometryBuffer(
-            g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), cage.positions.size()));
+        auto* pos = static_cast<float*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                    4 * sizeof(float), cage.positions.size()));
         for (size_t i = 0; i < cage.positions.size(); ++i) {
             for (int k = 0; k < 3; ++k) pos[4 * i + k] = cage.positions[i][k];
             pos[4 * i + 3] = 0.0f;
         }
         if (!cage.creaseEdges.empty()) {
-            auto* ce = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-                g, RTC_BUFFER_TYPE_EDGE_CREASE_INDEX, 0, RTC_FORMAT_UINT2, 2 * sizeof(unsigned),
-                cage.creaseEdges.size()));
-            auto* cw = static_cast<float*>(rtcSetNewGeometryBuffer(
-                g, RTC_BUFFER_TYPE_EDGE_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT, sizeof(float),
-                cage.creaseEdges.size()));
+            auto* ce = static_cast<unsigned*>(
+                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_INDEX, 0, RTC_FORMAT_UINT2,
+                                        2 * sizeof(unsigned), cage.creaseEdges.size()));
+            auto* cw = static_cast<float*>(
+                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT,
+                                        sizeof(float), cage.creaseEdges.size()));
             for (size_t i = 0; i < cage.creaseEdges.size(); ++i) {
                 ce[2 * i] = unsigned(cage.creaseEdges[i][0]);
                 ce[2 * i + 1] = unsigned(cage.creaseEdges[i][1]);
@@ -153,9 +163,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             }
         }
         if (!cage.cornerVertices.empty()) {
-            auto* vi = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-                g, RTC_BUFFER_TYPE_VERTEX_CREASE_INDEX, 0, RTC_FORMAT_UINT, sizeof(unsigned),
-                cage.cornerVertices.size()));
+            auto* vi = static_cast<unsigned*>(
+                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_INDEX, 0, RTC_FORMAT_UINT,
+                                        sizeof(unsigned), cage.cornerVertices.size()));
             auto* vw = static_cast<float*>(rtcSetNewGeometryBuffer(
                 g, RTC_BUFFER_TYPE_VERTEX_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT, sizeof(float),
                 cage.cornerVertices.size()));
@@ -180,14 +190,17 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             // Face-varying uvs: a second topology (uv indices) with linear boundaries, as OBJ uvs
             // are authored on the cage.
             rtcSetGeometryTopologyCount(g, 2);
-            auto* uidx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-                g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT, sizeof(unsigned), cage.faceUvIndices.size()));
-            for (size_t i = 0; i < cage.faceUvIndices.size(); ++i) uidx[i] = unsigned(cage.faceUvIndices[i]);
+            auto* uidx = static_cast<unsigned*>(
+                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT,
+                                        sizeof(unsigned), cage.faceUvIndices.size()));
+            for (size_t i = 0; i < cage.faceUvIndices.size(); ++i)
+                uidx[i] = unsigned(cage.faceUvIndices[i]);
             rtcSetGeometrySubdivisionMode(g, 1, RTC_SUBDIVISION_MODE_PIN_BOUNDARY);
             rtcSetGeometryVertexAttributeCount(g, 1);
             rtcSetGeometryVertexAttributeTopology(g, 0, 1);
-            auto* uv = static_cast<float*>(rtcSetNewGeometryBuffer(
-                g, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, RTC_FORMAT_FLOAT2, 4 * sizeof(float), cage.uvs.size()));
+            auto* uv = static_cast<float*>(
+                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, RTC_FORMAT_FLOAT2,
+                                        4 * sizeof(float), cage.uvs.size()));
             for (size_t i = 0; i < cage.uvs.size(); ++i) {
                 uv[4 * i] = cage.uvs[i][0];
                 uv[4 * i + 1] = cage.uvs[i][1];
@@ -217,7 +230,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         for (int s = 0; s < steps; ++s) {
             const float t = steps == 1 ? options.frameTime
                                        : options.frameTime + (cam.shutterClose - cam.shutterOpen) *
-                                                                  float(s) / float(steps - 1);
+                                                                 float(s) / float(steps - 1);
             inst.steps.push_back(obj.transform.Eval(t));
             rtcSetGeometryTransform(g, unsigned(s), RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
                                     &inst.steps.back()[0][0]);
@@ -237,8 +250,8 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             RTCGeometry g = rtcNewGeometry(I.device, RTC_GEOMETRY_TYPE_QUAD);
             auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
                 g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 4));
-            const glm::vec3 c[4] = {ql.corner, ql.corner + ql.edge1, ql.corner + ql.edge1 + ql.edge2,
-                                    ql.corner + ql.edge2};
+            const glm::vec3 c[4] = {ql.corner, ql.corner + ql.edge1,
+                                    ql.corner + ql.edge1 + ql.edge2, ql.corner + ql.edge2};
             for (int i = 0; i < 4; ++i) {
                 glm::vec3 w = glm::vec3(M * glm::vec4(c[i], 1.0f));
                 v[3 * i] = w.x, v[3 * i + 1] = w.y, v[3 * i + 2] = w.z;
@@ -275,7 +288,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
 
 RenderScene::~RenderScene() = default;
 
-void* RenderScene::EmbreeScene() const { return impl_->top; }
+void* RenderScene::EmbreeScene() const {
+    return impl_->top;
+}
 
 const PtexTopology& RenderScene::Topology(int object) const {
     return *impl_->meshes[impl_->objects[object].mesh].topo;
@@ -321,9 +336,10 @@ bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
         hit->light = -1;
         // Embree returns instance hits' Ng in object space.
         const Impl::Instance& inst = impl_->objects[hit->object];
-        const glm::mat3 N = inst.steps.size() == 1
-                                ? inst.normalMatrix
-                                : glm::transpose(glm::inverse(glm::mat3(impl_->Transform(hit->object, ray.time))));
+        const glm::mat3 N =
+            inst.steps.size() == 1
+                ? inst.normalMatrix
+                : glm::transpose(glm::inverse(glm::mat3(impl_->Transform(hit->object, ray.time))));
         hit->Ng = N * glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
     } else {
         hit->object = -1;
@@ -373,7 +389,8 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
         mesh.regular->Eval(si.ptex.face, si.ptex.u, si.ptex.v, P, du, dv);
     } else {
         // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
-        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, nullptr, du, dv, 3);
+        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, nullptr, du,
+                        dv, 3);
     }
     const glm::mat4 M = I.Transform(hit.object, ray.time);
     const glm::mat3 L(M);
@@ -391,8 +408,8 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
 
     if (mesh.hasUv) {
         alignas(16) float uv[4];
-        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, uv,
-                        nullptr, nullptr, 2);
+        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0,
+                        uv, nullptr, nullptr, 2);
         si.uv = {uv[0], uv[1]};
     } else {
         si.uv = {si.ptex.u, si.ptex.v};
@@ -417,7 +434,8 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     return si;
 }
 
-bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time, SurfaceSample* out) const {
+bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
+                              SurfaceSample* out) const {
     const Impl& I = *impl_;
     const Impl::Mesh& mesh = I.meshes[I.objects[object].mesh];
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
@@ -443,7 +461,8 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time, Surfac
 
 glm::vec3 RenderScene::Albedo(const SurfaceInteraction& si) const {
     const ColorParam& a = scene_.materials[si.material].albedo;
-    if (a.texture >= 0 && impl_->textures[a.texture]) return impl_->textures[a.texture]->Eval(si.uv);
+    if (a.texture >= 0 && impl_->textures[a.texture])
+        return impl_->textures[a.texture]->Eval(si.uv);
     return a.value;
 }
 

@@ -41,12 +41,12 @@ struct Hit {
 
 /// A shading point: everything the integrators and the cache need.
 struct SurfaceInteraction {
-    glm::vec3 P;         ///< hit point on the tessellated surface (spawn rays from here)
-    glm::vec3 Ng;        ///< geometric normal, facing the incoming ray
-    glm::vec3 N;         ///< limit-surface shading normal, facing the incoming ray
+    glm::vec3 P;           ///< hit point on the tessellated surface (spawn rays from here)
+    glm::vec3 Ng;          ///< geometric normal, facing the incoming ray
+    glm::vec3 N;           ///< limit-surface shading normal, facing the incoming ray
     glm::vec3 dPdu, dPdv;  ///< world-space limit derivatives in Ptex (u,v)
     PtexCoord ptex;
-    glm::vec2 uv;        ///< texture coordinates (face-varying OBJ uvs, else Ptex (u,v))
+    glm::vec2 uv;  ///< texture coordinates (face-varying OBJ uvs, else Ptex (u,v))
     float dudx = 0, dudy = 0, dvdx = 0, dvdy = 0;  ///< Ptex-space footprint of a pixel
     int object = -1;
     int material = 0;
@@ -59,11 +59,11 @@ struct SurfaceSample {
 };
 
 struct RenderSceneOptions {
-    float frameTime = 0.0f;      ///< scene time of shutter open
-    bool needLights = true;      ///< build light geometry / env map
-    bool needTextures = true;    ///< load textures and face-varying uvs
+    float frameTime = 0.0f;    ///< scene time of shutter open
+    bool needLights = true;    ///< build light geometry / env map
+    bool needTextures = true;  ///< load textures and face-varying uvs
     bool needEnvironment = true;
-    int threads = 0;             ///< Embree build threads (0 = all)
+    int threads = 0;  ///< Embree build threads (0 = all)
 };
 
 /// Embree device + scene for one frame of a Scene. Thread-safe for queries after construction.

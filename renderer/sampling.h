@@ -61,7 +61,9 @@ struct Frame {
         return {glm::vec3(1.0f + sign * n.x * n.x * a, sign * b, -sign * n.x),
                 glm::vec3(b, sign + n.y * n.y * a, -n.y), n};
     }
-    glm::vec3 ToLocal(glm::vec3 v) const { return {glm::dot(v, s), glm::dot(v, t), glm::dot(v, n)}; }
+    glm::vec3 ToLocal(glm::vec3 v) const {
+        return {glm::dot(v, s), glm::dot(v, t), glm::dot(v, n)};
+    }
     glm::vec3 FromLocal(glm::vec3 v) const { return v.x * s + v.y * t + v.z * n; }
 };
 
@@ -69,7 +71,8 @@ struct Frame {
 /// concentric map only needs this range, and libm's sincosf was a visible cost per AO ray.
 inline void SinCosQuarterPi(float a, float* s, float* c) {
     const float a2 = a * a;
-    *s = a * (1.0f + a2 * (-1.0f / 6.0f + a2 * (1.0f / 120.0f + a2 * (-1.0f / 5040.0f + a2 * (1.0f / 362880.0f)))));
+    *s = a * (1.0f + a2 * (-1.0f / 6.0f + a2 * (1.0f / 120.0f +
+                                                a2 * (-1.0f / 5040.0f + a2 * (1.0f / 362880.0f)))));
     *c = 1.0f + a2 * (-0.5f + a2 * (1.0f / 24.0f + a2 * (-1.0f / 720.0f + a2 * (1.0f / 40320.0f))));
 }
 
@@ -92,7 +95,9 @@ inline glm::vec3 SampleCosineHemisphere(glm::vec2 u) {
     const float z = std::sqrt(std::max(0.0f, 1.0f - d.x * d.x - d.y * d.y));
     return {d.x, d.y, z};
 }
-inline float CosineHemispherePdf(float cosTheta) { return std::max(cosTheta, 0.0f) * kInvPiF; }
+inline float CosineHemispherePdf(float cosTheta) {
+    return std::max(cosTheta, 0.0f) * kInvPiF;
+}
 
 /// Uniform direction on the sphere; pdf = 1 / (4 pi).
 inline glm::vec3 SampleUniformSphere(glm::vec2 u) {
@@ -128,7 +133,9 @@ inline float GgxLambda(glm::vec3 w, float alpha) {
     const float t2 = std::max(0.0f, 1.0f - c2) / c2;
     return 0.5f * (std::sqrt(1.0f + alpha * alpha * t2) - 1.0f);
 }
-inline float GgxG1(glm::vec3 w, float alpha) { return 1.0f / (1.0f + GgxLambda(w, alpha)); }
+inline float GgxG1(glm::vec3 w, float alpha) {
+    return 1.0f / (1.0f + GgxLambda(w, alpha));
+}
 /// Height-correlated masking-shadowing.
 inline float GgxG(glm::vec3 wo, glm::vec3 wi, float alpha) {
     return 1.0f / (1.0f + GgxLambda(wo, alpha) + GgxLambda(wi, alpha));
@@ -138,7 +145,8 @@ inline float GgxG(glm::vec3 wo, glm::vec3 wi, float alpha) {
 inline glm::vec3 GgxSampleVisibleNormal(glm::vec3 wo, float alpha, glm::vec2 u) {
     const glm::vec3 vh = glm::normalize(glm::vec3(alpha * wo.x, alpha * wo.y, wo.z));
     const float lensq = vh.x * vh.x + vh.y * vh.y;
-    const glm::vec3 t1 = lensq > 0.0f ? glm::vec3(-vh.y, vh.x, 0.0f) / std::sqrt(lensq) : glm::vec3(1, 0, 0);
+    const glm::vec3 t1 =
+        lensq > 0.0f ? glm::vec3(-vh.y, vh.x, 0.0f) / std::sqrt(lensq) : glm::vec3(1, 0, 0);
     const glm::vec3 t2 = glm::cross(vh, t1);
     const float r = std::sqrt(u.x);
     const float phi = 2.0f * kPiF * u.y;
@@ -146,7 +154,8 @@ inline glm::vec3 GgxSampleVisibleNormal(glm::vec3 wo, float alpha, glm::vec2 u) 
     float p2 = r * std::sin(phi);
     const float s = 0.5f * (1.0f + vh.z);
     p2 = (1.0f - s) * std::sqrt(std::max(0.0f, 1.0f - p1 * p1)) + s * p2;
-    const glm::vec3 nh = p1 * t1 + p2 * t2 + std::sqrt(std::max(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
+    const glm::vec3 nh =
+        p1 * t1 + p2 * t2 + std::sqrt(std::max(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
     return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, std::max(1e-6f, nh.z)));
 }
 

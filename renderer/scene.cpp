@@ -24,7 +24,8 @@ glm::mat4 TransformTrack::Eval(float time) const {
         f = (time - a->time) / (b->time - a->time);
     }
     const glm::vec3 t = glm::mix(a->translation, b->translation, f);
-    const glm::quat r = glm::slerp(a->rotation, glm::dot(a->rotation, b->rotation) < 0.0f ? -b->rotation : b->rotation, f);
+    const glm::quat r = glm::slerp(
+        a->rotation, glm::dot(a->rotation, b->rotation) < 0.0f ? -b->rotation : b->rotation, f);
     const glm::vec3 s = glm::mix(a->scale, b->scale, f);
     return glm::translate(glm::mat4(1.0f), t) * glm::mat4_cast(r) * glm::scale(glm::mat4(1.0f), s);
 }

@@ -34,19 +34,19 @@ struct Camera {
     // by the loader).
     TransformTrack pose;
     float fovYDegrees = 40.0f;
-    float lensRadius = 0.0f;      ///< 0 = pinhole
-    float focusDistance = 1.0f;   ///< used when lensRadius > 0
-    float shutterOpen = 0.0f;     ///< times in the same units as keyframes (seconds)
-    float shutterClose = 0.0f;    ///< == shutterOpen: no motion blur
+    float lensRadius = 0.0f;     ///< 0 = pinhole
+    float focusDistance = 1.0f;  ///< used when lensRadius > 0
+    float shutterOpen = 0.0f;    ///< times in the same units as keyframes (seconds)
+    float shutterClose = 0.0f;   ///< == shutterOpen: no motion blur
 };
 
 /// A 2D texture: an image file (sRGB-decoded for colours) or a procedural checker, looked up by
 /// the cage's face-varying uvs when it has them, else by the Ptex face (u,v).
 struct Texture {
     enum class Kind { Image, Checker } kind = Kind::Checker;
-    std::string path;                 ///< Image
+    std::string path;                      ///< Image
     glm::vec3 colorA{0.8f}, colorB{0.2f};  ///< Checker
-    float scale = 8.0f;               ///< Checker: squares per uv unit
+    float scale = 8.0f;                    ///< Checker: squares per uv unit
 };
 
 /// A colour or scalar that is either a constant or a texture index.
@@ -62,8 +62,8 @@ struct FloatParam {
 struct Material {
     std::string name;
     enum class Type { Diffuse, GGX } type = Type::Diffuse;
-    ColorParam albedo;       ///< diffuse albedo (Diffuse), or diffuse base under the coat (GGX)
-    FloatParam roughness;    ///< GGX alpha = roughness^2
+    ColorParam albedo;          ///< diffuse albedo (Diffuse), or diffuse base under the coat (GGX)
+    FloatParam roughness;       ///< GGX alpha = roughness^2
     glm::vec3 specular{0.04f};  ///< GGX Schlick F0
     /// Texture-space filter of this material's cached term ("" = the render's default).
     std::string cacheFilter;
@@ -79,10 +79,10 @@ struct Object {
 };
 
 struct EnvironmentLight {
-    std::string path;          ///< lat-long image, width == 2 * height
+    std::string path;  ///< lat-long image, width == 2 * height
     float intensity = 1.0f;
     float rotationDegrees = 0.0f;  ///< about the world up (+Y) axis
-    glm::vec3 constant{0.0f};  ///< used when path is empty (e.g. white furnace)
+    glm::vec3 constant{0.0f};      ///< used when path is empty (e.g. white furnace)
 };
 
 struct QuadLight {
@@ -96,7 +96,7 @@ struct QuadLight {
 
 struct DistantLight {
     glm::vec3 direction{0.0f, -1.0f, 0.0f};  ///< direction the light travels (towards the scene)
-    glm::vec3 irradiance{1.0f};  ///< on a surface facing the light
+    glm::vec3 irradiance{1.0f};              ///< on a surface facing the light
     TransformTrack transform;
 };
 

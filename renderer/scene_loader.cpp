@@ -35,7 +35,8 @@ std::string TypeName(const json& j) {
 /// A JSON value with its key path, for errors like "scene.json: key 'camera.fov': ...".
 class Node {
 public:
-    Node(const json& j, std::string path, const std::string& file) : j_(j), path_(std::move(path)), file_(file) {}
+    Node(const json& j, std::string path, const std::string& file)
+        : j_(j), path_(std::move(path)), file_(file) {}
 
     [[noreturn]] void Fail(const std::string& what) const {
         throw InputError(file_ + ": key '" + path_ + "'", what);
@@ -53,7 +54,8 @@ public:
             if (!ok) {
                 std::string list;
                 for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-                throw InputError(file_ + ": key '" + Join(k) + "'", "unknown key (expected one of: " + list + ")");
+                throw InputError(file_ + ": key '" + Join(k) + "'",
+                                 "unknown key (expected one of: " + list + ")");
             }
         }
     }
@@ -69,14 +71,17 @@ public:
         if (!j_.is_number()) Fail("expected a number, got " + TypeName(j_) + " " + j_.dump());
         const double v = j_.get<double>();
         if (!std::isfinite(v)) Fail("expected a finite number");
-        if (v < lo || v > hi) Fail("value " + j_.dump() + " is out of range [" + Fmt(lo) + ", " + Fmt(hi) + "]");
+        if (v < lo || v > hi)
+            Fail("value " + j_.dump() + " is out of range [" + Fmt(lo) + ", " + Fmt(hi) + "]");
         return float(v);
     }
     int Int(long lo, long hi) const {
-        if (!j_.is_number_integer()) Fail("expected an integer, got " + TypeName(j_) + " " + j_.dump());
+        if (!j_.is_number_integer())
+            Fail("expected an integer, got " + TypeName(j_) + " " + j_.dump());
         const long v = j_.get<long>();
         if (v < lo || v > hi)
-            Fail("value " + std::to_string(v) + " is out of range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+            Fail("value " + std::to_string(v) + " is out of range [" + std::to_string(lo) + ", " +
+                 std::to_string(hi) + "]");
         return int(v);
     }
     bool Bool() const {
@@ -88,7 +93,8 @@ public:
         return j_.get<std::string>();
     }
     glm::vec3 Vec3(float lo = -1e30f, float hi = 1e30f) const {
-        if (!j_.is_array() || j_.size() != 3) Fail("expected an array of 3 numbers, got " + j_.dump());
+        if (!j_.is_array() || j_.size() != 3)
+            Fail("expected an array of 3 numbers, got " + j_.dump());
         return {At(0).Number(lo, hi), At(1).Number(lo, hi), At(2).Number(lo, hi)};
     }
 
@@ -120,8 +126,10 @@ glm::quat RotationFromAxisAngle(const Node& n) {
 }
 
 Keyframe ParseRigid(const Node& n, bool allowTime) {
-    if (allowTime) n.Object({"time", "translate", "rotate", "scale"});
-    else n.Object({"translate", "rotate", "scale"});
+    if (allowTime)
+        n.Object({"time", "translate", "rotate", "scale"});
+    else
+        n.Object({"translate", "rotate", "scale"});
     Keyframe k;
     if (allowTime) k.time = n["time"].Number();
     if (n.Has("translate")) k.translation = n["translate"].Vec3();
@@ -146,7 +154,8 @@ TransformTrack ParseTrack(const Node& obj) {
         const Node ks = obj["keyframes"];
         for (size_t i = 0; i < ks.ArraySize(); ++i) t.keys.push_back(ParseRigid(ks.At(i), true));
         CheckIncreasing(ks, t.keys);
-        if (obj.Has("transform")) obj["transform"].Fail("give either 'transform' or 'keyframes', not both");
+        if (obj.Has("transform"))
+            obj["transform"].Fail("give either 'transform' or 'keyframes', not both");
     } else if (obj.Has("transform")) {
         t.keys.push_back(ParseRigid(obj["transform"], false));
     }
@@ -155,7 +164,8 @@ TransformTrack ParseTrack(const Node& obj) {
 
 }  // namespace
 
-Keyframe CameraLookAt(glm::vec3 position, glm::vec3 target, glm::vec3 up, const std::string& where) {
+Keyframe CameraLookAt(glm::vec3 position, glm::vec3 target, glm::vec3 up,
+                      const std::string& where) {
     const glm::vec3 f = target - position;
     if (!(glm::length(f) >= 1e-9f)) throw InputError(where, "look_at equals position");
     const glm::vec3 fn = glm::normalize(f);
@@ -173,7 +183,8 @@ Keyframe CameraLookAt(glm::vec3 position, glm::vec3 target, glm::vec3 up, const 
 namespace {
 
 void ParseCamera(const Node& n, Camera* cam) {
-    n.Object({"position", "look_at", "up", "fov", "lens_radius", "focus_distance", "shutter", "keyframes"});
+    n.Object({"position", "look_at", "up", "fov", "lens_radius", "focus_distance", "shutter",
+              "keyframes"});
     if (n.Has("fov")) cam->fovYDegrees = n["fov"].Number(1e-3f, 179.0f);
     if (n.Has("lens_radius")) cam->lensRadius = n["lens_radius"].Number(0.0f, 1e6f);
     if (n.Has("focus_distance")) cam->focusDistance = n["focus_distance"].Number(1e-6f, 1e12f);
@@ -198,8 +209,10 @@ void ParseCamera(const Node& n, Camera* cam) {
         CheckIncreasing(ks, cam->pose.keys);
         if (cam->pose.keys.empty()) ks.Fail("needs at least one keyframe");
     } else {
-        if (!n.Has("position") || !n.Has("look_at")) n.Fail("camera needs 'position' and 'look_at' (or 'keyframes')");
-        cam->pose.keys.push_back(CameraLookAt(n["position"].Vec3(), n["look_at"].Vec3(), defUp, n.Where()));
+        if (!n.Has("position") || !n.Has("look_at"))
+            n.Fail("camera needs 'position' and 'look_at' (or 'keyframes')");
+        cam->pose.keys.push_back(
+            CameraLookAt(n["position"].Vec3(), n["look_at"].Vec3(), defUp, n.Where()));
     }
 }
 
@@ -230,39 +243,50 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
     Material m;
     m.name = name;
     const std::string type = n.Has("type") ? n["type"].String() : "diffuse";
-    if (type == "diffuse") m.type = Material::Type::Diffuse;
-    else if (type == "ggx") m.type = Material::Type::GGX;
-    else n["type"].Fail("unknown material type '" + type + "' (valid: diffuse, ggx)");
+    if (type == "diffuse")
+        m.type = Material::Type::Diffuse;
+    else if (type == "ggx")
+        m.type = Material::Type::GGX;
+    else
+        n["type"].Fail("unknown material type '" + type + "' (valid: diffuse, ggx)");
     if (n.Has("albedo")) {
         const Node a = n["albedo"];
-        if (a.raw().is_object()) m.albedo.texture = ParseTexture(a, base, scene);
-        else m.albedo.value = a.Vec3(0.0f, 1.0f);
+        if (a.raw().is_object())
+            m.albedo.texture = ParseTexture(a, base, scene);
+        else
+            m.albedo.value = a.Vec3(0.0f, 1.0f);
     }
     if (n.Has("roughness")) {
         const Node r = n["roughness"];
-        if (r.raw().is_object()) m.roughness.texture = ParseTexture(r, base, scene);
-        else m.roughness.value = r.Number(0.0f, 1.0f);
+        if (r.raw().is_object())
+            m.roughness.texture = ParseTexture(r, base, scene);
+        else
+            m.roughness.value = r.Number(0.0f, 1.0f);
     }
     if (n.Has("specular")) m.specular = n["specular"].Vec3(0.0f, 1.0f);
     if (n.Has("filter")) {
         m.cacheFilter = n["filter"].String();
         static const std::set<std::string> kFilters = {"none", "normal"};
-        if (!kFilters.count(m.cacheFilter)) n["filter"].Fail("unknown filter '" + m.cacheFilter + "' (valid: none, normal)");
+        if (!kFilters.count(m.cacheFilter))
+            n["filter"].Fail("unknown filter '" + m.cacheFilter + "' (valid: none, normal)");
     }
     if (n.Has("filter_radius")) m.cacheRadius = n["filter_radius"].Int(0, 32);
     scene->materials.push_back(m);
 }
 
 void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
-    if (!n.raw().is_object() || !n.Has("type")) n.Fail("a light needs a 'type' (environment, quad, distant)");
+    if (!n.raw().is_object() || !n.Has("type"))
+        n.Fail("a light needs a 'type' (environment, quad, distant)");
     const std::string type = n["type"].String();
     if (type == "environment") {
         n.Object({"type", "file", "constant", "intensity", "rotation"});
         EnvironmentLight e;
-        if (n.Has("file") == n.Has("constant")) n.Fail("an environment light needs exactly one of 'file' or 'constant'");
+        if (n.Has("file") == n.Has("constant"))
+            n.Fail("an environment light needs exactly one of 'file' or 'constant'");
         if (n.Has("file")) {
             e.path = Resolve(base, n["file"].String());
-            if (!fs::exists(e.path)) n["file"].Fail("environment map '" + e.path + "' does not exist");
+            if (!fs::exists(e.path))
+                n["file"].Fail("environment map '" + e.path + "' does not exist");
         } else {
             e.constant = n["constant"].Vec3(0.0f, 1e9f);
         }
@@ -271,12 +295,14 @@ void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
         if (!scene->environments.empty()) n.Fail("only one environment light is supported");
         scene->environments.push_back(e);
     } else if (type == "quad") {
-        n.Object({"type", "corner", "edge1", "edge2", "radiance", "two_sided", "transform", "keyframes"});
+        n.Object({"type", "corner", "edge1", "edge2", "radiance", "two_sided", "transform",
+                  "keyframes"});
         QuadLight q;
         q.corner = n["corner"].Vec3();
         q.edge1 = n["edge1"].Vec3();
         q.edge2 = n["edge2"].Vec3();
-        if (glm::length(glm::cross(q.edge1, q.edge2)) < 1e-12f) n["edge2"].Fail("quad light has zero area");
+        if (glm::length(glm::cross(q.edge1, q.edge2)) < 1e-12f)
+            n["edge2"].Fail("quad light has zero area");
         q.radiance = n["radiance"].Vec3(0.0f, 1e9f);
         if (n.Has("two_sided")) q.twoSided = n["two_sided"].Bool();
         q.transform = ParseTrack(n);
@@ -296,8 +322,8 @@ void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
 }
 
 void ParseRender(const Node& n, RenderSettings* s) {
-    n.Object({"resolution", "spp", "seconds", "integrator", "max_depth", "seed", "tessellation_rate",
-              "ao_samples", "ao_distance", "time"});
+    n.Object({"resolution", "spp", "seconds", "integrator", "max_depth", "seed",
+              "tessellation_rate", "ao_samples", "ao_distance", "time"});
     if (n.Has("resolution")) {
         const Node r = n["resolution"];
         if (r.ArraySize() != 2) r.Fail("expected [width, height]");
@@ -310,11 +336,14 @@ void ParseRender(const Node& n, RenderSettings* s) {
         s->integrator = n["integrator"].String();
         bool ok = false;
         for (const char* i : kIntegrators) ok |= s->integrator == i;
-        if (!ok) n["integrator"].Fail("unknown integrator '" + s->integrator + "' (valid: normal, ptex, uv, eyelight, ao, direct, path)");
+        if (!ok)
+            n["integrator"].Fail("unknown integrator '" + s->integrator +
+                                 "' (valid: normal, ptex, uv, eyelight, ao, direct, path)");
     }
     if (n.Has("max_depth")) s->maxDepth = n["max_depth"].Int(0, 1000);
     if (n.Has("seed")) s->seed = uint64_t(n["seed"].Int(0, 2147483647));
-    if (n.Has("tessellation_rate")) s->tessellationRate = n["tessellation_rate"].Number(1.0f, 64.0f);
+    if (n.Has("tessellation_rate"))
+        s->tessellationRate = n["tessellation_rate"].Number(1.0f, 64.0f);
     if (n.Has("ao_samples")) s->aoSamples = n["ao_samples"].Int(1, 1 << 16);
     if (n.Has("ao_distance")) s->aoDistance = n["ao_distance"].Number(1e-6f, 1e30f);
     if (n.Has("time")) s->time = n["time"].Number();
@@ -335,8 +364,10 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         // Turn the byte offset into line:column.
         size_t line = 1, col = 1;
         for (size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
-            if (text[i] == '\n') ++line, col = 1;
-            else ++col;
+            if (text[i] == '\n')
+                ++line, col = 1;
+            else
+                ++col;
         }
         std::string msg = e.what();
         const size_t p = msg.find("syntax error");
@@ -370,7 +401,8 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         Object obj;
         obj.name = o.Has("name") ? o["name"].String() : "object" + std::to_string(i);
         obj.objPath = Resolve(base, o["mesh"].String());
-        if (!fs::exists(obj.objPath)) o["mesh"].Fail("mesh file '" + obj.objPath + "' does not exist");
+        if (!fs::exists(obj.objPath))
+            o["mesh"].Fail("mesh file '" + obj.objPath + "' does not exist");
         auto it = meshIds.find(obj.objPath);
         if (it == meshIds.end()) {
             scene.meshes.push_back(LoadObj(obj.objPath, warnings));

@@ -37,7 +37,8 @@ TextureImage::TextureImage(const Texture& desc) : desc_(desc) {
 
 glm::vec3 TextureImage::Eval(glm::vec2 uv) const {
     if (desc_.kind == Texture::Kind::Checker) {
-        const int cx = int(std::floor(uv.x * desc_.scale)), cy = int(std::floor(uv.y * desc_.scale));
+        const int cx = int(std::floor(uv.x * desc_.scale)),
+                  cy = int(std::floor(uv.y * desc_.scale));
         return ((cx + cy) & 1) ? desc_.colorB : desc_.colorA;
     }
     // Bilinear with wrapping; v = 0 is the bottom row of the image (OBJ convention).

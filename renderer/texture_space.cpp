@@ -10,7 +10,8 @@ namespace texcache {
 void CheckFilterRadius(int radius, const std::string& where) {
     // 2r+1 = 65 texels a side is far past any useful kernel (the paper uses up to 21).
     if (radius < 0 || radius > 32)
-        throw InputError(where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
+        throw InputError(
+            where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
 }
 
 TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options)
@@ -43,7 +44,8 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
         }
         const Material& m = scene.materials[scene.objects[o].material];
         const std::string where = scene.path + ": material '" + m.name + "'";
-        filterOf_.push_back(m.cacheFilter.empty() ? options.filter : ParseTextureFilter(m.cacheFilter, where));
+        filterOf_.push_back(m.cacheFilter.empty() ? options.filter
+                                                  : ParseTextureFilter(m.cacheFilter, where));
         radiusOf_.push_back(m.cacheRadius >= 0 ? m.cacheRadius : options.radius);
         CheckFilterRadius(radiusOf_.back(), where);
     }

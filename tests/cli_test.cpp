@@ -44,7 +44,7 @@ fs::path Dir() {
 TEST(Cli, RendersAnObjToExrAndPng) {
     const fs::path out = Dir() / "cube.exr";
     const CliRun r = Texcache("render " + test::MeshPath("catmark_cube") +
-                           " --spp 2 --resolution 64x32 --integrator ao -q -o " + out.string());
+                              " --spp 2 --resolution 64x32 --integrator ao -q -o " + out.string());
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_NE(r.out.find("Mrays/s"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("peak memory"), std::string::npos) << r.out;
@@ -55,15 +55,17 @@ TEST(Cli, RendersAnObjToExrAndPng) {
 
 TEST(Cli, WritesRequestedAovLayers) {
     const fs::path out = Dir() / "aov.exr";
-    const CliRun r = Texcache("render " + test::MeshPath("catmark_torus") +
-                           " --spp 1 --resolution 32x32 --integrator normal --aov albedo,depth,ptex -q -o " +
-                           out.string());
+    const CliRun r =
+        Texcache("render " + test::MeshPath("catmark_torus") +
+                 " --spp 1 --resolution 32x32 --integrator normal --aov albedo,depth,ptex -q -o " +
+                 out.string());
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_EQ(ReadImage(out.string()).channels, 3 + 3 + 1 + 3);
 }
 
 TEST(Cli, HelpOnEverySubcommand) {
-    for (const char* c : {"--help", "render --help", "compare --help", "bench --help", "bench rays --help"}) {
+    for (const char* c :
+         {"--help", "render --help", "compare --help", "bench --help", "bench rays --help"}) {
         const CliRun r = Texcache(c);
         EXPECT_EQ(r.code, 0) << c << ": " << r.out;
         EXPECT_NE(r.out.find("Usage"), std::string::npos) << c;
@@ -77,25 +79,27 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
     WriteImage(notLatLong.string(), Image(16, 16, 3, 1.0f));
     const fs::path scene = Dir() / "env.json";
     std::ofstream(scene) << R"({"camera": {"position": [0,0,5], "look_at": [0,0,0]},
-        "objects": [{"mesh": ")" << test::MeshPath("catmark_cube") << R"("}],
-        "lights": [{"type": "environment", "file": ")" << notLatLong.string() << R"("}]})";
+        "objects": [{"mesh": ")"
+                         << test::MeshPath("catmark_cube") << R"("}],
+        "lights": [{"type": "environment", "file": ")"
+                         << notLatLong.string() << R"("}]})";
     struct Case {
         std::string args, expect;
     };
     const std::string cube = test::MeshPath("catmark_cube");
-    for (const Case& c : {Case{"render /no/such/scene.json", "/no/such/scene.json"},
-                          Case{"render " + bad.string(), "bad.obj:4"},
-                          Case{"render " + cube + " --spp -5", "--spp"},
-                          Case{"render " + cube + " --resolution 10", "--resolution"},
-                          Case{"render " + cube + " --integrator magic", "valid: normal"},
-                          Case{"render " + cube + " -o out.tiff", "--output"},
-                          Case{"render " + cube + " --shading texture --filter fancy", "valid: none, normal"},
-                          Case{"render " + cube + " --shading texture --filter-radius -1", "--filter-radius"},
-                          Case{"render " + cube + " --shading texture --sample-cache-mb 0", "--sample-cache-mb"},
-                          Case{"render " + cube + " --shading texture --lod-bias 99", "--lod-bias"},
-                          Case{"render " + scene.string() + " -o " + (Dir() / "x.exr").string(), "lat-long"},
-                          Case{"compare /no/a.exr /no/b.exr", "/no/a.exr"},
-                          Case{"render", "scene"}}) {
+    for (const Case& c :
+         {Case{"render /no/such/scene.json", "/no/such/scene.json"},
+          Case{"render " + bad.string(), "bad.obj:4"},
+          Case{"render " + cube + " --spp -5", "--spp"},
+          Case{"render " + cube + " --resolution 10", "--resolution"},
+          Case{"render " + cube + " --integrator magic", "valid: normal"},
+          Case{"render " + cube + " -o out.tiff", "--output"},
+          Case{"render " + cube + " --shading texture --filter fancy", "valid: none, normal"},
+          Case{"render " + cube + " --shading texture --filter-radius -1", "--filter-radius"},
+          Case{"render " + cube + " --shading texture --sample-cache-mb 0", "--sample-cache-mb"},
+          Case{"render " + cube + " --shading texture --lod-bias 99", "--lod-bias"},
+          Case{"render " + scene.string() + " -o " + (Dir() / "x.exr").string(), "lat-long"},
+          Case{"compare /no/a.exr /no/b.exr", "/no/a.exr"}, Case{"render", "scene"}}) {
         const CliRun r = Texcache(c.args);
         EXPECT_EQ(r.code, 2) << c.args << ": " << r.out;
         EXPECT_NE(r.out.find(c.expect), std::string::npos) << c.args << ": " << r.out;
@@ -118,7 +122,8 @@ TEST(Cli, CompareReportsMetrics) {
     WriteImage(a.string(), Image(16, 8, 3, 0.5f));
     WriteImage(b.string(), Image(16, 8, 3, 0.6f));
     WriteImage(c.string(), Image(8, 8, 3, 0.6f));
-    const CliRun r = Texcache("compare " + a.string() + " " + b.string() + " --error-image " + (Dir() / "err.png").string());
+    const CliRun r = Texcache("compare " + a.string() + " " + b.string() + " --error-image " +
+                              (Dir() / "err.png").string());
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_NE(r.out.find("relMSE"), std::string::npos);
     EXPECT_NE(r.out.find("SSIM"), std::string::npos);

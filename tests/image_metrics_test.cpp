@@ -64,7 +64,7 @@ TEST(ImageIO, FailedWritesNeverClobberAGoodFile) {
     const std::string path = Temp("good.png");
     WriteImage(path, Image(2, 2, 3, 0.25f));
     const auto before = fs::file_size(path);
-    EXPECT_THROW(WriteImage(path, Image()), InputError);                         // empty image
+    EXPECT_THROW(WriteImage(path, Image()), InputError);                        // empty image
     EXPECT_THROW(WriteImage(Temp("nodir/x.exr"), Image(2, 2, 3)), InputError);  // missing dir
     EXPECT_THROW(WriteImage(Temp("x.bmpx"), Image(2, 2, 3)), InputError);       // unknown type
     EXPECT_EQ(fs::file_size(path), before);

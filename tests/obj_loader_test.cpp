@@ -39,7 +39,8 @@ TEST(ObjLoader, ParsesFacesInEveryIndexForm) {
     EXPECT_EQ(c.faceUvIndices[6], 3);
     EXPECT_TRUE(w.empty());
     // v//vn and plain v, CRLF line ends and trailing spaces
-    const ControlCage d = ParseObj(std::string(kQuad) + "f 1//1 2//1 3//1 4//1  \r\nf 1 2 3\r\n", "t.obj", &w);
+    const ControlCage d =
+        ParseObj(std::string(kQuad) + "f 1//1 2//1 3//1 4//1  \r\nf 1 2 3\r\n", "t.obj", &w);
     EXPECT_EQ(d.numFaces(), 2);
     EXPECT_TRUE(d.uvs.empty());
 }
@@ -72,14 +73,17 @@ TEST(ObjLoader, NgonsAndEveryTag) {
 
 TEST(ObjLoader, TagsNamingMissingEdgesOrVerticesWarnAndAreIgnored) {
     std::vector<std::string> w;
-    const ControlCage c = ParseObj(std::string(kQuad) + "f 1 2 3 4\nt crease 2/1/0 0 2 3\nt corner 1/1/0 9 1\nt hole 1/0/0 7\n",
-                                   "m.obj", &w);
+    const ControlCage c =
+        ParseObj(std::string(kQuad) +
+                     "f 1 2 3 4\nt crease 2/1/0 0 2 3\nt corner 1/1/0 9 1\nt hole 1/0/0 7\n",
+                 "m.obj", &w);
     EXPECT_TRUE(c.creaseEdges.empty());  // 0-2 is a diagonal, not an edge
     EXPECT_TRUE(c.cornerVertices.empty());
     EXPECT_TRUE(c.holes.empty());
     ASSERT_EQ(w.size(), 3u);
     EXPECT_NE(w[0].find("m.obj:6"), std::string::npos) << w[0];
-    EXPECT_EQ(c.boundary, BoundaryInterpolation::EdgeOnly);  // absent tag: OpenSubdiv tools' default
+    EXPECT_EQ(c.boundary,
+              BoundaryInterpolation::EdgeOnly);  // absent tag: OpenSubdiv tools' default
 }
 
 TEST(ObjLoader, BadInputNamesFileLineAndProblem) {
@@ -87,15 +91,15 @@ TEST(ObjLoader, BadInputNamesFileLineAndProblem) {
         std::string text, expect;
     };
     const std::vector<Case> cases = {
-        {"v 0 0 0\nv 1 0 0\nv 1 x 0\n", "bad.obj:3"},                    // malformed number
-        {"v 0 0 0\nv 1 0 nan\n", "bad.obj:2"},                            // NaN coordinate
-        {"v 0 0 0\nv inf 0 0\n", "non-finite"},                           // Inf coordinate
-        {std::string(kQuad) + "f 1 2 5\n", "out of range"},               // index past the end
-        {std::string(kQuad) + "f 0 1 2\n", "bad.obj:5"},                  // zero index
-        {std::string(kQuad) + "f -9 1 2\n", "out of range"},              // relative before the start
-        {std::string(kQuad) + "f 1 2\n", "at least 3"},                   // too few vertices
-        {std::string(kQuad) + "f 1 2 2 3\n", "repeats vertex"},           // degenerate face
-        {std::string(kQuad) + "vt 0 0\nf 1/1 2 3\n", "some corners"},     // mixed uvs
+        {"v 0 0 0\nv 1 0 0\nv 1 x 0\n", "bad.obj:3"},                  // malformed number
+        {"v 0 0 0\nv 1 0 nan\n", "bad.obj:2"},                         // NaN coordinate
+        {"v 0 0 0\nv inf 0 0\n", "non-finite"},                        // Inf coordinate
+        {std::string(kQuad) + "f 1 2 5\n", "out of range"},            // index past the end
+        {std::string(kQuad) + "f 0 1 2\n", "bad.obj:5"},               // zero index
+        {std::string(kQuad) + "f -9 1 2\n", "out of range"},           // relative before the start
+        {std::string(kQuad) + "f 1 2\n", "at least 3"},                // too few vertices
+        {std::string(kQuad) + "f 1 2 2 3\n", "repeats vertex"},        // degenerate face
+        {std::string(kQuad) + "vt 0 0\nf 1/1 2 3\n", "some corners"},  // mixed uvs
         {std::string(kQuad) + "f 1 2 3\nt crease 2/1/0 0 1\n", "fewer"},  // tag count mismatch
         {std::string(kQuad) + "f 1 2 3\nt crease 2/1/0 0 1 2 3\n", "more values"},
         {std::string(kQuad) + "f 1 2 3\nt crease two 0 1 2\n", "nInts/nFloats"},
@@ -116,12 +120,13 @@ TEST(ObjLoader, BundledMeshesHaveTheirDocumentedCounts) {
         const char* name;
         int v, f, creases;
     };
-    for (const Expect& e : {Expect{"catmark_car", 1642, 1575, 314}, Expect{"catmark_bishop", 917, 968, 224},
-                            Expect{"catmark_rook", 768, 777, 280}, Expect{"catmark_pawn", 601, 588, 120},
-                            Expect{"catmark_helmet", 72, 58, -1}, Expect{"catmark_cube", 8, 6, 0},
-                            Expect{"catmark_torus", 32, 32, 0}, Expect{"catmark_pyramid", 5, 5, 0},
-                            Expect{"catmark_nonquads", 33, 17, -1}, Expect{"catmark_xord_interior", 151, 71, -1},
-                            Expect{"catmark_hole_test1", 8, 6, 0}}) {
+    for (const Expect& e :
+         {Expect{"catmark_car", 1642, 1575, 314}, Expect{"catmark_bishop", 917, 968, 224},
+          Expect{"catmark_rook", 768, 777, 280}, Expect{"catmark_pawn", 601, 588, 120},
+          Expect{"catmark_helmet", 72, 58, -1}, Expect{"catmark_cube", 8, 6, 0},
+          Expect{"catmark_torus", 32, 32, 0}, Expect{"catmark_pyramid", 5, 5, 0},
+          Expect{"catmark_nonquads", 33, 17, -1}, Expect{"catmark_xord_interior", 151, 71, -1},
+          Expect{"catmark_hole_test1", 8, 6, 0}}) {
         std::vector<std::string> w;
         const ControlCage c = LoadObj(test::MeshPath(e.name), &w);
         EXPECT_EQ(c.numVertices(), e.v) << e.name;
@@ -132,7 +137,8 @@ TEST(ObjLoader, BundledMeshesHaveTheirDocumentedCounts) {
     }
     std::vector<std::string> w;
     EXPECT_EQ(LoadObj(test::MeshPath("catmark_hole_test1"), &w).holes.size(), 1u);
-    EXPECT_EQ(LoadObj(test::MeshPath("catmark_helmet"), &w).boundary, BoundaryInterpolation::EdgeAndCorner);
+    EXPECT_EQ(LoadObj(test::MeshPath("catmark_helmet"), &w).boundary,
+              BoundaryInterpolation::EdgeAndCorner);
 }
 
 }  // namespace

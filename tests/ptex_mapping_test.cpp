@@ -22,7 +22,9 @@ float BBoxDiagonal(const ControlCage& c) {
     return glm::length(hi - lo);
 }
 
-glm::vec3 V(const std::array<float, 3>& a) { return {a[0], a[1], a[2]}; }
+glm::vec3 V(const std::array<float, 3>& a) {
+    return {a[0], a[1], a[2]};
+}
 
 class PtexMappingTest : public ::testing::TestWithParam<std::string> {};
 
@@ -49,10 +51,14 @@ ControlCage WithoutFractionalSharpness(ControlCage c) {
     ControlCage out = c;
     out.creaseEdges.clear(), out.creaseWeights.clear();
     for (size_t i = 0; i < c.creaseEdges.size(); ++i)
-        if (c.creaseWeights[i] >= 1.0f) out.creaseEdges.push_back(c.creaseEdges[i]), out.creaseWeights.push_back(c.creaseWeights[i]);
+        if (c.creaseWeights[i] >= 1.0f)
+            out.creaseEdges.push_back(c.creaseEdges[i]),
+                out.creaseWeights.push_back(c.creaseWeights[i]);
     out.cornerVertices.clear(), out.cornerWeights.clear();
     for (size_t i = 0; i < c.cornerVertices.size(); ++i)
-        if (c.cornerWeights[i] >= 1.0f) out.cornerVertices.push_back(c.cornerVertices[i]), out.cornerWeights.push_back(c.cornerWeights[i]);
+        if (c.cornerWeights[i] >= 1.0f)
+            out.cornerVertices.push_back(c.cornerVertices[i]),
+                out.cornerWeights.push_back(c.cornerWeights[i]);
     return out;
 }
 
@@ -102,10 +108,12 @@ TEST_P(PtexMappingTest, OpenSubdivDerivativesMatchFiniteDifferences) {
     for (int f = 0; f < topo.NumPtexFaces(); f += 3) {
         LimitPoint p, pu0, pu1, pv0, pv1;
         const float u = 0.37f, v = 0.61f;
-        if (!osd.Eval(f, u, v, &p) || !osd.Eval(f, u + h, v, &pu1) || !osd.Eval(f, u, v + h, &pv1) ||
-            !osd.Eval(f, u - h, v, &pu0) || !osd.Eval(f, u, v - h, &pv0))
+        if (!osd.Eval(f, u, v, &p) || !osd.Eval(f, u + h, v, &pu1) ||
+            !osd.Eval(f, u, v + h, &pv1) || !osd.Eval(f, u - h, v, &pu0) ||
+            !osd.Eval(f, u, v - h, &pv0))
             continue;
-        const glm::vec3 fdU = (V(pu1.P) - V(pu0.P)) / (2 * h), fdV = (V(pv1.P) - V(pv0.P)) / (2 * h);
+        const glm::vec3 fdU = (V(pu1.P) - V(pu0.P)) / (2 * h),
+                        fdV = (V(pv1.P) - V(pv0.P)) / (2 * h);
         // Plus float rounding of the positions amplified by 1/h (faces with tiny derivatives).
         const glm::vec3 P = V(p.P);
         const float pmag = std::max({1.0f, std::abs(P.x), std::abs(P.y), std::abs(P.z)});
@@ -200,8 +208,10 @@ TEST_P(PtexMappingTest, RegularPatchFastPathMatchesOpenSubdiv) {
                 ASSERT_TRUE(osd.Eval(f, u, v, &ref));
                 const float scale = glm::length(V(ref.dPdu)) + glm::length(V(ref.dPdv));
                 ASSERT_LE(glm::length(glm::vec3(P[0], P[1], P[2]) - V(ref.P)), 1e-5f * diag) << f;
-                ASSERT_LE(glm::length(glm::vec3(du[0], du[1], du[2]) - V(ref.dPdu)), 1e-3f * scale) << f;
-                ASSERT_LE(glm::length(glm::vec3(dv[0], dv[1], dv[2]) - V(ref.dPdv)), 1e-3f * scale) << f;
+                ASSERT_LE(glm::length(glm::vec3(du[0], du[1], du[2]) - V(ref.dPdu)), 1e-3f * scale)
+                    << f;
+                ASSERT_LE(glm::length(glm::vec3(dv[0], dv[1], dv[2]) - V(ref.dPdv)), 1e-3f * scale)
+                    << f;
             }
     }
     if (GetParam() == "catmark_torus") {
@@ -246,7 +256,8 @@ TEST(PtexMapping, HoleFacesAreNeverHit) {
     const PtexTopology& topo = rs.Topology(0);
     int hits = 0;
     for (int i = 0; i < 2000; ++i) {
-        const float a = 6.2831853f * float(i) / 2000.0f, b = 3.14159f * float((i * 37) % 100) / 100.0f;
+        const float a = 6.2831853f * float(i) / 2000.0f,
+                    b = 3.14159f * float((i * 37) % 100) / 100.0f;
         const glm::vec3 d(std::sin(b) * std::cos(a), std::cos(b), std::sin(b) * std::sin(a));
         Ray ray;
         ray.org = -4.0f * d;
@@ -254,7 +265,8 @@ TEST(PtexMapping, HoleFacesAreNeverHit) {
         Hit hit;
         if (!rs.Intersect(ray, &hit)) continue;
         ++hits;
-        ASSERT_NE(topo.CoarseFace(EmbreeToPtex(topo, hit.primID, hit.U, hit.V).face), cage.holes[0]);
+        ASSERT_NE(topo.CoarseFace(EmbreeToPtex(topo, hit.primID, hit.U, hit.V).face),
+                  cage.holes[0]);
     }
     EXPECT_GT(hits, 1000);
 }

@@ -76,8 +76,8 @@ TEST(Render, AmbientOcclusionOfOpenPlaneIsOne) {
     for (float v : r.beauty.data) ASSERT_EQ(v, 1.0f);
 }
 
-// A diffuse plane lit by a distant light of irradiance E at angle theta: L = albedo/pi E cos(theta).
-// Deterministic (one delta light, no occluder): tolerance 1e-4 relative.
+// A diffuse plane lit by a distant light of irradiance E at angle theta: L = albedo/pi E
+// cos(theta). Deterministic (one delta light, no occluder): tolerance 1e-4 relative.
 TEST(Render, DistantLightCosineLaw) {
     for (float thetaDeg : {0.0f, 30.0f, 60.0f, 85.0f}) {
         Scene s = test::OneObjectScene(test::PlaneCage(10.0f), glm::vec3(0.5f));
@@ -125,11 +125,15 @@ void CheckDifferentials(const ControlCage& cage, glm::vec3 eye, float tolerance,
             const SurfaceInteraction sx0 = rs.Interact(rx0, hx0), sx1 = rs.Interact(rx1, hx1);
             const SurfaceInteraction sy0 = rs.Interact(ry0, hy0), sy1 = rs.Interact(ry1, hy1);
             const int f = s0.ptex.face;
-            if (sx0.ptex.face != f || sx1.ptex.face != f || sy0.ptex.face != f || sy1.ptex.face != f) continue;
+            if (sx0.ptex.face != f || sx1.ptex.face != f || sy0.ptex.face != f ||
+                sy1.ptex.face != f)
+                continue;
             // Grazing pixels have huge footprints where second-order terms dominate: skip them.
             if (std::abs(glm::dot(s0.N, r0.dir)) < 0.3f) continue;
-            const float fdudx = 0.5f * (sx1.ptex.u - sx0.ptex.u), fdvdx = 0.5f * (sx1.ptex.v - sx0.ptex.v);
-            const float fdudy = 0.5f * (sy1.ptex.u - sy0.ptex.u), fdvdy = 0.5f * (sy1.ptex.v - sy0.ptex.v);
+            const float fdudx = 0.5f * (sx1.ptex.u - sx0.ptex.u),
+                        fdvdx = 0.5f * (sx1.ptex.v - sx0.ptex.v);
+            const float fdudy = 0.5f * (sy1.ptex.u - sy0.ptex.u),
+                        fdvdy = 0.5f * (sy1.ptex.v - sy0.ptex.v);
             const float sx_ = std::hypot(fdudx, fdvdx), sy_ = std::hypot(fdudy, fdvdy);
             EXPECT_NEAR(s0.dudx, fdudx, tolerance * sx_ + 1e-6f) << x << "," << y;
             EXPECT_NEAR(s0.dvdx, fdvdx, tolerance * sx_ + 1e-6f) << x << "," << y;

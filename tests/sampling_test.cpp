@@ -95,7 +95,8 @@ TEST(Sampling, GgxNormalsAreNormalizedAndVndfMatchesItsPdf) {
     const glm::vec3 grazing(1.0f, 0.0f, 1e-6f), below(0.0f, 0.6f, -0.8f);
     EXPECT_EQ(GgxPdfReflect(grazing, below, 0.3f), 0.0f);
     EXPECT_TRUE(std::isfinite(GgxG(grazing, glm::vec3(0, 0, 1), 0.3f)));
-    EXPECT_TRUE(std::isfinite(GgxPdfReflect(glm::normalize(glm::vec3(1, 0, 1e-6f)), glm::vec3(0, 0, 1), 0.3f)));
+    EXPECT_TRUE(std::isfinite(
+        GgxPdfReflect(glm::normalize(glm::vec3(1, 0, 1e-6f)), glm::vec3(0, 0, 1), 0.3f)));
     EXPECT_EQ(GgxD(below, 0.3f), 0.0f);
 }
 
@@ -123,7 +124,8 @@ std::string WriteEnv(int w, int h, int bx, int by, float bright) {
     for (int k = 0; k < 3; ++k) img.At(bx, by)[k] = bright;
     const auto dir = std::filesystem::path(::testing::TempDir()) / "texcache_env";
     std::filesystem::create_directories(dir);
-    const std::string path = (dir / ("env_" + std::to_string(w) + "x" + std::to_string(h) + ".exr")).string();
+    const std::string path =
+        (dir / ("env_" + std::to_string(w) + "x" + std::to_string(h) + ".exr")).string();
     WriteImage(path, img);
     return path;
 }
@@ -171,11 +173,13 @@ TEST(EnvironmentMap, ImportanceSamplingIsUnbiasedOnABundledMap) {
 
 TEST(EnvironmentMap, RotationTurnsTheMapAboutUp) {
     const std::string path = WriteEnv(64, 32, 16, 16, 500.0f);
-    const EnvironmentMap a = EnvironmentMap::Load(path, 1.0f, 0.0f), b = EnvironmentMap::Load(path, 1.0f, 90.0f);
+    const EnvironmentMap a = EnvironmentMap::Load(path, 1.0f, 0.0f),
+                         b = EnvironmentMap::Load(path, 1.0f, 90.0f);
     Rng rng(5, 0);
     glm::vec3 da, db;
     float pdf;
-    for (int i = 0; i < 50; ++i) a.Sample(rng.Next2D(), &da, &pdf);  // any sample: the sun dominates
+    for (int i = 0; i < 50; ++i)
+        a.Sample(rng.Next2D(), &da, &pdf);  // any sample: the sun dominates
     a.Sample({0.5f, 0.5f}, &da, &pdf);
     b.Sample({0.5f, 0.5f}, &db, &pdf);
     // Rotating by +90 degrees is the right-handed R_y(90): (x, y, z) -> (z, y, -x).

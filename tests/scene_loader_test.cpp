@@ -24,16 +24,20 @@ std::string WriteScene(const std::string& name, const std::string& json) {
     return p.string();
 }
 
-std::string Mesh() { return "\"" + test::MeshPath("catmark_cube") + "\""; }
+std::string Mesh() {
+    return "\"" + test::MeshPath("catmark_cube") + "\"";
+}
 
 std::string Valid() {
     return R"({
   "camera": {"position": [0, 1, 5], "look_at": [0, 0, 0], "fov": 45, "shutter": [0, 0.5]},
   "materials": {"red": {"type": "ggx", "albedo": [0.8, 0.1, 0.1], "roughness": 0.3},
                 "chk": {"albedo": {"texture": "checker", "colors": [[1,1,1],[0,0,0]], "scale": 4}}},
-  "objects": [{"name": "a", "mesh": )" + Mesh() + R"(, "material": "red",
+  "objects": [{"name": "a", "mesh": )" +
+           Mesh() + R"(, "material": "red",
                "keyframes": [{"time": 0, "translate": [0,0,0]}, {"time": 1, "translate": [1,0,0], "rotate": [90, 0, 1, 0]}]},
-              {"mesh": )" + Mesh() + R"(, "material": "chk", "transform": {"scale": 2}}],
+              {"mesh": )" +
+           Mesh() + R"(, "material": "chk", "transform": {"scale": 2}}],
   "lights": [{"type": "environment", "constant": [1, 1, 1]},
              {"type": "quad", "corner": [0,2,0], "edge1": [1,0,0], "edge2": [0,0,1], "radiance": [5,5,5]},
              {"type": "distant", "direction": [0,-1,0], "irradiance": [2,2,2]}],
@@ -72,7 +76,8 @@ TEST(SceneLoader, ValidSceneRoundTrips) {
 TEST(SceneLoader, BareObjIsFramedByTheDefaultCamera) {
     std::vector<std::string> w;
     for (const char* name : {"catmark_car", "catmark_pawn", "catmark_torus"}) {
-        const Scene s = SceneFromObj(test::MeshPath(name), test::SceneDir() + "/envmaps/studio.exr", &w);
+        const Scene s =
+            SceneFromObj(test::MeshPath(name), test::SceneDir() + "/envmaps/studio.exr", &w);
         const CameraModel cam(s.camera, 0.0f, 640, 360);
         for (const auto& p : s.meshes[0].positions) {
             glm::vec2 film;
@@ -126,7 +131,8 @@ TEST(SceneLoader, BadInputNamesFileAndKey) {
 
 TEST(SceneLoader, JsonSyntaxErrorsReportLineAndColumn) {
     std::vector<std::string> w;
-    const std::string path = WriteScene("syntax.json", "{\n  \"camera\": {\n    \"fov\": 45,,\n  }\n}\n");
+    const std::string path =
+        WriteScene("syntax.json", "{\n  \"camera\": {\n    \"fov\": 45,,\n  }\n}\n");
     try {
         LoadScene(path, &w);
         FAIL();

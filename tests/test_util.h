@@ -9,15 +9,22 @@
 
 namespace texcache::test {
 
-inline std::string SceneDir() { return std::string(TEXCACHE_SOURCE_DIR) + "/scenes"; }
-inline std::string MeshPath(const std::string& name) { return SceneDir() + "/meshes/" + name + ".obj"; }
+inline std::string SceneDir() {
+    return std::string(TEXCACHE_SOURCE_DIR) + "/scenes";
+}
+inline std::string MeshPath(const std::string& name) {
+    return SceneDir() + "/meshes/" + name + ".obj";
+}
 
 inline const std::vector<std::string>& BundledMeshes() {
     static const std::vector<std::string> names = {
-        "catmark_car",   "catmark_bishop",        "catmark_rook",          "catmark_pawn",
-        "catmark_helmet", "catmark_cube",         "catmark_torus",         "catmark_pyramid",
-        "catmark_cube_creases1", "catmark_cubes_infsharp", "catmark_tent_creases1",
-        "catmark_hole_test1", "catmark_nonquads", "catmark_xord_interior"};
+        "catmark_car",           "catmark_bishop",
+        "catmark_rook",          "catmark_pawn",
+        "catmark_helmet",        "catmark_cube",
+        "catmark_torus",         "catmark_pyramid",
+        "catmark_cube_creases1", "catmark_cubes_infsharp",
+        "catmark_tent_creases1", "catmark_hole_test1",
+        "catmark_nonquads",      "catmark_xord_interior"};
     return names;
 }
 

@@ -119,7 +119,8 @@ TEST(TextureSpace, WarmCacheHitsEveryTexelOnTheSecondFrame) {
     EXPECT_GE(double(c.texelHits), 0.99 * double(c.lookups));
     EXPECT_EQ(c.texelMisses, c.texelEvictions + c.texelUncached);  // every miss is a slot conflict
     EXPECT_LT(c.samplesShaded, c.lookups / 20);
-    EXPECT_LE(cache.cache().BytesUsed(), o.texture.cache.sampleCacheBytes + o.texture.cache.texelCacheBytes);
+    EXPECT_LE(cache.cache().BytesUsed(),
+              o.texture.cache.sampleCacheBytes + o.texture.cache.texelCacheBytes);
 }
 
 // Texture-space diffuse indirect (path integrator): finite, and close to per-hit path tracing

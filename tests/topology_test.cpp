@@ -47,7 +47,9 @@ TEST_P(TopologyTest, SharedEdgesAreContinuousOnTheLimitSurface) {
     const PtexTopology topo(cage);
     const LimitSurface osd(cage, 8);
     glm::vec3 lo(1e30f), hi(-1e30f);
-    for (const auto& p : cage.positions) lo = glm::min(lo, glm::vec3(p[0], p[1], p[2])), hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
+    for (const auto& p : cage.positions)
+        lo = glm::min(lo, glm::vec3(p[0], p[1], p[2])),
+        hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
     const float tol = 5e-4f * glm::length(hi - lo);
     for (int f = 0; f < topo.NumPtexFaces(); ++f)
         for (int e = 0; e < 4; ++e)
@@ -58,7 +60,8 @@ TEST_P(TopologyTest, SharedEdgesAreContinuousOnTheLimitSurface) {
                 EdgeToUv(e, along, 0.0f, &fu, &fv);
                 LimitPoint a, b;
                 if (!osd.Eval(f, fu, fv, &a) || !osd.Eval(g, u, v, &b)) continue;
-                const float d = glm::length(glm::vec3(a.P[0] - b.P[0], a.P[1] - b.P[1], a.P[2] - b.P[2]));
+                const float d =
+                    glm::length(glm::vec3(a.P[0] - b.P[0], a.P[1] - b.P[1], a.P[2] - b.P[2]));
                 ASSERT_LE(d, tol) << GetParam() << " face " << f << " edge " << e << " -> " << g;
             }
 }
@@ -72,7 +75,8 @@ TEST_P(TopologyTest, FootprintsAtEveryCornerAreWellFormed) {
     for (int f = 0; f < grids.NumFaces(); ++f)
         for (int mip : {0, 2, 100}) {
             const int m = grids.ClampMip(f, mip), res = grids.Res(f, m);
-            for (auto [iu, iv] : {std::pair{0, 0}, std::pair{res - 1, 0}, std::pair{0, res - 1}, std::pair{res - 1, res - 1}}) {
+            for (auto [iu, iv] : {std::pair{0, 0}, std::pair{res - 1, 0}, std::pair{0, res - 1},
+                                  std::pair{res - 1, res - 1}}) {
                 GatherFootprint(grids, f, m, iu, iv, 6, &fp);
                 ASSERT_FALSE(fp.empty());
                 ASSERT_LE(fp.size(), 169u);

@@ -23,7 +23,8 @@ struct Fixture {
     ShadingCache<Sample, float> cache{CacheSettings{}};
     std::vector<CacheHit> hits;
     Fixture() {
-        const int mesh = cache.AddMesh(test::GridCage(4), 1.0f / 256.0f);  // 256 texels a face at mip 0
+        const int mesh =
+            cache.AddMesh(test::GridCage(4), 1.0f / 256.0f);  // 256 texels a face at mip 0
         for (int i = 0; i < 4096; ++i) {
             const float u = (float(i % 64) + 0.5f) / 256.0f, v = (float(i / 64) + 0.5f) / 256.0f;
             hits.push_back({mesh, 5, u, v, 1.0f / 256.0f, 0.0f, 0.0f, 1.0f / 256.0f});

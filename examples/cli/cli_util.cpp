@@ -6,8 +6,8 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <fstream>
 #include <filesystem>
+#include <fstream>
 
 #include "renderer/scene_loader.h"
 
@@ -34,7 +34,8 @@ Scene LoadSceneOrObj(const std::string& path, std::vector<std::string>* warnings
     if (!fs::exists(path)) throw InputError(path, "no such file");
     const std::string ext = Extension(path);
     if (ext == ".obj")
-        return SceneFromObj(path, std::string(TEXCACHE_SCENES_DIR) + "/envmaps/studio.exr", warnings);
+        return SceneFromObj(path, std::string(TEXCACHE_SCENES_DIR) + "/envmaps/studio.exr",
+                            warnings);
     if (ext == ".json") return LoadScene(path, warnings);
     throw InputError(path, "unknown scene type '" + ext + "' (expected .json or .obj)");
 }
@@ -48,7 +49,8 @@ OutputPaths PlanOutputs(const std::string& output, bool pngBesideExr) {
     } else if (ext == ".png") {
         p.png = output;
     } else {
-        throw InputError("--output", "unsupported image type '" + ext + "' (expected .exr or .png)");
+        throw InputError("--output",
+                         "unsupported image type '" + ext + "' (expected .exr or .png)");
     }
     const fs::path dir = fs::path(output).parent_path();
     if (!dir.empty() && !fs::is_directory(dir))

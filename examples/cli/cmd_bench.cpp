@@ -2,8 +2,8 @@
 // `texcache bench rays`: the AO integrator's ray throughput against a raw Embree loop
 // (rtcIntersect1 + rtcOccluded1) over exactly the same rays, measured in the same process and
 // interleaved so that a noisy shared machine affects both alike.
-#include <xmmintrin.h>
 #include <pmmintrin.h>
+#include <xmmintrin.h>
 
 #include <algorithm>
 #include <atomic>
@@ -19,8 +19,8 @@
 #include "renderer/camera.h"
 #include "renderer/integrator.h"
 #include "renderer/metrics.h"
-#include "renderer/scene_loader.h"
 #include "renderer/sampling.h"
+#include "renderer/scene_loader.h"
 
 namespace texcache::cli {
 
@@ -62,7 +62,8 @@ void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<R
                 for (int i = 0; i < opt.aoSamples; ++i) {
                     const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
                     if (glm::dot(wi, si.Ng) <= 0.0f) continue;
-                    const float scale = std::max({1.0f, std::abs(si.P.x), std::abs(si.P.y), std::abs(si.P.z)});
+                    const float scale =
+                        std::max({1.0f, std::abs(si.P.x), std::abs(si.P.y), std::abs(si.P.z)});
                     Ray r{si.P + 2e-5f * scale * si.Ng, wi, 0.0f, opt.aoDistance, ray.time};
                     occ->push_back(toRtc(r));
                 }
@@ -105,8 +106,8 @@ double RawLoop(RTCScene scene, const std::vector<RTCRay>& cam, const std::vector
 }
 
 /// AO render options shared by the benchmarks, checked like the render command's.
-RenderOptions AoBenchOptions(const Scene& scene, const std::string& resolution, int spp, int aoSamples,
-                             int repeats) {
+RenderOptions AoBenchOptions(const Scene& scene, const std::string& resolution, int spp,
+                             int aoSamples, int repeats) {
     RenderOptions o;
     o.integrator = IntegratorKind::AO;
     ParseResolution(resolution, &o.width, &o.height);
@@ -137,7 +138,8 @@ int RunBench(const BenchArgs& a) {
     RecordAoRays(rs, opt, &cam, &occ);
     const double rays = double(cam.size() + occ.size());
     std::printf("scene %s, %dx%d, %d spp, %d AO rays per hit: %zu camera + %zu occlusion rays\n",
-                a.scene.c_str(), opt.width, opt.height, opt.spp, opt.aoSamples, cam.size(), occ.size());
+                a.scene.c_str(), opt.width, opt.height, opt.spp, opt.aoSamples, cam.size(),
+                occ.size());
 
     Render(rs, opt);                                             // warm-up
     RawLoop(static_cast<RTCScene>(rs.EmbreeScene()), cam, occ);  // warm-up
@@ -151,9 +153,12 @@ int RunBench(const BenchArgs& a) {
         bestRaw = std::min(bestRaw, RawLoop(static_cast<RTCScene>(rs.EmbreeScene()), cam, occ));
     }
     const double integratorRate = rays / bestIntegrator * 1e-6, rawRate = rays / bestRaw * 1e-6;
-    std::printf("AO integrator      : %8.3f Mrays/s (best of %d: %.4f s)\n", integratorRate, a.repeats, bestIntegrator);
-    std::printf("raw Embree loop    : %8.3f Mrays/s (best of %d: %.4f s)\n", rawRate, a.repeats, bestRaw);
-    std::printf("integrator / raw   : %8.1f %% (goal >= 70 %%)\n", 100.0 * integratorRate / rawRate);
+    std::printf("AO integrator      : %8.3f Mrays/s (best of %d: %.4f s)\n", integratorRate,
+                a.repeats, bestIntegrator);
+    std::printf("raw Embree loop    : %8.3f Mrays/s (best of %d: %.4f s)\n", rawRate, a.repeats,
+                bestRaw);
+    std::printf("integrator / raw   : %8.1f %% (goal >= 70 %%)\n",
+                100.0 * integratorRate / rawRate);
     return 0;
 }
 
@@ -168,8 +173,8 @@ struct CacheBenchArgs {
     std::string out = "out/bench_cache";
 };
 
-double TimedRender(const RenderScene& rs, const RenderOptions& o, TextureSpaceCache* cache, int repeats,
-                   RenderResult* last = nullptr) {
+double TimedRender(const RenderScene& rs, const RenderOptions& o, TextureSpaceCache* cache,
+                   int repeats, RenderResult* last = nullptr) {
     double best = 1e30;
     for (int i = 0; i < repeats; ++i) {
         RenderResult r = Render(rs, o, cache);
@@ -189,17 +194,18 @@ int RunCacheBench(const CacheBenchArgs& a) {
     RenderSceneOptions ro;
     ro.needLights = ro.needEnvironment = false;
     RenderScene rs(scene, ro);
-    std::printf("scene %s, %dx%d, %d spp, %d AO rays per hit / per cached sample\n", a.scene.c_str(),
-                o.width, o.height, o.spp, o.aoSamples);
+    std::printf("scene %s, %dx%d, %d spp, %d AO rays per hit / per cached sample\n",
+                a.scene.c_str(), o.width, o.height, o.spp, o.aoSamples);
 
     // 1. Warm-cache frame against the same frame with the cached term replaced by a constant.
     RenderOptions tex = o;
     tex.texture.enabled = true;
     tex.texture.filter = TextureFilterKind::Normal;
-    tex.texture.cache.texelCacheBytes = size_t(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0) * (1 << 20));
+    tex.texture.cache.texelCacheBytes =
+        size_t(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0) * (1 << 20));
     TextureSpaceCache cache(rs, tex.texture);
     RenderResult first = Render(rs, tex, &cache);  // cold: fills the caches
-    Render(rs, tex, &cache);  // a second frame settles two-choice placements
+    Render(rs, tex, &cache);                       // a second frame settles two-choice placements
     RenderOptions constant = tex;
     constant.texture.constantTerm = 0.5f;
     double tConst = 1e30, tWarm = 1e30;
@@ -208,9 +214,10 @@ int RunCacheBench(const CacheBenchArgs& a) {
         tConst = std::min(tConst, TimedRender(rs, constant, &cache, 1));
         tWarm = std::min(tWarm, TimedRender(rs, tex, &cache, 1, &warm));
     }
-    std::printf("cold frame (fills caches)    : %8.4f s, %llu samples shaded, texel hit rate %.1f%%\n",
-                first.stats.seconds, (unsigned long long)first.stats.cache.samplesShaded,
-                100.0 * first.stats.cache.TexelHitRate());
+    std::printf(
+        "cold frame (fills caches)    : %8.4f s, %llu samples shaded, texel hit rate %.1f%%\n",
+        first.stats.seconds, (unsigned long long)first.stats.cache.samplesShaded,
+        100.0 * first.stats.cache.TexelHitRate());
     std::printf("warm frame (texel hits)      : %8.4f s, texel hit rate %.2f%%\n", tWarm,
                 100.0 * warm.stats.cache.TexelHitRate());
     std::printf("constant term (no lookup)    : %8.4f s\n", tConst);
@@ -252,28 +259,36 @@ int RunCacheBench(const CacheBenchArgs& a) {
 
 void AddBenchCommand(CLI::App& app, int& exitCode) {
     auto args = std::make_shared<BenchArgs>();
-    CLI::App* bench = app.add_subcommand("bench", "Benchmarks (ratios against a baseline in the same run)");
+    CLI::App* bench =
+        app.add_subcommand("bench", "Benchmarks (ratios against a baseline in the same run)");
     bench->require_subcommand(1);
-    CLI::App* rays = bench->add_subcommand("rays", "AO integrator rays/s vs a raw rtcIntersect1/rtcOccluded1 loop");
+    CLI::App* rays = bench->add_subcommand(
+        "rays", "AO integrator rays/s vs a raw rtcIntersect1/rtcOccluded1 loop");
     rays->add_option("scene", args->scene, "Scene file or OBJ")->capture_default_str();
     rays->add_option("--resolution", args->resolution, "Image size WxH")->capture_default_str();
     rays->add_option("--ao-samples", args->aoSamples, "AO rays per hit")->capture_default_str();
     rays->add_option("--spp", args->spp, "Camera samples per pixel")->capture_default_str();
-    rays->add_option("--repeats", args->repeats, "Timed repetitions (best is reported)")->capture_default_str();
+    rays->add_option("--repeats", args->repeats, "Timed repetitions (best is reported)")
+        ->capture_default_str();
     rays->add_option("--threads", args->threads, "Worker threads (0 = all)");
     rays->callback([args, &exitCode] { exitCode = RunBench(*args); });
 
     auto cargs = std::make_shared<CacheBenchArgs>();
     CLI::App* cache = bench->add_subcommand(
-        "cache", "Warm-cache frame vs a constant term, and texture-space vs per-hit AO at equal time");
+        "cache",
+        "Warm-cache frame vs a constant term, and texture-space vs per-hit AO at equal time");
     cache->add_option("scene", cargs->scene, "Scene file or OBJ")->capture_default_str();
     cache->add_option("--resolution", cargs->resolution, "Image size WxH")->capture_default_str();
-    cache->add_option("--ao-samples", cargs->aoSamples, "AO rays per hit / per cached sample")->capture_default_str();
+    cache->add_option("--ao-samples", cargs->aoSamples, "AO rays per hit / per cached sample")
+        ->capture_default_str();
     cache->add_option("--spp", cargs->spp, "Camera samples per pixel")->capture_default_str();
-    cache->add_option("--reference-spp", cargs->referenceSpp, "Samples of the per-hit reference")->capture_default_str();
-    cache->add_option("--repeats", cargs->repeats, "Timed repetitions (best is reported)")->capture_default_str();
+    cache->add_option("--reference-spp", cargs->referenceSpp, "Samples of the per-hit reference")
+        ->capture_default_str();
+    cache->add_option("--repeats", cargs->repeats, "Timed repetitions (best is reported)")
+        ->capture_default_str();
     cache->add_option("--out", cargs->out, "Prefix of the images written")->capture_default_str();
-    cache->add_option("--texel-cache-mb", cargs->texelCacheMb, "Texel cache size (MiB)")->capture_default_str();
+    cache->add_option("--texel-cache-mb", cargs->texelCacheMb, "Texel cache size (MiB)")
+        ->capture_default_str();
     cache->callback([cargs, &exitCode] { exitCode = RunCacheBench(*cargs); });
 }
 

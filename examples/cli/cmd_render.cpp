@@ -3,9 +3,9 @@
 #include <sys/resource.h>
 
 #include <cmath>
-#include <limits>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <memory>
 
 #include <tbb/global_control.h>
@@ -13,8 +13,8 @@
 #include "cli_util.h"
 #include "commands.h"
 #include "renderer/integrator.h"
-#include "renderer/texture_space.h"
 #include "renderer/scene_loader.h"
+#include "renderer/texture_space.h"
 #include "texcache/error.h"
 
 namespace texcache::cli {
@@ -113,12 +113,18 @@ void WriteStatsJson(const std::string& path, const RenderStats& s, const Texture
 AovFlags ParseAovs(const std::vector<std::string>& names) {
     AovFlags f;
     for (const std::string& n : names) {
-        if (n == "albedo") f.albedo = true;
-        else if (n == "normal") f.normal = true;
-        else if (n == "depth") f.depth = true;
-        else if (n == "ptex") f.ptex = true;
-        else if (n == "motion") f.motion = true;
-        else if (n == "all") f.albedo = f.normal = f.depth = f.ptex = f.motion = true;
+        if (n == "albedo")
+            f.albedo = true;
+        else if (n == "normal")
+            f.normal = true;
+        else if (n == "depth")
+            f.depth = true;
+        else if (n == "ptex")
+            f.ptex = true;
+        else if (n == "motion")
+            f.motion = true;
+        else if (n == "all")
+            f.albedo = f.normal = f.depth = f.ptex = f.motion = true;
         else
             throw InputError("--aov", "unknown layer '" + n +
                                           "' (valid: albedo, normal, depth, ptex, motion, all)");
@@ -129,7 +135,8 @@ AovFlags ParseAovs(const std::vector<std::string>& names) {
 int RunRender(const RenderArgs& a) {
     std::vector<std::string> warnings;
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
-    for (const std::string& w : warnings) std::fprintf(stderr, "texcache: warning: %s\n", w.c_str());
+    for (const std::string& w : warnings)
+        std::fprintf(stderr, "texcache: warning: %s\n", w.c_str());
 
     // Command-line values override the scene's render settings.
     RenderSettings& s = scene.settings;
@@ -142,14 +149,17 @@ int RunRender(const RenderArgs& a) {
     if (!a.integrator.empty()) s.integrator = a.integrator;
     if (a.maxDepth != kUnset) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
     if (a.aoSamples != kUnset) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
-    if (!std::isnan(a.aoDistance)) s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
+    if (!std::isnan(a.aoDistance))
+        s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
     if (!std::isnan(a.tessellationRate))
         s.tessellationRate = CheckRange("--tessellation-rate", a.tessellationRate, 1.0f, 64.0f);
     if (!std::isnan(a.time)) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     CheckRange("--threads", a.threads, 0, 4096);
 
     RenderOptions opt;
-    opt.integrator = ParseIntegrator(s.integrator, a.integrator.empty() ? scene.path + ": key 'render.integrator'" : "--integrator");
+    opt.integrator = ParseIntegrator(s.integrator, a.integrator.empty()
+                                                       ? scene.path + ": key 'render.integrator'"
+                                                       : "--integrator");
     opt.width = s.width;
     opt.height = s.height;
     opt.spp = s.spp;
@@ -166,7 +176,8 @@ int RunRender(const RenderArgs& a) {
 
     std::unique_ptr<tbb::global_control> limit;
     if (a.threads > 0)
-        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, a.threads);
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      a.threads);
 
     const double t0 = NowSeconds();
     RenderSceneOptions ro;
@@ -206,11 +217,12 @@ int RunRender(const RenderArgs& a) {
                 (unsigned long long)r.stats.TotalRays());
     if (cache) {
         const CacheStats& c = r.stats.cache;
-        std::printf("texture-space cache: %llu lookups, %.1f%% texel hits, %llu samples shaded "
-                    "(%llu evictions, %llu deferrals), %.1f MiB\n",
-                    (unsigned long long)c.lookups, 100.0 * c.TexelHitRate(),
-                    (unsigned long long)c.samplesShaded, (unsigned long long)c.sampleEvictions,
-                    (unsigned long long)c.deferrals, double(cache->cache().BytesUsed()) / (1 << 20));
+        std::printf(
+            "texture-space cache: %llu lookups, %.1f%% texel hits, %llu samples shaded "
+            "(%llu evictions, %llu deferrals), %.1f MiB\n",
+            (unsigned long long)c.lookups, 100.0 * c.TexelHitRate(),
+            (unsigned long long)c.samplesShaded, (unsigned long long)c.sampleEvictions,
+            (unsigned long long)c.deferrals, double(cache->cache().BytesUsed()) / (1 << 20));
         if (overshading >= 0.0)
             std::printf("overshading: %.2f%% more samples than an unbounded cache (%llu)\n",
                         100.0 * overshading, (unsigned long long)referenceShaded);
@@ -225,8 +237,10 @@ int RunRender(const RenderArgs& a) {
 void AddRenderCommand(CLI::App& app, int& exitCode) {
     auto args = std::make_shared<RenderArgs>();
     CLI::App* cmd = app.add_subcommand("render", "Render a scene file (.json) or a bare OBJ cage");
-    cmd->add_option("scene", args->scene, "Scene file (.json) or OBJ control cage (.obj)")->required();
-    cmd->add_option("-o,--output", args->output, "Output image (.exr writes a .png beside it; .png only)")
+    cmd->add_option("scene", args->scene, "Scene file (.json) or OBJ control cage (.obj)")
+        ->required();
+    cmd->add_option("-o,--output", args->output,
+                    "Output image (.exr writes a .png beside it; .png only)")
         ->capture_default_str();
     cmd->add_option("--spp", args->spp, "Samples per pixel (a cap when --seconds is given)");
     cmd->add_option("--seconds", args->seconds, "Time budget in seconds (progressive passes)");
@@ -237,27 +251,39 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--max-depth", args->maxDepth, "Path tracer bounce limit");
     cmd->add_option("--ao-samples", args->aoSamples, "AO rays per camera sample");
     cmd->add_option("--ao-distance", args->aoDistance, "AO ray length (world units)");
-    cmd->add_option("--tessellation-rate", args->tessellationRate, "Embree subdivision tessellation rate");
+    cmd->add_option("--tessellation-rate", args->tessellationRate,
+                    "Embree subdivision tessellation rate");
     cmd->add_option("--time", args->time, "Scene time of the frame (shutter open)");
-    cmd->add_option("--aov", args->aovs, "Extra EXR layers: albedo, normal, depth, ptex, motion, all")
+    cmd->add_option("--aov", args->aovs,
+                    "Extra EXR layers: albedo, normal, depth, ptex, motion, all")
         ->delimiter(',');
     cmd->add_option("--exposure", args->exposure, "PNG exposure in stops");
     cmd->add_flag("-q,--quiet", args->quiet, "No progress bar");
     cmd->add_flag("--no-png", args->noPng, "Do not write a PNG beside an EXR output");
-    cmd->add_option("--shading", args->shading, "hit: shade every hit; texture: cache AO / diffuse indirect in texture space")
+    cmd->add_option("--shading", args->shading,
+                    "hit: shade every hit; texture: cache AO / diffuse indirect in texture space")
         ->capture_default_str();
-    cmd->add_option("--filter", args->filter, std::string("Texture-space filter: ") + TextureFilterNames())
+    cmd->add_option("--filter", args->filter,
+                    std::string("Texture-space filter: ") + TextureFilterNames())
         ->capture_default_str();
-    cmd->add_option("--filter-radius", args->filterRadius, "Footprint radius r: (2r+1)^2 samples")->capture_default_str();
-    cmd->add_option("--sample-cache-mb", args->sampleCacheMb, "Sample cache size (MiB)")->capture_default_str();
-    cmd->add_option("--texel-cache-mb", args->texelCacheMb, "Texel cache size (MiB)")->capture_default_str();
-    cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")->capture_default_str();
-    cmd->add_option("--indirect-samples", args->indirectSamples, "Paths per cached indirect sample")->capture_default_str();
-    cmd->add_flag("--reference-cache", args->referenceCache, "Unbounded caches (the overshading baseline)");
-    cmd->add_flag("--direct-mapped", args->directMapped,
-                  "Strictly direct-mapped texel cache (the paper's; default: two choices per texel)");
-    cmd->add_flag("--overshading", args->overshading,
-                  "Also render with unbounded caches and report the extra shading of the bounded ones");
+    cmd->add_option("--filter-radius", args->filterRadius, "Footprint radius r: (2r+1)^2 samples")
+        ->capture_default_str();
+    cmd->add_option("--sample-cache-mb", args->sampleCacheMb, "Sample cache size (MiB)")
+        ->capture_default_str();
+    cmd->add_option("--texel-cache-mb", args->texelCacheMb, "Texel cache size (MiB)")
+        ->capture_default_str();
+    cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")
+        ->capture_default_str();
+    cmd->add_option("--indirect-samples", args->indirectSamples, "Paths per cached indirect sample")
+        ->capture_default_str();
+    cmd->add_flag("--reference-cache", args->referenceCache,
+                  "Unbounded caches (the overshading baseline)");
+    cmd->add_flag(
+        "--direct-mapped", args->directMapped,
+        "Strictly direct-mapped texel cache (the paper's; default: two choices per texel)");
+    cmd->add_flag(
+        "--overshading", args->overshading,
+        "Also render with unbounded caches and report the extra shading of the bounded ones");
     cmd->add_option("--stats", args->statsFile, "Write cache statistics as JSON to FILE");
     cmd->callback([args, &exitCode] { exitCode = RunRender(*args); });
 }

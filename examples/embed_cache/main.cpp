@@ -66,7 +66,8 @@ int main(int argc, char** argv) try {
             Hit hit;
             if (!rs.Intersect(ray, &hit) || hit.object < 0) continue;
             const SurfaceInteraction si = rs.Interact(ray, hit, &diff);
-            const CacheHit h{hit.object, si.ptex.face, si.ptex.u, si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy};
+            const CacheHit h{hit.object, si.ptex.face, si.ptex.u, si.ptex.v,
+                             si.dudx,    si.dvdx,      si.dudy,   si.dvdy};
             const float ao = cache.Lookup(h, 6, shadeAo, filter, stats.local());
             const float toon = glm::dot(si.N, toLight) > 0.3f ? 1.0f : 0.55f;  // two-band key light
             const glm::vec3 c = rs.Albedo(si) * toon * (0.3f + 0.7f * ao);

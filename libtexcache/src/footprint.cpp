@@ -13,9 +13,10 @@ MeshGrids::MeshGrids(const ControlCage& cage, float texelSize, uint32_t faceOffs
     if (!(texelSize > 0.0f) || !std::isfinite(texelSize))
         throw InputError(cage.sourcePath, "texel size must be a positive number");
     if (uint64_t(faceOffset) + uint64_t(topo_.NumPtexFaces()) > TexelKey::kMaxFaces)
-        throw InputError(cage.sourcePath, std::to_string(uint64_t(faceOffset) + topo_.NumPtexFaces()) +
-                                              " Ptex faces exceed the cache key's range of " +
-                                              std::to_string(TexelKey::kMaxFaces));
+        throw InputError(cage.sourcePath,
+                         std::to_string(uint64_t(faceOffset) + topo_.NumPtexFaces()) +
+                             " Ptex faces exceed the cache key's range of " +
+                             std::to_string(TexelKey::kMaxFaces));
     log2Res_ = ComputeFaceResolutions(cage, topo_, texelSize, TexelKey::kCoordBits - 1);
 }
 
@@ -45,7 +46,8 @@ bool Step(const MeshGrids& g, int footprintMip, Walker* w, int a, int sign) {
     UvToEdge(edge, w->x / float(w->res), w->y / float(w->res), &along, &inward);
     int nbFace, nbEdge;
     float u, v, scale;
-    if (!g.Topology().Cross(w->face, edge, along, -inward, &nbFace, &u, &v, &nbEdge, &scale)) return false;
+    if (!g.Topology().Cross(w->face, edge, along, -inward, &nbFace, &u, &v, &nbEdge, &scale))
+        return false;
     float nbAlong, nbInward;
     UvToEdge(nbEdge, u, v, &nbAlong, &nbInward);
     const int mip = g.ClampMip(nbFace, footprintMip);
@@ -120,11 +122,14 @@ void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int 
         }
     }
     // Around extraordinary vertices two walks can end in the same texel: keep the first.
-    std::stable_sort(out->begin(), out->end(), [](const FootprintSample& a, const FootprintSample& b) {
-        return a.key.Pack() < b.key.Pack();
-    });
+    std::stable_sort(out->begin(), out->end(),
+                     [](const FootprintSample& a, const FootprintSample& b) {
+                         return a.key.Pack() < b.key.Pack();
+                     });
     out->erase(std::unique(out->begin(), out->end(),
-                           [](const FootprintSample& a, const FootprintSample& b) { return a.key == b.key; }),
+                           [](const FootprintSample& a, const FootprintSample& b) {
+                               return a.key == b.key;
+                           }),
                out->end());
 }
 

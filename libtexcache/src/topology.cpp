@@ -38,7 +38,8 @@ std::unique_ptr<Far::TopologyRefiner> CreateRefiner(const ControlCage& cage) {
     desc.holeIndices = cage.holes.data();
 
     Sdc::Options options;
-    // Always explicit: OSD defaults to VTX_BOUNDARY_NONE, which turns every boundary face into a hole.
+    // Always explicit: OSD defaults to VTX_BOUNDARY_NONE, which turns every boundary face into a
+    // hole.
     switch (cage.boundary) {
         case BoundaryInterpolation::None:
             options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_NONE);
@@ -126,7 +127,8 @@ PtexTopology::PtexTopology(const ControlCage& cage) {
                 if (gEdges[k] == e) b = k;
             // Consistently oriented neighbours traverse the shared edge in opposite directions;
             // anything else (non-orientable) is treated as a boundary.
-            if (b < 0 || gVerts[b] != fVerts[(a + 1) % n] || gVerts[(b + 1) % m] != fVerts[a]) continue;
+            if (b < 0 || gVerts[b] != fVerts[(a + 1) % n] || gVerts[(b + 1) % m] != fVerts[a])
+                continue;
             Segment mine[2], theirs[2];
             const int nm = SideSegments(firstPtex_[f], n, a, mine);
             const int nt = SideSegments(firstPtex_[g], m, b, theirs);
@@ -193,7 +195,8 @@ RegularPatches::RegularPatches(const ControlCage& cage) {
                        ((boundary & 4) && iv == 3) || ((boundary & 8) && iu == 0);
             };
             bool coarse = cv.size() == 16;
-            for (int i = 0; i < cv.size() && coarse; ++i) coarse = outside(i) || (cv[i] >= 0 && cv[i] < numCoarse);
+            for (int i = 0; i < cv.size() && coarse; ++i)
+                coarse = outside(i) || (cv[i] >= 0 && cv[i] < numCoarse);
             const int face = param.GetFaceId();
             if (!coarse || face < 0 || face >= int(index_.size())) continue;
             float c[16][3];
@@ -235,7 +238,8 @@ inline void BSpline(float t, float w[4], float d[4]) {
 }
 }  // namespace
 
-void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu[3], float dPdv[3]) const {
+void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu[3],
+                          float dPdv[3]) const {
     const float* cv = &cvs_[size_t(index_[ptexFace]) * 48];
     float wu[4], du[4], wv[4], dv[4];
     BSpline(u, wu, du);
@@ -255,7 +259,8 @@ void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu
 
 float RegularPatches::Coverage() const {
     if (index_.empty()) return 0.0f;
-    return float(std::count_if(index_.begin(), index_.end(), [](int i) { return i >= 0; })) / float(index_.size());
+    return float(std::count_if(index_.begin(), index_.end(), [](int i) { return i >= 0; })) /
+           float(index_.size());
 }
 
 std::vector<uint8_t> ComputeFaceResolutions(const ControlCage& cage, const PtexTopology& topo,
@@ -286,7 +291,8 @@ std::vector<uint8_t> ComputeFaceResolutions(const ControlCage& cage, const PtexT
                 return m;
             };
             for (int i = 0; i < n; ++i)
-                areas.push_back(quadArea(P(offset + i), mid(i, (i + 1) % n), c, mid((i + n - 1) % n, i)));
+                areas.push_back(
+                    quadArea(P(offset + i), mid(i, (i + 1) % n), c, mid((i + n - 1) % n, i)));
         }
         for (size_t i = 0; i < areas.size(); ++i) {
             const float side = std::sqrt(areas[i]) / texelSize;

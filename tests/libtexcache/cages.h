@@ -29,7 +29,7 @@ inline ControlCage GridCage(int n) {
 /// The unit cube: closed, every vertex of valence 3.
 inline ControlCage CubeCage() {
     ControlCage c;
-    c.positions = {{-1, -1, 1}, {1, -1, 1}, {-1, 1, 1}, {1, 1, 1},
+    c.positions = {{-1, -1, 1}, {1, -1, 1}, {-1, 1, 1},   {1, 1, 1},
                    {-1, 1, -1}, {1, 1, -1}, {-1, -1, -1}, {1, -1, -1}};
     c.faceVertexCounts = {4, 4, 4, 4, 4, 4};
     c.faceVertexIndices = {0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4};
@@ -65,9 +65,9 @@ inline ControlCage PentagonCage() {
         c.positions.push_back({std::cos(a), 0.0f, -std::sin(a)});
     }
     // Quad on edge (0,1) and triangle on edge (2,3), both consistently oriented (CCW from +Y).
-    c.positions.push_back({2.0f * std::cos(0.0f), 0.0f, -2.0f * std::sin(0.0f)});  // 5
+    c.positions.push_back({2.0f * std::cos(0.0f), 0.0f, -2.0f * std::sin(0.0f)});        // 5
     c.positions.push_back({2.0f * std::cos(1.2566f), 0.0f, -2.0f * std::sin(1.2566f)});  // 6
-    c.positions.push_back({-1.6f, 0.0f, 0.0f});  // 7
+    c.positions.push_back({-1.6f, 0.0f, 0.0f});                                          // 7
     c.faceVertexCounts = {5, 4, 3};
     c.faceVertexIndices = {0, 1, 2, 3, 4, /*quad*/ 1, 0, 5, 6, /*tri*/ 3, 2, 7};
     c.boundary = BoundaryInterpolation::EdgeAndCorner;
@@ -83,8 +83,10 @@ inline void ExpectSymmetricAdjacency(const PtexTopology& topo, const std::string
             for (int j = 0; j < link.count; ++j) {
                 const auto& back = topo.Edge(link.face[j], link.edge[j]);
                 bool found = false;
-                for (int k = 0; k < back.count; ++k) found |= back.face[k] == f && back.edge[k] == e;
-                EXPECT_TRUE(found) << name << " face " << f << " edge " << e << " -> " << link.face[j];
+                for (int k = 0; k < back.count; ++k)
+                    found |= back.face[k] == f && back.edge[k] == e;
+                EXPECT_TRUE(found)
+                    << name << " face " << f << " edge " << e << " -> " << link.face[j];
             }
         }
 }

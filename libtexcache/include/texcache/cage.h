@@ -18,7 +18,7 @@ enum class BoundaryInterpolation : uint8_t {
 /// renderer or subdivision library inside; indices are 0-based and validated by whoever fills it.
 struct ControlCage {
     std::vector<std::array<float, 3>> positions;
-    std::vector<int> faceVertexCounts;  ///< one entry per face, each >= 3
+    std::vector<int> faceVertexCounts;   ///< one entry per face, each >= 3
     std::vector<int> faceVertexIndices;  ///< concatenated face loops (counter-clockwise)
 
     /// Optional face-varying texture coordinates (OBJ `vt`), empty when absent.
@@ -26,7 +26,7 @@ struct ControlCage {
     std::vector<int> faceUvIndices;  ///< parallel to faceVertexIndices when uvs is non-empty
 
     std::vector<std::array<int, 2>> creaseEdges;  ///< vertex pairs of existing edges
-    std::vector<float> creaseWeights;              ///< sharpness per crease edge (>= 10: infinite)
+    std::vector<float> creaseWeights;             ///< sharpness per crease edge (>= 10: infinite)
     std::vector<int> cornerVertices;
     std::vector<float> cornerWeights;
     std::vector<int> holes;  ///< face indices tagged as holes

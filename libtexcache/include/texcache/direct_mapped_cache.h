@@ -33,13 +33,13 @@
 // explicitly when the scene changes. Invalidation must not run while the same keys are being
 // shaded (call it between frames); it is still memory-safe if it does.
 #pragma once
+#include <algorithm>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include <string>
-#include <algorithm>
 #include <memory>
+#include <string>
 #include <type_traits>
 
 #include "texcache/error.h"
@@ -58,7 +58,7 @@ enum class AcquireResult : uint8_t {
 /// Proof of a claimed slot, returned by Acquire and consumed by Publish/Abandon.
 struct SlotTicket {
     size_t slot = ~size_t(0);
-    uint64_t seq = 0;   ///< the odd sequence number we set
+    uint64_t seq = 0;      ///< the odd sequence number we set
     bool evicted = false;  ///< the claim replaced another key's entry
 };
 
@@ -114,7 +114,8 @@ public:
         {
             // Hit in the first slot: touch no other cache line.
             const uint64_t q1 = s1->seq.load(std::memory_order_acquire);
-            if (!(q1 & 1) && s1->key.load(std::memory_order_relaxed) == key && TryRead(*s1, q1, out) == kHit)
+            if (!(q1 & 1) && s1->key.load(std::memory_order_relaxed) == key &&
+                TryRead(*s1, q1, out) == kHit)
                 return AcquireResult::Hit;
         }
         Slot* s2 = twoChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1;
@@ -133,7 +134,8 @@ public:
             if (!idle1 && !idle2) return AcquireResult::Conflict;
             Slot* victim;
             uint64_t seq, old;
-            if (idle1 && (!idle2 || k1 == TexelKey::kEmpty || (k2 != TexelKey::kEmpty && !(key & 1)))) {
+            if (idle1 &&
+                (!idle2 || k1 == TexelKey::kEmpty || (k2 != TexelKey::kEmpty && !(key & 1)))) {
                 victim = s1, seq = q1, old = k1;
             } else {
                 victim = s2, seq = q2, old = k2;

@@ -29,8 +29,9 @@ namespace texcache {
 struct CacheSettings {
     size_t sampleCacheBytes = size_t(64) << 20;
     size_t texelCacheBytes = size_t(64) << 20;
-    float lodBias = 0.0f;        ///< added to eq. 1's level (Sec. 6.2 shader LOD)
-    bool referenceMode = false;  ///< unbounded caches: every sample and texel kept (overshading baseline)
+    float lodBias = 0.0f;  ///< added to eq. 1's level (Sec. 6.2 shader LOD)
+    bool referenceMode =
+        false;  ///< unbounded caches: every sample and texel kept (overshading baseline)
     /// Let a texel live in one of two slots (see direct_mapped_cache.h): a warm frame then hits
     /// ~99.9% instead of ~91% of its texels (measured on the car at 640x360, 4 spp); false is the
     /// paper's strictly direct-mapped texel cache. The sample cache is always direct-mapped: its
@@ -46,9 +47,11 @@ struct CacheSettings {
         if (texelCacheBytes == 0 || texelCacheBytes > kMaxBytes)
             throw InputError("texel cache size", "must be between 1 byte and 1 TiB, got " +
                                                      std::to_string(texelCacheBytes) + " bytes");
-        if (!(lodBias >= -float(TexelKey::kMaxMipLevels) && lodBias <= float(TexelKey::kMaxMipLevels)))
-            throw InputError("lod bias", "must be within [-16, 16] (the mip chain has at most 16 levels), got " +
-                                             std::to_string(lodBias));
+        if (!(lodBias >= -float(TexelKey::kMaxMipLevels) &&
+              lodBias <= float(TexelKey::kMaxMipLevels)))
+            throw InputError(
+                "lod bias", "must be within [-16, 16] (the mip chain has at most 16 levels), got " +
+                                std::to_string(lodBias));
     }
 };
 
@@ -158,7 +161,8 @@ private:
 
 inline uint64_t MixFaceMip(uint32_t face, int mip) {
     uint64_t x = (uint64_t(face) << 4) | uint64_t(mip);
-    x ^= x >> 31, x *= 0x7fb5d329728ea185ull, x ^= x >> 27, x *= 0x81dadef4bc2dd44dull, x ^= x >> 33;
+    x ^= x >> 31, x *= 0x7fb5d329728ea185ull, x ^= x >> 27, x *= 0x81dadef4bc2dd44dull,
+        x ^= x >> 33;
     return x;
 }
 
@@ -167,7 +171,8 @@ inline uint64_t MixFaceMip(uint32_t face, int mip) {
 template <typename Sample, typename Texel>
 class ShadingCache {
 public:
-    /// Allocates both caches (or the unbounded reference stores); throws InputError on bad settings.
+    /// Allocates both caches (or the unbounded reference stores); throws InputError on bad
+    /// settings.
     explicit ShadingCache(const CacheSettings& settings) : settings_(settings) {
         settings.Validate();
         if (settings.referenceMode) {
@@ -175,7 +180,8 @@ public:
             refTexels_ = std::make_unique<internal::UnboundedCache<Texel>>();
         } else {
             samples_ = std::make_unique<DirectMappedCache<Sample>>(settings.sampleCacheBytes);
-            texels_ = std::make_unique<DirectMappedCache<Texel>>(settings.texelCacheBytes, settings.texelTwoChoices);
+            texels_ = std::make_unique<DirectMappedCache<Texel>>(settings.texelCacheBytes,
+                                                                 settings.texelTwoChoices);
         }
     }
 
@@ -192,7 +198,8 @@ public:
     /// The texel a hit maps to: eq. 1 (floored, plus the LOD bias) and eq. 2.
     SampleRequest TexelAt(const CacheHit& h) const {
         const MeshGrids& g = *meshes_[h.mesh];
-        const int mip = ComputeMip(g.Log2Res(h.face), h.dudx, h.dvdx, h.dudy, h.dvdy, settings_.lodBias);
+        const int mip =
+            ComputeMip(g.Log2Res(h.face), h.dudx, h.dvdx, h.dudy, h.dvdy, settings_.lodBias);
         const int res = g.Res(h.face, mip);
         const int iu = QuantizeCoord(h.u, res), iv = QuantizeCoord(h.v, res);
         SampleRequest r{h.mesh, h.face, mip, TexelCenter(iu, res), TexelCenter(iv, res), {}};
@@ -208,7 +215,8 @@ public:
 
     /// The filtered value at a hit: texel cache hit, or gather + shade missing samples + filter.
     template <typename ShadeFn, typename FilterFn>
-    Texel Lookup(const CacheHit& h, int radius, ShadeFn&& shade, FilterFn&& filter, CacheStats& st) {
+    Texel Lookup(const CacheHit& h, int radius, ShadeFn&& shade, FilterFn&& filter,
+                 CacheStats& st) {
         return LookupTexel(TexelAt(h), radius, shade, filter, st);
     }
 
@@ -236,8 +244,10 @@ public:
         }
         if (ticket.evicted) ++st.texelEvictions;
         texel = Filter(centre, radius, shade, filter, st);
-        if (refTexels_) refTexels_->Publish(key, texel);
-        else texels_->Publish(ticket, texel);
+        if (refTexels_)
+            refTexels_->Publish(key, texel);
+        else
+            texels_->Publish(ticket, texel);
         return texel;
     }
 
@@ -253,7 +263,8 @@ public:
     }
     /// Evicts one mesh's samples and texels (that object was edited).
     void InvalidateMesh(int mesh) {
-        const uint32_t lo = meshes_[mesh]->FaceOffset(), hi = lo + uint32_t(meshes_[mesh]->NumFaces());
+        const uint32_t lo = meshes_[mesh]->FaceOffset(),
+                       hi = lo + uint32_t(meshes_[mesh]->NumFaces());
         auto pred = [lo, hi](uint64_t k) {
             const uint32_t f = TexelKey::Unpack(k).face;
             return f >= lo && f < hi;
@@ -270,7 +281,8 @@ public:
     /// Bytes held by the caches' storage (bounded mode: never above the configured budgets).
     size_t BytesUsed() const {
         if (refSamples_)
-            return refSamples_->Size() * (sizeof(Sample) + 32) + refTexels_->Size() * (sizeof(Texel) + 32);
+            return refSamples_->Size() * (sizeof(Sample) + 32) +
+                   refTexels_->Size() * (sizeof(Texel) + 32);
         return samples_->BytesUsed() + texels_->BytesUsed();
     }
     size_t SampleCacheBytes() const { return samples_ ? samples_->BytesUsed() : 0; }
@@ -284,13 +296,15 @@ private:
         // stride aliased rows onto the same slots of a 2^k-slot cache). Neighbouring pixels and
         // footprint taps then share cache lines instead of each missing to DRAM.
         const uint64_t block = uint64_t(k.iv >> 2) * 2654435761u + uint64_t(k.iu >> 2);
-        return internal::MixFaceMip(k.face, k.mip) + block * 16u + uint64_t(k.iv & 3) * 4u + (k.iu & 3);
+        return internal::MixFaceMip(k.face, k.mip) + block * 16u + uint64_t(k.iv & 3) * 4u +
+               (k.iu & 3);
     }
 
     // Gathers the footprint, shades what is missing (deferring samples other threads are
     // shading, revisiting them after the rest), then filters.
     template <typename ShadeFn, typename FilterFn>
-    Texel Filter(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter, CacheStats& st) {
+    Texel Filter(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter,
+                 CacheStats& st) {
         thread_local std::vector<FootprintSample> taps;
         thread_local std::vector<Sample> values;
         thread_local std::vector<int> deferred;
@@ -306,16 +320,18 @@ private:
                 ++st.deferrals;
             }
         }
-        for (int i : deferred) FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/true);
+        for (int i : deferred)
+            FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/true);
         FilterInput<Sample> in{std::span<const FootprintSample>(taps.data(), taps.size()),
-                               std::span<const Sample>(values.data(), values.size()), centreIndex, centre};
+                               std::span<const Sample>(values.data(), values.size()), centreIndex,
+                               centre};
         return filter(in);
     }
 
     // Returns false (without a value) when another thread is shading the sample and !wait.
     template <typename ShadeFn>
-    bool FetchOrShade(int mesh, const FootprintSample& tap, Sample* out, ShadeFn& shade, CacheStats& st,
-                      bool wait) {
+    bool FetchOrShade(int mesh, const FootprintSample& tap, Sample* out, ShadeFn& shade,
+                      CacheStats& st, bool wait) {
         const uint64_t key = tap.key.Pack();
         const uint64_t hash = Hash(tap.key);
         const MeshGrids& g = *meshes_[mesh];
@@ -327,13 +343,17 @@ private:
             const AcquireResult r = refSamples_ ? refSamples_->Acquire(key, out)
                                                 : samples_->Acquire(key, hash, out, &ticket);
             switch (r) {
-                case AcquireResult::Hit: ++st.sampleHits; return true;
+                case AcquireResult::Hit:
+                    ++st.sampleHits;
+                    return true;
                 case AcquireResult::Claimed:
                     if (ticket.evicted) ++st.sampleEvictions;
                     *out = shade(req);
                     ++st.samplesShaded;
-                    if (refSamples_) refSamples_->Publish(key, *out);
-                    else samples_->Publish(ticket, *out);
+                    if (refSamples_)
+                        refSamples_->Publish(key, *out);
+                    else
+                        samples_->Publish(ticket, *out);
                     return true;
                 case AcquireResult::Conflict:
                     // The slot is busy with an unrelated key: shade for this filter only.

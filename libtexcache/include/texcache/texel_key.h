@@ -12,10 +12,10 @@ namespace texcache {
 /// can compare whole keys with one atomic load. Faces are global ids (all objects' Ptex faces).
 struct TexelKey {
     static constexpr int kFaceBits = 28, kMipBits = 4, kCoordBits = 14;
-    static constexpr uint32_t kMaxFaces = 1u << kFaceBits;   ///< face ids must be below this
-    static constexpr int kMaxMipLevels = 1 << kMipBits;      ///< mip 0..15
-    static constexpr int kMaxResolution = 1 << kCoordBits;   ///< grid side at mip 0, at most 16384
-    static constexpr uint64_t kEmpty = ~uint64_t(0);          ///< never a valid packed key
+    static constexpr uint32_t kMaxFaces = 1u << kFaceBits;  ///< face ids must be below this
+    static constexpr int kMaxMipLevels = 1 << kMipBits;     ///< mip 0..15
+    static constexpr int kMaxResolution = 1 << kCoordBits;  ///< grid side at mip 0, at most 16384
+    static constexpr uint64_t kEmpty = ~uint64_t(0);        ///< never a valid packed key
 
     uint32_t face = 0;
     uint8_t mip = 0;
@@ -50,7 +50,7 @@ inline int ComputeMip(int log2Res, float dudx, float dvdx, float dudy, float dvd
     if (!(m2 == m2)) return 0;  // NaN differentials: finest level (safe, just more shading)
     const int numLevels = log2Res + 1;
     if (!(m2 > 0.0f)) return lodBias >= float(numLevels - 1) ? numLevels - 1 : 0;  // zero footprint
-    if (!(m2 < 3.0e38f)) return numLevels - 1;                                        // huge or +inf
+    if (!(m2 < 3.0e38f)) return numLevels - 1;                                     // huge or +inf
     int l;
     if (lodBias == std::floor(lodBias)) {
         // floor(log2(sqrt(m2))) = floor(ilogb(m2) / 2): exact, from the float's exponent.
@@ -71,6 +71,8 @@ inline int QuantizeCoord(float u, int res) {
 }
 
 /// Centre of a texel in face (u,v) (eq. 2): where samples are shaded.
-inline float TexelCenter(int i, int res) { return (float(i) + 0.5f) / float(res); }
+inline float TexelCenter(int i, int res) {
+    return (float(i) + 0.5f) / float(res);
+}
 
 }  // namespace texcache

@@ -27,7 +27,9 @@ public:
     /// First Ptex id of a coarse face; an n-gon's sub-face i has id FirstPtexFace(f) + i.
     int FirstPtexFace(int coarseFace) const { return firstPtex_[coarseFace]; }
     /// True when the coarse face is a quad (one Ptex face, no sub-faces).
-    bool IsQuad(int coarseFace) const { return firstPtex_[coarseFace + 1] - firstPtex_[coarseFace] == 1; }
+    bool IsQuad(int coarseFace) const {
+        return firstPtex_[coarseFace + 1] - firstPtex_[coarseFace] == 1;
+    }
     /// Coarse face a Ptex face belongs to.
     int CoarseFace(int ptexFace) const { return ptexToCoarse_[ptexFace]; }
     /// Sub-face index within its n-gon (0 for quads).
@@ -37,7 +39,7 @@ public:
     /// 2 (v=1), 3 (u=0), counter-clockwise. A quad edge bordering an n-gon meets two sub-faces,
     /// each covering half of it, hence up to two segments.
     struct EdgeLink {
-        int8_t count = 0;    ///< 0: boundary or non-manifold edge (no neighbour)
+        int8_t count = 0;           ///< 0: boundary or non-manifold edge (no neighbour)
         int8_t edge[2] = {-1, -1};  ///< the neighbours' edge numbers
         int face[2] = {-1, -1};     ///< the neighbours' Ptex ids
         /// Extent of each neighbour segment along the shared cage edge, in the neighbour's own
@@ -46,7 +48,9 @@ public:
         float myStart = 0.0f, myLength = 1.0f;
     };
     /// Adjacency across edge `edge` (0..3) of a Ptex face.
-    const EdgeLink& Edge(int ptexFace, int edge) const { return edges_[size_t(ptexFace) * 4 + edge]; }
+    const EdgeLink& Edge(int ptexFace, int edge) const {
+        return edges_[size_t(ptexFace) * 4 + edge];
+    }
 
     /// A point just outside edge `edge` of a Ptex face, at (u,v) in that face's (extended)
     /// parameter, mapped into the neighbour: its face, (u,v), and the neighbour edge crossed.
@@ -76,25 +80,42 @@ private:
 /// face (negative: outside): the face's (u,v).
 inline void EdgeToUv(int edge, float along, float inward, float* u, float* v) {
     switch (edge & 3) {
-        case 0: *u = along, *v = inward; break;
-        case 1: *u = 1.0f - inward, *v = along; break;
-        case 2: *u = 1.0f - along, *v = 1.0f - inward; break;
-        default: *u = inward, *v = 1.0f - along; break;
+        case 0:
+            *u = along, *v = inward;
+            break;
+        case 1:
+            *u = 1.0f - inward, *v = along;
+            break;
+        case 2:
+            *u = 1.0f - along, *v = 1.0f - inward;
+            break;
+        default:
+            *u = inward, *v = 1.0f - along;
+            break;
     }
 }
 /// Inverse of EdgeToUv.
 inline void UvToEdge(int edge, float u, float v, float* along, float* inward) {
     switch (edge & 3) {
-        case 0: *along = u, *inward = v; break;
-        case 1: *along = v, *inward = 1.0f - u; break;
-        case 2: *along = 1.0f - u, *inward = 1.0f - v; break;
-        default: *along = 1.0f - v, *inward = u; break;
+        case 0:
+            *along = u, *inward = v;
+            break;
+        case 1:
+            *along = v, *inward = 1.0f - u;
+            break;
+        case 2:
+            *along = 1.0f - u, *inward = 1.0f - v;
+            break;
+        default:
+            *along = 1.0f - v, *inward = u;
+            break;
     }
 }
 
 /// Fast limit evaluation for the Ptex faces whose limit surface is one regular bicubic B-spline
-/// patch with no crease (interior or boundary; most faces of a typical cage): ~20 ns instead of a general
-/// patch evaluation. Other faces report Has() == false and need a general evaluator. Immutable.
+/// patch with no crease (interior or boundary; most faces of a typical cage): ~20 ns instead of a
+/// general patch evaluation. Other faces report Has() == false and need a general evaluator.
+/// Immutable.
 class RegularPatches {
 public:
     /// Finds the regular interior faces with OpenSubdiv and stores their 16 control points.
