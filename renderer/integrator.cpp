@@ -336,46 +336,24 @@ bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, gl
     return true;
 }
 
-ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
+/// Shades a cache sample with n cosine-distributed rays from its point; `trace(ray, rng)` gives
+/// each ray's value. Returns the mean, the sample's normal and the variance of the mean
+/// (luminance). Unreachable samples (holes, NaN surface) come back NaN: filters skip them.
+template <typename TraceFn>
+ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, RayCounts& rays,
+                             TraceFn&& trace) {
     SurfaceSample ss;
     glm::vec3 origin;
     if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
     Rng rng = SampleRng(c, r);
     const Frame frame = Frame::FromZ(ss.N);
-    const int n = c.opt.aoSamples;
-    int open = 0;
-    for (int i = 0; i < n; ++i) {
-        Ray ray;
-        ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
-        ray.org = origin;
-        ray.tfar = c.opt.aoDistance;
-        ++rays.shadow;
-        if (!c.rs.Occluded(ray)) ++open;
-    }
-    const float p = float(open) / float(n);
-    return {glm::vec3(p), ss.N, p * (1.0f - p) / float(std::max(n - 1, 1))};
-}
-
-ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
-    SurfaceSample ss;
-    glm::vec3 origin;
-    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
-    Rng rng = SampleRng(c, r);
-    const Frame frame = Frame::FromZ(ss.N);
-    const int n = c.opt.texture.indirectSamples;
     glm::vec3 sum(0.0f);
     float sum2 = 0.0f;
     for (int i = 0; i < n; ++i) {
-        // Cosine sampling: the estimate of (1/pi) * integral of L cos is the mean incident
-        // radiance, which the hit multiplies by its albedo.
         Ray ray;
         ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
         ray.org = origin;
-        ++rays.bounce;
-        Hit hit;
-        const bool found = c.rs.Intersect(ray, &hit);
-        glm::vec3 L = LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
-        if (!std::isfinite(L.x + L.y + L.z)) L = glm::vec3(0.0f);
+        const glm::vec3 L = trace(ray, rng);
         sum += L;
         const float y = Luminance(L);
         sum2 += y * y;
@@ -385,13 +363,34 @@ ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCo
     return {mean, ss.N, std::max(0.0f, sum2 / float(n) - ym * ym) / float(std::max(n - 1, 1))};
 }
 
-/// The cached term at a camera hit: texel-cache lookup with the material's filter.
+ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
+    return ShadeCosineRays(c, r, c.opt.aoSamples, rays, [&](Ray& ray, Rng&) {
+        ray.tfar = c.opt.aoDistance;
+        ++rays.shadow;
+        return glm::vec3(c.rs.Occluded(ray) ? 0.0f : 1.0f);
+    });
+}
+
+ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
+    // Cosine sampling: the mean of the incident radiance estimates (1/pi) * integral of L cos,
+    // which the hit multiplies by its albedo. Emission seen directly is NEE's job at the hit.
+    return ShadeCosineRays(c, r, c.opt.texture.indirectSamples, rays, [&](Ray& ray, Rng& rng) {
+        ++rays.bounce;
+        Hit hit;
+        const bool found = c.rs.Intersect(ray, &hit);
+        const glm::vec3 L =
+            LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
+        return std::isfinite(L.x + L.y + L.z) ? L : glm::vec3(0.0f);
+    });
+}
+
 /// The texel a shading point maps to (eq. 1 and 2) in its object's (front or back) grids.
 SampleRequest TexelOf(const Context& c, const SurfaceInteraction& si) {
     return c.tsc->cache().TexelAt({c.tsc->MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u,
                                    si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy});
 }
 
+/// The cached term at a camera hit: texel-cache lookup with the material's filter.
 template <typename ShadeFn>
 glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&& shade,
                        CacheStats* stats = nullptr, const SampleRequest* texel = nullptr) {
