@@ -8,11 +8,12 @@ namespace texcache {
 TextureFilterKind ParseTextureFilter(const std::string& name, const std::string& where) {
     if (name == "none") return TextureFilterKind::None;
     if (name == "normal") return TextureFilterKind::Normal;
+    if (name == "gaussian") return TextureFilterKind::Gaussian;
     throw InputError(where, "unknown filter '" + name + "' (valid: " + TextureFilterNames() + ")");
 }
 
 const char* TextureFilterNames() {
-    return "none, normal";
+    return "none, normal, gaussian";
 }
 
 }  // namespace texcache

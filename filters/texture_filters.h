@@ -19,7 +19,7 @@ struct ShadedSample {
     float variance;
 };
 
-enum class TextureFilterKind { None, Normal };
+enum class TextureFilterKind { None, Normal, Gaussian };
 
 /// Parses a filter name; throws InputError listing the valid names.
 TextureFilterKind ParseTextureFilter(const std::string& name, const std::string& where);

@@ -310,9 +310,10 @@ Rng SampleRng(const Context& c, const SampleRequest& r) {
 
 /// Limit-surface point of a cache sample, and the origin its secondary rays start from. The
 /// rays hit the tessellated surface, which lies up to ~1.4% of an edge off the limit surface:
-/// one short ray along -N finds the tessellated surface under the sample, and rays start just
-/// above it (a fixed offset large enough for curved faces would lift samples on big flat faces
-/// off the ground and lose their contact occlusion).
+/// a short ray along -N against this object alone finds the tessellated surface under the
+/// sample, and rays start just above it. (A fixed lift large enough for curved faces would put
+/// samples on big flat faces above nearby objects, e.g. the ground under a car's sills; and
+/// another object crossing the short ray must not be taken for the surface.)
 bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, glm::vec3* origin,
                  RayCounts& rays) {
     const int object = c.tsc->ObjectOfMesh(r.mesh);
@@ -327,12 +328,10 @@ bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, gl
     snap.org = ss->P + lift * ss->N;
     snap.dir = -ss->N;
     snap.tfar = 2.0f * lift;
-    Hit hit;
+    float t;
     ++rays.bounce;
-    if (c.rs.Intersect(snap, &hit) && hit.object == object)
-        *origin = snap.org + hit.t * snap.dir + eps * ss->N;
-    else
-        *origin = ss->P + lift * ss->N;
+    *origin = c.rs.IntersectObject(object, snap, &t) ? snap.org + t * snap.dir + eps * ss->N
+                                                     : ss->P + eps * ss->N;
     return true;
 }
 
@@ -401,10 +400,19 @@ glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&&
     // their thread's stats in.
     CacheStats& st = stats ? *stats : c.cacheStats->local();
     // One branch per lookup picks the material's filter; the filters themselves are inlined.
-    if (c.tsc->FilterOf(si.object) == TextureFilterKind::None)
-        return c.tsc->cache().LookupTexel(h, 0, shade, CentreFilter{}, st);
-    return c.tsc->cache().LookupTexel(h, c.tsc->RadiusOf(si.object), shade,
-                                      NormalWeightedFilter{t.cosThreshold, 0.0f}, st);
+    const int radius = c.tsc->RadiusOf(si.object);
+    switch (c.tsc->FilterOf(si.object)) {
+        case TextureFilterKind::None:
+            return c.tsc->cache().LookupTexel(h, 0, shade, CentreFilter{}, st);
+        case TextureFilterKind::Gaussian:
+            // The paper's 20x20 Gaussian: sigma half the radius, same normal test.
+            return c.tsc->cache().LookupTexel(
+                h, radius, shade, NormalWeightedFilter{t.cosThreshold, 0.5f * float(radius)}, st);
+        default:
+            break;
+    }
+    return c.tsc->cache().LookupTexel(h, radius, shade, NormalWeightedFilter{t.cosThreshold, 0.0f},
+                                      st);
 }
 
 void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInteraction& si,

@@ -349,6 +349,23 @@ bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
     return true;
 }
 
+bool RenderScene::IntersectObject(int object, const Ray& ray, float* t) const {
+    const Impl& I = *impl_;
+    const glm::mat4 inv = glm::inverse(I.Transform(object, ray.time));
+    Ray local = ray;
+    local.org = glm::vec3(inv * glm::vec4(ray.org, 1.0f));
+    local.dir = glm::mat3(inv) * ray.dir;  // not normalized: t stays the world-space parameter
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    ToRtcRay(local, &rh.ray);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(I.meshes[I.objects[object].mesh].scene, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+    *t = rh.ray.tfar;
+    return true;
+}
+
 bool RenderScene::Occluded(const Ray& ray) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);

@@ -266,9 +266,10 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
     if (n.Has("specular")) m.specular = n["specular"].Vec3(0.0f, 1.0f);
     if (n.Has("filter")) {
         m.cacheFilter = n["filter"].String();
-        static const std::set<std::string> kFilters = {"none", "normal"};
+        static const std::set<std::string> kFilters = {"none", "normal", "gaussian"};
         if (!kFilters.count(m.cacheFilter))
-            n["filter"].Fail("unknown filter '" + m.cacheFilter + "' (valid: none, normal)");
+            n["filter"].Fail("unknown filter '" + m.cacheFilter +
+                             "' (valid: none, normal, gaussian)");
     }
     if (n.Has("filter_radius")) m.cacheRadius = n["filter_radius"].Int(0, 32);
     scene->materials.push_back(m);

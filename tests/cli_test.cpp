@@ -94,7 +94,7 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
           Case{"render " + cube + " --resolution 10", "--resolution"},
           Case{"render " + cube + " --integrator magic", "valid: normal"},
           Case{"render " + cube + " -o out.tiff", "--output"},
-          Case{"render " + cube + " --shading texture --filter fancy", "valid: none, normal"},
+          Case{"render " + cube + " --shading texture --filter fancy", "valid: none, normal, gaussian"},
           Case{"render " + cube + " --shading texture --filter-radius -1", "--filter-radius"},
           Case{"render " + cube + " --shading texture --sample-cache-mb 0", "--sample-cache-mb"},
           Case{"render " + cube + " --shading texture --lod-bias 99", "--lod-bias"},
