@@ -41,7 +41,7 @@ RenderOptions AoOptions(int spp, int aoSamples) {
 // Per-hit AO at 64 camera samples x 16 AO rays per pixel is the reference. Texture-space AO
 // with the 1x1 filter and the same camera samples (same seed: the same camera rays, so coverage
 // noise at silhouettes cancels) and 64 rays per cached sample converges to it up to the
-// quantization of shading to texel centres: relMSE below 0.01 (measured 0.0029).
+// quantization of shading to texel centres: relMSE below 0.006 (measured 0.0029).
 TEST(TextureSpace, OneByOneFilterConvergesToPerHitShading) {
     const Scene s = TorusOnPlane();
     RenderSceneOptions ro;
@@ -54,7 +54,7 @@ TEST(TextureSpace, OneByOneFilterConvergesToPerHitShading) {
     const RenderResult cached = Render(rs, o);
     const double e = RelMSE(cached.beauty, ref);
     RecordProperty("relMSE", std::to_string(e));
-    EXPECT_LT(e, 0.01);  // measured 0.0029
+    EXPECT_LT(e, 0.006);  // measured 0.0029 (0.0093 before samples ignored other objects)
     // More rays per cached sample: closer still (convergence, not just a bound).
     o.aoSamples = 8;
     EXPECT_LT(e, RelMSE(Render(rs, o).beauty, ref));
