@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 
 #include <embree3/rtcore.h>
@@ -189,8 +190,15 @@ int RunCacheBench(const CacheBenchArgs& a) {
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
     const RenderOptions o = AoBenchOptions(scene, a.resolution, a.spp, a.aoSamples, a.repeats);
     CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
-    const OutputPaths plan = PlanOutputs(a.out + "_ref.exr", false);
-    (void)plan;
+    // The images go beside the prefix; make its directory (out/ by default) like an experiment
+    // would.
+    if (const auto dir = std::filesystem::path(a.out).parent_path(); !dir.empty()) {
+        std::error_code ec;
+        std::filesystem::create_directories(dir, ec);
+        if (ec)
+            throw InputError("--out",
+                             "cannot create directory '" + dir.string() + "': " + ec.message());
+    }
     RenderSceneOptions ro;
     ro.needLights = ro.needEnvironment = false;
     RenderScene rs(scene, ro);
