@@ -344,7 +344,9 @@ LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
     impl_->map = std::make_unique<Far::PatchMap>(*impl_->patches);
 
     const int numRefined = refiner->GetNumVerticesTotal();
-    const Far::StencilTable* local = impl_->patches->GetLocalPointStencilTable();
+    // The templated accessor: the untemplated one downcasts StencilTableReal<float> to StencilTable
+    // (UBSan flags it in OpenSubdiv's header).
+    const Far::StencilTableReal<float>* local = impl_->patches->GetLocalPointStencilTable<float>();
     const int numLocal = local ? local->GetNumStencils() : 0;
     std::vector<Vertex> verts(numRefined + numLocal);
     for (int i = 0; i < cage.numVertices(); ++i)
