@@ -121,11 +121,15 @@ void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int 
             }
         }
     }
-    // Around extraordinary vertices two walks can end in the same texel: keep the first.
-    std::stable_sort(out->begin(), out->end(),
-                     [](const FootprintSample& a, const FootprintSample& b) {
-                         return a.key.Pack() < b.key.Pack();
-                     });
+    // Around extraordinary vertices two walks can end in the same texel: keep the one with the
+    // smallest offset. std::sort is in place (stable_sort allocated on every slow-path gather).
+    std::sort(out->begin(), out->end(), [](const FootprintSample& a, const FootprintSample& b) {
+        const uint64_t ka = a.key.Pack(), kb = b.key.Pack();
+        if (ka != kb) return ka < kb;
+        const int da = std::abs(a.dx) + std::abs(a.dy), db = std::abs(b.dx) + std::abs(b.dy);
+        if (da != db) return da < db;
+        return a.dx != b.dx ? a.dx < b.dx : a.dy < b.dy;
+    });
     out->erase(std::unique(out->begin(), out->end(),
                            [](const FootprintSample& a, const FootprintSample& b) {
                                return a.key == b.key;

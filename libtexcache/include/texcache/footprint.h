@@ -51,7 +51,8 @@ struct FootprintSample {
 /// dy texels along the (possibly rotated) v axis, one texel at a time; crossing an edge lands in
 /// the first texel row of the neighbour, whose frame is turned to continue the same direction.
 /// Boundary and non-manifold edges end the walk (that sample is left out). Around extraordinary
-/// vertices two walks can reach the same texel; each sample is returned once (the first walk).
+/// vertices two walks can reach the same texel; each sample is returned once (the walk with the
+/// smallest |dx| + |dy|).
 void GatherFootprint(const MeshGrids& grids, int face, int mip, int iu, int iv, int radius,
                      std::vector<FootprintSample>* out);
 
