@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -19,36 +20,60 @@ OIIO_NAMESPACE_USING
 
 namespace {
 
-std::string Lower(std::string s) {
-    for (char& c : s) c = char(std::tolower(c));
-    return s;
+enum class Format { kExr, kPng, kHdr };
+
+struct FormatInfo {
+    const char* ext;
+    const char* oiioName;  // the OIIO writer, named explicitly: the temporary file's name has no
+                           // image extension for OIIO to infer it from
+    Format format;
+};
+constexpr FormatInfo kFormats[] = {{".exr", "openexr", Format::kExr},
+                                   {".png", "png", Format::kPng},
+                                   {".hdr", "hdr", Format::kHdr}};
+
+std::string LowerExtension(const std::string& path) {
+    std::string e = fs::path(path).extension().string();
+    for (char& c : e) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return e;
 }
 
-// Writes `pixels` with `spec` to a temporary file next to `path`, then renames it over `path`.
-void WriteAtomic(const std::string& path, const ImageSpec& spec, const void* pixels,
-                 TypeDesc type) {
+const FormatInfo& FormatOf(const std::string& path) {
+    const std::string ext = LowerExtension(path);
+    for (const FormatInfo& f : kFormats)
+        if (ext == f.ext) return f;
+    throw InputError(
+        path, "cannot write image: unsupported type '" + ext + "' (supported: .exr, .png, .hdr)");
+}
+
+void CheckDirectory(const std::string& path) {
     const fs::path dir = fs::path(path).parent_path();
     if (!dir.empty() && !fs::is_directory(dir))
         throw InputError(path,
                          "cannot write image: directory '" + dir.string() + "' does not exist");
-    const std::string ext = fs::path(path).extension().string();
-    // Keep the real extension last so OIIO picks the right writer for the temporary file.
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + ext;
-    auto out = ImageOutput::create(tmp);
+}
+
+// Writes `pixels` with `spec` to "<path>.tmp-<pid>", then renames it over `path`: rename within a
+// directory is atomic, so readers see the old file or the complete new one, never a partial one.
+void WriteAtomic(const std::string& path, const FormatInfo& fmt, const ImageSpec& spec,
+                 const void* pixels, TypeDesc type) {
+    CheckDirectory(path);
+    const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
+    auto out = ImageOutput::create(fmt.oiioName);
     if (!out) throw InputError(path, "cannot write image: " + OIIO::geterror());
-    bool ok = out->open(tmp, spec) && out->write_image(type, pixels) && out->close();
+    const bool ok = out->open(tmp, spec) && out->write_image(type, pixels) && out->close();
+    std::error_code ec;
     if (!ok) {
         const std::string err = out->geterror();
         out.reset();
-        std::error_code ec;
         fs::remove(tmp, ec);
-        throw InputError(path, "cannot write image: " + err);
+        throw InputError(path, "cannot write image: " + (err.empty() ? "write failed" : err));
     }
     out.reset();
-    std::error_code ec;
     fs::rename(tmp, path, ec);
     if (ec) {
-        fs::remove(tmp, ec);
+        std::error_code ignored;
+        fs::remove(tmp, ignored);
         throw InputError(path, "cannot write image: " + ec.message());
     }
 }
@@ -57,67 +82,108 @@ void WriteAtomic(const std::string& path, const ImageSpec& spec, const void* pix
 
 uint8_t LinearToSrgb8(float v) {
     if (!(v > 0.0f)) return 0;  // also NaN
-    if (v >= 1.0f) return 255;
+    if (v >= 1.0f) return 255;  // also +inf
     const float s = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
     return uint8_t(std::lround(s * 255.0f));
 }
 
+void CheckImageOutputPath(const std::string& path) {
+    FormatOf(path);
+    CheckDirectory(path);
+}
+
 void WriteImage(const std::string& path, const Image& beauty, const std::vector<ImageLayer>& layers,
                 float exposure) {
+    // Validate everything before the temporary file exists, so a bad call leaves no trace.
+    const FormatInfo& fmt = FormatOf(path);
     if (beauty.width <= 0 || beauty.height <= 0 || beauty.channels <= 0 ||
         beauty.data.size() != beauty.NumPixels() * beauty.channels)
-        throw InputError(path, "refusing to write an empty or inconsistent image");
-    const std::string ext = Lower(fs::path(path).extension().string());
-    if (ext == ".png") {
-        const int c = std::min(beauty.channels, 3) == 1 ? 1 : 3;
-        std::vector<uint8_t> px(beauty.NumPixels() * c);
+        throw InputError(path, "cannot write image: empty or inconsistent image (" +
+                                   std::to_string(beauty.width) + "x" +
+                                   std::to_string(beauty.height) + "x" +
+                                   std::to_string(beauty.channels) + ")");
+    const size_t n = beauty.NumPixels();
+    const int bc = beauty.channels;
+
+    if (fmt.format == Format::kPng) {
+        // OIIO would quantize linearly; the sRGB encode is done here. Fewer than 3 channels: grey.
+        const int c = bc >= 3 ? 3 : 1;
         const float scale = std::exp2(exposure);
-        for (size_t p = 0; p < beauty.NumPixels(); ++p)
+        std::vector<uint8_t> px(n * c);
+        for (size_t p = 0; p < n; ++p)
             for (int k = 0; k < c; ++k)
-                px[p * c + k] = LinearToSrgb8(beauty.data[p * beauty.channels + k] * scale);
+                px[p * c + k] = LinearToSrgb8(beauty.data[p * bc + k] * scale);
         ImageSpec spec(beauty.width, beauty.height, c, TypeDesc::UINT8);
-        WriteAtomic(path, spec, px.data(), TypeDesc::UINT8);
+        spec.attribute("oiio:ColorSpace", "sRGB");
+        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::UINT8);
         return;
     }
-    if (ext != ".exr")
-        throw InputError(path, "unsupported image type '" + ext + "' (supported: .exr, .png)");
-    int total = beauty.channels;
+
+    if (fmt.format == Format::kHdr) {
+        // Radiance RGBE holds exactly RGB: grey is replicated, alpha dropped.
+        std::vector<float> px(n * 3);
+        for (size_t p = 0; p < n; ++p)
+            for (int k = 0; k < 3; ++k) px[p * 3 + k] = beauty.data[p * bc + (bc >= 3 ? k : 0)];
+        ImageSpec spec(beauty.width, beauty.height, 3, TypeDesc::FLOAT);
+        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT);
+        return;
+    }
+
+    int total = bc;
     for (const ImageLayer& l : layers) {
-        if (l.image.width != beauty.width || l.image.height != beauty.height ||
-            int(l.channelNames.size()) != l.image.channels)
-            throw InputError(path, "layer '" + l.name + "' does not match the image size");
+        if (l.image.width != beauty.width || l.image.height != beauty.height)
+            throw InputError(
+                path, "cannot write image: layer '" + l.name + "' is not the size of the image");
+        if (l.image.channels <= 0 || int(l.channelNames.size()) != l.image.channels ||
+            l.image.data.size() != l.image.NumPixels() * l.image.channels)
+            throw InputError(path, "cannot write image: layer '" + l.name +
+                                       "' has inconsistent channels or channel names");
         total += l.image.channels;
     }
     ImageSpec spec(beauty.width, beauty.height, total, TypeDesc::FLOAT);
     spec.channelnames.clear();
     static const char* kBeauty[] = {"R", "G", "B", "A"};
-    for (int k = 0; k < beauty.channels; ++k)
+    for (int k = 0; k < bc; ++k)
         spec.channelnames.push_back(k < 4 ? kBeauty[k] : "C" + std::to_string(k));
     for (const ImageLayer& l : layers)
         for (const std::string& ch : l.channelNames) spec.channelnames.push_back(l.name + "." + ch);
-    if (beauty.channels >= 4) spec.alpha_channel = 3;
-    spec.attribute("compression", "zip");
-    std::vector<float> px(beauty.NumPixels() * total);
-    for (size_t p = 0; p < beauty.NumPixels(); ++p) {
+    spec.alpha_channel = bc >= 4 ? 3 : -1;
+    spec.attribute("compression", "zip");  // lossless
+    std::vector<float> px(n * total);
+    for (size_t p = 0; p < n; ++p) {
         float* o = &px[p * total];
-        for (int k = 0; k < beauty.channels; ++k) *o++ = beauty.data[p * beauty.channels + k];
+        for (int k = 0; k < bc; ++k) *o++ = beauty.data[p * bc + k];
         for (const ImageLayer& l : layers)
             for (int k = 0; k < l.image.channels; ++k)
                 *o++ = l.image.data[p * l.image.channels + k];
     }
-    WriteAtomic(path, spec, px.data(), TypeDesc::FLOAT);
+    WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT);
 }
 
 Image ReadImage(const std::string& path) {
-    if (!fs::exists(path)) throw InputError(path, "cannot read image: no such file");
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec))
+        throw InputError(path, fs::exists(path, ec) ? "cannot read image: not a regular file"
+                                                    : "cannot read image: no such file");
     auto in = ImageInput::open(path);
-    if (!in) throw InputError(path, "cannot read image: " + OIIO::geterror());
+    if (!in) {
+        const std::string err = OIIO::geterror();
+        throw InputError(path, "cannot read image: " + (err.empty() ? "unknown format" : err));
+    }
     const ImageSpec& spec = in->spec();
     if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
         throw InputError(path, "cannot read image: empty image");
+    // A corrupt header must not turn into a huge allocation (bad_alloc is not a user error).
+    const double floats = double(spec.width) * spec.height * spec.nchannels;
+    if (floats > double(1u << 31))
+        throw InputError(path, "cannot read image: " + std::to_string(spec.width) + "x" +
+                                   std::to_string(spec.height) + "x" +
+                                   std::to_string(spec.nchannels) + " is too large");
     Image img(spec.width, spec.height, spec.nchannels);
-    if (!in->read_image(0, 0, 0, spec.nchannels, TypeDesc::FLOAT, img.data.data()))
-        throw InputError(path, "cannot read image: " + in->geterror());
+    if (!in->read_image(0, 0, 0, spec.nchannels, TypeDesc::FLOAT, img.data.data())) {
+        const std::string err = in->geterror();
+        throw InputError(path, "cannot read image: " + (err.empty() ? "read failed" : err));
+    }
     in->close();
     return img;
 }
@@ -126,9 +192,9 @@ Image ReadImageRGB(const std::string& path) {
     Image src = ReadImage(path);
     if (src.channels == 3) return src;
     Image rgb(src.width, src.height, 3);
+    const int c = src.channels;
     for (size_t p = 0; p < src.NumPixels(); ++p)
-        for (int k = 0; k < 3; ++k)
-            rgb.data[p * 3 + k] = src.data[p * src.channels + (src.channels < 3 ? 0 : k)];
+        for (int k = 0; k < 3; ++k) rgb.data[p * 3 + k] = src.data[p * c + (c < 3 ? 0 : k)];
     return rgb;
 }
 

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
-// Float images and their files (EXR with AOV layers, tone-mapped sRGB PNG), written atomically.
+// Float images and their files (EXR with AOV layers, tone-mapped sRGB PNG, Radiance HDR),
+// written atomically. OpenImageIO stays in image.cpp so users of this header need not find it.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -27,17 +28,23 @@ struct ImageLayer {
     std::vector<std::string> channelNames;  ///< size == image.channels
 };
 
-/// Writes .exr (32-bit float, linear: beauty as R,G,B[,A] + each layer as "name.CH") or .png
-/// (exposure in stops, clamp, exact sRGB OETF, 8-bit; layers ignored), chosen by extension.
-/// Writes "<path>.tmp-<pid>" and renames it, so a failed write never clobbers a good file.
-/// Throws InputError naming the path on failure.
+/// Writes by extension: .exr (32-bit float, linear; beauty as R,G,B[,A], each layer as "name.CH"),
+/// .png (exposure in stops, clamp, exact sRGB OETF, 8-bit; layers and alpha ignored), .hdr
+/// (linear RGBE, ~1% precision; layers and alpha ignored). Writes "<path>.tmp-<pid>" and renames it
+/// over `path`, so a failed or interrupted write never clobbers a good file. Throws InputError
+/// naming the path.
 void WriteImage(const std::string& path, const Image& beauty,
                 const std::vector<ImageLayer>& layers = {}, float exposure = 0.0f);
-/// Reads any image OpenImageIO reads as float RGB (1 channel is replicated); throws InputError.
+/// Throws the InputError WriteImage would throw for this path's extension or missing directory,
+/// so a command can reject a bad output name before doing its work.
+void CheckImageOutputPath(const std::string& path);
+/// Reads any image OpenImageIO reads, as float: the first 3 channels (1 or 2 channels: the first
+/// replicated), so channels == 3. Throws InputError("path", "cannot read image: ...").
 Image ReadImageRGB(const std::string& path);
-/// Reads all channels as stored; throws InputError.
+/// Reads all channels as stored in the file (environment maps, AOVs); throws InputError.
 Image ReadImage(const std::string& path);
-/// Linear value -> 8-bit sRGB (NaN -> 0, +inf -> 255).
+/// Linear value -> 8-bit sRGB through the exact sRGB OETF (NaN and <= 0 -> 0, >= 1 and +inf ->
+/// 255).
 uint8_t LinearToSrgb8(float linear);
 
 }  // namespace texcache

@@ -1,12 +1,16 @@
 // SPDX-License-Identifier: Apache-2.0
+// OBJ control cages. One pass over the text with string_views and std::from_chars (no per-token
+// allocation: the 100 KB car parses in about a millisecond); tags are collected while reading and
+// applied after the last face, because a tag may name faces and edges defined further down.
 #include "renderer/obj_loader.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
+#include <filesystem>
 #include <fstream>
 #include <map>
-#include <set>
-#include <sstream>
 
 #include "texcache/error.h"
 
@@ -14,11 +18,16 @@ namespace texcache {
 
 namespace {
 
+bool IsSpace(char c) {
+    return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
+}
+
+/// Whitespace-separated tokens of one line.
 struct Cursor {
     std::string_view s;
     size_t pos = 0;
     void SkipSpace() {
-        while (pos < s.size() && (s[pos] == ' ' || s[pos] == '\t' || s[pos] == '\r')) ++pos;
+        while (pos < s.size() && IsSpace(s[pos])) ++pos;
     }
     bool AtEnd() {
         SkipSpace();
@@ -27,236 +36,330 @@ struct Cursor {
     std::string_view Token() {
         SkipSpace();
         const size_t b = pos;
-        while (pos < s.size() && s[pos] != ' ' && s[pos] != '\t' && s[pos] != '\r') ++pos;
+        while (pos < s.size() && !IsSpace(s[pos])) ++pos;
         return s.substr(b, pos - b);
     }
 };
+
+std::string Quoted(std::string_view t) {
+    return "'" + std::string(t) + "'";
+}
 
 class Parser {
 public:
     Parser(const std::string& name, std::vector<std::string>* warnings)
         : name_(name), warnings_(warnings) {}
 
-    [[noreturn]] void Fail(const std::string& what) const {
-        throw InputError(name_ + ":" + std::to_string(line_), what);
-    }
-    void Warn(const std::string& what) const {
-        if (warnings_) warnings_->push_back(name_ + ":" + std::to_string(line_) + ": " + what);
-    }
-
-    float Float(std::string_view t) const {
-        float v;
-        const auto r = std::from_chars(t.data(), t.data() + t.size(), v);
-        if (r.ec != std::errc() || r.ptr != t.data() + t.size()) {
-            // from_chars rejects "inf"/"nan" spellings in some forms; report them as non-finite.
-            std::string low(t);
-            for (char& ch : low) ch = char(std::tolower(ch));
-            if (low.find("nan") != std::string::npos || low.find("inf") != std::string::npos)
-                Fail("non-finite coordinate '" + std::string(t) + "'");
-            Fail("malformed number '" + std::string(t) + "'");
-        }
-        if (!std::isfinite(v)) Fail("non-finite coordinate '" + std::string(t) + "'");
-        return v;
-    }
-    long Int(std::string_view t) const {
-        long v;
-        const auto r = std::from_chars(t.data(), t.data() + t.size(), v);
-        if (r.ec != std::errc() || r.ptr != t.data() + t.size())
-            Fail("malformed integer '" + std::string(t) + "'");
-        return v;
-    }
-    // OBJ index (1-based, or negative = relative to the count so far) -> 0-based.
-    int Index(std::string_view t, size_t count, const char* what) const {
-        const long i = Int(t);
-        long r = i > 0 ? i - 1 : long(count) + i;
-        if (i == 0 || r < 0 || r >= long(count))
-            Fail(std::string(what) + " index " + std::string(t) + " is out of range (" +
-                 std::to_string(count) + " defined so far)");
-        return int(r);
-    }
-
     ControlCage Parse(std::string_view text) {
         cage_.sourcePath = name_;
+        // A UTF-8 byte order mark would otherwise glue itself to the first keyword.
+        if (text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);
         size_t start = 0;
-        bool anyFaceUv = false, anyFaceNoUv = false;
-        while (start <= text.size()) {
+        while (start < text.size()) {
             size_t end = text.find('\n', start);
             if (end == std::string_view::npos) end = text.size();
             ++line_;
-            Cursor c{text.substr(start, end - start)};
+            // Trailing comments ("f 1 2 3 # top") would otherwise read as one more index.
+            std::string_view line = text.substr(start, end - start);
+            line = line.substr(0, line.find('#'));
+            Cursor c{line};
             start = end + 1;
             const std::string_view kw = c.Token();
-            if (kw.empty() || kw[0] == '#') {
-                if (end == text.size()) break;
-                continue;
-            }
+            if (kw.empty()) continue;
             if (kw == "v") {
+                // `v x y z [w]`: w (and the colours some exporters append) are ignored.
                 std::array<float, 3> p;
-                for (float& x : p) {
-                    const auto t = c.Token();
-                    if (t.empty()) Fail("vertex needs 3 coordinates");
-                    x = Float(t);
-                }
+                for (float& x : p) x = Float(c.Token(), "vertex needs 3 coordinates");
                 cage_.positions.push_back(p);
             } else if (kw == "vt") {
                 std::array<float, 2> uv;
-                for (float& x : uv) {
-                    const auto t = c.Token();
-                    if (t.empty()) Fail("texture coordinate needs 2 values");
-                    x = Float(t);
-                }
+                for (float& x : uv) x = Float(c.Token(), "texture coordinate needs 2 values");
                 cage_.uvs.push_back(uv);
-            } else if (kw == "vn" || kw == "o" || kw == "g" || kw == "s" || kw == "usemtl" ||
-                       kw == "mtllib") {
-                // Facet normals are ignored (the limit surface defines normals); groups too.
+            } else if (kw == "vn") {
+                // Facet normals: the limit surface defines the normals. Counted only to validate
+                // the indices faces give.
+                ++numNormals_;
             } else if (kw == "f") {
-                int n = 0;
-                bool hasUv = false, noUv = false;
-                std::set<int> seen;
-                while (!c.AtEnd()) {
-                    const std::string_view t = c.Token();
-                    const size_t s1 = t.find('/');
-                    const int v = Index(t.substr(0, s1), cage_.positions.size(), "vertex");
-                    if (!seen.insert(v).second)
-                        Fail("face repeats vertex " + std::to_string(v + 1));
-                    cage_.faceVertexIndices.push_back(v);
-                    int vt = -1;
-                    if (s1 != std::string_view::npos) {
-                        const size_t s2 = t.find('/', s1 + 1);
-                        const std::string_view tt =
-                            t.substr(s1 + 1, s2 == std::string_view::npos ? t.npos : s2 - s1 - 1);
-                        if (!tt.empty()) vt = Index(tt, cage_.uvs.size(), "texture coordinate");
-                    }
-                    (vt >= 0 ? hasUv : noUv) = true;
-                    faceUv_.push_back(vt);
-                    ++n;
-                }
-                if (n < 3) Fail("face has " + std::to_string(n) + " vertices (at least 3 needed)");
-                if (hasUv && noUv)
-                    Fail("face gives texture coordinates for some corners but not others");
-                anyFaceUv |= hasUv;
-                anyFaceNoUv |= noUv;
-                cage_.faceVertexCounts.push_back(n);
-                faceLines_.push_back(line_);
+                ParseFace(c);
             } else if (kw == "t") {
                 ParseTag(c);
+            } else if (kw == "o" || kw == "g" || kw == "s" || kw == "usemtl" || kw == "mtllib") {
+                // Names, smoothing groups and materials do not change the cage.
             } else {
-                Warn("unknown statement '" + std::string(kw) + "' skipped");
+                // Warn once per keyword: a file full of `l` lines should not bury other warnings.
+                auto it = unknownStatements_.find(kw);
+                if (it == unknownStatements_.end())
+                    it = unknownStatements_.emplace(std::string(kw), std::pair{line_, 0}).first;
+                ++it->second.second;
             }
-            if (end == text.size()) break;
         }
         if (cage_.faceVertexCounts.empty()) {
-            line_ = 0;
-            throw InputError(name_, "no faces");
+            line_ = std::max(line_, 1);  // an empty file still gets a line to point at
+            Fail("no faces in the file (" + std::to_string(cage_.numVertices()) +
+                 " vertices): an empty cage cannot be rendered");
         }
-        if (anyFaceUv && !anyFaceNoUv) {
-            cage_.faceUvIndices = faceUv_;
+        for (const auto& [kw, at] : unknownStatements_) {
+            std::string w = "unknown statement " + Quoted(kw) + " skipped";
+            if (at.second > 1) w += " (" + std::to_string(at.second) + " lines)";
+            WarnAt(at.first, w);
+        }
+        // Face-varying uvs are only usable when every corner has one. A face mixing corners with
+        // and without uvs is an error (ParseFace); faces that disagree with each other drop the
+        // uvs with a warning, because the geometry itself is still fine.
+        if (firstUvFaceLine_ > 0 && firstNoUvFaceLine_ > 0) {
+            WarnAt(std::max(firstUvFaceLine_, firstNoUvFaceLine_),
+                   "faces with texture coordinates (first on line " +
+                       std::to_string(firstUvFaceLine_) + ") and without (first on line " +
+                       std::to_string(firstNoUvFaceLine_) + "): uvs dropped");
+        }
+        if (firstUvFaceLine_ > 0 && firstNoUvFaceLine_ == 0) {
+            cage_.faceUvIndices = std::move(faceUv_);
         } else {
-            if (anyFaceUv) Warn("texture coordinates on some faces only: uvs dropped");
             cage_.uvs.clear();
+            cage_.faceUvIndices.clear();
         }
         ResolveTags();
         return std::move(cage_);
     }
 
 private:
+    [[noreturn]] void Fail(const std::string& what) const {
+        throw InputError(name_ + ":" + std::to_string(line_), what);
+    }
+    void WarnAt(int line, const std::string& what) const {
+        if (warnings_) warnings_->push_back(name_ + ":" + std::to_string(line) + ": " + what);
+    }
+
+    /// A finite float; `missing` is the message when the token is absent.
+    float Float(std::string_view t, const char* missing) const {
+        if (t.empty()) Fail(missing);
+        std::string_view digits = t;
+        if (digits.size() > 1 && digits[0] == '+') digits.remove_prefix(1);  // from_chars says no
+        float v = 0.0f;
+        const auto r = std::from_chars(digits.data(), digits.data() + digits.size(), v);
+        if (r.ec == std::errc::result_out_of_range)
+            Fail("number " + Quoted(t) + " is out of the float range");
+        if (r.ec != std::errc() || r.ptr != digits.data() + digits.size())
+            Fail("malformed number " + Quoted(t));
+        // from_chars accepts "nan" and "inf"; a cage with them cannot be subdivided.
+        if (!std::isfinite(v)) Fail("non-finite number " + Quoted(t));
+        return v;
+    }
+    /// An integer; `what` names it in the message ("tag integer", "vertex index").
+    long Int(std::string_view t, const char* what, const char* what2 = "") const {
+        long v = 0;
+        const auto r = std::from_chars(t.data(), t.data() + t.size(), v);
+        if (t.empty() || r.ec != std::errc() || r.ptr != t.data() + t.size())
+            Fail("malformed " + std::string(what) + what2 + " " + Quoted(t) +
+                 " (expected an integer)");
+        return v;
+    }
+    /// OBJ index (1-based, or negative = relative: -1 is the last defined so far) -> 0-based.
+    int Index(std::string_view t, size_t count, const char* what) const {
+        const long i = Int(t, what, " index");
+        const long r = i > 0 ? i - 1 : long(count) + i;
+        if (i == 0 || r < 0 || r >= long(count))
+            Fail(std::string(what) + " index " + std::string(t) + " is out of range (" +
+                 std::to_string(count) + " defined so far" +
+                 (i == 0 ? "; OBJ indices start at 1)" : ")"));
+        return int(r);
+    }
+
+    void ParseFace(Cursor& c) {
+        const size_t first = cage_.faceVertexIndices.size();
+        int withUv = 0, n = 0;
+        while (!c.AtEnd()) {
+            const std::string_view t = c.Token();
+            // v, v/vt, v//vn or v/vt/vn
+            const size_t s1 = t.find('/');
+            cage_.faceVertexIndices.push_back(
+                Index(t.substr(0, s1), cage_.positions.size(), "vertex"));
+            int vt = -1;
+            if (s1 != std::string_view::npos) {
+                const size_t s2 = t.find('/', s1 + 1);
+                const std::string_view tt =
+                    t.substr(s1 + 1, s2 == std::string_view::npos ? t.npos : s2 - s1 - 1);
+                if (!tt.empty()) vt = Index(tt, cage_.uvs.size(), "texture coordinate");
+                if (s2 != std::string_view::npos) {
+                    const std::string_view tn = t.substr(s2 + 1);
+                    if (tn.find('/') != std::string_view::npos)
+                        Fail("face corner " + Quoted(t) + " has more than v/vt/vn");
+                    // Normals are ignored, so a dangling one only earns a warning (once).
+                    const long ni = Int(tn, "normal", " index");
+                    const long nr = ni > 0 ? ni - 1 : long(numNormals_) + ni;
+                    if ((ni == 0 || nr < 0 || nr >= long(numNormals_)) && !warnedNormal_) {
+                        warnedNormal_ = true;
+                        WarnAt(line_, "normal index " + std::string(tn) + " is out of range (" +
+                                          std::to_string(numNormals_) +
+                                          " defined so far); normals are ignored anyway");
+                    }
+                } else if (tt.empty()) {
+                    Fail("face corner " + Quoted(t) + " ends with '/'");
+                }
+            }
+            withUv += vt >= 0;
+            faceUv_.push_back(vt);
+            ++n;
+        }
+        if (n < 3) Fail("face has " + std::to_string(n) + " vertices (at least 3 needed)");
+        if (withUv != 0 && withUv != n)
+            Fail("face gives texture coordinates for " + std::to_string(withUv) + " of its " +
+                 std::to_string(n) + " corners (all or none needed)");
+        // A repeated vertex makes a degenerate face Embree and OpenSubdiv both reject. Faces are
+        // small, so a quadratic scan beats any set; long n-gons sort a scratch copy instead.
+        const int* v = cage_.faceVertexIndices.data() + first;
+        int repeated = -1;
+        if (n <= 32) {
+            for (int i = 0; i < n && repeated < 0; ++i)
+                for (int j = i + 1; j < n; ++j)
+                    if (v[i] == v[j]) {
+                        repeated = v[i];
+                        break;
+                    }
+        } else {
+            scratch_.assign(v, v + n);
+            std::sort(scratch_.begin(), scratch_.end());
+            const auto it = std::adjacent_find(scratch_.begin(), scratch_.end());
+            if (it != scratch_.end()) repeated = *it;
+        }
+        if (repeated >= 0)
+            Fail("degenerate face: it repeats vertex " + std::to_string(repeated + 1));
+        int& firstLine = withUv ? firstUvFaceLine_ : firstNoUvFaceLine_;
+        if (firstLine == 0) firstLine = line_;
+        cage_.faceVertexCounts.push_back(n);
+    }
+
     struct PendingTag {
         int line;
-        std::string name;
+        std::string_view name;
         std::vector<long> ints;
         std::vector<float> floats;
     };
 
+    /// `t NAME nInts/nFloats/nStrings ints... floats... strings...`: checks the counts now (a
+    /// mismatch is a syntax error), interprets the values in ResolveTags.
     void ParseTag(Cursor& c) {
         PendingTag tag;
         tag.line = line_;
-        tag.name = std::string(c.Token());
+        tag.name = c.Token();
+        if (tag.name.empty()) Fail("tag line without a tag name");
+        const std::string name(tag.name);
         const std::string_view counts = c.Token();
-        int ni, nf, ns;
-        if (std::sscanf(std::string(counts).c_str(), "%d/%d/%d", &ni, &nf, &ns) != 3 || ni < 0 ||
-            nf < 0 || ns < 0)
-            Fail("tag '" + tag.name + "' needs counts as nInts/nFloats/nStrings, got '" +
-                 std::string(counts) + "'");
-        for (int i = 0; i < ni; ++i) {
-            const auto t = c.Token();
-            if (t.empty())
-                Fail("tag '" + tag.name + "' declares " + std::to_string(ni) +
-                     " integers but has fewer");
-            tag.ints.push_back(Int(t));
+        long n[3] = {-1, -1, -1};
+        const char* p = counts.data();
+        const char* end = counts.data() + counts.size();
+        for (int k = 0; k < 3; ++k) {
+            const auto r = std::from_chars(p, end, n[k]);
+            const bool sepOk = k == 2 ? r.ptr == end : (r.ptr != end && *r.ptr == '/');
+            if (r.ec != std::errc() || !sepOk || n[k] < 0 || n[k] > (1 << 24)) {
+                Fail("tag '" + name + "' needs counts as nInts/nFloats/nStrings, got " +
+                     Quoted(counts));
+            }
+            p = r.ptr + 1;
         }
-        for (int i = 0; i < nf; ++i) {
-            const auto t = c.Token();
-            if (t.empty())
-                Fail("tag '" + tag.name + "' declares " + std::to_string(nf) +
-                     " floats but has fewer");
-            tag.floats.push_back(Float(t));
+        const auto need = [&](long count, const char* kind) {
+            return "tag '" + name + "' declares " + std::to_string(count) + " " + kind +
+                   " but has fewer";
+        };
+        tag.ints.reserve(size_t(n[0]));
+        for (long i = 0; i < n[0]; ++i) {
+            const std::string_view t = c.Token();
+            if (t.empty()) Fail(need(n[0], "integers"));
+            tag.ints.push_back(Int(t, "tag integer"));
         }
-        for (int i = 0; i < ns; ++i) c.Token();
-        if (!c.AtEnd()) Fail("tag '" + tag.name + "' has more values than its counts declare");
+        tag.floats.reserve(size_t(n[1]));
+        for (long i = 0; i < n[1]; ++i) {
+            const std::string_view t = c.Token();
+            if (t.empty()) Fail(need(n[1], "floats"));
+            tag.floats.push_back(Float(t, "missing float"));
+        }
+        for (long i = 0; i < n[2]; ++i)
+            if (c.Token().empty()) Fail(need(n[2], "strings"));
+        if (!c.AtEnd())
+            Fail("tag '" + name + "' has more values than its counts " + Quoted(counts) +
+                 " declare");
         tags_.push_back(std::move(tag));
     }
 
-    // Tags are applied after all faces are read: they may name edges of faces defined later.
+    static uint64_t EdgeKey(long a, long b) {
+        return uint64_t(std::min(a, b)) << 32 | uint64_t(std::max(a, b));
+    }
+
+    /// Applies the tags to the finished face list. Tags that name missing edges, vertices or faces
+    /// are skipped with a warning (Embree fails on creases of non-edges); malformed tags throw.
     void ResolveTags() {
-        std::set<std::pair<int, int>> edges;
+        std::vector<uint64_t> edges;
+        edges.reserve(cage_.faceVertexIndices.size());
         size_t off = 0;
-        for (int n : cage_.faceVertexCounts) {
-            for (int i = 0; i < n; ++i) {
-                const int a = cage_.faceVertexIndices[off + i],
-                          b = cage_.faceVertexIndices[off + (i + 1) % n];
-                edges.insert({std::min(a, b), std::max(a, b)});
-            }
-            off += n;
+        for (const int n : cage_.faceVertexCounts) {
+            for (int i = 0; i < n; ++i)
+                edges.push_back(EdgeKey(cage_.faceVertexIndices[off + i],
+                                        cage_.faceVertexIndices[off + (i + 1) % n]));
+            off += size_t(n);
         }
-        std::map<std::pair<int, int>, float> creases;
+        std::sort(edges.begin(), edges.end());
+        const auto isEdge = [&](long a, long b) {
+            return std::binary_search(edges.begin(), edges.end(), EdgeKey(a, b));
+        };
+        // Ordered maps keep the output deterministic (sorted by vertex) whatever the tag order.
+        std::map<uint64_t, float> creases;
         std::map<int, float> corners;
-        std::set<int> holes;
-        const int nv = cage_.numVertices(), nfaces = cage_.numFaces();
+        std::vector<bool> hole(size_t(cage_.numFaces()), false);
+        const long nv = cage_.numVertices(), nf = cage_.numFaces();
         for (const PendingTag& t : tags_) {
             line_ = t.line;
             if (t.name == "crease") {
-                if (t.ints.size() % 2 != 0 || t.ints.empty() || t.floats.empty())
-                    Fail("crease needs vertex pairs and a sharpness");
+                // `2k/1/0`: k edges sharing one sharpness; `2k/k/0`: one sharpness per edge.
                 const size_t pairs = t.ints.size() / 2;
-                if (t.floats.size() != 1 && t.floats.size() != pairs)
-                    Fail("crease needs one sharpness, or one per edge");
+                if (t.ints.empty() || t.ints.size() % 2 != 0 ||
+                    (t.floats.size() != 1 && t.floats.size() != pairs))
+                    Fail("crease needs 2k/1/0 (k edges, one sharpness) or 2k/k/0, got " +
+                         std::to_string(t.ints.size()) + "/" + std::to_string(t.floats.size()));
                 for (size_t i = 0; i < pairs; ++i) {
                     const long a = t.ints[2 * i], b = t.ints[2 * i + 1];
                     const float s = t.floats[t.floats.size() == 1 ? 0 : i];
-                    const std::pair<int, int> e{int(std::min(a, b)), int(std::max(a, b))};
-                    if (a < 0 || b < 0 || a >= nv || b >= nv || !edges.count(e)) {
-                        Warn("crease names edge (" + std::to_string(a) + ", " + std::to_string(b) +
-                             ") that no face has: ignored");
+                    if (s < 0.0f) Fail("negative crease sharpness " + std::to_string(s));
+                    if (a < 0 || b < 0 || a >= nv || b >= nv || a == b || !isEdge(a, b)) {
+                        WarnAt(line_, "crease names (" + std::to_string(a) + ", " +
+                                          std::to_string(b) +
+                                          "), which is not an edge of any face: ignored");
                         continue;
                     }
-                    if (s < 0.0f) Fail("negative crease sharpness");
-                    // A repeated edge keeps its largest sharpness.
-                    auto [it, fresh] = creases.try_emplace(e, s);
+                    // A repeated edge keeps its largest sharpness, whatever the order.
+                    auto [it, fresh] = creases.try_emplace(EdgeKey(a, b), s);
                     if (!fresh) it->second = std::max(it->second, s);
                 }
             } else if (t.name == "corner") {
+                // `k/1/0` (one sharpness for all) or `k/k/0`.
                 if (t.ints.empty() || (t.floats.size() != 1 && t.floats.size() != t.ints.size()))
-                    Fail("corner needs vertices and a sharpness (one, or one per vertex)");
+                    Fail("corner needs k/1/0 (k vertices, one sharpness) or k/k/0, got " +
+                         std::to_string(t.ints.size()) + "/" + std::to_string(t.floats.size()));
                 for (size_t i = 0; i < t.ints.size(); ++i) {
                     const long v = t.ints[i];
+                    const float s = t.floats[t.floats.size() == 1 ? 0 : i];
+                    if (s < 0.0f) Fail("negative corner sharpness " + std::to_string(s));
                     if (v < 0 || v >= nv) {
-                        Warn("corner names missing vertex " + std::to_string(v) + ": ignored");
+                        WarnAt(line_, "corner names vertex " + std::to_string(v) +
+                                          ", but there are " + std::to_string(nv) + ": ignored");
                         continue;
                     }
-                    const float s = t.floats[t.floats.size() == 1 ? 0 : i];
-                    if (s < 0.0f) Fail("negative corner sharpness");
-                    corners[int(v)] = std::max(corners[int(v)], s);
+                    auto [it, fresh] = corners.try_emplace(int(v), s);
+                    if (!fresh) it->second = std::max(it->second, s);
                 }
             } else if (t.name == "hole") {
-                for (long f : t.ints) {
-                    if (f < 0 || f >= nfaces) {
-                        Warn("hole names missing face " + std::to_string(f) + ": ignored");
+                if (t.ints.empty() || !t.floats.empty())
+                    Fail("hole needs N/0/0 followed by N face indices");
+                for (const long f : t.ints) {
+                    if (f < 0 || f >= nf) {
+                        WarnAt(line_, "hole names face " + std::to_string(f) + ", but there are " +
+                                          std::to_string(nf) + ": ignored");
                         continue;
                     }
-                    holes.insert(int(f));
+                    hole[size_t(f)] = true;
                 }
             } else if (t.name == "interpolateboundary") {
-                if (t.ints.size() != 1) Fail("interpolateboundary needs one integer");
+                if (t.ints.size() != 1 || !t.floats.empty())
+                    Fail("interpolateboundary needs 1/0/0 and one integer");
                 switch (t.ints[0]) {
                     case 0:
                         cage_.boundary = BoundaryInterpolation::None;
@@ -268,30 +371,39 @@ private:
                         cage_.boundary = BoundaryInterpolation::EdgeOnly;
                         break;
                     default:
-                        Fail("interpolateboundary must be 0, 1 or 2");
+                        Fail(
+                            "interpolateboundary must be 0 (none), 1 (edge and corner) or 2 "
+                            "(edge only), got " +
+                            std::to_string(t.ints[0]));
                 }
             } else {
-                Warn("unknown tag '" + t.name + "' skipped");
+                WarnAt(line_, "unknown tag '" + std::string(t.name) + "' skipped");
             }
         }
         for (const auto& [e, s] : creases) {
-            cage_.creaseEdges.push_back({e.first, e.second});
+            cage_.creaseEdges.push_back({int(e >> 32), int(e & 0xffffffffu)});
             cage_.creaseWeights.push_back(s);
         }
         for (const auto& [v, s] : corners) {
             cage_.cornerVertices.push_back(v);
             cage_.cornerWeights.push_back(s);
         }
-        cage_.holes.assign(holes.begin(), holes.end());
+        for (int f = 0; f < cage_.numFaces(); ++f)
+            if (hole[size_t(f)]) cage_.holes.push_back(f);
     }
 
     std::string name_;
     std::vector<std::string>* warnings_;
     int line_ = 0;
     ControlCage cage_;
-    std::vector<int> faceUv_;
-    std::vector<int> faceLines_;
-    std::vector<PendingTag> tags_;
+    size_t numNormals_ = 0;
+    bool warnedNormal_ = false;
+    std::vector<int> faceUv_;   ///< parallel to faceVertexIndices, -1 = no vt
+    std::vector<int> scratch_;  ///< long n-gons' duplicate check
+    int firstUvFaceLine_ = 0, firstNoUvFaceLine_ = 0;
+    std::map<std::string, std::pair<int, int>, std::less<>>
+        unknownStatements_;         ///< first line, count
+    std::vector<PendingTag> tags_;  ///< names view the text, which outlives the parse
 };
 
 }  // namespace
@@ -302,12 +414,18 @@ ControlCage ParseObj(std::string_view text, const std::string& name,
 }
 
 ControlCage LoadObj(const std::string& path, std::vector<std::string>* warnings) {
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw InputError(path, "cannot open file");
-    std::stringstream ss;
-    ss << f.rdbuf();
-    if (f.bad()) throw InputError(path, "cannot read file");
-    return ParseObj(ss.str(), path, warnings);
+    // A directory opens as a stream on Linux and reports a nonsense size: rule it out first.
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec))
+        throw InputError(path, "is a directory, not an OBJ file");
+    std::ifstream f(path, std::ios::binary | std::ios::ate);
+    if (!f) throw InputError(path, "cannot open OBJ file (missing or unreadable)");
+    const std::streamoff size = f.tellg();
+    if (size < 0) throw InputError(path, "cannot read OBJ file (not a regular file?)");
+    std::string text(size_t(size), '\0');
+    f.seekg(0);
+    if (!f.read(text.data(), size)) throw InputError(path, "cannot read OBJ file");
+    return ParseObj(text, path, warnings);
 }
 
 }  // namespace texcache

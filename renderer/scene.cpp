@@ -2,6 +2,7 @@
 #include "renderer/scene.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include <glm/gtc/matrix_transform.hpp>
 
@@ -12,9 +13,10 @@ glm::mat4 TransformTrack::Eval(float time) const {
     const Keyframe* a = &keys.front();
     const Keyframe* b = a;
     float f = 0.0f;
-    if (time <= keys.front().time) {
+    // Written so a NaN time takes the first key instead of running off the end.
+    if (!(time > keys.front().time)) {
         a = b = &keys.front();
-    } else if (time >= keys.back().time) {
+    } else if (!(time < keys.back().time)) {
         a = b = &keys.back();
     } else {
         const auto it = std::upper_bound(keys.begin(), keys.end(), time,
@@ -24,6 +26,7 @@ glm::mat4 TransformTrack::Eval(float time) const {
         f = (time - a->time) / (b->time - a->time);
     }
     const glm::vec3 t = glm::mix(a->translation, b->translation, f);
+    // Shortest path: q and -q are the same rotation, take the one on a's side.
     const glm::quat r = glm::slerp(
         a->rotation, glm::dot(a->rotation, b->rotation) < 0.0f ? -b->rotation : b->rotation, f);
     const glm::vec3 s = glm::mix(a->scale, b->scale, f);
@@ -31,6 +34,7 @@ glm::mat4 TransformTrack::Eval(float time) const {
 }
 
 bool TransformTrack::IsAnimated() const {
+    // Every key against the first: any difference means the pose changes somewhere.
     for (size_t i = 1; i < keys.size(); ++i) {
         const Keyframe& a = keys[0];
         const Keyframe& b = keys[i];

@@ -1,16 +1,19 @@
 // SPDX-License-Identifier: Apache-2.0
+// JSON scene files (format: scenes/README.md). Every value is read through a Node that knows its
+// key path, so each error names the file and the key ("car.json: key 'camera.fov': ...");
+// unknown and duplicate keys are errors because a typo would otherwise silently use a default.
 #include "renderer/scene_loader.h"
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <set>
 #include <sstream>
 
 #include <glm/gtc/quaternion.hpp>
 #include <nlohmann/json.hpp>
 
+#include "filters/texture_filters.h"
 #include "renderer/obj_loader.h"
 #include "texcache/error.h"
 
@@ -21,225 +24,249 @@ using json = nlohmann::json;
 
 namespace {
 
-const char* kIntegrators[] = {"normal", "ptex", "uv", "eyelight", "ao", "direct", "path"};
+constexpr const char* kIntegrators[] = {"normal", "ptex", "uv", "eyelight", "ao", "direct", "path"};
+constexpr float kBig = 1e30f;  // finite values beyond this are almost certainly typos
 
 std::string TypeName(const json& j) {
-    if (j.is_number()) return "a number";
-    if (j.is_string()) return "a string";
+    if (j.is_number()) return "the number " + j.dump();
+    if (j.is_string()) return "the string " + j.dump();
     if (j.is_array()) return "an array";
     if (j.is_object()) return "an object";
-    if (j.is_boolean()) return "a boolean";
+    if (j.is_boolean()) return j.dump();
     return "null";
+}
+
+std::string Fmt(double v) {
+    std::ostringstream o;
+    o << v;
+    return o.str();
+}
+
+std::string List(std::initializer_list<const char*> names) {
+    std::string s;
+    for (const char* n : names) s += (s.empty() ? "" : ", ") + std::string(n);
+    return s;
 }
 
 /// A JSON value with its key path, for errors like "scene.json: key 'camera.fov': ...".
 class Node {
 public:
     Node(const json& j, std::string path, const std::string& file)
-        : j_(j), path_(std::move(path)), file_(file) {}
+        : j_(&j), path_(std::move(path)), file_(&file) {}
 
-    [[noreturn]] void Fail(const std::string& what) const {
-        throw InputError(file_ + ": key '" + path_ + "'", what);
-    }
-    const json& raw() const { return j_; }
-    const std::string& path() const { return path_; }
-    /// "file: key 'path'" for messages raised outside Node.
-    std::string Where() const { return file_ + ": key '" + path_ + "'"; }
+    /// "file: key 'a.b'" (just "file" at the root), the `where` of InputError.
+    std::string Where() const { return path_.empty() ? *file_ : *file_ + ": key '" + path_ + "'"; }
+    [[noreturn]] void Fail(const std::string& what) const { throw InputError(Where(), what); }
+    const json& raw() const { return *j_; }
 
-    void Object(std::initializer_list<const char*> allowed) const {
-        if (!j_.is_object()) Fail("expected an object, got " + TypeName(j_));
-        for (const auto& [k, v] : j_.items()) {
+    /// Requires an object whose keys are all in `allowed`.
+    void Keys(std::initializer_list<const char*> allowed) const {
+        if (!j_->is_object()) Fail("expected an object, got " + TypeName(*j_));
+        for (const auto& [k, v] : j_->items()) {
             bool ok = false;
             for (const char* a : allowed) ok |= k == a;
-            if (!ok) {
-                std::string list;
-                for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
-                throw InputError(file_ + ": key '" + Join(k) + "'",
-                                 "unknown key (expected one of: " + list + ")");
-            }
+            if (!ok)
+                Node(v, Join(k), *file_)
+                    .Fail("unknown key (expected one of: " + List(allowed) + ")");
         }
     }
-    bool Has(const char* k) const { return j_.is_object() && j_.contains(k); }
-    Node operator[](const char* k) const { return Node(j_.at(k), Join(k), file_); }
-    Node At(size_t i) const { return Node(j_.at(i), path_ + "[" + std::to_string(i) + "]", file_); }
+    bool Has(const char* k) const { return j_->is_object() && j_->contains(k); }
+    /// A required member.
+    Node operator[](const char* k) const {
+        if (!j_->is_object()) Fail("expected an object, got " + TypeName(*j_));
+        const auto it = j_->find(k);
+        if (it == j_->end()) Node(*j_, Join(k), *file_).Fail("missing (required)");
+        return Node(*it, Join(k), *file_);
+    }
+    Node At(size_t i) const {
+        return Node(j_->at(i), path_ + "[" + std::to_string(i) + "]", *file_);
+    }
     size_t ArraySize() const {
-        if (!j_.is_array()) Fail("expected an array, got " + TypeName(j_));
-        return j_.size();
+        if (!j_->is_array()) Fail("expected an array, got " + TypeName(*j_));
+        return j_->size();
     }
 
-    float Number(float lo = -1e30f, float hi = 1e30f) const {
-        if (!j_.is_number()) Fail("expected a number, got " + TypeName(j_) + " " + j_.dump());
-        const double v = j_.get<double>();
+    /// A finite number in [lo, hi].
+    float Number(float lo = -kBig, float hi = kBig) const {
+        if (!j_->is_number()) Fail("expected a number, got " + TypeName(*j_));
+        const double v = j_->get<double>();
         if (!std::isfinite(v)) Fail("expected a finite number");
         if (v < lo || v > hi)
-            Fail("value " + j_.dump() + " is out of range [" + Fmt(lo) + ", " + Fmt(hi) + "]");
+            Fail("value " + Fmt(v) + " is out of range [" + Fmt(lo) + ", " + Fmt(hi) + "]");
         return float(v);
     }
-    int Int(long lo, long hi) const {
-        if (!j_.is_number_integer())
-            Fail("expected an integer, got " + TypeName(j_) + " " + j_.dump());
-        const long v = j_.get<long>();
+    /// A finite number in the open interval (lo, hi).
+    float NumberOpen(float lo, float hi) const {
+        const float v = Number();
+        if (!(v > lo && v < hi))
+            Fail("value " + Fmt(v) + " is out of range (" + Fmt(lo) + ", " + Fmt(hi) + ")");
+        return v;
+    }
+    /// An integer in [lo, hi] (lo >= 0).
+    int64_t Int(int64_t lo, int64_t hi) const {
+        const char* kind = lo >= 1 ? "a positive integer" : "a non-negative integer";
+        if (!j_->is_number_integer())
+            Fail(std::string("expected ") + kind + ", got " + TypeName(*j_));
+        // Unsigned JSON integers above INT64_MAX would wrap in get<int64_t>.
+        if (j_->is_number_unsigned() && j_->get<uint64_t>() > uint64_t(hi))
+            Fail("value " + j_->dump() + " is out of range [" + std::to_string(lo) + ", " +
+                 std::to_string(hi) + "]");
+        const int64_t v = j_->get<int64_t>();
+        if (v < 0) Fail(std::string("expected ") + kind + ", got " + TypeName(*j_));
         if (v < lo || v > hi)
             Fail("value " + std::to_string(v) + " is out of range [" + std::to_string(lo) + ", " +
                  std::to_string(hi) + "]");
-        return int(v);
+        return v;
     }
     bool Bool() const {
-        if (!j_.is_boolean()) Fail("expected true or false, got " + TypeName(j_));
-        return j_.get<bool>();
+        if (!j_->is_boolean()) Fail("expected true or false, got " + TypeName(*j_));
+        return j_->get<bool>();
     }
     std::string String() const {
-        if (!j_.is_string()) Fail("expected a string, got " + TypeName(j_) + " " + j_.dump());
-        return j_.get<std::string>();
+        if (!j_->is_string()) Fail("expected a string, got " + TypeName(*j_));
+        return j_->get<std::string>();
     }
-    glm::vec3 Vec3(float lo = -1e30f, float hi = 1e30f) const {
-        if (!j_.is_array() || j_.size() != 3)
-            Fail("expected an array of 3 numbers, got " + j_.dump());
+    glm::vec3 Vec3(float lo = -kBig, float hi = kBig) const {
+        if (!j_->is_array() || j_->size() != 3)
+            Fail("expected an array of 3 numbers, got " +
+                 (j_->is_array() ? "an array of " + std::to_string(j_->size()) : TypeName(*j_)));
         return {At(0).Number(lo, hi), At(1).Number(lo, hi), At(2).Number(lo, hi)};
     }
 
 private:
     std::string Join(const std::string& k) const { return path_.empty() ? k : path_ + "." + k; }
-    static std::string Fmt(float v) {
-        std::ostringstream o;
-        o << v;
-        return o.str();
-    }
-    const json& j_;
+    const json* j_;
     std::string path_;
-    const std::string& file_;
+    const std::string* file_;
 };
 
+/// Absolute, normalised path of `rel` relative to the directory `base`.
 std::string Resolve(const fs::path& base, const std::string& rel) {
     fs::path p(rel);
     if (p.is_relative()) p = base / p;
-    return p.lexically_normal().string();
+    return fs::absolute(p).lexically_normal().string();
+}
+
+/// Fails unless `path` is an existing regular file (a directory would pass fs::exists).
+void RequireFile(const Node& n, const std::string& path, const char* what) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec))
+        n.Fail(std::string(what) + " '" + path + "' " +
+               (fs::exists(path, ec) ? "is not a regular file" : "does not exist"));
 }
 
 glm::quat RotationFromAxisAngle(const Node& n) {
     if (!n.raw().is_array() || n.raw().size() != 4)
-        n.Fail("expected [angle_degrees, axis_x, axis_y, axis_z], got " + n.raw().dump());
+        n.Fail("expected [angle_degrees, axis_x, axis_y, axis_z], got " + TypeName(n.raw()));
     const float a = n.At(0).Number();
     const glm::vec3 axis(n.At(1).Number(), n.At(2).Number(), n.At(3).Number());
-    if (glm::length(axis) < 1e-12f) n.Fail("rotation axis is zero");
+    if (!(glm::length(axis) > 1e-12f)) n.Fail("rotation axis is zero");
     return glm::angleAxis(glm::radians(a), glm::normalize(axis));
 }
 
-Keyframe ParseRigid(const Node& n, bool allowTime) {
-    if (allowTime)
-        n.Object({"time", "translate", "rotate", "scale"});
+Keyframe ParseRigid(const Node& n, bool keyed) {
+    if (keyed)
+        n.Keys({"time", "translate", "rotate", "scale"});
     else
-        n.Object({"translate", "rotate", "scale"});
+        n.Keys({"translate", "rotate", "scale"});
     Keyframe k;
-    if (allowTime) k.time = n["time"].Number();
+    if (keyed) k.time = n["time"].Number();
     if (n.Has("translate")) k.translation = n["translate"].Vec3();
     if (n.Has("rotate")) k.rotation = RotationFromAxisAngle(n["rotate"]);
     if (n.Has("scale")) {
         const Node s = n["scale"];
+        // A zero or negative scale collapses or mirrors the cage (inside-out normals).
         k.scale = s.raw().is_number() ? glm::vec3(s.Number(1e-12f, 1e12f)) : s.Vec3(1e-12f, 1e12f);
     }
     return k;
 }
 
-void CheckIncreasing(const Node& n, const std::vector<Keyframe>& keys) {
-    for (size_t i = 1; i < keys.size(); ++i)
-        if (!(keys[i].time > keys[i - 1].time))
-            n.At(i)["time"].Fail("keyframe times must increase (" + std::to_string(keys[i].time) +
-                                 " follows " + std::to_string(keys[i - 1].time) + ")");
+void CheckIncreasing(const Node& keys, const std::vector<Keyframe>& k) {
+    if (k.empty()) keys.Fail("needs at least one keyframe");
+    for (size_t i = 1; i < k.size(); ++i)
+        if (!(k[i].time > k[i - 1].time))
+            keys.At(i)["time"].Fail("keyframe times must increase (" + Fmt(k[i].time) +
+                                    " follows " + Fmt(k[i - 1].time) + ")");
 }
 
-TransformTrack ParseTrack(const Node& obj) {
+/// `transform` (one static pose) or `keyframes` (animated) of an object or light.
+TransformTrack ParseTrack(const Node& owner) {
     TransformTrack t;
-    if (obj.Has("keyframes")) {
-        const Node ks = obj["keyframes"];
+    if (owner.Has("keyframes") && owner.Has("transform"))
+        owner["transform"].Fail("give either 'transform' or 'keyframes', not both");
+    if (owner.Has("keyframes")) {
+        const Node ks = owner["keyframes"];
         for (size_t i = 0; i < ks.ArraySize(); ++i) t.keys.push_back(ParseRigid(ks.At(i), true));
         CheckIncreasing(ks, t.keys);
-        if (obj.Has("transform"))
-            obj["transform"].Fail("give either 'transform' or 'keyframes', not both");
-    } else if (obj.Has("transform")) {
-        t.keys.push_back(ParseRigid(obj["transform"], false));
+    } else if (owner.Has("transform")) {
+        t.keys.push_back(ParseRigid(owner["transform"], false));
     }
     return t;
 }
 
-}  // namespace
-
-Keyframe CameraLookAt(glm::vec3 position, glm::vec3 target, glm::vec3 up,
-                      const std::string& where) {
-    const glm::vec3 f = target - position;
-    if (!(glm::length(f) >= 1e-9f)) throw InputError(where, "look_at equals position");
-    const glm::vec3 fn = glm::normalize(f);
-    const glm::vec3 r = glm::cross(fn, up);
-    if (glm::length(r) < 1e-6f * glm::length(up) || glm::length(up) == 0.0f)
-        throw InputError(where, "up is parallel to the view direction");
-    const glm::vec3 rn = glm::normalize(r);
-    const glm::vec3 u = glm::cross(rn, fn);
-    Keyframe k;
-    k.translation = position;
-    k.rotation = glm::quat_cast(glm::mat3(rn, u, -fn));
-    return k;
-}
-
-namespace {
-
 void ParseCamera(const Node& n, Camera* cam) {
-    n.Object({"position", "look_at", "up", "fov", "lens_radius", "focus_distance", "shutter",
-              "keyframes"});
-    if (n.Has("fov")) cam->fovYDegrees = n["fov"].Number(1e-3f, 179.0f);
+    n.Keys({"position", "look_at", "up", "fov", "lens_radius", "focus_distance", "shutter",
+            "keyframes"});
+    if (n.Has("fov")) cam->fovYDegrees = n["fov"].NumberOpen(0.0f, 180.0f);
     if (n.Has("lens_radius")) cam->lensRadius = n["lens_radius"].Number(0.0f, 1e6f);
-    if (n.Has("focus_distance")) cam->focusDistance = n["focus_distance"].Number(1e-6f, 1e12f);
+    if (n.Has("focus_distance")) cam->focusDistance = n["focus_distance"].NumberOpen(0.0f, kBig);
     if (n.Has("shutter")) {
         const Node s = n["shutter"];
-        if (s.ArraySize() != 2) s.Fail("expected [open, close]");
+        if (s.ArraySize() != 2) s.Fail("expected [open, close] (seconds)");
         cam->shutterOpen = s.At(0).Number();
         cam->shutterClose = s.At(1).Number();
-        if (cam->shutterClose < cam->shutterOpen) s.Fail("shutter closes before it opens");
+        if (cam->shutterClose < cam->shutterOpen) s.Fail("the shutter closes before it opens");
     }
-    const glm::vec3 defUp = n.Has("up") ? n["up"].Vec3() : glm::vec3(0, 1, 0);
+    const glm::vec3 up = n.Has("up") ? n["up"].Vec3() : glm::vec3(0, 1, 0);
     if (n.Has("keyframes")) {
+        for (const char* k : {"position", "look_at"})
+            if (n.Has(k)) n[k].Fail("give either 'position'/'look_at' or 'keyframes', not both");
         const Node ks = n["keyframes"];
         for (size_t i = 0; i < ks.ArraySize(); ++i) {
             const Node k = ks.At(i);
-            k.Object({"time", "position", "look_at", "up"});
+            k.Keys({"time", "position", "look_at", "up"});
+            const float time = k["time"].Number();
             Keyframe kf = CameraLookAt(k["position"].Vec3(), k["look_at"].Vec3(),
-                                       k.Has("up") ? k["up"].Vec3() : defUp, k.Where());
-            kf.time = k["time"].Number();
+                                       k.Has("up") ? k["up"].Vec3() : up, k.Where());
+            kf.time = time;
             cam->pose.keys.push_back(kf);
         }
         CheckIncreasing(ks, cam->pose.keys);
-        if (cam->pose.keys.empty()) ks.Fail("needs at least one keyframe");
     } else {
         if (!n.Has("position") || !n.Has("look_at"))
-            n.Fail("camera needs 'position' and 'look_at' (or 'keyframes')");
+            n.Fail("the camera needs 'position' and 'look_at' (or 'keyframes')");
         cam->pose.keys.push_back(
-            CameraLookAt(n["position"].Vec3(), n["look_at"].Vec3(), defUp, n.Where()));
+            CameraLookAt(n["position"].Vec3(), n["look_at"].Vec3(), up, n.Where()));
     }
 }
 
+/// TEXTURE: {"texture": "checker", "colors": [[..],[..]], "scale": s} or {"texture": "file"}.
 int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
-    n.Object({"texture", "colors", "scale"});
     Texture t;
     const std::string name = n["texture"].String();
     if (name == "checker") {
+        n.Keys({"texture", "colors", "scale"});
         t.kind = Texture::Kind::Checker;
         if (n.Has("colors")) {
             const Node c = n["colors"];
-            if (c.ArraySize() != 2) c.Fail("expected two colours");
-            t.colorA = c.At(0).Vec3(0.0f, 1e6f);
-            t.colorB = c.At(1).Vec3(0.0f, 1e6f);
+            if (c.ArraySize() != 2) c.Fail("expected two colours [[r,g,b], [r,g,b]]");
+            t.colorA = c.At(0).Vec3(0.0f, 1.0f);
+            t.colorB = c.At(1).Vec3(0.0f, 1.0f);
         }
-        if (n.Has("scale")) t.scale = n["scale"].Number(1e-6f, 1e6f);
+        if (n.Has("scale")) t.scale = n["scale"].NumberOpen(0.0f, 1e6f);
     } else {
+        n.Keys({"texture"});  // images take no parameters
         t.kind = Texture::Kind::Image;
         t.path = Resolve(base, name);
-        if (!fs::exists(t.path)) n["texture"].Fail("texture file '" + t.path + "' does not exist");
+        RequireFile(n["texture"], t.path, "texture file");
     }
     scene->textures.push_back(t);
     return int(scene->textures.size()) - 1;
 }
 
-void ParseMaterial(const Node& n, const std::string& name, const fs::path& base, Scene* scene) {
-    n.Object({"type", "albedo", "roughness", "specular", "filter", "filter_radius"});
+void ParseMaterial(const Node& n, const std::string& name, const fs::path& base, Scene* scene,
+                   std::vector<std::string>* warnings) {
+    n.Keys({"type", "albedo", "roughness", "specular", "filter", "filter_radius"});
     Material m;
     m.name = name;
     const std::string type = n.Has("type") ? n["type"].String() : "diffuse";
@@ -254,7 +281,7 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
         if (a.raw().is_object())
             m.albedo.texture = ParseTexture(a, base, scene);
         else
-            m.albedo.value = a.Vec3(0.0f, 1.0f);
+            m.albedo.value = a.Vec3(0.0f, 1.0f);  // > 1 would create energy
     }
     if (n.Has("roughness")) {
         const Node r = n["roughness"];
@@ -264,57 +291,56 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
             m.roughness.value = r.Number(0.0f, 1.0f);
     }
     if (n.Has("specular")) m.specular = n["specular"].Vec3(0.0f, 1.0f);
+    if (m.type == Material::Type::Diffuse && warnings)
+        for (const char* k : {"roughness", "specular"})
+            if (n.Has(k))
+                warnings->push_back(n[k].Where() + ": ignored by a diffuse material (type ggx?)");
     if (n.Has("filter")) {
         m.cacheFilter = n["filter"].String();
-        static const std::set<std::string> kFilters = {"none", "normal", "gaussian"};
-        if (!kFilters.count(m.cacheFilter))
-            n["filter"].Fail("unknown filter '" + m.cacheFilter +
-                             "' (valid: none, normal, gaussian)");
+        ParseTextureFilter(m.cacheFilter, n["filter"].Where());  // throws listing valid names
     }
-    if (n.Has("filter_radius")) m.cacheRadius = n["filter_radius"].Int(0, 32);
+    if (n.Has("filter_radius")) m.cacheRadius = int(n["filter_radius"].Int(0, 32));
     scene->materials.push_back(m);
 }
 
 void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
-    if (!n.raw().is_object() || !n.Has("type"))
-        n.Fail("a light needs a 'type' (environment, quad, distant)");
+    if (!n.raw().is_object()) n.Fail("expected a light object, got " + TypeName(n.raw()));
     const std::string type = n["type"].String();
     if (type == "environment") {
-        n.Object({"type", "file", "constant", "intensity", "rotation"});
+        n.Keys({"type", "file", "constant", "intensity", "rotation"});
         EnvironmentLight e;
         if (n.Has("file") == n.Has("constant"))
             n.Fail("an environment light needs exactly one of 'file' or 'constant'");
         if (n.Has("file")) {
             e.path = Resolve(base, n["file"].String());
-            if (!fs::exists(e.path))
-                n["file"].Fail("environment map '" + e.path + "' does not exist");
+            RequireFile(n["file"], e.path, "environment map");
         } else {
-            e.constant = n["constant"].Vec3(0.0f, 1e9f);
+            e.constant = n["constant"].Vec3(0.0f, kBig);
         }
-        if (n.Has("intensity")) e.intensity = n["intensity"].Number(0.0f, 1e9f);
+        if (n.Has("intensity")) e.intensity = n["intensity"].Number(0.0f, kBig);
         if (n.Has("rotation")) e.rotationDegrees = n["rotation"].Number();
         if (!scene->environments.empty()) n.Fail("only one environment light is supported");
         scene->environments.push_back(e);
     } else if (type == "quad") {
-        n.Object({"type", "corner", "edge1", "edge2", "radiance", "two_sided", "transform",
-                  "keyframes"});
+        n.Keys({"type", "corner", "edge1", "edge2", "radiance", "two_sided", "transform",
+                "keyframes"});
         QuadLight q;
         q.corner = n["corner"].Vec3();
         q.edge1 = n["edge1"].Vec3();
         q.edge2 = n["edge2"].Vec3();
-        if (glm::length(glm::cross(q.edge1, q.edge2)) < 1e-12f)
-            n["edge2"].Fail("quad light has zero area");
-        q.radiance = n["radiance"].Vec3(0.0f, 1e9f);
+        if (!(glm::length(glm::cross(q.edge1, q.edge2)) > 1e-12f))
+            n["edge2"].Fail("the quad light has zero area (edge1 and edge2 are parallel)");
+        q.radiance = n["radiance"].Vec3(0.0f, kBig);
         if (n.Has("two_sided")) q.twoSided = n["two_sided"].Bool();
         q.transform = ParseTrack(n);
         scene->quadLights.push_back(q);
     } else if (type == "distant") {
-        n.Object({"type", "direction", "irradiance", "transform", "keyframes"});
+        n.Keys({"type", "direction", "irradiance", "transform", "keyframes"});
         DistantLight d;
         d.direction = n["direction"].Vec3();
-        if (glm::length(d.direction) < 1e-12f) n["direction"].Fail("direction is zero");
+        if (!(glm::length(d.direction) > 1e-12f)) n["direction"].Fail("direction is zero");
         d.direction = glm::normalize(d.direction);
-        d.irradiance = n["irradiance"].Vec3(0.0f, 1e9f);
+        d.irradiance = n["irradiance"].Vec3(0.0f, kBig);
         d.transform = ParseTrack(n);
         scene->distantLights.push_back(d);
     } else {
@@ -323,15 +349,15 @@ void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
 }
 
 void ParseRender(const Node& n, RenderSettings* s) {
-    n.Object({"resolution", "spp", "seconds", "integrator", "max_depth", "seed",
-              "tessellation_rate", "ao_samples", "ao_distance", "time"});
+    n.Keys({"resolution", "spp", "seconds", "integrator", "max_depth", "seed", "tessellation_rate",
+            "ao_samples", "ao_distance", "time"});
     if (n.Has("resolution")) {
         const Node r = n["resolution"];
-        if (r.ArraySize() != 2) r.Fail("expected [width, height]");
-        s->width = r.At(0).Int(1, 16384);
-        s->height = r.At(1).Int(1, 16384);
+        if (r.ArraySize() != 2) r.Fail("expected [width, height] in pixels");
+        s->width = int(r.At(0).Int(1, 16384));
+        s->height = int(r.At(1).Int(1, 16384));
     }
-    if (n.Has("spp")) s->spp = n["spp"].Int(1, 1 << 20);
+    if (n.Has("spp")) s->spp = int(n["spp"].Int(1, 1 << 20));
     if (n.Has("seconds")) s->seconds = n["seconds"].Number(0.0f, 1e6f);
     if (n.Has("integrator")) {
         s->integrator = n["integrator"].String();
@@ -341,86 +367,203 @@ void ParseRender(const Node& n, RenderSettings* s) {
             n["integrator"].Fail("unknown integrator '" + s->integrator +
                                  "' (valid: normal, ptex, uv, eyelight, ao, direct, path)");
     }
-    if (n.Has("max_depth")) s->maxDepth = n["max_depth"].Int(0, 1000);
-    if (n.Has("seed")) s->seed = uint64_t(n["seed"].Int(0, 2147483647));
+    if (n.Has("max_depth")) s->maxDepth = int(n["max_depth"].Int(0, 1000));
+    if (n.Has("seed")) s->seed = uint64_t(n["seed"].Int(0, INT64_MAX));
+    // Embree accepts rates in [1, 64]: below 1 the surface is not even one quad per patch.
     if (n.Has("tessellation_rate"))
         s->tessellationRate = n["tessellation_rate"].Number(1.0f, 64.0f);
-    if (n.Has("ao_samples")) s->aoSamples = n["ao_samples"].Int(1, 1 << 16);
-    if (n.Has("ao_distance")) s->aoDistance = n["ao_distance"].Number(1e-6f, 1e30f);
+    if (n.Has("ao_samples")) s->aoSamples = int(n["ao_samples"].Int(1, 1 << 16));
+    if (n.Has("ao_distance")) s->aoDistance = n["ao_distance"].NumberOpen(0.0f, kBig);
     if (n.Has("time")) s->time = n["time"].Number();
 }
 
-}  // namespace
-
-Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
-    std::ifstream f(path, std::ios::binary);
-    if (!f) throw InputError(path, "cannot open scene file");
-    std::stringstream ss;
-    ss << f.rdbuf();
-    const std::string text = ss.str();
-    json j;
-    try {
-        j = json::parse(text);
-    } catch (const json::parse_error& e) {
-        // Turn the byte offset into line:column.
+/// Parses with comments allowed and duplicate keys rejected (nlohmann keeps the last silently,
+/// which would hide a typo'd override); syntax errors become "file:line:col: ...".
+json ParseJson(const std::string& text, const std::string& file) {
+    struct Frame {
+        bool object;
+        std::string path;
+        std::vector<std::string> keys;  // objects: keys seen so far (the last is the current one)
+        size_t index = 0;               // arrays: index of the next element
+    };
+    std::vector<Frame> stack;
+    const auto childPath = [&]() -> std::string {
+        if (stack.empty()) return "";
+        const Frame& p = stack.back();
+        if (!p.object) return p.path + "[" + std::to_string(p.index) + "]";
+        const std::string& k = p.keys.empty() ? std::string() : p.keys.back();
+        return p.path.empty() ? k : p.path + "." + k;
+    };
+    const auto valueDone = [&] {
+        if (!stack.empty() && !stack.back().object) ++stack.back().index;
+    };
+    const json::parser_callback_t callback = [&](int, json::parse_event_t ev, json& parsed) {
+        switch (ev) {
+            case json::parse_event_t::object_start:
+            case json::parse_event_t::array_start:
+                stack.push_back({ev == json::parse_event_t::object_start, childPath(), {}, 0});
+                break;
+            case json::parse_event_t::key: {
+                Frame& f = stack.back();
+                const std::string k = parsed.get<std::string>();
+                for (const std::string& seen : f.keys)
+                    if (seen == k) {
+                        const std::string path = f.path.empty() ? k : f.path + "." + k;
+                        throw InputError(file + ": key '" + path + "'",
+                                         "duplicate key (given twice in the same object)");
+                    }
+                f.keys.push_back(k);
+                break;
+            }
+            case json::parse_event_t::object_end:
+            case json::parse_event_t::array_end:
+                stack.pop_back();
+                valueDone();
+                break;
+            case json::parse_event_t::value:
+                valueDone();
+                break;
+        }
+        return true;
+    };
+    // Editors want line:column, nlohmann gives a byte offset (1-based: the offending character).
+    const auto lineCol = [&](size_t byte) {
         size_t line = 1, col = 1;
-        for (size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
+        for (size_t i = 0; i + 1 < byte && i < text.size(); ++i) {
             if (text[i] == '\n')
                 ++line, col = 1;
             else
                 ++col;
         }
-        std::string msg = e.what();
+        return file + ":" + std::to_string(line) + ":" + std::to_string(col);
+    };
+    try {
+        return json::parse(text, callback, /*allow_exceptions=*/true, /*ignore_comments=*/true);
+    } catch (const json::parse_error& e) {
+        const std::string msg = e.what();
         const size_t p = msg.find("syntax error");
-        throw InputError(path + ":" + std::to_string(line) + ":" + std::to_string(col),
-                         "JSON " + (p == std::string::npos ? msg : msg.substr(p)));
+        throw InputError(lineCol(e.byte), "JSON " + (p == std::string::npos ? msg : msg.substr(p)));
+    } catch (const json::out_of_range& e) {
+        // "number overflow parsing '1e999'" carries no position: point at the literal instead.
+        const std::string msg = e.what();
+        const size_t q0 = msg.find('\''), q1 = msg.rfind('\'');
+        const size_t at = q0 < q1 ? text.find(msg.substr(q0 + 1, q1 - q0 - 1)) : std::string::npos;
+        const size_t p = msg.find(']');
+        throw InputError(at == std::string::npos ? file : lineCol(at + 1),
+                         "JSON " + (p == std::string::npos ? msg : msg.substr(p + 2)));
     }
+}
+
+/// World-space bounding box of every object's cage at `time`.
+void SceneBounds(const Scene& scene, float time, glm::vec3* lo, glm::vec3* hi) {
+    *lo = glm::vec3(kBig);
+    *hi = glm::vec3(-kBig);
+    for (const Object& o : scene.objects) {
+        const glm::mat4 m = o.transform.Eval(time);
+        for (const auto& p : scene.meshes[size_t(o.mesh)].positions) {
+            const glm::vec3 w(m * glm::vec4(p[0], p[1], p[2], 1.0f));
+            *lo = glm::min(*lo, w);
+            *hi = glm::max(*hi, w);
+        }
+    }
+}
+
+/// A camera pose that fits the box's bounding sphere into the narrower of the two fields of view
+/// with a 10% margin, seen from a 3/4 view above (+Y up).
+Keyframe FrameBounds(glm::vec3 lo, glm::vec3 hi, float fovYDegrees, float aspect) {
+    const glm::vec3 centre = 0.5f * (lo + hi);
+    const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f);
+    const float halfY = 0.5f * glm::radians(fovYDegrees);
+    const float halfX = std::atan(std::tan(halfY) * aspect);
+    const float dist = 1.1f * radius / std::sin(std::min(halfX, halfY));
+    const glm::vec3 dir = glm::normalize(glm::vec3(1.0f, 0.7f, 1.4f));
+    return CameraLookAt(centre + dir * dist, centre, {0, 1, 0}, "default camera");
+}
+
+}  // namespace
+
+Keyframe CameraLookAt(glm::vec3 position, glm::vec3 target, glm::vec3 up,
+                      const std::string& where) {
+    const glm::vec3 f = target - position;
+    if (!(glm::length(f) > 1e-9f)) throw InputError(where, "look_at equals position");
+    if (!(glm::length(up) > 1e-12f)) throw InputError(where, "up is zero");
+    const glm::vec3 fn = glm::normalize(f);
+    const glm::vec3 r = glm::cross(fn, glm::normalize(up));
+    if (!(glm::length(r) > 1e-6f))
+        throw InputError(where, "up is parallel to the view direction (look_at - position)");
+    // Columns: camera +X (right), +Y (the part of `up` orthogonal to the view), +Z (backwards).
+    const glm::vec3 rn = glm::normalize(r);
+    Keyframe k;
+    k.translation = position;
+    k.rotation = glm::normalize(glm::quat_cast(glm::mat3(rn, glm::cross(rn, fn), -fn)));
+    return k;
+}
+
+Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) throw InputError(path, "is a directory, not a scene file");
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw InputError(path, "cannot open scene file (missing or unreadable)");
+    std::stringstream ss;
+    ss << f.rdbuf();
+    const std::string text = ss.str();
+    const json j = ParseJson(text, path);
+
     Scene scene;
     scene.path = path;
-    const fs::path base = fs::path(path).parent_path();
+    const fs::path base = fs::absolute(path).parent_path();
     const Node root(j, "", path);
-    root.Object({"camera", "materials", "objects", "lights", "render"});
-    if (!root.Has("camera")) throw InputError(path, "missing key 'camera'");
-    ParseCamera(root["camera"], &scene.camera);
+    root.Keys({"camera", "materials", "objects", "lights", "render"});
+    // Render settings first: a default camera (no 'camera' key) needs the aspect ratio and the
+    // frame time, and is made once the objects are loaded.
+    if (root.Has("render")) ParseRender(root["render"], &scene.settings);
+    if (root.Has("camera")) ParseCamera(root["camera"], &scene.camera);
 
     std::map<std::string, int> materialIds;
     if (root.Has("materials")) {
         const Node ms = root["materials"];
-        if (!ms.raw().is_object()) ms.Fail("expected an object of named materials");
+        if (!ms.raw().is_object())
+            ms.Fail("expected an object of named materials, got " + TypeName(ms.raw()));
         for (const auto& [name, value] : ms.raw().items()) {
-            ParseMaterial(Node(value, "materials." + name, path), name, base, &scene);
+            ParseMaterial(Node(value, "materials." + name, path), name, base, &scene, warnings);
             materialIds[name] = int(scene.materials.size()) - 1;
         }
     }
-    if (!root.Has("objects")) throw InputError(path, "missing key 'objects'");
     const Node objs = root["objects"];
     if (objs.ArraySize() == 0) objs.Fail("needs at least one object");
     std::map<std::string, int> meshIds;
+    int defaultMaterial = -1;
     for (size_t i = 0; i < objs.ArraySize(); ++i) {
         const Node o = objs.At(i);
-        o.Object({"name", "mesh", "material", "transform", "keyframes"});
+        o.Keys({"name", "mesh", "material", "transform", "keyframes"});
         Object obj;
         obj.name = o.Has("name") ? o["name"].String() : "object" + std::to_string(i);
         obj.objPath = Resolve(base, o["mesh"].String());
-        if (!fs::exists(obj.objPath))
-            o["mesh"].Fail("mesh file '" + obj.objPath + "' does not exist");
         auto it = meshIds.find(obj.objPath);
         if (it == meshIds.end()) {
-            scene.meshes.push_back(LoadObj(obj.objPath, warnings));
+            RequireFile(o["mesh"], obj.objPath, "mesh file");
+            scene.meshes.push_back(LoadObj(obj.objPath, warnings));  // errors name the OBJ line
             it = meshIds.emplace(obj.objPath, int(scene.meshes.size()) - 1).first;
         }
         obj.mesh = it->second;
         if (o.Has("material")) {
             const std::string m = o["material"].String();
             const auto mit = materialIds.find(m);
-            if (mit == materialIds.end()) o["material"].Fail("unknown material '" + m + "'");
+            if (mit == materialIds.end()) {
+                std::string known;
+                for (const auto& [k, v] : materialIds) known += (known.empty() ? "" : ", ") + k;
+                o["material"].Fail("unknown material '" + m +
+                                   "' (defined: " + (known.empty() ? "none" : known) + ")");
+            }
             obj.material = mit->second;
         } else {
-            if (!materialIds.count("")) {
-                scene.materials.push_back(Material{});
-                materialIds[""] = int(scene.materials.size()) - 1;
+            if (defaultMaterial < 0) {
+                Material grey;
+                grey.name = "default";
+                scene.materials.push_back(grey);
+                defaultMaterial = int(scene.materials.size()) - 1;
             }
-            obj.material = materialIds[""];
+            obj.material = defaultMaterial;
         }
         obj.transform = ParseTrack(o);
         scene.objects.push_back(obj);
@@ -429,7 +572,19 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         const Node ls = root["lights"];
         for (size_t i = 0; i < ls.ArraySize(); ++i) ParseLight(ls.At(i), base, &scene);
     }
-    if (root.Has("render")) ParseRender(root["render"], &scene.settings);
+    const bool lit =
+        !scene.environments.empty() || !scene.quadLights.empty() || !scene.distantLights.empty();
+    if (!lit && warnings &&
+        (scene.settings.integrator == "direct" || scene.settings.integrator == "path"))
+        warnings->push_back(path + ": no lights: the '" + scene.settings.integrator +
+                            "' integrator will render black");
+    if (!root.Has("camera")) {
+        glm::vec3 lo, hi;
+        SceneBounds(scene, scene.settings.time, &lo, &hi);
+        scene.camera.pose.keys.push_back(
+            FrameBounds(lo, hi, scene.camera.fovYDegrees,
+                        float(scene.settings.width) / float(scene.settings.height)));
+    }
     return scene;
 }
 
@@ -440,7 +595,7 @@ Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath
     scene.meshes.push_back(LoadObj(objPath, warnings));
     Object o;
     o.name = fs::path(objPath).stem().string();
-    o.objPath = objPath;
+    o.objPath = fs::absolute(objPath).lexically_normal().string();
     o.mesh = 0;
     scene.objects.push_back(o);
     Material m;
@@ -448,23 +603,22 @@ Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath
     m.albedo.value = glm::vec3(0.6f);
     scene.materials.push_back(m);
     EnvironmentLight env;
-    env.path = defaultEnvPath;
-    scene.environments.push_back(env);
-
-    glm::vec3 lo(1e30f), hi(-1e30f);
-    for (const auto& p : scene.meshes[0].positions) {
-        lo = glm::min(lo, glm::vec3(p[0], p[1], p[2]));
-        hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
+    std::error_code ec;
+    if (fs::is_regular_file(defaultEnvPath, ec)) {
+        env.path = defaultEnvPath;
+    } else {
+        // A missing install file should not stop a quick look at a cage: light it evenly.
+        env.constant = glm::vec3(1.0f);
+        if (warnings)
+            warnings->push_back(defaultEnvPath +
+                                ": default environment map not found; using constant white");
     }
-    const glm::vec3 centre = 0.5f * (lo + hi);
-    const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f);
-    // Fit the bounding sphere in the vertical field of view with a 10% margin, from a 3/4 view
-    // above the object.
-    const float fov = 40.0f;
-    const float dist = 1.1f * radius / std::sin(glm::radians(fov) * 0.5f);
-    const glm::vec3 dir = glm::normalize(glm::vec3(1.0f, 0.7f, 1.4f));
-    scene.camera.fovYDegrees = fov;
-    scene.camera.pose.keys.push_back(CameraLookAt(centre + dir * dist, centre, {0, 1, 0}, objPath));
+    scene.environments.push_back(env);
+    glm::vec3 lo, hi;
+    SceneBounds(scene, 0.0f, &lo, &hi);
+    scene.camera.pose.keys.push_back(
+        FrameBounds(lo, hi, scene.camera.fovYDegrees,
+                    float(scene.settings.width) / float(scene.settings.height)));
     return scene;
 }
 

@@ -1,5 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
-// Scene files (JSON, documented in scenes/README.md) and bare OBJ cages -> Scene.
+// Scene files (JSON, documented in scenes/README.md) and bare OBJ cages -> Scene. Errors throw
+// InputError naming the file and the key path ("car.json: key 'camera.fov': ..."), or
+// file:line:column for JSON syntax errors; OBJ errors keep the OBJ's own file:line.
 #pragma once
 #include <string>
 #include <vector>
@@ -8,14 +10,12 @@
 
 namespace texcache {
 
-/// Loads a scene file; throws InputError naming the file and the key path (or line:column for
-/// JSON syntax errors). Paths in the file are relative to its directory.
+/// Loads a scene file (paths in it relative to its directory); `warnings` may be null.
 Scene LoadScene(const std::string& path, std::vector<std::string>* warnings);
-/// One OBJ cage framed by a default camera (3/4 view from above, whole bounding box in view) and
-/// lit by the environment map `defaultEnvPath`, with a grey diffuse material.
+/// One OBJ, grey diffuse, framed from a 3/4 view above, lit by `defaultEnvPath` (white if absent).
 Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath,
                    std::vector<std::string>* warnings);
-/// Keyframe of a camera at `position` looking at `target` with `up` (throws when degenerate).
+/// Camera pose at `position` looking down -Z at `target`, +Y towards `up`; throws if degenerate.
 Keyframe CameraLookAt(glm::vec3 position, glm::vec3 target, glm::vec3 up, const std::string& where);
 
 }  // namespace texcache
