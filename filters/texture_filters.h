@@ -12,14 +12,25 @@
 namespace texcache {
 
 /// What the renderer caches per sample: the shaded term, the noise-free surface normal at the
-/// texel centre, and the sample's variance (for filters that estimate error).
+/// texel centre, the variance of the term's mean (luminance; for filters that estimate error),
+/// and two per-filter extras. 36 bytes: the extras share storage rather than every sample paying
+/// for every filter's inputs.
 struct ShadedSample {
     glm::vec3 value;
     glm::vec3 normal;
-    float variance;
+    float variance = 0.0f;
+    union {
+        float roughness;   ///< regression: an extra feature (microfacet materials; else 0)
+        float blurRadius;  ///< soft shadows: the blur std (world units) the occluders allow
+    };
+    float texelSize = 0.0f;  ///< soft shadows: world size of the sample's texel
+
+    ShadedSample() : value(0.0f), normal(0.0f), roughness(0.0f) {}
+    ShadedSample(glm::vec3 v, glm::vec3 n, float var, float extra = 0.0f, float texel = 0.0f)
+        : value(v), normal(n), variance(var), roughness(extra), texelSize(texel) {}
 };
 
-enum class TextureFilterKind { None, Normal, Gaussian };
+enum class TextureFilterKind { None, Normal, Gaussian, Regression, SoftShadow };
 
 /// Parses a filter name; throws InputError listing the valid names.
 TextureFilterKind ParseTextureFilter(const std::string& name, const std::string& where);
@@ -28,29 +39,31 @@ const char* TextureFilterNames();
 
 /// The paper's trivial filter: a box (or Gaussian) window averaging samples whose normals are
 /// within the threshold of the centre sample's normal (cos > 0.9 in the paper). Non-finite
-/// samples are skipped; the centre sample always counts, so the result is never empty.
+/// samples are skipped (a NaN normal fails the test too). The centre always counts when it is
+/// finite; when it is not (a hole, an unreachable point) and no neighbour passes the normal test,
+/// the result is the plain mean of the finite taps, and 0 when there are none.
 struct NormalWeightedFilter {
     float cosThreshold = 0.9f;
     float sigma = 0.0f;  ///< 0: box window; > 0: Gaussian weights exp(-d^2 / (2 sigma^2)) in texels
 
     glm::vec3 operator()(const FilterInput<ShadedSample>& in) const {
         const glm::vec3 nc = in.samples[in.centre].normal;
-        glm::vec3 sum(0.0f);
+        const float inv2s2 = sigma > 0.0f ? 1.0f / (2.0f * sigma * sigma) : 0.0f;
+        glm::vec3 sum(0.0f), any(0.0f);
         float wsum = 0.0f;
+        int finite = 0;
         for (size_t i = 0; i < in.samples.size(); ++i) {
             const ShadedSample& s = in.samples[i];
-            if (int(i) != in.centre && glm::dot(s.normal, nc) <= cosThreshold) continue;
             if (!std::isfinite(s.value.x + s.value.y + s.value.z)) continue;
-            float w = 1.0f;
-            if (sigma > 0.0f) {
-                const float d2 =
-                    float(in.taps[i].dx * in.taps[i].dx + in.taps[i].dy * in.taps[i].dy);
-                w = std::exp(-d2 / (2.0f * sigma * sigma));
-            }
+            any += s.value, ++finite;
+            if (int(i) != in.centre && !(glm::dot(s.normal, nc) > cosThreshold)) continue;
+            const float d2 = float(in.taps[i].dx * in.taps[i].dx + in.taps[i].dy * in.taps[i].dy);
+            const float w = sigma > 0.0f ? std::exp(-d2 * inv2s2) : 1.0f;
             sum += w * s.value;
             wsum += w;
         }
-        return wsum > 0.0f ? sum / wsum : glm::vec3(0.0f);
+        if (wsum > 0.0f) return sum / wsum;
+        return finite ? any / float(finite) : glm::vec3(0.0f);
     }
 };
 

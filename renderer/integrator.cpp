@@ -19,6 +19,8 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include "filters/regression_filter.h"
+#include "filters/soft_shadow_filter.h"
 #include "renderer/bsdf.h"
 #include "renderer/camera.h"
 #include "renderer/envmap.h"
@@ -66,6 +68,7 @@ struct LightSample {
     glm::vec3 Li;  // incident radiance (irradiance for delta lights)
     float pdf;     // solid angle, includes light selection; 0 for delta lights (no MIS)
     bool delta;
+    int quad = -1;  // the quad light sampled, -1 for other lights
 };
 
 /// Everything the per-sample code reads, resolved once per frame.
@@ -152,6 +155,7 @@ struct Context {
             s->Li = QuadEmission(i, s->wi);
             s->pdf = QuadPdf(i, s->wi, s->dist);
             s->delta = false;
+            s->quad = i;
             return s->pdf > 0.0f && s->Li != glm::vec3(0.0f);
         }
         i -= int(quads.size());
@@ -176,6 +180,16 @@ Bsdf MakeBsdf(const Context& c, const SurfaceInteraction& si) {
     const Material& m = c.scene.materials[si.material];
     const bool ggx = m.type == Material::Type::GGX;
     return Bsdf(si.N, si.Ng, c.rs.Albedo(si), ggx, ggx ? c.rs.Roughness(si) : 1.0f, m.specular);
+}
+
+/// The shadow ray of a light sample, stopping just short of an area light's surface.
+Ray ShadowRay(const SurfaceInteraction& si, const LightSample& ls, float time) {
+    Ray shadow;
+    shadow.org = OffsetOrigin(si.P, si.Ng, ls.wi);
+    shadow.dir = ls.wi;
+    shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
+    shadow.time = time;
+    return shadow;
 }
 
 struct NoCachedTerm {
@@ -235,13 +249,8 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         if (c.SampleLight(si.P, rng.Next1D(), rng.Next2D(), &ls)) {
             const glm::vec3 f = bsdf.Eval(wo, ls.wi);
             if (f != glm::vec3(0.0f)) {
-                Ray shadow;
-                shadow.org = OffsetOrigin(si.P, si.Ng, ls.wi);
-                shadow.dir = ls.wi;
-                shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
-                shadow.time = ray.time;
                 ++rays.shadow;
-                if (!c.rs.Occluded(shadow)) {
+                if (!c.rs.Occluded(ShadowRay(si, ls, ray.time))) {
                     const float cosi = std::abs(glm::dot(ls.wi, si.N));
                     if (ls.delta) {
                         L += beta * f * ls.Li * cosi;
@@ -343,7 +352,7 @@ ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, Ra
                              TraceFn&& trace) {
     SurfaceSample ss;
     glm::vec3 origin;
-    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(0.0f), 0.0f};
+    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
     Rng rng = SampleRng(c, r);
     const Frame frame = Frame::FromZ(ss.N);
     glm::vec3 sum(0.0f);
@@ -383,6 +392,46 @@ ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCo
     });
 }
 
+/// Visibility of the scene's area lights from a cache sample (Mehta et al.'s soft-shadow input):
+/// the fraction of shadow rays towards uniform points on the quad lights that reach them, and the
+/// smallest blur std sigma_l * t / (d - t) the blocked rays allow (see soft_shadow_filter.h).
+ShadedSample ShadeShadowSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
+    SurfaceSample ss;
+    glm::vec3 origin;
+    if (c.quads.empty() || !SamplePoint(c, r, &ss, &origin, rays))
+        return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
+    Rng rng = SampleRng(c, r);
+    const int n = c.opt.texture.shadowSamples;
+    int open = 0, counted = 0;
+    float blur = INFINITY;
+    for (int i = 0; i < n; ++i) {
+        const int l = std::min(int(rng.Next1D() * float(c.quads.size())), int(c.quads.size()) - 1);
+        const Context::Quad& q = c.quads[l];
+        const glm::vec2 u = rng.Next2D();
+        const glm::vec3 d = q.corner + u.x * q.e1 + u.y * q.e2 - origin;
+        const float dist = glm::length(d);
+        // Light points below the sample's tangent plane light nothing: not a visibility question.
+        if (!(dist > 0.0f) || glm::dot(d, ss.N) <= 0.0f) continue;
+        ++counted;
+        Ray ray;
+        ray.org = origin;
+        ray.dir = d / dist;
+        ray.tfar = dist * (1.0f - 1e-4f);
+        ++rays.shadow;
+        Hit hit;
+        if (!c.rs.Intersect(ray, &hit) || hit.light >= 0) {
+            ++open;
+            continue;
+        }
+        const float sigmaL = std::sqrt(glm::length(q.e1) * glm::length(q.e2) / 12.0f);
+        blur = std::min(blur, sigmaL * hit.t / std::max(dist - hit.t, 1e-6f * dist));
+    }
+    const float V = counted ? float(open) / float(counted) : 1.0f;
+    const float res = float(c.tsc->cache().Mesh(r.mesh).Res(r.face, r.mip));
+    const float texel = std::max(glm::length(ss.dPdu), glm::length(ss.dPdv)) / res;
+    return {glm::vec3(V), ss.N, counted ? V * (1.0f - V) / float(counted) : 0.0f, blur, texel};
+}
+
 /// The texel a shading point maps to (eq. 1 and 2) in its object's (front or back) grids.
 SampleRequest TexelOf(const Context& c, const SurfaceInteraction& si) {
     return c.tsc->cache().TexelAt({c.tsc->MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u,
@@ -390,29 +439,105 @@ SampleRequest TexelOf(const Context& c, const SurfaceInteraction& si) {
 }
 
 /// The cached term at a camera hit: texel-cache lookup with the material's filter.
+/// `raysPerSample` is the number of rays behind each cached sample (the regression's n).
 template <typename ShadeFn>
 glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&& shade,
-                       CacheStats* stats = nullptr, const SampleRequest* texel = nullptr) {
+                       int raysPerSample, CacheStats* stats = nullptr,
+                       const SampleRequest* texel = nullptr) {
     const TextureSpaceOptions& t = c.tsc->options();
     if (c.opt.texture.constantTerm >= 0.0f) return glm::vec3(c.opt.texture.constantTerm);
     const SampleRequest h = texel ? *texel : TexelOf(c, si);
     // enumerable_thread_specific::local() hashes the thread id: callers with many lookups pass
     // their thread's stats in.
     CacheStats& st = stats ? *stats : c.cacheStats->local();
-    // One branch per lookup picks the material's filter; the filters themselves are inlined.
-    const int radius = c.tsc->RadiusOf(si.object);
-    switch (c.tsc->FilterOf(si.object)) {
+    TextureSpaceCache& tsc = *c.tsc;
+    // One branch per lookup picks the material's filter; the filters themselves are inlined. The
+    // temporal blend runs once per reconstructed texel, not per lookup.
+    auto lookup = [&](int radius, const auto& filter) {
+        return tsc.cache().LookupTexel(
+            h, radius, shade,
+            [&](const FilterInput<ShadedSample>& in) {
+                return tsc.Accumulate(in.request.key, filter(in));
+            },
+            st);
+    };
+    const int radius = tsc.RadiusOf(si.object);
+    switch (tsc.FilterOf(si.object)) {
         case TextureFilterKind::None:
-            return c.tsc->cache().LookupTexel(h, 0, shade, CentreFilter{}, st);
+            return lookup(0, CentreFilter{});
         case TextureFilterKind::Gaussian:
             // The paper's 20x20 Gaussian: sigma half the radius, same normal test.
-            return c.tsc->cache().LookupTexel(
-                h, radius, shade, NormalWeightedFilter{t.cosThreshold, 0.5f * float(radius)}, st);
-        default:
+            return lookup(radius, NormalWeightedFilter{t.cosThreshold, 0.5f * float(radius)});
+        case TextureFilterKind::Regression:
+            return lookup(radius, RegressionFilter{raysPerSample, false});
+        case TextureFilterKind::SoftShadow:
+            return lookup(radius, SoftShadowFilter{t.cosThreshold});
+        case TextureFilterKind::Normal:
             break;
     }
-    return c.tsc->cache().LookupTexel(h, radius, shade, NormalWeightedFilter{t.cosThreshold, 0.0f},
-                                      st);
+    return lookup(radius, NormalWeightedFilter{t.cosThreshold, 0.0f});
+}
+
+/// Direct lighting with area-light visibility from the texture-space cache (the soft-shadow
+/// filter). Per hit, each quad light's unshadowed light is estimated from `shadowSamples` points
+/// on it (no rays: the cheap, low-noise part) and multiplied by the texel's filtered visibility;
+/// other lights (environment, distant) get one NEE sample with its shadow ray. No MIS with BSDF
+/// sampling: a BSDF ray that finds the light would bring back unfiltered visibility. Objects whose
+/// material uses another filter get the plain per-hit estimator.
+glm::vec3 LiDirectCachedShadows(const Context& c, const Ray& ray, const Hit& hit, bool found,
+                                Rng& rng, const RayDifferentials& diff, RayCounts& rays) {
+    if (!found) return c.env ? c.env->Eval(ray.dir) : glm::vec3(0.0f);
+    if (hit.light >= 0) return c.QuadEmission(hit.light, ray.dir);
+    if (c.tsc->FilterOf(hit.object) != TextureFilterKind::SoftShadow)
+        return LiPath(c, ray, hit, found, rng, 1, rays);
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, &diff);
+    const Bsdf bsdf = MakeBsdf(c, si);
+    const glm::vec3 wo = -ray.dir;
+    glm::vec3 L(0.0f);
+    // Area lights: unshadowed estimate times cached visibility.
+    const int m = c.opt.texture.shadowSamples;
+    glm::vec3 unshadowed(0.0f);
+    for (size_t l = 0; l < c.quads.size(); ++l) {
+        const Context::Quad& q = c.quads[l];
+        for (int j = 0; j < m; ++j) {
+            const glm::vec2 u = rng.Next2D();
+            const glm::vec3 d = q.corner + u.x * q.e1 + u.y * q.e2 - si.P;
+            const float dist2 = glm::dot(d, d);
+            if (!(dist2 > 0.0f)) continue;
+            const float dist = std::sqrt(dist2);
+            const glm::vec3 wi = d / dist;
+            const float cosl = glm::dot(q.n, -wi);
+            if (!(cosl > 0.0f || q.twoSided)) continue;
+            // Solid-angle pdf of a uniform point on the quad: dist^2 / (area |cos_l|).
+            const float G = std::abs(cosl) * q.area / dist2;
+            unshadowed += bsdf.Eval(wo, wi) * q.L * (std::abs(glm::dot(wi, si.N)) * G);
+        }
+    }
+    if (unshadowed != glm::vec3(0.0f)) {
+        const glm::vec3 V = CachedLookup(
+            c, si, [&](const SampleRequest& r) { return ShadeShadowSample(c, r, rays); },
+            c.opt.texture.shadowSamples);
+        L += unshadowed / float(m) * V.x;
+    }
+    // Other lights: one shadowed NEE sample among them.
+    const int others = c.numLights - int(c.quads.size());
+    if (others > 0) {
+        const int pick =
+            int(c.quads.size()) + std::min(int(rng.Next1D() * float(others)), others - 1);
+        LightSample ls;
+        // SampleLight takes a uniform pick over all lights: map `pick` into its interval.
+        if (c.SampleLight(si.P, (float(pick) + 0.5f) / float(c.numLights), rng.Next2D(), &ls)) {
+            const glm::vec3 f = bsdf.Eval(wo, ls.wi);
+            ++rays.shadow;
+            if (f != glm::vec3(0.0f) && !c.rs.Occluded(ShadowRay(si, ls, ray.time))) {
+                // SampleLight divides by the pick probability over all lights; ours is 1/others.
+                const float pickFix = float(others) / float(c.numLights);
+                const float cosi = std::abs(glm::dot(ls.wi, si.N));
+                L += (ls.delta ? f * ls.Li * cosi : f * ls.Li * (cosi / ls.pdf)) * pickFix;
+            }
+        }
+    }
+    return L;
 }
 
 void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInteraction& si,
@@ -465,12 +590,15 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
                 if (c.scene.materials[si0.material].type != Material::Type::Diffuse) return false;
                 const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
                 const glm::vec3 E = CachedLookup(
-                    c, sd, [&](const SampleRequest& r) { return ShadeIndirectSample(c, r, rays); });
+                    c, sd, [&](const SampleRequest& r) { return ShadeIndirectSample(c, r, rays); },
+                    c.opt.texture.indirectSamples);
                 *term = c.rs.Albedo(si0) * E;
                 return true;
             };
             return LiPath(c, ray, hit, found, rng, c.opt.maxDepth, rays, true, cached);
         }
+        if (c.tsc && k == IntegratorKind::Direct)
+            return LiDirectCachedShadows(c, ray, hit, found, rng, diff, rays);
         return LiPath(c, ray, hit, found, rng, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
                       rays);
     }
@@ -490,7 +618,8 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
         case IntegratorKind::AO:
             if (c.tsc)
                 return CachedLookup(
-                    c, si, [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); });
+                    c, si, [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
+                    c.opt.aoSamples);
             return LiAO(c, ray, si, rng, rays);
         default:
             return glm::vec3(0.0f);
@@ -573,8 +702,8 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
                     ? glm::vec3(1.0f)
                     : CachedLookup(
                           c, points[i],
-                          [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); }, &stats,
-                          lookups ? &texels[i] : nullptr);
+                          [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
+                          c.opt.aoSamples, &stats, lookups ? &texels[i] : nullptr);
         add(p, L);
     }
 }
@@ -646,8 +775,9 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     Context ctx(rs, opt);
     std::unique_ptr<TextureSpaceCache> frameCache;
     tbb::enumerable_thread_specific<CacheStats> cacheStats;
-    const bool cachedIntegrator =
-        opt.integrator == IntegratorKind::AO || opt.integrator == IntegratorKind::Path;
+    const bool cachedIntegrator = opt.integrator == IntegratorKind::AO ||
+                                  opt.integrator == IntegratorKind::Path ||
+                                  opt.integrator == IntegratorKind::Direct;
     if (opt.texture.enabled && cachedIntegrator) {
         if (!cache) {
             frameCache = std::make_unique<TextureSpaceCache>(rs, opt.texture);

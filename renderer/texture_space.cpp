@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "renderer/texture_space.h"
 
+#include <algorithm>
 #include <string>
 
 #include "texcache/error.h"
@@ -14,9 +15,36 @@ void CheckFilterRadius(int radius, const std::string& where) {
             where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
 }
 
+int DefaultFilterRadius(TextureFilterKind kind) {
+    switch (kind) {
+        case TextureFilterKind::None:
+            return 0;
+        case TextureFilterKind::Normal:
+            return 6;
+        case TextureFilterKind::Gaussian:
+            return 10;
+        case TextureFilterKind::Regression:
+        case TextureFilterKind::SoftShadow:
+            return 8;
+    }
+    return 6;
+}
+
+bool TextureSpaceCache::Uses(TextureFilterKind kind) const {
+    return std::find(filterOf_.begin(), filterOf_.end(), kind) != filterOf_.end();
+}
+
+void TextureSpaceCache::BeginFrame(uint32_t frame) {
+    frame_ = frame;
+    cache_.InvalidateAll();
+}
+
 TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options)
     : options_(options), cache_(options.cache) {
-    CheckFilterRadius(options.radius, "filter radius");
+    if (options.radius != -1) CheckFilterRadius(options.radius, "filter radius");
+    if (options.temporalAlpha != 0.0f)
+        history_ = std::make_unique<TemporalHistory<glm::vec3>>(options.cache.texelCacheBytes,
+                                                                options.temporalAlpha);
     if (!(options.cosThreshold >= -1.0f && options.cosThreshold <= 1.0f))
         throw InputError("normal threshold", "must be a cosine in [-1, 1]");
     const Scene& scene = rs.scene();
@@ -46,7 +74,9 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
         const std::string where = scene.path + ": material '" + m.name + "'";
         filterOf_.push_back(m.cacheFilter.empty() ? options.filter
                                                   : ParseTextureFilter(m.cacheFilter, where));
-        radiusOf_.push_back(m.cacheRadius >= 0 ? m.cacheRadius : options.radius);
+        radiusOf_.push_back(m.cacheRadius >= 0    ? m.cacheRadius
+                            : options.radius >= 0 ? options.radius
+                                                  : DefaultFilterRadius(filterOf_.back()));
         CheckFilterRadius(radiusOf_.back(), where);
     }
 }

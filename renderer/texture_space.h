@@ -2,6 +2,7 @@
 // The renderer's use of libtexcache: one cache mesh per scene object (shading depends on where
 // the object is), samples of ShadedSample, texels of filtered RGB.
 #pragma once
+#include <memory>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -9,6 +10,7 @@
 #include "filters/texture_filters.h"
 #include "renderer/render_scene.h"
 #include "texcache/shading_cache.h"
+#include "texcache/temporal_history.h"
 
 namespace texcache {
 
@@ -16,9 +18,13 @@ namespace texcache {
 struct TextureSpaceOptions {
     bool enabled = false;  ///< --shading texture
     TextureFilterKind filter = TextureFilterKind::Normal;
-    int radius = 6;             ///< footprint (2r+1)^2: the paper's 13x13
+    int radius = -1;            ///< footprint (2r+1)^2; -1: the filter's default (see below)
     float cosThreshold = 0.9f;  ///< normal filter: keep taps with cos > threshold
     int indirectSamples = 1;    ///< paths per cached indirect sample
+    int shadowSamples = 4;      ///< shadow rays per cached visibility sample (soft shadows)
+    /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
+    /// keep a history table the size of the texel cache.
+    float temporalAlpha = 0.0f;
     CacheSettings cache;
     /// Mip-0 texel size as a fraction of each object's bounding-box diagonal; eq. 1 then picks
     /// the level whose texels are about a pixel.
@@ -30,6 +36,9 @@ struct TextureSpaceOptions {
 
 /// Throws InputError when a filter radius is negative or larger than the footprint allows.
 void CheckFilterRadius(int radius, const std::string& where);
+/// The paper's footprint for each filter: 13x13 normal-weighted (Sec. 6.1), 21x21 Gaussian (its
+/// "20x20" centred on the texel), 17x17 regression, 17x17 soft shadows; 1x1 without a filter.
+int DefaultFilterRadius(TextureFilterKind kind);
 
 using RenderShadingCache = ShadingCache<ShadedSample, glm::vec3>;
 
@@ -54,6 +63,20 @@ public:
     TextureFilterKind FilterOf(int object) const { return filterOf_[object]; }
     /// Footprint radius of an object's material (its override, else the render's default).
     int RadiusOf(int object) const { return radiusOf_[object]; }
+    /// Whether any object uses a filter (e.g. to skip what only that filter needs).
+    bool Uses(TextureFilterKind kind) const;
+
+    /// Starts a frame of an animation: shading changes when objects move, so samples and texels
+    /// are re-shaded, while the temporal history (if any) carries over.
+    void BeginFrame(uint32_t frame);
+    uint32_t Frame() const { return frame_; }
+    /// This frame's filtered value of a texel blended into its history (eq. 6); `value` as is
+    /// when temporal accumulation is off.
+    glm::vec3 Accumulate(const TexelKey& key, glm::vec3 value) {
+        return history_ ? history_->Blend(key, frame_, value) : value;
+    }
+    /// Bytes of all cache storage (sample and texel caches, temporal history).
+    size_t BytesUsed() const { return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0); }
 
 private:
     TextureSpaceOptions options_;
@@ -63,6 +86,8 @@ private:
     std::vector<char> meshIsBack_;
     std::vector<TextureFilterKind> filterOf_;
     std::vector<int> radiusOf_;
+    std::unique_ptr<TemporalHistory<glm::vec3>> history_;
+    uint32_t frame_ = 0;
 };
 
 }  // namespace texcache

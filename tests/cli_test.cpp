@@ -95,16 +95,41 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
           Case{"render " + cube + " --integrator magic", "valid: normal"},
           Case{"render " + cube + " -o out.tiff", "--output"},
           Case{"render " + cube + " --shading texture --filter fancy",
-               "valid: none, normal, gaussian"},
-          Case{"render " + cube + " --shading texture --filter-radius -1", "--filter-radius"},
+               "valid: none, normal, gaussian, regression, softshadow"},
+          Case{"render " + cube + " --shading texture --filter-radius -2", "--filter-radius"},
+          Case{"render " + cube + " --shading texture --filter-radius 33", "--filter-radius"},
+          Case{"render " + cube + " --shading texture --shadow-samples 0", "--shadow-samples"},
+          Case{"render " + cube + " --shading texture --frames 3 --temporal-alpha 1.5",
+               "--temporal-alpha: must be in [0, 1)"},
+          Case{"render " + cube + " --shading texture --temporal-alpha 0.7", "give --frames"},
+          Case{"render " + cube + " --temporal-alpha 0.7 --frames 3", "needs --shading texture"},
+          Case{"render " + cube + " --frames 5:2", "--frames"},
+          Case{"render " + cube + " --frames x", "--frames"},
+          Case{"render " + cube + " --frames 2 --fps 0", "--fps"},
           Case{"render " + cube + " --shading texture --sample-cache-mb 0", "--sample-cache-mb"},
           Case{"render " + cube + " --shading texture --lod-bias 99", "--lod-bias"},
           Case{"render " + scene.string() + " -o " + (Dir() / "x.exr").string(), "lat-long"},
-          Case{"compare /no/a.exr /no/b.exr", "/no/a.exr"}, Case{"render", "scene"}}) {
+          Case{"compare /no/a.exr /no/b.exr", "/no/a.exr"},
+          Case{"render", "scene"}}) {
         const CliRun r = Texcache(c.args);
         EXPECT_EQ(r.code, 2) << c.args << ": " << r.out;
         EXPECT_NE(r.out.find(c.expect), std::string::npos) << c.args << ": " << r.out;
     }
+}
+
+// Animation mode: numbered frames (a run of # in the name), the cache and its temporal history
+// carried across frames.
+TEST(Cli, RendersNumberedAnimationFrames) {
+    const fs::path out = Dir() / "anim_###.png";
+    const CliRun r = Texcache("render " + test::SceneDir() +
+                              "/turntable.json --resolution 48x27 --spp 1 --shading texture "
+                              "--temporal-alpha 0.7 --frames 2:4 --fps 8 -o " +
+                              out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    for (const char* f : {"anim_002.png", "anim_003.png", "anim_004.png"})
+        EXPECT_TRUE(fs::exists(Dir() / f)) << f << "\n" << r.out;
+    EXPECT_FALSE(fs::exists(Dir() / "anim_001.png"));
+    EXPECT_NE(r.out.find("rendered 3 frames"), std::string::npos) << r.out;
 }
 
 TEST(Cli, FailedRenderKeepsTheGoodOutput) {

@@ -44,7 +44,12 @@ struct RenderArgs {
     // Texture-space shading (libtexcache).
     std::string shading = "hit";
     std::string filter = "normal";
-    int filterRadius = 6;
+    int filterRadius = -1;  // -1: the filter's own default (DefaultFilterRadius)
+    int shadowSamples = 4;
+    float temporalAlpha = 0.0f;
+    // Animation: frames "A:B" (inclusive) or "N" (frames 0..N-1) at fps.
+    std::string frames;
+    float fps = 24.0f;
     double sampleCacheMb = 64.0, texelCacheMb = 64.0;
     float lodBias = 0.0f;
     bool referenceCache = false;
@@ -60,8 +65,20 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
         throw InputError("--shading", "unknown mode '" + a.shading + "' (valid: hit, texture)");
     t.enabled = a.shading == "texture";
     t.filter = ParseTextureFilter(a.filter, "--filter");
-    CheckFilterRadius(a.filterRadius, "--filter-radius");
+    if (a.filterRadius != -1) CheckFilterRadius(a.filterRadius, "--filter-radius");
     t.radius = a.filterRadius;
+    t.shadowSamples = CheckRange("--shadow-samples", a.shadowSamples, 1, 1 << 16);
+    if (a.temporalAlpha != 0.0f) {
+        if (!(a.temporalAlpha > 0.0f && a.temporalAlpha < 1.0f))
+            throw InputError("--temporal-alpha",
+                             "must be in [0, 1) (the weight of the history; "
+                             "the paper uses 0.7), got " +
+                                 std::to_string(a.temporalAlpha));
+        if (!t.enabled) throw InputError("--temporal-alpha", "needs --shading texture");
+        if (a.frames.empty())
+            throw InputError("--temporal-alpha", "accumulates across frames: give --frames");
+    }
+    t.temporalAlpha = a.temporalAlpha;
     auto bytes = [](const char* opt, double mb) {
         CheckRange(opt, mb, 1.0 / 1024.0, 1024.0 * 1024.0);
         return size_t(mb * 1024.0 * 1024.0);
@@ -105,7 +122,7 @@ void WriteStatsJson(const std::string& path, const RenderStats& s, const Texture
     if (overshading >= 0.0) add("overshading", overshading);
     add("sample_cache_bytes", cache ? double(cache->cache().SampleCacheBytes()) : 0.0);
     add("texel_cache_bytes", cache ? double(cache->cache().TexelCacheBytes()) : 0.0);
-    add("bytes_used", cache ? double(cache->cache().BytesUsed()) : 0.0, true);
+    add("bytes_used", cache ? double(cache->BytesUsed()) : 0.0, true);
     json += "}\n";
     WriteTextAtomic(path, json);
 }
@@ -130,6 +147,37 @@ AovFlags ParseAovs(const std::vector<std::string>& names) {
                                           "' (valid: albedo, normal, depth, ptex, motion, all)");
     }
     return f;
+}
+
+/// Frame range of --frames: "A:B" (inclusive) or "N" (0..N-1).
+void ParseFrames(const std::string& s, int* first, int* last) {
+    int a = 0, b = 0;
+    char extra;
+    if (std::sscanf(s.c_str(), "%d:%d%c", &a, &b, &extra) == 2) {
+        *first = a, *last = b;
+    } else if (std::sscanf(s.c_str(), "%d%c", &a, &extra) == 1 && a >= 1) {
+        *first = 0, *last = a - 1;
+    } else {
+        throw InputError("--frames", "expected A:B (first and last frame) or N, got '" + s + "'");
+    }
+    if (*first < 0 || *last < *first || *last - *first >= 100000)
+        throw InputError("--frames", "'" + s + "' is not a range of 1 to 100000 frames from 0");
+}
+
+/// Output name of frame f: the run of '#' in the name replaced by the zero-padded number, or
+/// "_NNNN" inserted before the extension.
+std::string FramePath(const std::string& output, int f) {
+    const size_t hash = output.find('#');
+    char num[32];
+    if (hash != std::string::npos) {
+        size_t end = hash;
+        while (end < output.size() && output[end] == '#') ++end;
+        std::snprintf(num, sizeof num, "%0*d", int(end - hash), f);
+        return output.substr(0, hash) + num + output.substr(end);
+    }
+    const std::filesystem::path p(output);
+    std::snprintf(num, sizeof num, "_%04d", f);
+    return (p.parent_path() / (p.stem().string() + num + p.extension().string())).string();
 }
 
 int RunRender(const RenderArgs& a) {
@@ -172,7 +220,14 @@ int RunRender(const RenderArgs& a) {
     opt.aovs = ParseAovs(a.aovs);
     opt.texture = ParseTextureOptions(a);
     opt.progress = !a.quiet;
-    OutputPaths out = PlanOutputs(a.output, !a.noPng);
+    int first = 0, last = 0;
+    float fps = 0.0f;
+    if (!a.frames.empty()) {
+        ParseFrames(a.frames, &first, &last);
+        fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
+        if (a.overshading) throw InputError("--overshading", "renders one frame: drop --frames");
+    }
+    OutputPaths out = a.frames.empty() ? PlanOutputs(a.output, !a.noPng) : OutputPaths{};
 
     std::unique_ptr<tbb::global_control> limit;
     if (a.threads > 0)
@@ -186,6 +241,39 @@ int RunRender(const RenderArgs& a) {
     ro.needLights = IntegratorUsesLights(opt.integrator);
     ro.needEnvironment = ro.needLights;
     ro.needTextures = true;
+    if (!a.frames.empty()) {
+        // Plan every frame's outputs first: a bad name fails before anything renders.
+        std::vector<OutputPaths> outs;
+        for (int f = first; f <= last; ++f)
+            outs.push_back(PlanOutputs(FramePath(a.output, f), !a.noPng));
+        std::unique_ptr<TextureSpaceCache> cache;
+        double total = 0.0;
+        for (int f = first; f <= last; ++f) {
+            // Scene geometry and lights are posed per frame; the cache (and its temporal
+            // history) persists, keyed by each object's own grids.
+            const double tf = NowSeconds();
+            ro.frameTime = opt.frameTime = s.time + float(f) / fps;
+            RenderScene rs(scene, ro);
+            if (opt.texture.enabled && !cache)
+                cache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
+            if (cache) cache->BeginFrame(uint32_t(f));
+            RenderOptions fo = opt;
+            fo.seed = opt.seed + uint64_t(f) * 0x9E3779B9ull;  // fresh noise per frame
+            fo.progress = false;
+            RenderResult r = Render(rs, fo, cache.get());
+            OutputPaths& out = outs[size_t(f - first)];
+            WriteOutputs(out, r.beauty, r.aovs, a.exposure);
+            total += NowSeconds() - tf;
+            std::printf("frame %d (%d of %d, t = %.3f): %.3f s, %.1f%% texel hits -> %s\n", f,
+                        f - first + 1, last - first + 1, fo.frameTime, r.stats.seconds,
+                        100.0 * r.stats.cache.TexelHitRate(), out.written.front().c_str());
+            std::fflush(stdout);
+        }
+        std::printf("rendered %d frames of %s in %.2f s (%dx%d, %d spp, integrator %s)\n",
+                    last - first + 1, scene.path.c_str(), total, opt.width, opt.height, opt.spp,
+                    s.integrator.c_str());
+        return 0;
+    }
     RenderScene rs(scene, ro);
     const double buildSeconds = NowSeconds() - t0;
 
@@ -222,7 +310,7 @@ int RunRender(const RenderArgs& a) {
             "(%llu evictions, %llu deferrals), %.1f MiB\n",
             (unsigned long long)c.lookups, 100.0 * c.TexelHitRate(),
             (unsigned long long)c.samplesShaded, (unsigned long long)c.sampleEvictions,
-            (unsigned long long)c.deferrals, double(cache->cache().BytesUsed()) / (1 << 20));
+            (unsigned long long)c.deferrals, double(cache->BytesUsed()) / (1 << 20));
         if (overshading >= 0.0)
             std::printf("overshading: %.2f%% more samples than an unbounded cache (%llu)\n",
                         100.0 * overshading, (unsigned long long)referenceShaded);
@@ -266,8 +354,20 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--filter", args->filter,
                     std::string("Texture-space filter: ") + TextureFilterNames())
         ->capture_default_str();
-    cmd->add_option("--filter-radius", args->filterRadius, "Footprint radius r: (2r+1)^2 samples")
+    cmd->add_option("--filter-radius", args->filterRadius,
+                    "Footprint radius r: (2r+1)^2 samples (default: the paper's for the filter: "
+                    "none 0, normal 6, gaussian 10, regression 8, softshadow 8)");
+    cmd->add_option("--shadow-samples", args->shadowSamples,
+                    "Shadow rays per cached visibility sample (--filter softshadow)")
         ->capture_default_str();
+    cmd->add_option("--temporal-alpha", args->temporalAlpha,
+                    "Temporal accumulation of texels across --frames: c = (1-A) c + A c_prev "
+                    "(paper: 0.7; 0 = off)")
+        ->capture_default_str();
+    cmd->add_option("--frames", args->frames,
+                    "Animation: render frames A:B (inclusive) or N (0..N-1) at --fps; outputs "
+                    "are numbered (a run of # in -o, else name_NNNN.ext)");
+    cmd->add_option("--fps", args->fps, "Frames per second of --frames")->capture_default_str();
     cmd->add_option("--sample-cache-mb", args->sampleCacheMb, "Sample cache size (MiB)")
         ->capture_default_str();
     cmd->add_option("--texel-cache-mb", args->texelCacheMb, "Texel cache size (MiB)")

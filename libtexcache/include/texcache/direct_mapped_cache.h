@@ -175,6 +175,20 @@ public:
         return false;
     }
 
+    /// Overwrites the key's first slot with `value` unless another thread holds that slot
+    /// (then returns false and stores nothing): for stores that may be dropped, e.g. temporal
+    /// history. A seqlock write like Publish; readers never see a torn value.
+    bool TryStore(uint64_t key, uint64_t hash, const T& value) {
+        Slot& s = slots_[SlotOf(hash)];
+        uint64_t seq = s.seq.load(std::memory_order_acquire);
+        if ((seq & 1) || !s.seq.compare_exchange_strong(seq, seq + 1, std::memory_order_acq_rel,
+                                                        std::memory_order_relaxed))
+            return false;
+        s.key.store(key, std::memory_order_release);
+        Publish(SlotTicket{size_t(&s - slots_.get()), seq + 1, false}, value);
+        return true;
+    }
+
     /// Starts loading the slot(s) of `hash` into the CPU cache, ahead of an Acquire.
     void Prefetch(uint64_t hash) const {
         __builtin_prefetch(&slots_[SlotOf(hash)]);

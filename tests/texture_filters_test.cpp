@@ -1,0 +1,288 @@
+// SPDX-License-Identifier: Apache-2.0
+// Texture-space filters on synthetic footprints: the regression recovers linear signals and
+// stays finite and non-negative on the hard cases (rank-deficient features, fireflies, NaN/Inf
+// samples, unusable centres, huge values, wildly varying normals); the normal-weighted and
+// soft-shadow filters fall back sensibly when every tap is rejected.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <random>
+#include <vector>
+
+#include "filters/regression_filter.h"
+#include "filters/soft_shadow_filter.h"
+#include "filters/texture_filters.h"
+
+namespace texcache {
+namespace {
+
+/// A square footprint of radius R on one face, with values, normals and variances from callables.
+struct Footprint {
+    std::vector<FootprintSample> taps;
+    std::vector<ShadedSample> samples;
+    int centre = 0;
+
+    FilterInput<ShadedSample> Input() const {
+        return {std::span<const FootprintSample>(taps), std::span<const ShadedSample>(samples),
+                centre, SampleRequest{}};
+    }
+};
+
+Footprint Square(
+    int R, const std::function<glm::vec3(int, int)>& value,
+    const std::function<glm::vec3(int, int)>& normal = [](int, int) { return glm::vec3(0, 0, 1); },
+    float variance = 0.0f, int width = -1) {
+    Footprint f;
+    const int wx = width < 0 ? R : width;
+    for (int dy = -R; dy <= R; ++dy)
+        for (int dx = -wx; dx <= wx; ++dx) {
+            FootprintSample t{};
+            t.key = TexelKey{0, 0, uint16_t(dx + 64), uint16_t(dy + 64)};
+            t.dx = dx, t.dy = dy;
+            if (dx == 0 && dy == 0) f.centre = int(f.taps.size());
+            f.taps.push_back(t);
+            f.samples.emplace_back(value(dx, dy), glm::normalize(normal(dx, dy)), variance);
+        }
+    return f;
+}
+
+bool Finite(glm::vec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+bool NonNegativeFinite(glm::vec3 v) {
+    return Finite(v) && v.x >= 0.0f && v.y >= 0.0f && v.z >= 0.0f;
+}
+
+// Gaussian noise of std `sigma` on a linear ramp: a noise-free value with a known gradient.
+Footprint NoisyRamp(int R, float sigma, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<float> noise(0.0f, sigma);
+    return Square(
+        R, [&](int dx, int dy) { return glm::vec3(1.0f + 0.02f * dx - 0.01f * dy + noise(rng)); },
+        [](int, int) { return glm::vec3(0, 0, 1); }, sigma * sigma);
+}
+
+// A noise-free linear signal over a planar footprint is reproduced exactly (tolerance: float
+// round-off of the inputs, 1e-5 relative).
+TEST(RegressionFilter, ReproducesALinearSignal) {
+    const Footprint f = Square(
+        8, [](int dx, int dy) { return glm::vec3(2.0f + 0.1f * dx, 1.0f - 0.05f * dy, 0.5f); });
+    RegressionInfo info;
+    const glm::vec3 v = RegressionFilter{64, false}.Reconstruct(f.Input(), &info);
+    EXPECT_NEAR(v.x, 2.0f, 2e-5f);
+    EXPECT_NEAR(v.y, 1.0f, 2e-5f);
+    EXPECT_NEAR(v.z, 0.5f, 2e-5f);
+    EXPECT_EQ(info.rank, 2);  // flat: constant normals carry no information
+}
+
+// Noise on a ramp: the regression picks a large ring and lands much closer to the truth than
+// the centre sample (averaged over 200 footprints: RMSE at most 0.2 of the noise std).
+TEST(RegressionFilter, AveragesNoiseAwayOnSmoothSignals) {
+    for (int n : {1, 16}) {
+        double err2 = 0.0, centre2 = 0.0;
+        int rings = 0;
+        for (uint32_t seed = 0; seed < 200; ++seed) {
+            const Footprint f = NoisyRamp(8, 0.1f, seed);
+            RegressionInfo info;
+            const glm::vec3 v = RegressionFilter{n, false}.Reconstruct(f.Input(), &info);
+            err2 += double(v.x - 1.0f) * (v.x - 1.0f);
+            const float c = f.samples[f.centre].value.x;
+            centre2 += double(c - 1.0f) * (c - 1.0f);
+            rings += info.ring;
+        }
+        EXPECT_LT(std::sqrt(err2 / 200), 0.2 * 0.1) << "n = " << n;
+        EXPECT_LT(err2, 0.05 * centre2) << "n = " << n;
+        EXPECT_GT(rings / 200.0, 4.0) << "n = " << n;
+    }
+}
+
+// A step edge (a shadow boundary) at the centre's doorstep: the error estimate must keep the
+// model small rather than blur the edge in (result within 0.15 of the centre's side).
+TEST(RegressionFilter, KeepsASharpEdge) {
+    std::mt19937 rng(3);
+    std::normal_distribution<float> noise(0.0f, 0.02f);
+    const Footprint f = Square(
+        8, [&](int dx, int) { return glm::vec3((dx <= 1 ? 1.0f : 0.0f) + noise(rng)); },
+        [](int, int) { return glm::vec3(0, 0, 1); }, 0.02f * 0.02f);
+    RegressionInfo info;
+    const glm::vec3 v = RegressionFilter{16, false}.Reconstruct(f.Input(), &info);
+    EXPECT_NEAR(v.x, 1.0f, 0.15f) << "ring " << info.ring;
+    EXPECT_LE(info.ring, 2);
+}
+
+// Rank-deficient features: a footprint one texel wide (collinear coordinates, as at a boundary
+// where only one column exists) and a single tap. Finite, exact on a linear signal.
+TEST(RegressionFilter, RankDeficientFootprints) {
+    const Footprint column = Square(
+        8, [](int, int dy) { return glm::vec3(1.0f + 0.05f * dy); },
+        [](int, int) { return glm::vec3(0, 0, 1); }, 0.0f, 0);
+    RegressionInfo info;
+    glm::vec3 v = RegressionFilter{4, false}.Reconstruct(column.Input(), &info);
+    EXPECT_EQ(info.rank, 1);
+    EXPECT_NEAR(v.x, 1.0f, 1e-5f);
+
+    const Footprint single = Square(0, [](int, int) { return glm::vec3(0.25f); });
+    v = RegressionFilter{4, false}.Reconstruct(single.Input(), &info);
+    EXPECT_EQ(info.rank, 0);
+    EXPECT_FLOAT_EQ(v.x, 0.25f);
+
+    // Normals that vary exactly with the coordinates (a cylinder's normals are a function of u):
+    // collinear features, the TSVD keeps only the independent directions.
+    const Footprint cyl = Square(
+        8, [](int dx, int) { return glm::vec3(0.5f + 0.01f * dx); },
+        [](int dx, int) { return glm::vec3(std::sin(0.01f * dx), 0.0f, std::cos(0.01f * dx)); });
+    v = RegressionFilter{4, false}.Reconstruct(cyl.Input(), &info);
+    EXPECT_LE(info.rank, 3);
+    EXPECT_NEAR(v.x, 0.5f, 1e-4f);
+}
+
+// Wildly varying normals (a valence-3 or high-valence corner seen at a coarse mip, tiny faces
+// folded into one footprint): full rank, finite, non-negative.
+TEST(RegressionFilter, ChaoticNormalsStayFinite) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    const Footprint f = Square(
+        8, [&](int, int) { return glm::vec3(0.5f + 0.5f * u(rng)); },
+        [&](int, int) { return glm::vec3(u(rng), u(rng), u(rng) + 1.5f); }, 0.01f);
+    RegressionInfo info;
+    const glm::vec3 v = RegressionFilter{4, false}.Reconstruct(f.Input(), &info);
+    EXPECT_TRUE(NonNegativeFinite(v));
+    EXPECT_LE(v.x, 1.0f);
+    EXPECT_EQ(info.rank, 5);
+}
+
+// A firefly 1e6 times brighter in the footprint. With per-sample variances (n = 16), the models
+// that include it have a huge a-priori error and the result stays at the surrounding level
+// (within 2x). With one ray per sample (n = 1, noise estimated from the footprint) it reads as
+// noise and is spread over a large ring: its energy is kept at no more than 1/81 of its peak
+// (at least a 9x9 average). A firefly at the centre stays finite and at most its own value.
+TEST(RegressionFilter, Fireflies) {
+    Footprint f = NoisyRamp(8, 0.05f, 11);
+    f.samples[f.centre + 3].value = glm::vec3(1e6f);
+    glm::vec3 v = RegressionFilter{16, false}(f.Input());
+    EXPECT_TRUE(NonNegativeFinite(v));
+    EXPECT_LT(v.x, 2.0f);
+    v = RegressionFilter{1, false}(f.Input());
+    EXPECT_TRUE(NonNegativeFinite(v));
+    EXPECT_LE(v.x, 1e6f / 81.0f);
+    EXPECT_GT(v.x, 0.5f);
+
+    f = NoisyRamp(8, 0.05f, 12);
+    f.samples[f.centre].value = glm::vec3(1e6f);
+    for (int n : {1, 16}) {
+        v = RegressionFilter{n, false}(f.Input());
+        EXPECT_TRUE(NonNegativeFinite(v));
+        EXPECT_LE(v.x, 1e6f);
+    }
+}
+
+// NaN and Inf samples (values, normals, variances) are excluded and counted, never propagated.
+TEST(RegressionFilter, NonFiniteSamplesAreExcludedAndCounted) {
+    Footprint f = NoisyRamp(8, 0.05f, 5);
+    f.samples[1].value = glm::vec3(NAN);
+    f.samples[2].value = glm::vec3(INFINITY, 0, 0);
+    f.samples[3].normal = glm::vec3(NAN);
+    f.samples[4].variance = INFINITY;
+    f.samples[5].value = glm::vec3(-INFINITY);
+    RegressionInfo info;
+    const glm::vec3 v = RegressionFilter{16, false}.Reconstruct(f.Input(), &info);
+    EXPECT_EQ(info.rejected, 5);
+    EXPECT_FALSE(info.fallback);
+    EXPECT_TRUE(NonNegativeFinite(v));
+    EXPECT_NEAR(v.x, 1.0f, 0.05f);
+}
+
+// An unusable centre (a hole, a NaN-shaded point) falls back to the mean of the usable taps
+// with the centre's normal, or of all usable taps; with nothing usable, 0.
+TEST(RegressionFilter, UnusableCentreFallsBack) {
+    Footprint f = Square(2, [](int, int) { return glm::vec3(0.7f); });
+    f.samples[f.centre].value = glm::vec3(NAN);
+    RegressionInfo info;
+    glm::vec3 v = RegressionFilter{4, false}.Reconstruct(f.Input(), &info);
+    EXPECT_TRUE(info.fallback);
+    EXPECT_NEAR(v.x, 0.7f, 1e-6f);
+
+    f.samples[f.centre].normal = glm::vec3(NAN);
+    v = RegressionFilter{4, false}.Reconstruct(f.Input(), &info);
+    EXPECT_NEAR(v.x, 0.7f, 1e-6f);
+
+    for (ShadedSample& s : f.samples) s.value = glm::vec3(NAN);
+    v = RegressionFilter{4, false}.Reconstruct(f.Input(), &info);
+    EXPECT_EQ(v, glm::vec3(0.0f));
+}
+
+// Radiance is never negative, even where a steep ramp extrapolates below zero at the centre.
+TEST(RegressionFilter, NeverNegative) {
+    const Footprint f = Square(8, [](int dx, int) { return glm::vec3(dx > 0 ? 0.1f * dx : 0.0f); });
+    const glm::vec3 v = RegressionFilter{64, false}(f.Input());
+    EXPECT_TRUE(NonNegativeFinite(v));
+}
+
+// Huge magnitudes (1e30: far beyond any sane radiance, well inside float) stay finite.
+TEST(RegressionFilter, HugeValuesStayFinite) {
+    const Footprint f = Square(
+        8, [](int dx, int dy) { return glm::vec3(1e30f * (1.0f + 0.01f * dx + 0.01f * dy)); });
+    const glm::vec3 v = RegressionFilter{4, false}(f.Input());
+    EXPECT_TRUE(Finite(v));
+    EXPECT_NEAR(v.x / 1e30f, 1.0f, 1e-3f);
+}
+
+// The roughness feature: a signal that depends on roughness only (a microfacet material with a
+// roughness texture) is explained by it; without the feature the same footprint is not.
+TEST(RegressionFilter, RoughnessFeature) {
+    auto rough = [](int dx, int dy) { return 0.5f + 0.4f * std::sin(1.3f * dx + 0.7f * dy); };
+    Footprint f = Square(8, [&](int dx, int dy) { return glm::vec3(2.0f * rough(dx, dy)); });
+    for (size_t i = 0; i < f.samples.size(); ++i)
+        f.samples[i].roughness = rough(f.taps[i].dx, f.taps[i].dy);
+    const float truth = 2.0f * rough(0, 0);
+    f.samples[f.centre].value = glm::vec3(truth + 0.3f);  // a noisy centre
+    for (auto& s : f.samples) s.variance = 0.01f;
+    const glm::vec3 with = RegressionFilter{4, true}(f.Input());
+    EXPECT_NEAR(with.x, truth, 0.05f);
+}
+
+// Every tap rejected by the normal test and the centre unusable: the normal filter returns the
+// mean of the finite taps; with none finite, 0.
+TEST(NormalWeightedFilter, AllTapsRejectedFallsBackToTheMean) {
+    Footprint f = Square(
+        2, [](int dx, int) { return glm::vec3(dx >= 0 ? 1.0f : 0.5f); },
+        [](int dx, int) { return glm::vec3(dx >= 0 ? 1.0f : -1.0f, 0.0f, 0.1f); });
+    f.samples[f.centre].value = glm::vec3(NAN);
+    f.samples[f.centre].normal = glm::vec3(NAN);
+    glm::vec3 v = NormalWeightedFilter{0.9f, 0.0f}(f.Input());
+    EXPECT_TRUE(Finite(v));
+    EXPECT_GT(v.x, 0.5f);
+    EXPECT_LT(v.x, 1.0f);
+    for (ShadedSample& s : f.samples) s.value = glm::vec3(INFINITY);
+    EXPECT_EQ(NormalWeightedFilter{}(f.Input()), glm::vec3(0.0f));
+    // Fireflies are averaged, not hidden: a 1e6 tap stays finite.
+    f = Square(6, [](int, int) { return glm::vec3(1.0f); });
+    f.samples[7].value = glm::vec3(1e6f);
+    EXPECT_TRUE(Finite(NormalWeightedFilter{}(f.Input())));
+}
+
+// Soft shadows: the blur follows the occluder slope. A contact shadow (tiny blur radius) keeps
+// the centre's visibility; no occluder around gives the wide average; NaN radii are ignored.
+TEST(SoftShadowFilter, WidthFollowsTheOccluderDistance) {
+    auto vis = [](int dx, int) { return glm::vec3(dx < 0 ? 0.0f : 1.0f); };
+    Footprint f = Square(8, vis);
+    for (auto& s : f.samples) s.texelSize = 0.01f;
+    for (auto& s : f.samples) s.blurRadius = 0.001f;  // 0.1 texel: clamped to 0.5
+    glm::vec3 v = SoftShadowFilter{}(f.Input());
+    // A 0.5-texel Gaussian: the centre's lit side weighs 1.44 against 0.17 for the dark column.
+    EXPECT_GT(v.x, 0.85f);
+    for (auto& s : f.samples) s.blurRadius = INFINITY;  // nothing blocked: widest filter
+    v = SoftShadowFilter{}(f.Input());
+    EXPECT_NEAR(v.x, 9.0f / 17.0f, 0.1f);
+    for (auto& s : f.samples) s.blurRadius = NAN;
+    v = SoftShadowFilter{}(f.Input());
+    EXPECT_TRUE(Finite(v));
+    for (auto& s : f.samples) s.blurRadius = 0.04f;  // 4 texels: a penumbra-wide blur
+    v = SoftShadowFilter{}(f.Input());
+    EXPECT_GT(v.x, 0.5f);
+    EXPECT_LT(v.x, 0.9f);
+}
+
+}  // namespace
+}  // namespace texcache
