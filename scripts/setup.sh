@@ -7,7 +7,8 @@ build="${BUILD_DIR:-$root/build}"
 
 pkgs=(build-essential cmake pkg-config
       libembree-dev libosd-dev libopenimageio-dev libopenexr-dev libglm-dev libtbb-dev
-      libeigen3-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev)
+      libeigen3-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
+      libglfw3-dev libimgui-dev xvfb xauth libgl1-mesa-dri)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

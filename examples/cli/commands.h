@@ -10,5 +10,6 @@ namespace texcache::cli {
 void AddRenderCommand(CLI::App& app, int& exitCode);
 void AddCompareCommand(CLI::App& app, int& exitCode);
 void AddBenchCommand(CLI::App& app, int& exitCode);
+void AddPreviewCommand(CLI::App& app, int& exitCode);
 
 }  // namespace texcache::cli

@@ -1,0 +1,140 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache preview`: command-line options -> PreviewSettings, then the window, the headless
+// test mode or the benchmark.
+#include <cmath>
+#include <filesystem>
+#include <memory>
+
+#include "cli_util.h"
+#include "commands.h"
+#include "preview.h"
+#include "renderer/integrator.h"
+#include "renderer/texture_space.h"
+
+namespace texcache::cli {
+
+namespace {
+
+struct PreviewCliArgs {
+    std::string scene;
+    int frames = 0;
+    std::string screenshot;
+    float orbit = 20.0f;
+    std::string resolution;
+    std::string integrator = "ao";
+    std::string shading = "texture";
+    std::string filter = "none";
+    int filterRadius = 0;
+    int aoSamples = 32;
+    int spp = 1;
+    float lodBias = 1.0f;  // half the shading rate (Sec. 6.2): ~1 texel per pixel, high reuse
+    double sampleCacheMb = 64.0, texelCacheMb = 64.0;
+    float exposure = 0.0f;
+    bool saveCamera = false;
+    bool bench = false;
+    int benchFrames = 36;
+    int referenceSpp = 32;
+    std::string benchOut = "out/preview_bench";
+};
+
+int RunPreview(const PreviewCliArgs& a) {
+    std::vector<std::string> warnings;
+    Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    for (const std::string& w : warnings)
+        std::fprintf(stderr, "texcache: warning: %s\n", w.c_str());
+
+    preview::PreviewSettings s;
+    s.integrator = ParseIntegrator(a.integrator, "--integrator");
+    if (a.shading != "hit" && a.shading != "texture")
+        throw InputError("--shading", "unknown mode '" + a.shading + "' (valid: hit, texture)");
+    s.textureSpace = a.shading == "texture";
+    s.filter = ParseTextureFilter(a.filter, "--filter");
+    CheckFilterRadius(a.filterRadius, "--filter-radius");
+    s.radius = a.filterRadius;
+    s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 4096);
+    s.sppPerFrame = CheckRange("--spp", a.spp, 1, 4096);
+    s.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
+    s.sampleCacheMb = float(CheckRange("--sample-cache-mb", a.sampleCacheMb, 1.0, 65536.0));
+    s.texelCacheMb = float(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0));
+    s.exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
+    s.aoDistance = scene.settings.aoDistance;
+    s.maxDepth = scene.settings.maxDepth;
+    s.tessellationRate = scene.settings.tessellationRate;
+    s.seed = scene.settings.seed;
+    // The preview's default is the benchmark's 512x512, not the scene's final-render size.
+    s.width = s.height = 512;
+    if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
+
+    preview::PreviewArgs p;
+    p.scenePath = a.scene;
+    p.frames = CheckRange("--frames", a.frames, 0, 100000);
+    p.screenshot = a.screenshot;
+    p.orbitDegrees = CheckRange("--orbit", a.orbit, -3600.0f, 3600.0f);
+    p.filterName = a.filter;
+    p.saveCamera = a.saveCamera;
+    if (a.saveCamera && p.frames == 0)
+        throw InputError("--save-camera", "needs --frames N (the window has a button for it)");
+    if (a.saveCamera && std::filesystem::path(a.scene).extension() != ".json")
+        throw InputError("--save-camera", "needs a .json scene file, got '" + a.scene + "'");
+    if (!a.screenshot.empty() && p.frames == 0)
+        throw InputError("--screenshot", "needs --frames N (the headless test mode)");
+    if (a.bench) {
+        preview::BenchArgs b;
+        b.frames = CheckRange("--bench-frames", a.benchFrames, 1, 10000);
+        b.referenceSpp = CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
+        b.out = a.benchOut;
+        return preview::RunPreviewBench(scene, s, p, b);
+    }
+    return preview::RunPreviewWindow(std::move(scene), s, p);
+}
+
+}  // namespace
+
+void AddPreviewCommand(CLI::App& app, int& exitCode) {
+    auto a = std::make_shared<PreviewCliArgs>();
+    CLI::App* cmd = app.add_subcommand(
+        "preview",
+        "Interactive progressive preview (GLFW + OpenGL window), headless test mode, "
+        "frame-rate benchmark");
+    cmd->add_option("scene", a->scene, "Scene file (.json) or OBJ control cage (.obj)")->required();
+    cmd->add_option("--frames", a->frames,
+                    "Headless test mode: render N frames along a scripted orbit, then exit");
+    cmd->add_option("--screenshot", a->screenshot,
+                    "Headless: write what the window shows after the last frame (PNG)");
+    cmd->add_flag("--save-camera", a->saveCamera,
+                  "Headless: write the camera after the orbit back into the scene file");
+    cmd->add_option("--orbit", a->orbit, "Degrees the scripted camera orbits (headless, bench)")
+        ->capture_default_str();
+    cmd->add_option("--resolution", a->resolution, "Render size WxH (default 512x512)");
+    cmd->add_option("--integrator", a->integrator, std::string("One of: ") + IntegratorNames())
+        ->capture_default_str();
+    cmd->add_option("--shading", a->shading, "hit or texture (cache AO / diffuse indirect)")
+        ->capture_default_str();
+    cmd->add_option("--filter", a->filter,
+                    std::string("Texture-space filter: ") + TextureFilterNames())
+        ->capture_default_str();
+    cmd->add_option("--filter-radius", a->filterRadius, "Footprint radius r: (2r+1)^2 samples")
+        ->capture_default_str();
+    cmd->add_option("--ao-samples", a->aoSamples, "AO rays per hit / per cached sample")
+        ->capture_default_str();
+    cmd->add_option("--spp", a->spp, "Camera samples per pixel per frame")->capture_default_str();
+    cmd->add_option("--lod-bias", a->lodBias, "Shading LOD bias (> 0: coarser)")
+        ->capture_default_str();
+    cmd->add_option("--sample-cache-mb", a->sampleCacheMb, "Sample cache size (MiB)")
+        ->capture_default_str();
+    cmd->add_option("--texel-cache-mb", a->texelCacheMb, "Texel cache size (MiB)")
+        ->capture_default_str();
+    cmd->add_option("--exposure", a->exposure, "Display exposure in stops")->capture_default_str();
+    cmd->add_flag("--bench", a->bench,
+                  "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
+                  "(no window)");
+    cmd->add_option("--bench-frames", a->benchFrames, "Bench: timed orbit frames")
+        ->capture_default_str();
+    cmd->add_option("--reference-spp", a->referenceSpp, "Bench: spp of the per-hit reference")
+        ->capture_default_str();
+    cmd->add_option("--bench-out", a->benchOut, "Bench: prefix of the images written")
+        ->capture_default_str();
+    cmd->callback([a, &exitCode] { exitCode = RunPreview(*a); });
+}
+
+}  // namespace texcache::cli
