@@ -3,13 +3,12 @@
 // never replaces a good output.
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-
 #include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 
+#include "cli_run.h"
 #include "renderer/image.h"
 #include "test_util.h"
 
@@ -18,22 +17,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-    int code;
-    std::string out;  // stdout + stderr
-};
-
-CliRun Texcache(const std::string& args) {
-    const std::string cmd = std::string(TEXCACHE_BIN_DIR) + "/texcache " + args + " 2>&1";
-    FILE* p = popen(cmd.c_str(), "r");
-    CliRun r{-1, ""};
-    std::array<char, 4096> buf;
-    size_t n;
-    while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-    const int status = pclose(p);
-    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return r;
-}
+using test::CliRun;
+using test::Texcache;
 
 fs::path Dir() {
     const fs::path d = fs::path(::testing::TempDir()) / "texcache_cli";

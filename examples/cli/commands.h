@@ -11,5 +11,6 @@ void AddRenderCommand(CLI::App& app, int& exitCode);
 void AddCompareCommand(CLI::App& app, int& exitCode);
 void AddBenchCommand(CLI::App& app, int& exitCode);
 void AddPreviewCommand(CLI::App& app, int& exitCode);
+void AddExperimentCommand(CLI::App& app, int& exitCode);
 
 }  // namespace texcache::cli

@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
     texcache::cli::AddRenderCommand(app, exitCode);
     texcache::cli::AddCompareCommand(app, exitCode);
     texcache::cli::AddBenchCommand(app, exitCode);
+    texcache::cli::AddExperimentCommand(app, exitCode);
     texcache::cli::AddPreviewCommand(app, exitCode);
     try {
         app.parse(argc, argv);

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "texcache/footprint.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -83,6 +84,65 @@ FootprintSample Emit(const MeshGrids& g, const Walker& w, int dx, int dy) {
     return s;
 }
 
+// Which of two walks reaching the same texel to keep: the smallest |dx| + |dy|, then the
+// smallest dx, then dy (a total order: the result does not depend on the walk order).
+bool Closer(const FootprintSample& a, const FootprintSample& b) {
+    const int da = std::abs(a.dx) + std::abs(a.dy), db = std::abs(b.dx) + std::abs(b.dy);
+    if (da != db) return da < db;
+    return a.dx != b.dx ? a.dx < b.dx : a.dy < b.dy;
+}
+
+// Drops all but the closest walk to each texel, in O(n) with a small open-addressing table of
+// sample indices (thread-local; emptied by bumping a generation stamp rather than clearing).
+// Sorting by key did the same in O(n log n) and was 9% of a 21x21 AO render.
+void RemoveDuplicateTexels(std::vector<FootprintSample>* out) {
+    const size_t n = out->size();
+    thread_local std::vector<uint32_t> index, stamp;
+    thread_local std::vector<char> keep;
+    thread_local uint32_t generation = 0;
+    size_t cap = 64;
+    while (cap < 2 * n) cap <<= 1;
+    if (index.size() < cap) {
+        index.assign(cap, 0);
+        stamp.assign(cap, 0);
+        generation = 0;
+    }
+    if (++generation == 0) {  // wrapped: stale stamps could match again
+        std::fill(stamp.begin(), stamp.end(), 0u);
+        generation = 1;
+    }
+    const size_t mask = index.size() - 1;
+    keep.assign(n, 1);
+    bool duplicates = false;
+    for (size_t i = 0; i < n; ++i) {
+        const FootprintSample& s = (*out)[i];
+        uint64_t h = s.key.Pack() * 0x9E3779B97F4A7C15ull;
+        size_t slot = size_t(h >> 40) & mask;
+        for (;; slot = (slot + 1) & mask) {
+            if (stamp[slot] != generation) {
+                stamp[slot] = generation;
+                index[slot] = uint32_t(i);
+                break;
+            }
+            const uint32_t j = index[slot];
+            if (!((*out)[j].key == s.key)) continue;
+            duplicates = true;
+            if (Closer(s, (*out)[j])) {
+                keep[j] = 0;
+                index[slot] = uint32_t(i);
+            } else {
+                keep[i] = 0;
+            }
+            break;
+        }
+    }
+    if (!duplicates) return;
+    size_t w = 0;
+    for (size_t i = 0; i < n; ++i)
+        if (keep[i]) (*out)[w++] = (*out)[i];
+    out->resize(w);
+}
+
 }  // namespace
 
 void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
@@ -122,19 +182,8 @@ void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int 
         }
     }
     // Around extraordinary vertices two walks can end in the same texel: keep the one with the
-    // smallest offset. std::sort is in place (stable_sort allocated on every slow-path gather).
-    std::sort(out->begin(), out->end(), [](const FootprintSample& a, const FootprintSample& b) {
-        const uint64_t ka = a.key.Pack(), kb = b.key.Pack();
-        if (ka != kb) return ka < kb;
-        const int da = std::abs(a.dx) + std::abs(a.dy), db = std::abs(b.dx) + std::abs(b.dy);
-        if (da != db) return da < db;
-        return a.dx != b.dx ? a.dx < b.dx : a.dy < b.dy;
-    });
-    out->erase(std::unique(out->begin(), out->end(),
-                           [](const FootprintSample& a, const FootprintSample& b) {
-                               return a.key == b.key;
-                           }),
-               out->end());
+    // smallest offset.
+    RemoveDuplicateTexels(out);
 }
 
 }  // namespace texcache

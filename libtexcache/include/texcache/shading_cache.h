@@ -207,6 +207,18 @@ public:
         return r;
     }
 
+    /// Whether a texel is in the texel cache right now (read-only: never shades, claims or
+    /// counts anything), e.g. for a hit/miss heat map. Always false in reference mode.
+    bool ContainsTexel(const SampleRequest& texel) const {
+        Texel t;
+        return texels_ && texels_->Find(texel.key.Pack(), Hash(texel.key), &t);
+    }
+    /// Whether a sample is in the sample cache right now (read-only, like ContainsTexel).
+    bool ContainsSample(const TexelKey& key) const {
+        Sample s;
+        return samples_ && samples_->Find(key.Pack(), Hash(key), &s);
+    }
+
     /// Starts fetching a texel's slot into the CPU cache: call it for a batch of texels before
     /// their lookups to overlap the memory latency of a large texel table.
     void Prefetch(const SampleRequest& texel) const {
@@ -312,6 +324,10 @@ private:
         GatherFootprint(g, centre.face, centre.mip, centre.key.iu, centre.key.iv, radius, &taps);
         values.resize(taps.size());
         deferred.clear();
+        // Start loading every tap's slot: the lookups below then overlap their cache misses
+        // instead of taking them one after another.
+        if (samples_)
+            for (const FootprintSample& t : taps) samples_->Prefetch(Hash(t.key));
         int centreIndex = 0;
         for (size_t i = 0; i < taps.size(); ++i) {
             if (taps[i].key == centre.key) centreIndex = int(i);

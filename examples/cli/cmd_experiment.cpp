@@ -1,0 +1,80 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache experiment <name> --out DIR [--quick]`: reproduce a claim of the paper on our scenes
+// and write CSV + PNG plots + a markdown summary into DIR.
+#include <filesystem>
+#include <functional>
+#include <map>
+
+#include "cli_util.h"
+#include "commands.h"
+#include "experiment_util.h"
+#include "texcache/error.h"
+
+namespace texcache::cli {
+
+namespace {
+
+struct ExperimentArgs {
+    std::string name;
+    std::string out;
+    std::string scenes = TEXCACHE_SCENES_DIR;
+    bool quick = false;
+    std::string only;
+};
+
+const std::map<std::string, std::function<int(const experiments::Setup&)>>& Experiments() {
+    static const std::map<std::string, std::function<int(const experiments::Setup&)>> m = {
+        {"speed-vs-error", experiments::SpeedVsError},
+        {"cache-size", experiments::CacheSize},
+        {"filter-size", experiments::FilterSize},
+        {"threads", experiments::Threads},
+        {"lod-bias", experiments::LodBias},
+    };
+    return m;
+}
+
+std::string ExperimentNames() {
+    std::string s;
+    for (const auto& [name, fn] : Experiments()) s += (s.empty() ? "" : ", ") + name;
+    return s + ", all";
+}
+
+int RunExperiment(const ExperimentArgs& a) {
+    const auto& all = Experiments();
+    if (a.name != "all" && !all.count(a.name))
+        throw InputError("experiment",
+                         "unknown experiment '" + a.name + "' (valid: " + ExperimentNames() + ")");
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::create_directories(a.out, ec);
+    if (!fs::is_directory(a.out))
+        throw InputError("--out", "cannot create directory '" + a.out + "'");
+    if (!fs::is_directory(a.scenes))
+        throw InputError("--scenes", "no scene directory '" + a.scenes + "'");
+    experiments::Setup s{a.out, a.scenes, a.quick, a.only};
+    const double t0 = NowSeconds();
+    int code = 0;
+    for (const auto& [name, fn] : all)
+        if (a.name == "all" || a.name == name) code = std::max(code, fn(s));
+    std::printf("experiment %s finished in %.1f s\n", a.name.c_str(), NowSeconds() - t0);
+    return code;
+}
+
+}  // namespace
+
+void AddExperimentCommand(CLI::App& app, int& exitCode) {
+    auto args = std::make_shared<ExperimentArgs>();
+    CLI::App* cmd = app.add_subcommand(
+        "experiment", "Run one of the paper's experiments: CSV + PNG plots + markdown summary");
+    cmd->add_option("name", args->name, "One of: " + ExperimentNames())->required();
+    cmd->add_option("--out", args->out, "Output directory (created if missing)")->required();
+    cmd->add_flag("--quick", args->quick,
+                  "Test size: small images and budgets (under a minute); not for conclusions");
+    cmd->add_option("--only", args->only,
+                    "speed-vs-error: run only these cases (comma separated, e.g. car-ao,chess-ao)");
+    cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
+        ->capture_default_str();
+    cmd->callback([args, &exitCode] { exitCode = RunExperiment(*args); });
+}
+
+}  // namespace texcache::cli

@@ -1,0 +1,108 @@
+// SPDX-License-Identifier: Apache-2.0
+// What every `texcache experiment` shares: scenes and references, timed renders (best of n, in
+// this process, so ratios compare runs made under the same machine load), CSV tables, gnuplot
+// PNG plots and the markdown summary. Everything is written with a temporary file + rename.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "renderer/image.h"
+#include "renderer/integrator.h"
+#include "renderer/render_scene.h"
+#include "renderer/scene.h"
+
+namespace texcache::experiments {
+
+/// Options common to every experiment.
+struct Setup {
+    std::string outDir;
+    std::string scenesDir;
+    bool quick = false;  ///< test size: small images, few budgets, under a minute on 2 cores
+    std::string only;    ///< speed-vs-error: comma-separated case labels to run (empty: all)
+};
+
+/// A scene file loaded and built once for a given integrator family. Not movable: the
+/// RenderScene refers to the Scene beside it.
+struct LoadedScene {
+    std::string name;  ///< file stem, e.g. "car"
+    Scene scene;
+    std::unique_ptr<RenderScene> rs;
+    LoadedScene() = default;
+    LoadedScene(const LoadedScene&) = delete;
+    LoadedScene& operator=(const LoadedScene&) = delete;
+};
+std::unique_ptr<LoadedScene> LoadForExperiment(const Setup& s, const std::string& file,
+                                               bool needLights);
+
+/// Render options from a scene's settings at a given size and integrator.
+RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int width, int height);
+
+/// One timed render: the image, its render seconds (best of `repeats`) and statistics.
+struct Run {
+    Image image;
+    double seconds = 0.0;
+    RenderStats stats;
+};
+/// With `warmUp`, one untimed render first: Embree tessellates subdivision patches lazily on
+/// first hit, and the first render of a scene would pay for it.
+Run TimedRender(const RenderScene& rs, const RenderOptions& o, int repeats = 1,
+                bool warmUp = false);
+
+/// A high-sample reference, cached as OUT/ref_<tag>.exr and reused when it exists at this size
+/// (references cost minutes; re-running an experiment should not).
+Image Reference(const Setup& s, const std::string& tag, const RenderScene& rs,
+                const RenderOptions& o);
+
+/// A CSV table built row by row; numbers printed with 6 significant digits.
+class Table {
+public:
+    explicit Table(std::vector<std::string> columns) : columns_(std::move(columns)) {}
+    Table& Row();
+    Table& Add(const std::string& v);
+    Table& Add(double v);
+    void Write(const std::string& path) const;
+    size_t NumRows() const { return rows_.size(); }
+
+private:
+    std::vector<std::string> columns_;
+    std::vector<std::vector<std::string>> rows_;
+};
+
+/// A line plot drawn by gnuplot (pngcairo) from a CSV written beside it.
+struct Series {
+    std::string title;
+    std::string csv;       ///< data file (comma separated, with a header line)
+    int xColumn, yColumn;  ///< 1-based columns
+    std::string filter;    ///< optional gnuplot condition on the row, e.g. "strcol(2) eq 'car'"
+};
+struct Plot {
+    std::string png, title, xLabel, yLabel;
+    bool logX = false, logY = false;
+    std::vector<Series> series;
+    std::vector<std::string> extra;  ///< further gnuplot commands (e.g. reference lines)
+};
+/// Writes the gnuplot script beside the PNG and runs gnuplot; throws if it is missing or fails.
+void Draw(const Plot& p);
+
+/// Writes text atomically.
+void WriteText(const std::string& path, const std::string& text);
+/// printf into a std::string.
+std::string Format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+/// Progress line on stdout (flushed: experiments run for minutes).
+void Say(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+
+/// Log-log interpolation of y at x along a curve of increasing x (extrapolated linearly in
+/// log-log outside the range; `extrapolated` says so).
+double InterpolateLogLog(const std::vector<double>& xs, const std::vector<double>& ys, double x,
+                         bool* extrapolated);
+
+// The experiments (each returns a process exit code).
+int SpeedVsError(const Setup& s);
+int CacheSize(const Setup& s);
+int FilterSize(const Setup& s);
+int Threads(const Setup& s);
+int LodBias(const Setup& s);
+
+}  // namespace texcache::experiments

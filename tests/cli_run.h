@@ -1,0 +1,30 @@
+// SPDX-License-Identifier: Apache-2.0
+// Runs the `texcache` program from a test and captures its output and exit code.
+#pragma once
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <string>
+
+namespace texcache::test {
+
+struct CliRun {
+    int code;         ///< exit code (-1 if it did not exit normally)
+    std::string out;  ///< stdout + stderr
+};
+
+inline CliRun Texcache(const std::string& args) {
+    const std::string cmd = std::string(TEXCACHE_BIN_DIR) + "/texcache " + args + " 2>&1";
+    FILE* p = popen(cmd.c_str(), "r");
+    CliRun r{-1, ""};
+    if (!p) return r;
+    std::array<char, 4096> buf;
+    size_t n;
+    while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
+    const int status = pclose(p);
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
+}
+
+}  // namespace texcache::test

@@ -1,0 +1,98 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache experiment <name> --quick` end to end: every experiment runs at test size and writes
+// its CSV (finite numbers, at least the expected rows), its PNG plots and its markdown summary;
+// an unknown name is a clear error listing the valid ones.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "cli_run.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+using texcache::test::CliRun;
+using texcache::test::Texcache;
+
+// Rows of a CSV (header excluded); fails the test on a non-finite number.
+int CheckCsv(const fs::path& path) {
+    std::ifstream f(path);
+    EXPECT_TRUE(f.good()) << path;
+    std::string line;
+    std::getline(f, line);
+    int rows = 0;
+    while (std::getline(f, line)) {
+        ++rows;
+        std::stringstream ss(line);
+        std::string cell;
+        while (std::getline(ss, cell, ',')) {
+            char* end = nullptr;
+            const double v = std::strtod(cell.c_str(), &end);
+            if (end != cell.c_str() && *end == '\0') {
+                EXPECT_TRUE(std::isfinite(v)) << path << ": " << line;
+            }
+            EXPECT_NE(cell, "nan") << path << ": " << line;
+        }
+    }
+    return rows;
+}
+
+struct Expected {
+    std::string name, csv;
+    int minRows;
+    std::vector<std::string> pngs;
+};
+
+class Experiment : public ::testing::TestWithParam<Expected> {};
+
+TEST_P(Experiment, QuickRunWritesCsvPlotsAndSummary) {
+    const Expected& e = GetParam();
+    const fs::path out = fs::path(::testing::TempDir()) / ("texcache_exp_" + e.name);
+    fs::remove_all(out);
+    const CliRun r = Texcache("experiment " + e.name + " --quick --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_GE(CheckCsv(out / (e.csv + ".csv")), e.minRows);
+    for (const std::string& png : e.pngs) {
+        EXPECT_TRUE(fs::exists(out / png)) << png << "\n" << r.out;
+        EXPECT_GT(fs::file_size(out / png), 1000u) << png;
+    }
+    std::ifstream md(out / (e.csv + ".md"));
+    std::stringstream text;
+    text << md.rdbuf();
+    EXPECT_NE(text.str().find("Paper"), std::string::npos) << "the summary quotes the paper";
+    EXPECT_NE(text.str().find("Quick mode"), std::string::npos);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    All, Experiment,
+    ::testing::Values(
+        Expected{"speed-vs-error",
+                 "speed_vs_error",
+                 5 * 5 * 2 + 2 * 2,
+                 {"speed_vs_error_car-ao_seconds.png", "speed_vs_error_chess-softshadow_rays.png",
+                  "sve_car-ao_ts-regression.png"}},
+        Expected{"cache-size", "cache_size", 15, {"cache_size.png"}},
+        Expected{"filter-size", "filter_size", 11, {"filter_size.png", "filter_size_21.png"}},
+        Expected{"threads", "threads", 6, {"threads.png"}},
+        Expected{"lod-bias", "lod_bias", 4, {"lod_bias.png", "lod_bias_3.png"}}),
+    [](const ::testing::TestParamInfo<Expected>& i) {
+        std::string n = i.param.name;
+        for (char& c : n)
+            if (c == '-') c = '_';
+        return n;
+    });
+
+TEST(ExperimentCli, UnknownNameListsTheValidOnes) {
+    const CliRun r = Texcache("experiment fastest --quick --out " +
+                              (fs::path(::testing::TempDir()) / "texcache_exp_bad").string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("unknown experiment 'fastest'"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("speed-vs-error"), std::string::npos) << r.out;
+}
+
+}  // namespace
