@@ -192,15 +192,19 @@ Ray ShadowRay(const SurfaceInteraction& si, const LightSample& ls, float time) {
     return shadow;
 }
 
+enum class CachedTerm { None, Indirect, All };
+
 struct NoCachedTerm {
-    bool operator()(const SurfaceInteraction&, const Ray&, glm::vec3*) const { return false; }
+    CachedTerm operator()(const SurfaceInteraction&, const Ray&, glm::vec3*) const {
+        return CachedTerm::None;
+    }
 };
 
 /// Direct lighting (depth 1) and path tracing: NEE with MIS against BSDF sampling.
 /// `emitFirst` = false drops emission seen by the first ray (a cached indirect sample must not
-/// count what NEE at the camera hit already did). `cached(si, ray, &term)` may replace the
-/// indirect light at the first surface: it returns true with the term to add, and the path then
-/// stops after the first BSDF ray's direct hit.
+/// count what NEE at the camera hit already did). `cached(si, ray, &term)` may replace light at
+/// the first surface: Indirect adds the term and stops the path after the first BSDF ray's direct
+/// hit (NEE and MIS still do direct light); All adds the term (direct + indirect) and stops.
 template <typename CachedIndirect = NoCachedTerm>
 glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, Rng& rng,
                  int maxDepth, RayCounts& rays, bool emitFirst = true,
@@ -239,7 +243,9 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         const glm::vec3 wo = -ray.dir;
         if (depth == 0) {
             glm::vec3 term;
-            if (cached(si, ray, &term)) {
+            const CachedTerm t = cached(si, ray, &term);
+            if (t == CachedTerm::All) return L + term;
+            if (t == CachedTerm::Indirect) {
                 L += term;
                 maxDepth = 1;  // the BSDF ray below still finds direct light (MIS), then stops
             }
@@ -344,7 +350,7 @@ bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, gl
     return true;
 }
 
-/// Shades a cache sample with n cosine-distributed rays from its point; `trace(ray, rng)` gives
+/// Shades a cache sample with n cosine-distributed rays from its point; `trace(ray, rng, N)` gives
 /// each ray's value. Returns the mean, the sample's normal and the variance of the mean
 /// (luminance). Unreachable samples (holes, NaN surface) come back NaN: filters skip them.
 template <typename TraceFn>
@@ -361,7 +367,7 @@ ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, Ra
         Ray ray;
         ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
         ray.org = origin;
-        const glm::vec3 L = trace(ray, rng);
+        const glm::vec3 L = trace(ray, rng, ss.N);
         sum += L;
         const float y = Luminance(L);
         sum2 += y * y;
@@ -372,24 +378,43 @@ ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, Ra
 }
 
 ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
-    return ShadeCosineRays(c, r, c.opt.aoSamples, rays, [&](Ray& ray, Rng&) {
+    return ShadeCosineRays(c, r, c.opt.aoSamples, rays, [&](Ray& ray, Rng&, glm::vec3) {
         ray.tfar = c.opt.aoDistance;
         ++rays.shadow;
         return glm::vec3(c.rs.Occluded(ray) ? 0.0f : 1.0f);
     });
 }
 
-ShadedSample ShadeIndirectSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
-    // Cosine sampling: the mean of the incident radiance estimates (1/pi) * integral of L cos,
-    // which the hit multiplies by its albedo. Emission seen directly is NEE's job at the hit.
-    return ShadeCosineRays(c, r, c.opt.texture.indirectSamples, rays, [&](Ray& ray, Rng& rng) {
-        ++rays.bounce;
-        Hit hit;
-        const bool found = c.rs.Intersect(ray, &hit);
-        const glm::vec3 L =
-            LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
-        return std::isfinite(L.x + L.y + L.z) ? L : glm::vec3(0.0f);
-    });
+/// Diffuse light at a cache sample, as (1/pi) * integral of L cos (the hit multiplies it by its
+/// albedo). Indirect: cosine-sampled paths, whose first ray does not count emission (light
+/// seen directly is NEE's). With `direct`, each of the n iterations also takes one NEE sample
+/// (light sampling, shadow ray): (1/pi) Le V cos / pdf; otherwise direct light stays NEE's job
+/// at the hit.
+ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool direct,
+                                RayCounts& rays) {
+    return ShadeCosineRays(
+        c, r, c.opt.texture.indirectSamples, rays, [&](Ray& ray, Rng& rng, glm::vec3 N) {
+            glm::vec3 Ld(0.0f);
+            LightSample ls;
+            if (direct && c.SampleLight(ray.org, rng.Next1D(), rng.Next2D(), &ls)) {
+                const float cosi = glm::dot(ls.wi, N);
+                if (cosi > 0.0f) {
+                    Ray shadow;
+                    shadow.org = ray.org;
+                    shadow.dir = ls.wi;
+                    shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
+                    ++rays.shadow;
+                    if (!c.rs.Occluded(shadow))
+                        Ld = ls.Li * (ls.delta ? cosi : cosi / ls.pdf) * (1.0f / kPiF);
+                }
+            }
+            ++rays.bounce;
+            Hit hit;
+            const bool found = c.rs.Intersect(ray, &hit);
+            const glm::vec3 L =
+                Ld + LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
+            return std::isfinite(L.x + L.y + L.z) ? L : glm::vec3(0.0f);
+        });
 }
 
 /// Visibility of the scene's area lights from a cache sample (Mehta et al.'s soft-shadow input):
@@ -586,14 +611,19 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
         if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
         if (c.tsc && k == IntegratorKind::Path) {
             // Diffuse indirect from the cache; glossy materials stay per hit (view-dependent).
+            // Diffuse light is view-independent: diffuse materials take it from the cache
+            // (direct + indirect, or indirect only); glossy ones stay per hit.
             auto cached = [&](const SurfaceInteraction& si0, const Ray& r0, glm::vec3* term) {
-                if (c.scene.materials[si0.material].type != Material::Type::Diffuse) return false;
+                if (c.scene.materials[si0.material].type != Material::Type::Diffuse)
+                    return CachedTerm::None;
                 const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
+                const bool all = c.opt.texture.cacheDirect;
                 const glm::vec3 E = CachedLookup(
-                    c, sd, [&](const SampleRequest& r) { return ShadeIndirectSample(c, r, rays); },
+                    c, sd,
+                    [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, all, rays); },
                     c.opt.texture.indirectSamples);
                 *term = c.rs.Albedo(si0) * E;
-                return true;
+                return all ? CachedTerm::All : CachedTerm::Indirect;
             };
             return LiPath(c, ray, hit, found, rng, c.opt.maxDepth, rays, true, cached);
         }

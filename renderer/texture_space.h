@@ -21,6 +21,9 @@ struct TextureSpaceOptions {
     int radius = -1;            ///< footprint (2r+1)^2; -1: the filter's default (see below)
     float cosThreshold = 0.9f;  ///< normal filter: keep taps with cos > threshold
     int indirectSamples = 1;    ///< paths per cached indirect sample
+    /// Path integrator: diffuse materials cache their direct light too (one NEE sample per
+    /// path), not just indirect. Both are view-independent for a diffuse surface.
+    bool cacheDirect = true;
     int shadowSamples = 4;      ///< shadow rays per cached visibility sample (soft shadows)
     /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
     /// keep a history table the size of the texel cache.

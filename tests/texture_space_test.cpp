@@ -126,8 +126,9 @@ TEST(TextureSpace, WarmCacheHitsEveryTexelOnTheSecondFrame) {
               o.texture.cache.sampleCacheBytes + o.texture.cache.texelCacheBytes);
 }
 
-// Texture-space diffuse indirect (path integrator): finite, and close to per-hit path tracing
-// in the mean (same estimator up to texel quantization and filtering).
+// Texture-space diffuse light (path integrator; direct + indirect, or indirect only): finite, and
+// close to per-hit path tracing in the mean (same estimator up to texel quantization and
+// filtering).
 TEST(TextureSpace, CachedIndirectIsFiniteAndUnbiasedInTheMean) {
     Scene s = TorusOnPlane();
     EnvironmentLight env;
@@ -139,13 +140,16 @@ TEST(TextureSpace, CachedIndirectIsFiniteAndUnbiasedInTheMean) {
     o.maxDepth = 3;
     const Image hit = Render(rs, o).beauty;
     o.texture.enabled = true;
-    const Image tex = Render(rs, o).beauty;
-    double mh = 0, mt = 0;
-    for (size_t i = 0; i < hit.data.size(); ++i) {
-        ASSERT_TRUE(std::isfinite(tex.data[i]));
-        mh += hit.data[i], mt += tex.data[i];
+    for (bool direct : {true, false}) {  // diffuse direct light cached too, or per hit
+        o.texture.cacheDirect = direct;
+        const Image tex = Render(rs, o).beauty;
+        double mh = 0, mt = 0;
+        for (size_t i = 0; i < hit.data.size(); ++i) {
+            ASSERT_TRUE(std::isfinite(tex.data[i]));
+            mh += hit.data[i], mt += tex.data[i];
+        }
+        EXPECT_NEAR(mt / mh, 1.0, 0.03) << "cacheDirect " << direct;  // measured ~0.5%
     }
-    EXPECT_NEAR(mt / mh, 1.0, 0.03);  // image means within 3% (measured ~0.5%)
 }
 
 ::testing::AssertionResult AllFiniteIn(const Image& img, float lo, float hi) {

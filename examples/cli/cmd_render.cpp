@@ -56,6 +56,7 @@ struct RenderArgs {
     bool overshading = false;
     bool directMapped = false;
     int indirectSamples = 1;
+    std::string cachedLight = "all";
     std::string statsFile;
 };
 
@@ -89,6 +90,10 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     t.cache.referenceMode = a.referenceCache;
     t.cache.texelTwoChoices = !a.directMapped;
     t.indirectSamples = CheckRange("--indirect-samples", a.indirectSamples, 1, 1 << 16);
+    if (a.cachedLight != "all" && a.cachedLight != "indirect")
+        throw InputError("--cached-light",
+                         "unknown value '" + a.cachedLight + "' (valid: all, indirect)");
+    t.cacheDirect = a.cachedLight == "all";
     t.cache.Validate();
     return t;
 }
@@ -374,7 +379,12 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")
         ->capture_default_str();
-    cmd->add_option("--indirect-samples", args->indirectSamples, "Paths per cached indirect sample")
+    cmd->add_option("--indirect-samples", args->indirectSamples,
+                    "Paths (and NEE samples) per cached diffuse sample")
+        ->capture_default_str();
+    cmd->add_option("--cached-light", args->cachedLight,
+                    "Path integrator, diffuse materials: all (direct + indirect light cached) or "
+                    "indirect (direct light stays per hit)")
         ->capture_default_str();
     cmd->add_flag("--reference-cache", args->referenceCache,
                   "Unbounded caches (the overshading baseline)");

@@ -3,11 +3,8 @@
 // shading vs texture-space shading with each filter, on the default scene (car) and the chess
 // scene, for ambient occlusion, diffuse indirect (path tracing) and area-light soft shadows.
 //
-// Budgets. Both methods trace 4 camera samples per pixel (primary visibility is not what the
-// cache changes) except per-hit path tracing and direct lighting, whose budget is the number of
-// camera samples (one path or light sample each). Per hit, AO rays per hit sweep 1..64; in texture
-// space, rays per cached sample sweep 1..16. Equal-time ratios interpolate the per-hit curve in
-// log-log at each texture-space point's time.
+// Budgets: see ApplyBudget. Equal-time ratios interpolate the per-hit curve in log-log at each
+// texture-space point's time.
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -46,30 +43,32 @@ const Method kGaussian{"ts-gaussian", true, TextureFilterKind::Gaussian};
 const Method kRegression{"ts-regression", true, TextureFilterKind::Regression};
 const Method kSoftShadow{"ts-softshadow", true, TextureFilterKind::SoftShadow};
 
-// The knob a budget turns for a method and integrator.
+// The knob a budget turns for a method and integrator. AO: rays per shading point at 4 camera
+// samples (per hit: AO rays per hit; texture space: AO rays per cached sample). Path tracing and
+// direct lighting: camera samples per pixel for both (glossy materials and the unshadowed light
+// stay per hit in texture space too), with 2 paths + NEE samples per cached diffuse sample and 4
+// shadow rays per cached visibility sample.
 void ApplyBudget(RenderOptions* o, const Method& m, int budget) {
-    switch (o->integrator) {
-        case IntegratorKind::AO:
-            o->spp = 4;
-            o->aoSamples = budget;
-            break;
-        case IntegratorKind::Path:
-            o->spp = m.texture ? 4 : budget;
-            o->texture.indirectSamples = budget;
-            break;
-        default:  // direct
-            o->spp = m.texture ? 4 : budget;
-            o->texture.shadowSamples = budget;
-            break;
+    if (o->integrator == IntegratorKind::AO) {
+        o->spp = 4;
+        o->aoSamples = budget;
+    } else {
+        o->spp = budget;
+        o->texture.indirectSamples = 2;
+        o->texture.shadowSamples = 4;
     }
     o->texture.enabled = m.texture;
     o->texture.filter = m.filter;
 }
 
 std::vector<int> Budgets(const Setup& s, IntegratorKind k, bool texture) {
-    if (s.quick) return texture ? std::vector<int>{1, 4} : std::vector<int>{2, 8};
-    if (texture) return {1, 2, 4, 8, 16};
-    if (k == IntegratorKind::AO) return {1, 2, 4, 8, 16, 32, 64};
+    if (k == IntegratorKind::AO) {
+        if (s.quick) return {1, 4};
+        if (texture) return {1, 2, 4, 8, 16};
+        return {1, 2, 4, 8, 16, 32, 64};
+    }
+    if (s.quick) return {2, 8};
+    if (texture) return {4, 8, 16, 32, 64};
     return {4, 8, 16, 32, 64, 128};
 }
 
