@@ -193,6 +193,40 @@ TEST(TextureSpace, EveryFilterIsFiniteOnHardMeshes) {
     }
 }
 
+// Very large coordinates: the torus and plane moved 1e5 units away and scaled 1e3 (the camera
+// with them). Float positions then carry ~1e-2 absolute error; ray offsets and sample snapping
+// scale with the coordinates, so AO with every filter stays finite and in [0, 1], and close to
+// the same scene at the origin (relMSE below 0.05 against it; per-pixel noise differs anyway).
+TEST(TextureSpace, VeryLargeCoordinatesStayFinite) {
+    auto scene = [](float scale, glm::vec3 offset) {
+        Scene s = TorusOnPlane();
+        for (Object& o : s.objects) {
+            if (o.transform.keys.empty()) o.transform.keys.push_back({});
+            for (Keyframe& k : o.transform.keys) {
+                k.translation = offset + scale * k.translation;
+                k.scale *= scale;
+            }
+        }
+        s.camera.pose.keys = {test::LookAt(offset + scale * glm::vec3(1.6f, 2.2f, 2.6f),
+                                           offset + scale * glm::vec3(0, -0.2f, 0))};
+        return s;
+    };
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    const Scene near = scene(1.0f, glm::vec3(0.0f)), far = scene(1e3f, glm::vec3(1e5f));
+    const RenderScene rsNear(near, ro), rsFar(far, ro);
+    for (TextureFilterKind f : {TextureFilterKind::Normal, TextureFilterKind::Regression}) {
+        RenderOptions o = AoOptions(4, 4);
+        o.texture.enabled = true;
+        o.texture.filter = f;
+        const Image a = Render(rsNear, o).beauty;
+        o.aoDistance *= 1e3f;
+        const Image b = Render(rsFar, o).beauty;
+        EXPECT_TRUE(AllFiniteIn(b, 0.0f, 1.0f)) << "filter " << int(f);
+        EXPECT_LT(RelMSE(b, a), 0.05) << "filter " << int(f);
+    }
+}
+
 // Temporal accumulation (eq. 6) over frames of a static scene averages the per-frame noise of
 // the texels: the 8th frame with alpha = 0.7 is closer to the reference than one frame alone.
 // RMSE rather than relMSE: at this size relMSE is ruled by a few dark crevice pixels and jumps
