@@ -73,7 +73,7 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Values(
         Expected{"speed-vs-error",
                  "speed_vs_error",
-                 5 * 5 * 2 + 2 * 2,
+                 5 * 5 * 2 + 2 * 4 * 2 + 2 * 2,
                  {"speed_vs_error_car-ao_seconds.png", "speed_vs_error_chess-softshadow_rays.png",
                   "sve_car-ao_ts-regression.png"}},
         Expected{"cache-size", "cache_size", 15, {"cache_size.png"}},

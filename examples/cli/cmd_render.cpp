@@ -56,7 +56,7 @@ struct RenderArgs {
     bool overshading = false;
     bool directMapped = false;
     int indirectSamples = 1;
-    std::string cachedLight = "all";
+    std::string cachedLight = "indirect";
     std::string statsFile;
 };
 
@@ -383,8 +383,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Paths (and NEE samples) per cached diffuse sample")
         ->capture_default_str();
     cmd->add_option("--cached-light", args->cachedLight,
-                    "Path integrator, diffuse materials: all (direct + indirect light cached) or "
-                    "indirect (direct light stays per hit)")
+                    "Path integrator, diffuse materials: indirect (direct light stays per hit) or "
+                    "all (direct light cached and filtered too: for soft lighting; blurs hard "
+                    "shadows)")
         ->capture_default_str();
     cmd->add_flag("--reference-cache", args->referenceCache,
                   "Unbounded caches (the overshading baseline)");

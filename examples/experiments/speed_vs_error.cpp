@@ -30,6 +30,7 @@ struct Case {
     IntegratorKind integrator;
     std::string label;
     std::vector<Method> methods;
+    bool cacheDirect = false;  ///< path: diffuse direct light cached too (--cached-light all)
 };
 
 struct Point {
@@ -92,6 +93,17 @@ int SpeedVsError(const Setup& s) {
          IntegratorKind::Path,
          "chess-indirect",
          {kPerHit, kNone, kNormal, kGaussian, kRegression}},
+        // The same two with diffuse direct light cached and filtered too (--cached-light all).
+        {"car.json",
+         IntegratorKind::Path,
+         "car-diffuse",
+         {kPerHit, kNone, kNormal, kRegression},
+         true},
+        {"chess.json",
+         IntegratorKind::Path,
+         "chess-diffuse",
+         {kPerHit, kNone, kNormal, kRegression},
+         true},
         // The diffuse-indirect scene: a clay car under a sun (a delta light: direct lighting has
         // no noise but shadow-edge aliasing), so indirect light is what the budget buys.
         {"sunlit.json",
@@ -141,7 +153,12 @@ int SpeedVsError(const Setup& s) {
             refOpt.spp = s.quick ? 64 : 1024;
         }
         Say("[speed-vs-error] %s (%dx%d)", c.label.c_str(), W, H);
-        const Image ref = Reference(s, Format("%s_%dx%d", c.label.c_str(), W, H), *ls.rs, refOpt);
+        // One reference per scene and integrator (car-diffuse shares car-indirect's).
+        const std::string kind = c.integrator == IntegratorKind::AO     ? "ao"
+                                 : c.integrator == IntegratorKind::Path ? "indirect"
+                                                                        : "softshadow";
+        const std::string refTag = c.label.substr(0, c.label.find('-')) + "-" + kind;
+        const Image ref = Reference(s, Format("%s_%dx%d", refTag.c_str(), W, H), *ls.rs, refOpt);
 
         std::map<std::string, std::vector<Point>> curves;
         for (const Method& m : c.methods) {
@@ -149,6 +166,7 @@ int SpeedVsError(const Setup& s) {
             for (int b : budgets) {
                 RenderOptions o = base;
                 ApplyBudget(&o, m, b);
+                o.texture.cacheDirect = c.cacheDirect;
                 const Run r = TimedRender(*ls.rs, o, repeats, b == budgets.front());
                 const double e = RelMSE(r.image, ref);
                 const double rays = double(r.stats.TotalRays());
