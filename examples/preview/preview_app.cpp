@@ -445,7 +445,6 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
                     "shaded\n",
                     i, last.seconds * 1e3, last.raysPerSecond * 1e-6, 100.0 * last.texelHitRate,
                     (unsigned long long)last.samplesShaded);
-                WriteImage("/tmp/pv/dbg.png", renderer.CopyImage());
                 if (shot.width > 0) {
                     WriteImage(args.screenshot, shot);
                     std::printf("wrote %s (%dx%d)\n", args.screenshot.c_str(), shot.width,
