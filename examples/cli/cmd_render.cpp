@@ -121,6 +121,7 @@ void WriteStatsJson(const std::string& path, const RenderStats& s, const Texture
     add("samples_shaded", double(c.samplesShaded));
     add("sample_evictions", double(c.sampleEvictions));
     add("samples_uncached", double(c.samplesUncached));
+    add("sample_memo_hits", double(c.sampleMemoHits));
     add("deferrals", double(c.deferrals));
     add("waits", double(c.waits));
     add("reference_mode", opt.texture.cache.referenceMode ? 1.0 : 0.0);

@@ -477,6 +477,52 @@ TEST(ShadingCache, InvalidationEvictsOneMeshOrAll) {
     EXPECT_EQ(shaded, 4);
 }
 
+// The per-thread tap memo in front of the sample cache never serves a sample of another cache or
+// one from before an invalidation: every tap a filter sees was shaded by this cache in this epoch.
+TEST(ShadingCache, TapMemoNeverServesForeignOrStaleSamples) {
+    ShadingCache<AoSample, float> a(CacheSettings{}), b(CacheSettings{});
+    const int ma = a.AddMesh(test::GridCage(2), 0.02f), mb = b.AddMesh(test::GridCage(2), 0.02f);
+    // One shader type for both caches (a value per cache), so nothing but the memo's tags keeps
+    // their samples apart.
+    float generation = 1.0f, valueB = -1.0f;
+    auto shadeA = [](const float* v) {
+        return [v](const SampleRequest&) { return AoSample{*v, {0, 1, 0}}; };
+    };
+    auto shadeB = shadeA(&valueB);
+    // Records the smallest and largest tap value the filter saw.
+    float lo = 0.0f, hi = 0.0f;
+    auto range = [&](const FilterInput<AoSample>& in) {
+        lo = INFINITY, hi = -INFINITY;
+        for (const AoSample& s : in.samples) lo = std::min(lo, s.value), hi = std::max(hi, s.value);
+        return in.samples[in.centre].value;
+    };
+    CacheStats st;
+    // Neighbouring texels of one face: their footprints overlap, so all but the first are served
+    // mostly from this thread's memo, which both caches share (one per Sample type and thread).
+    for (int i = 0; i < 4; ++i) {
+        a.Lookup({ma, 0, 0.3f + 0.02f * float(i), 0.5f, 0.02f, 0, 0, 0.02f}, 3, shadeA(&generation),
+                 range, st);
+        EXPECT_EQ(lo, 1.0f);
+        EXPECT_EQ(hi, 1.0f);
+    }
+    EXPECT_GT(st.sampleMemoHits, 0u);  // otherwise this test checks nothing
+    // The same keys in cache b: the memo holds a's samples for exactly these taps.
+    for (int i = 0; i < 4; ++i) {
+        b.Lookup({mb, 0, 0.31f + 0.02f * float(i), 0.5f, 0.02f, 0, 0, 0.02f}, 3, shadeB, range, st);
+        EXPECT_EQ(lo, -1.0f) << "cache b saw a sample of cache a";
+        EXPECT_EQ(hi, -1.0f) << "cache b saw a sample of cache a";
+    }
+    a.InvalidateAll();
+    generation = 2.0f;
+    a.Lookup({ma, 0, 0.35f, 0.5f, 0.02f, 0, 0, 0.02f}, 3, shadeA(&generation), range, st);
+    EXPECT_EQ(lo, 2.0f) << "a sample from before InvalidateAll was served";
+    a.InvalidateMesh(ma);
+    generation = 3.0f;
+    a.Lookup({ma, 0, 0.37f, 0.5f, 0.02f, 0, 0, 0.02f}, 3, shadeA(&generation), range, st);
+    EXPECT_EQ(lo, 3.0f) << "a sample from before InvalidateMesh was served";
+    EXPECT_EQ(hi, 3.0f);
+}
+
 // A bounded cache far too small for the working set still returns correct values (it re-shades).
 TEST(ShadingCache, TinyBoundedCacheStaysCorrect) {
     CacheSettings s;

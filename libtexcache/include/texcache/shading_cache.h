@@ -9,6 +9,7 @@
 //   filter(const FilterInput<Sample>&) -> Texel  reconstructs the centre texel from its footprint
 // See examples/embed_cache for a complete shader in a few dozen lines.
 #pragma once
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -60,6 +61,7 @@ struct CacheStats {
     uint64_t lookups = 0, texelHits = 0, texelMisses = 0, texelEvictions = 0, texelUncached = 0;
     uint64_t sampleLookups = 0, sampleHits = 0, samplesShaded = 0, sampleEvictions = 0;
     uint64_t deferrals = 0, waits = 0, samplesUncached = 0;
+    uint64_t sampleMemoHits = 0;  ///< sample hits served by the thread's tap memo (see Filter)
 
     void Merge(const CacheStats& o) {
         lookups += o.lookups, texelHits += o.texelHits, texelMisses += o.texelMisses;
@@ -67,6 +69,7 @@ struct CacheStats {
         sampleLookups += o.sampleLookups, sampleHits += o.sampleHits;
         samplesShaded += o.samplesShaded, sampleEvictions += o.sampleEvictions;
         deferrals += o.deferrals, waits += o.waits, samplesUncached += o.samplesUncached;
+        sampleMemoHits += o.sampleMemoHits;
     }
     double TexelHitRate() const { return lookups ? double(texelHits) / double(lookups) : 0.0; }
 };
@@ -159,6 +162,23 @@ private:
     Shard shards_[kShards];
 };
 
+/// The per-thread tap memo (see ShadingCache::Filter): the samples this thread fetched last, in a
+/// small direct-mapped table tagged with the cache instance and its invalidation epoch.
+template <typename Sample>
+struct TapMemo {
+    /// 2^12 entries: a 64x64-texel window of one face maps to distinct slots, which covers the
+    /// union of the footprints of a render tile's texels (8-16 pixels plus a 21x21 footprint).
+    static constexpr size_t kEntries = size_t(1) << 12;
+    uint64_t owner = 0, epoch = 0;
+    uint64_t keys[kEntries];
+    Sample values[kEntries];
+
+    void Reset(uint64_t newOwner, uint64_t newEpoch) {
+        owner = newOwner, epoch = newEpoch;
+        std::fill(std::begin(keys), std::end(keys), TexelKey::kEmpty);
+    }
+};
+
 inline uint64_t MixFaceMip(uint32_t face, int mip) {
     uint64_t x = (uint64_t(face) << 4) | uint64_t(mip);
     x ^= x >> 31, x *= 0x7fb5d329728ea185ull, x ^= x >> 27, x *= 0x81dadef4bc2dd44dull,
@@ -173,7 +193,8 @@ class ShadingCache {
 public:
     /// Allocates both caches (or the unbounded reference stores); throws InputError on bad
     /// settings.
-    explicit ShadingCache(const CacheSettings& settings) : settings_(settings) {
+    explicit ShadingCache(const CacheSettings& settings)
+        : settings_(settings), id_(NextInstanceId()) {
         settings.Validate();
         if (settings.referenceMode) {
             refSamples_ = std::make_unique<internal::UnboundedCache<Sample>>();
@@ -265,6 +286,7 @@ public:
 
     /// Evicts everything (the scene changed).
     void InvalidateAll() {
+        epoch_.fetch_add(1, std::memory_order_relaxed);
         if (refSamples_) {
             refSamples_->InvalidateIf([](uint64_t) { return true; });
             refTexels_->InvalidateIf([](uint64_t) { return true; });
@@ -275,6 +297,7 @@ public:
     }
     /// Evicts one mesh's samples and texels (that object was edited).
     void InvalidateMesh(int mesh) {
+        epoch_.fetch_add(1, std::memory_order_relaxed);
         const uint32_t lo = meshes_[mesh]->FaceOffset(),
                        hi = lo + uint32_t(meshes_[mesh]->NumFaces());
         auto pred = [lo, hi](uint64_t k) {
@@ -290,7 +313,11 @@ public:
         }
     }
 
-    /// Bytes held by the caches' storage (bounded mode: never above the configured budgets).
+    /// Bytes of the tap memo each render thread keeps besides the two caches (see Filter).
+    static constexpr size_t kTapMemoBytes = sizeof(internal::TapMemo<Sample>);
+
+    /// Bytes held by the caches' storage (bounded mode: never above the configured budgets;
+    /// each thread that filtered also holds one tap memo of kTapMemoBytes).
     size_t BytesUsed() const {
         if (refSamples_)
             return refSamples_->Size() * (sizeof(Sample) + 32) +
@@ -314,34 +341,87 @@ private:
 
     // Gathers the footprint, shades what is missing (deferring samples other threads are
     // shading, revisiting them after the rest), then filters.
+    //
+    // The tap memo: texel misses come in runs of neighbours (a render tile's pixels land on
+    // adjacent texels), and neighbouring (2r+1)^2 footprints share all but 2r+1 of their taps, so
+    // fetching every tap from the shared sample cache (a seqlock read in a table of tens of MB,
+    // mostly missing the CPU caches) repeats the same reads hundreds of times. Each thread keeps
+    // the samples it fetched last in a small table of its own (no atomics, L2-resident) and only
+    // asks the shared cache for the rest. A memo entry is a sample of that key published or
+    // shaded in this cache since its last invalidation (the memo is tagged with the cache and its
+    // epoch), so it is exactly what the shared cache could have returned.
     template <typename ShadeFn, typename FilterFn>
     Texel Filter(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter,
                  CacheStats& st) {
         thread_local std::vector<FootprintSample> taps;
         thread_local std::vector<Sample> values;
-        thread_local std::vector<int> deferred;
+        thread_local std::vector<int> missing, deferred;
+        internal::TapMemo<Sample>& memo = ThreadMemo();
+        const uint64_t epoch = epoch_.load(std::memory_order_relaxed);
+        if (memo.owner != id_ || memo.epoch != epoch) memo.Reset(id_, epoch);
+
         const MeshGrids& g = *meshes_[centre.mesh];
         GatherFootprint(g, centre.face, centre.mip, centre.key.iu, centre.key.iv, radius, &taps);
         values.resize(taps.size());
+        missing.clear();
         deferred.clear();
-        // Start loading every tap's slot: the lookups below then overlap their cache misses
-        // instead of taking them one after another.
-        if (samples_)
-            for (const FootprintSample& t : taps) samples_->Prefetch(Hash(t.key));
         int centreIndex = 0;
         for (size_t i = 0; i < taps.size(); ++i) {
             if (taps[i].key == centre.key) centreIndex = int(i);
-            if (!FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/false)) {
-                deferred.push_back(int(i));
-                ++st.deferrals;
+            const size_t m = MemoSlot(taps[i].key);
+            if (memo.keys[m] == taps[i].key.Pack()) {
+                values[i] = memo.values[m];
+                ++st.sampleMemoHits;
+                continue;
             }
+            missing.push_back(int(i));
+            // Start loading the slot: the lookups below then overlap their cache misses.
+            if (samples_) samples_->Prefetch(Hash(taps[i].key));
         }
-        for (int i : deferred)
+        st.sampleLookups += taps.size() - missing.size();
+        st.sampleHits += taps.size() - missing.size();
+        auto remember = [&](int i) {
+            const size_t m = MemoSlot(taps[i].key);
+            memo.keys[m] = taps[i].key.Pack();
+            memo.values[m] = values[i];
+        };
+        for (int i : missing) {
+            if (!FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/false)) {
+                deferred.push_back(i);
+                ++st.deferrals;
+                continue;
+            }
+            remember(i);
+        }
+        for (int i : deferred) {
             FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/true);
+            remember(i);
+        }
         FilterInput<Sample> in{std::span<const FootprintSample>(taps.data(), taps.size()),
                                std::span<const Sample>(values.data(), values.size()), centreIndex,
                                centre};
         return filter(in);
+    }
+
+    // One memo per thread for all caches of this Sample type (whatever their shaders and
+    // filters), allocated on the thread's first miss.
+    static internal::TapMemo<Sample>& ThreadMemo() {
+        thread_local std::unique_ptr<internal::TapMemo<Sample>> memo;
+        if (!memo) memo = std::make_unique<internal::TapMemo<Sample>>();
+        return *memo;
+    }
+
+    // Memo slot of a key: (iu, iv) mod 64 in scanline order, offset by the face and mip, so a
+    // 64x64-texel window of one face never collides with itself.
+    static size_t MemoSlot(const TexelKey& k) {
+        return size_t(internal::MixFaceMip(k.face, k.mip) + (uint64_t(k.iv & 63) << 6) +
+                      uint64_t(k.iu & 63)) &
+               (internal::TapMemo<Sample>::kEntries - 1);
+    }
+
+    static uint64_t NextInstanceId() {
+        static std::atomic<uint64_t> next{1};
+        return next.fetch_add(1, std::memory_order_relaxed);
     }
 
     // Returns false (without a value) when another thread is shading the sample and !wait.
@@ -393,6 +473,8 @@ private:
     }
 
     CacheSettings settings_;
+    uint64_t id_;                     ///< tags the tap memos (see Filter)
+    std::atomic<uint64_t> epoch_{0};  ///< bumped by every invalidation (see Filter)
     std::vector<std::unique_ptr<MeshGrids>> meshes_;
     uint32_t nextFace_ = 0;
     std::unique_ptr<DirectMappedCache<Sample>> samples_;
