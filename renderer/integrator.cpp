@@ -582,6 +582,21 @@ void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInt
     }
 }
 
+/// The mean of `hitSamples` estimates `li(rng)` from one camera hit: the first continues the
+/// camera sample's own random stream (so hitSamples = 1 is the plain path tracer), the others get
+/// streams of their own.
+template <typename LiFn>
+glm::vec3 SplitAtHit(const Context& c, int x, int y, int s, Rng& rng, LiFn&& li) {
+    const int n = std::max(c.opt.hitSamples, 1);
+    glm::vec3 sum = li(rng);
+    for (int h = 1; h < n; ++h) {
+        Rng split(MixBits(PixelSeed(c.opt.seed, x, y, c.opt.width) ^ (uint64_t(h) << 40)),
+                  uint64_t(s));
+        sum += li(split);
+    }
+    return sum / float(n);
+}
+
 glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCounts& rays) {
     Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
     const glm::vec2 jitter = rng.Next2D();
@@ -625,12 +640,18 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
                 *term = c.rs.Albedo(si0) * E;
                 return all ? CachedTerm::All : CachedTerm::Indirect;
             };
-            return LiPath(c, ray, hit, found, rng, c.opt.maxDepth, rays, true, cached);
+            return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+                return LiPath(c, ray, hit, found, r, c.opt.maxDepth, rays, true, cached);
+            });
         }
         if (c.tsc && k == IntegratorKind::Direct)
-            return LiDirectCachedShadows(c, ray, hit, found, rng, diff, rays);
-        return LiPath(c, ray, hit, found, rng, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
-                      rays);
+            return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+                return LiDirectCachedShadows(c, ray, hit, found, r, diff, rays);
+            });
+        return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+            return LiPath(c, ray, hit, found, r, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
+                          rays);
+        });
     }
     if (!found) return glm::vec3(0.0f);
     if (hit.object < 0) return glm::vec3(1.0f);  // a light seen by a debug view: white

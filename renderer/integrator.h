@@ -35,6 +35,10 @@ struct RenderOptions {
     uint64_t seed = 0;
     int maxDepth = 5;
     int aoSamples = 1;
+    /// Direct and path integrators: light paths continued from each camera hit (splitting). With
+    /// the same spp and seed, renders then share their camera rays and differ in shading only,
+    /// which isolates shading error (Munkberg et al. Fig. 7 fix the primary positions likewise).
+    int hitSamples = 1;
     float aoDistance = 1e30f;
     float frameTime = 0.0f;  ///< scene time at shutter open
     AovFlags aovs;

@@ -56,6 +56,7 @@ struct RenderArgs {
     bool overshading = false;
     bool directMapped = false;
     int indirectSamples = 1;
+    int hitSamples = 1;
     std::string cachedLight = "indirect";
     std::string statsFile;
 };
@@ -88,7 +89,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     t.cache.texelCacheBytes = bytes("--texel-cache-mb", a.texelCacheMb);
     t.cache.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
     t.cache.referenceMode = a.referenceCache;
-    t.cache.texelTwoChoices = !a.directMapped;
+    t.cache.texelTwoChoices = t.cache.sampleTwoChoices = !a.directMapped;
     t.indirectSamples = CheckRange("--indirect-samples", a.indirectSamples, 1, 1 << 16);
     if (a.cachedLight != "all" && a.cachedLight != "indirect")
         throw InputError("--cached-light",
@@ -221,6 +222,7 @@ int RunRender(const RenderArgs& a) {
     opt.seed = s.seed;
     opt.maxDepth = s.maxDepth;
     opt.aoSamples = s.aoSamples;
+    opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
     opt.aoDistance = s.aoDistance;
     opt.frameTime = s.time;
     opt.aovs = ParseAovs(a.aovs);
@@ -380,6 +382,10 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")
         ->capture_default_str();
+    cmd->add_option("--hit-samples", args->hitSamples,
+                    "Direct/path: light paths continued from each camera hit (same camera rays, "
+                    "more shading: isolates shading error)")
+        ->capture_default_str();
     cmd->add_option("--indirect-samples", args->indirectSamples,
                     "Paths (and NEE samples) per cached diffuse sample")
         ->capture_default_str();
@@ -392,7 +398,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                   "Unbounded caches (the overshading baseline)");
     cmd->add_flag(
         "--direct-mapped", args->directMapped,
-        "Strictly direct-mapped texel cache (the paper's; default: two choices per texel)");
+        "Strictly direct-mapped texel and sample caches (the paper's; default: two choices per "
+        "entry)");
     cmd->add_flag(
         "--overshading", args->overshading,
         "Also render with unbounded caches and report the extra shading of the bounded ones");

@@ -154,16 +154,21 @@ void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int 
     iv = std::clamp(iv, 0, res - 1);
     const uint32_t gface = g.FaceOffset() + uint32_t(face);
     if (iu - radius >= 0 && iu + radius < res && iv - radius >= 0 && iv + radius < res) {
-        // Fast path: the window lies inside the face.
-        for (int dy = -radius; dy <= radius; ++dy)
-            for (int dx = -radius; dx <= radius; ++dx) {
-                FootprintSample s;
-                s.key = {gface, uint8_t(mip), uint16_t(iu + dx), uint16_t(iv + dy)};
-                s.dx = int16_t(dx), s.dy = int16_t(dy);
-                s.u = TexelCenter(iu + dx, res);
-                s.v = TexelCenter(iv + dy, res);
-                out->push_back(s);
+        // Fast path: the window lies inside the face (written in place: this runs once per
+        // texel miss for up to 21x21 taps).
+        const int side = 2 * radius + 1;
+        out->resize(size_t(side) * size_t(side));
+        FootprintSample* o = out->data();
+        const float inv = 1.0f / float(res);  // exact: res is a power of two
+        for (int dy = -radius; dy <= radius; ++dy) {
+            const float v = (float(iv + dy) + 0.5f) * inv;
+            for (int dx = -radius; dx <= radius; ++dx, ++o) {
+                o->key = {gface, uint8_t(mip), uint16_t(iu + dx), uint16_t(iv + dy)};
+                o->dx = int16_t(dx), o->dy = int16_t(dy);
+                o->u = (float(iu + dx) + 0.5f) * inv;
+                o->v = v;
             }
+        }
         return;
     }
     // Walk: u first (a row of walkers, one per dx), then v from each of them.

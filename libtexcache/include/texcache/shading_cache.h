@@ -35,9 +35,12 @@ struct CacheSettings {
         false;  ///< unbounded caches: every sample and texel kept (overshading baseline)
     /// Let a texel live in one of two slots (see direct_mapped_cache.h): a warm frame then hits
     /// ~99.9% instead of ~91% of its texels (measured on the car at 640x360, 4 spp); false is the
-    /// paper's strictly direct-mapped texel cache. The sample cache is always direct-mapped: its
-    /// misses are far more frequent and a second slot read made cold frames ~15% slower.
+    /// paper's strictly direct-mapped texel cache.
     bool texelTwoChoices = true;
+    /// The same for samples: fewer conflict evictions, so less re-shading in a small cache. Its
+    /// second slot read used to make cold frames ~15% slower; with the tap memo (see Filter)
+    /// only a few percent of tap reads reach the sample cache at all.
+    bool sampleTwoChoices = true;
 
     /// Throws InputError naming the setting when a value is out of range.
     void Validate() const {
@@ -200,7 +203,8 @@ public:
             refSamples_ = std::make_unique<internal::UnboundedCache<Sample>>();
             refTexels_ = std::make_unique<internal::UnboundedCache<Texel>>();
         } else {
-            samples_ = std::make_unique<DirectMappedCache<Sample>>(settings.sampleCacheBytes);
+            samples_ = std::make_unique<DirectMappedCache<Sample>>(settings.sampleCacheBytes,
+                                                                   settings.sampleTwoChoices);
             texels_ = std::make_unique<DirectMappedCache<Texel>>(settings.texelCacheBytes,
                                                                  settings.texelTwoChoices);
         }
@@ -366,10 +370,17 @@ private:
         missing.clear();
         deferred.clear();
         int centreIndex = 0;
+        // Taps come face by face: the face/mip part of the memo slot is computed once per run.
+        uint32_t runFace = ~0u;
+        uint8_t runMip = 0xff;
+        uint64_t runBase = 0;
         for (size_t i = 0; i < taps.size(); ++i) {
-            if (taps[i].key == centre.key) centreIndex = int(i);
-            const size_t m = MemoSlot(taps[i].key);
-            if (memo.keys[m] == taps[i].key.Pack()) {
+            const TexelKey k = taps[i].key;
+            if (k == centre.key) centreIndex = int(i);
+            if (k.face != runFace || k.mip != runMip)
+                runFace = k.face, runMip = k.mip, runBase = internal::MixFaceMip(k.face, k.mip);
+            const size_t m = MemoSlot(runBase, k);
+            if (memo.keys[m] == k.Pack()) {
                 values[i] = memo.values[m];
                 ++st.sampleMemoHits;
                 continue;
@@ -381,7 +392,8 @@ private:
         st.sampleLookups += taps.size() - missing.size();
         st.sampleHits += taps.size() - missing.size();
         auto remember = [&](int i) {
-            const size_t m = MemoSlot(taps[i].key);
+            const TexelKey& k = taps[i].key;
+            const size_t m = MemoSlot(internal::MixFaceMip(k.face, k.mip), k);
             memo.keys[m] = taps[i].key.Pack();
             memo.values[m] = values[i];
         };
@@ -413,9 +425,8 @@ private:
 
     // Memo slot of a key: (iu, iv) mod 64 in scanline order, offset by the face and mip, so a
     // 64x64-texel window of one face never collides with itself.
-    static size_t MemoSlot(const TexelKey& k) {
-        return size_t(internal::MixFaceMip(k.face, k.mip) + (uint64_t(k.iv & 63) << 6) +
-                      uint64_t(k.iu & 63)) &
+    static size_t MemoSlot(uint64_t faceMipMix, const TexelKey& k) {
+        return size_t(faceMipMix + (uint64_t(k.iv & 63) << 6) + uint64_t(k.iu & 63)) &
                (internal::TapMemo<Sample>::kEntries - 1);
     }
 
