@@ -90,6 +90,7 @@ struct Context {
     float shutterLength;
     TextureSpaceCache* tsc = nullptr;
     tbb::enumerable_thread_specific<CacheStats>* cacheStats = nullptr;
+    PixelCacheCounts* pixelCache = nullptr;              // per-pixel cache traffic, when asked for
     std::optional<CameraModel> cameraOpen, cameraClose;  // for motion vectors
     bool cameraMoves = false;
 
@@ -316,6 +317,24 @@ struct PixelAovs {
 };
 
 // ---- texture-space shading (libtexcache) ---------------------------------------------------
+
+/// The counters of a thread's CacheStats that a pixel's heat-map counts are the change of.
+struct CacheSnapshot {
+    uint64_t lookups = 0, texelHits = 0, samplesShaded = 0;
+    CacheSnapshot() = default;
+    explicit CacheSnapshot(const CacheStats& s)
+        : lookups(s.lookups), texelHits(s.texelHits), samplesShaded(s.samplesShaded) {}
+};
+
+/// Adds what a pixel's lookups counted (the thread's stats after them minus `before`) to its
+/// counts. Exact because the lookups run on one thread whose CacheStats nothing else touches
+/// meanwhile: shading only traces rays, and Embree's queries spawn no TBB tasks that could run
+/// another tile on this thread in between.
+void AddPixelCounts(PixelCacheCounts* px, const CacheSnapshot& before, const CacheStats& after) {
+    px->lookups += uint32_t(after.lookups - before.lookups);
+    px->texelHits += uint32_t(after.texelHits - before.texelHits);
+    px->samplesShaded += uint32_t(after.samplesShaded - before.samplesShaded);
+}
 
 /// Random stream of a cache sample: a function of its key, so the same texel gets the same
 /// shading whichever thread shades it, and a re-shade after eviction reproduces it.
@@ -747,6 +766,7 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
     CacheStats& stats = c.cacheStats->local();
     for (size_t i = 0; i < queue.size(); ++i) {
         const Pending& p = queue[i];
+        const CacheSnapshot before = c.pixelCache ? CacheSnapshot(stats) : CacheSnapshot();
         glm::vec3 L(0.0f);
         if (p.found)
             L = p.hit.object < 0
@@ -755,6 +775,7 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
                           c, points[i],
                           [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
                           c.opt.aoSamples, &stats, lookups ? &texels[i] : nullptr);
+        if (c.pixelCache) AddPixelCounts(&c.pixelCache[p.pixel], before, stats);
         add(p, L);
     }
 }
@@ -839,6 +860,10 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     }
     const int W = opt.width, H = opt.height;
     const size_t numPixels = size_t(W) * H;
+    if (opt.pixelCache) {
+        opt.pixelCache->assign(numPixels, PixelCacheCounts{});
+        if (ctx.tsc) ctx.pixelCache = opt.pixelCache->data();
+    }
 
     std::vector<double> sum(numPixels * 3, 0.0);
     std::vector<PixelAovs> aovs(opt.aovs.Any() ? numPixels : 0);
@@ -878,10 +903,14 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
                             uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
                         return;
                     }
+                    // The thread's cache counters, read around each pixel for its heat-map counts.
+                    CacheStats* pixelStats = ctx.pixelCache ? &cacheStats.local() : nullptr;
                     for (int y = r.rows().begin(); y < r.rows().end(); ++y)
                         for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
                             const size_t p = size_t(y) * W + x;
                             PixelAovs* aov = aovs.empty() ? nullptr : &aovs[p];
+                            const CacheSnapshot before =
+                                pixelStats ? CacheSnapshot(*pixelStats) : CacheSnapshot();
                             glm::dvec3 acc(0.0);
                             for (int s = s0; s < s1; ++s) {
                                 glm::vec3 L = Sample(ctx, x, y, s, aov, rc);
@@ -890,6 +919,7 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
                                     acc += glm::dvec3(L);
                             }
                             sum[3 * p] += acc.x, sum[3 * p + 1] += acc.y, sum[3 * p + 2] += acc.z;
+                            if (pixelStats) AddPixelCounts(&ctx.pixelCache[p], before, *pixelStats);
                         }
                     pixelSamplesDone +=
                         uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);

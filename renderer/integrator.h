@@ -27,6 +27,12 @@ struct AovFlags {
     bool Any() const { return albedo || normal || depth || ptex || motion; }
 };
 
+/// One pixel's texel-cache traffic in a frame (texture-space shading): what its camera samples'
+/// lookups found and how many samples their misses shaded.
+struct PixelCacheCounts {
+    uint32_t lookups = 0, texelHits = 0, samplesShaded = 0;
+};
+
 struct RenderOptions {
     IntegratorKind integrator = IntegratorKind::Path;
     int width = 640, height = 360;
@@ -44,6 +50,10 @@ struct RenderOptions {
     AovFlags aovs;
     TextureSpaceOptions texture;  ///< cached AO / diffuse indirect when texture.enabled
     bool progress = true;         ///< progress bar on stderr for renders longer than a second
+    /// When set, filled with width x height PixelCacheCounts of this frame's lookups (all zero
+    /// without texture-space shading); null costs one predictable branch per lookup (the
+    /// preview's cache heat maps).
+    std::vector<PixelCacheCounts>* pixelCache = nullptr;
 };
 
 struct RenderStats {

@@ -5,6 +5,7 @@
 // the test fails rather than skips, so a machine that was not set up cannot pass silently.
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -15,7 +16,10 @@
 #include <gtest/gtest.h>
 
 #include "renderer/image.h"
+#include "renderer/integrator.h"
+#include "renderer/render_scene.h"
 #include "renderer/scene_loader.h"
+#include "renderer/texture_space.h"
 
 namespace {
 
@@ -23,6 +27,9 @@ namespace fs = std::filesystem;
 
 const std::string kBin = std::string(TEXCACHE_BIN_DIR) + "/texcache";
 const std::string kScene = std::string(TEXCACHE_SOURCE_DIR) + "/scenes/car.json";
+// The bundled animated scene: a torus tumbling about X over 2 s above a static ground.
+const std::string kAnimated = std::string(TEXCACHE_SOURCE_DIR) + "/scenes/turntable.json";
+constexpr float kPanelWidth = 380.0f;  // the preview panel's width (preview_app.cpp)
 
 struct ShellResult {
     int exitCode = -1;
@@ -60,6 +67,75 @@ double HitRateAfterMove(const std::string& out) {
     const std::string key = "cache hit rate after the move: ";
     const size_t at = out.find(key);
     return at == std::string::npos ? -1.0 : std::atof(out.c_str() + at + key.size());
+}
+
+/// Runs the preview headless under Xvfb; `args` after the scene.
+ShellResult Headless(const std::string& scene, const std::string& args) {
+    return Shell("xvfb-run -a -s '-screen 0 1280x1024x24' " + kBin + " preview " + scene + " " +
+                 args);
+}
+
+/// The rendered w x h image inside a window screenshot: the preview draws it left of the panel,
+/// scaled to fit and centred (DrawImage in preview_app.cpp).
+texcache::Image RenderArea(const texcache::Image& shot, int w, int h) {
+    const float areaW = float(shot.width) - kPanelWidth, areaH = float(shot.height);
+    const float s = std::min(areaW / float(w), areaH / float(h));
+    const float x0 = 0.5f * (areaW - s * float(w)), y0 = 0.5f * (areaH - s * float(h));
+    texcache::Image out(w, h, 3);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const int sx = std::clamp(int(x0 + (float(x) + 0.5f) * s), 0, shot.width - 1);
+            const int sy = std::clamp(int(y0 + (float(y) + 0.5f) * s), 0, shot.height - 1);
+            const float* src = shot.At(sx, sy);
+            float* dst = out.At(x, y);
+            dst[0] = src[0], dst[1] = src[1], dst[2] = src[2];
+        }
+    return out;
+}
+
+texcache::Image Screenshot(const fs::path& png, int w, int h) {
+    return RenderArea(texcache::ReadImageRGB(png.string()), w, h);
+}
+
+/// Hit rate printed for headless frame `frame` ("frame N: t = T s, ..., cache hit rate H %"),
+/// -1 when absent; `*time` gets T.
+double FrameHitRate(const std::string& out, int frame, double* time = nullptr) {
+    const std::string key = "frame " + std::to_string(frame) + ": t = ";
+    const size_t at = out.find(key);
+    if (at == std::string::npos) return -1.0;
+    if (time) *time = std::atof(out.c_str() + at + key.size());
+    const std::string rate = "cache hit rate ";
+    const size_t r = out.find(rate, at);
+    return r == std::string::npos ? -1.0 : std::atof(out.c_str() + r + rate.size());
+}
+
+/// Pixels of a hit/miss map by colour: green-dominant (hit), red-dominant (miss), and pixels
+/// with any colour at all (geometry; the background is black).
+struct HitMissPixels {
+    size_t hit = 0, miss = 0, geometry = 0;
+    double MissFraction() const { return hit + miss ? double(miss) / double(hit + miss) : 0.0; }
+};
+HitMissPixels ClassifyHitMiss(const texcache::Image& img) {
+    HitMissPixels c;
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x) {
+            const float* p = img.At(x, y);
+            if (std::max({p[0], p[1], p[2]}) < 0.01f) continue;
+            ++c.geometry;
+            if (p[1] > 1.5f * p[0]) ++c.hit;
+            if (p[0] > 1.5f * p[1]) ++c.miss;
+        }
+    return c;
+}
+
+/// Fraction of pixels whose colour differs by more than `tol` in some channel.
+double DifferingFraction(const texcache::Image& a, const texcache::Image& b, float tol) {
+    size_t n = 0;
+    for (size_t i = 0; i < a.data.size(); i += 3)
+        n += std::abs(a.data[i] - b.data[i]) > tol ||
+             std::abs(a.data[i + 1] - b.data[i + 1]) > tol ||
+             std::abs(a.data[i + 2] - b.data[i + 2]) > tol;
+    return double(n) / double(a.data.size() / 3);
 }
 
 TEST(Preview, HeadlessOrbitShowsTheSceneAndReusesTheCache) {
@@ -133,6 +209,147 @@ TEST(Preview, SavesTheCameraAndKeepsTheRestOfTheSceneFile) {
     EXPECT_GT(glm::length(p1 - p0), 0.5f);
     EXPECT_NEAR(saved.camera.fovYDegrees, original.camera.fovYDegrees, 1e-4f);
     fs::remove_all(dir);
+}
+
+TEST(Preview, HitMissViewShowsMissesWhenColdAndHitsAfterASmallMove) {
+    ASSERT_EQ(Shell("command -v xvfb-run").exitCode, 0) << "xvfb-run is not installed";
+    const fs::path dir = TempDir("hitmiss");
+    const fs::path cold = dir / "cold.png", moved = dir / "moved.png";
+    const ShellResult a = Headless(
+        kScene, "--view hitmiss --frames 1 --resolution 128x128 --screenshot " + cold.string());
+    ASSERT_EQ(a.exitCode, 0) << a.output;
+    // 4 frames over 3 degrees: 1 degree per step.
+    const ShellResult b =
+        Headless(kScene, "--view hitmiss --frames 4 --orbit 3 --resolution 128x128 --screenshot " +
+                             moved.string());
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    const HitMissPixels c = ClassifyHitMiss(Screenshot(cold, 128, 128));
+    const HitMissPixels m = ClassifyHitMiss(Screenshot(moved, 128, 128));
+    // Car and ground fill most of the picture, and (1 spp) every geometry pixel is all-hit or
+    // all-miss: no grey "no lookup", no yellow.
+    EXPECT_GT(double(c.geometry), 0.4 * 128 * 128) << a.output;
+    EXPECT_GT(double(c.hit + c.miss), 0.95 * double(c.geometry));
+    // Cold cache: only pixels sharing a texel with an earlier pixel hit (LOD bias 1: ~2x2 pixels
+    // per texel): 75% miss measured at 128x128 (a re-probe after the frame would show none).
+    EXPECT_GT(c.MissFraction(), 0.6) << a.output;
+    // After 1-degree steps the cache holds most texels: 20% miss measured.
+    EXPECT_LT(m.MissFraction(), 0.3) << b.output;
+    // The map agrees with the frame's own statistics (each pixel is one lookup).
+    EXPECT_NEAR(100.0 * (1.0 - c.MissFraction()), HitRateAfterMove(a.output), 8.0) << a.output;
+    EXPECT_NEAR(100.0 * (1.0 - m.MissFraction()), HitRateAfterMove(b.output), 8.0) << b.output;
+    fs::remove_all(dir);
+}
+
+TEST(Preview, OvershadingViewShowsWhereFootprintsShadeSamples) {
+    ASSERT_EQ(Shell("command -v xvfb-run").exitCode, 0) << "xvfb-run is not installed";
+    const fs::path dir = TempDir("overshading");
+    const fs::path shot = dir / "shot.png";
+    // A 5x5 normal-filter footprint on a cold cache: misses shade up to 25 samples each.
+    const ShellResult r = Headless(kScene,
+                                   "--view overshading --filter normal --filter-radius 2 "
+                                   "--frames 1 --resolution 128x128 --screenshot " +
+                                       shot.string());
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const std::string key = "overshading scale: 0 to ";
+    const size_t at = r.output.find(key);
+    ASSERT_NE(at, std::string::npos) << r.output;
+    const double top = std::atof(r.output.c_str() + at + key.size());
+    // The busiest pixel shaded about a footprint's worth (25), rounded up to a power of two: 32
+    // measured.
+    EXPECT_GE(top, 8.0) << r.output;
+    EXPECT_LE(top, 64.0) << r.output;
+    EXPECT_TRUE(std::isfinite(top));
+    // Not blank and not one colour: geometry everywhere the car and ground are, with cold (blue:
+    // few samples) and hot (red/yellow: many) pixels.
+    const texcache::Image img = Screenshot(shot, 128, 128);
+    size_t geometry = 0, cold = 0, hot = 0;
+    for (size_t i = 0; i < img.data.size(); i += 3) {
+        const float rr = img.data[i], g = img.data[i + 1], b = img.data[i + 2];
+        ASSERT_TRUE(std::isfinite(rr + g + b));
+        if (std::max({rr, g, b}) < 0.01f) continue;
+        ++geometry;
+        cold += b > rr;
+        hot += rr > b;
+    }
+    const double n = 128.0 * 128.0;
+    EXPECT_GT(double(geometry), 0.4 * n) << r.output;
+    EXPECT_GT(double(cold), 0.05 * n) << r.output;
+    EXPECT_GT(double(hot), 0.05 * n) << r.output;
+    fs::remove_all(dir);
+}
+
+TEST(Preview, AnimatedSceneRendersTheTimeAskedAndReshadesPerFrame) {
+    ASSERT_EQ(Shell("command -v xvfb-run").exitCode, 0) << "xvfb-run is not installed";
+    const fs::path dir = TempDir("animation");
+    auto run = [&](const std::string& name, const std::string& args, ShellResult* r) {
+        const fs::path png = dir / (name + ".png");
+        *r = Headless(kAnimated,
+                      args + " --orbit 0 --resolution 128x128 --screenshot " + png.string());
+        EXPECT_EQ(r->exitCode, 0) << r->output;
+        return Screenshot(png, 128, 128);
+    };
+    ShellResult r0, rHalf, rPlay;
+    const texcache::Image t0 = run("t0", "--frames 1 --time 0", &r0);
+    const texcache::Image tHalf = run("thalf", "--frames 1 --time 0.5", &rHalf);
+    // Frames at t = 0, 0.25, 0.5.
+    const texcache::Image played = run("play", "--frames 3 --time 0 --play --fps 4", &rPlay);
+    ASSERT_FALSE(HasFailure());
+
+    // The torus turned 40 degrees: its silhouette and the AO it casts changed (42% of the pixels
+    // measured, the ground within the AO distance included).
+    EXPECT_GT(DifferingFraction(t0, tHalf, 0.05f), 0.1);
+    // --play advanced the time by 1/fps per frame ...
+    double time = -1.0;
+    FrameHitRate(rPlay.output, 2, &time);
+    EXPECT_NEAR(time, 0.5, 1e-3) << rPlay.output;
+    // ... and began a cache frame at each new time: every frame is as cold as a first one (33%
+    // hits measured; 84% without BeginFrame, the moved torus hitting its stale texels) ...
+    for (int f = 1; f < 3; ++f) EXPECT_LT(FrameHitRate(rPlay.output, f), 50.0) << rPlay.output;
+    // ... so the same time gives the same picture, whatever came before: the last frame is
+    // exactly a fresh render at t = 0.5 (stale texels of t = 0 or 0.25 would show; 37% of the
+    // pixels differ without BeginFrame).
+    EXPECT_EQ(DifferingFraction(played, tHalf, 0.02f), 0.0);
+    fs::remove_all(dir);
+}
+
+/// Per-pixel cache counts (the heat maps' input) account for exactly the frame's lookups, on
+/// both render paths (AO's two-phase tiles, the path integrator's per-pixel loop).
+TEST(Preview, PixelCacheCountsAddUpToTheFrameStatistics) {
+    std::vector<std::string> warnings;
+    texcache::Scene scene = texcache::LoadScene(kAnimated, &warnings);
+    texcache::RenderSceneOptions ro;
+    const texcache::RenderScene rs(scene, ro);
+    for (texcache::IntegratorKind k :
+         {texcache::IntegratorKind::AO, texcache::IntegratorKind::Path}) {
+        texcache::RenderOptions opt;
+        opt.integrator = k;
+        opt.width = 48, opt.height = 32, opt.spp = 2, opt.aoSamples = 4, opt.maxDepth = 2;
+        opt.progress = false;
+        opt.texture.enabled = true;
+        opt.texture.filter = texcache::TextureFilterKind::Normal;
+        opt.texture.radius = 1;
+        std::vector<texcache::PixelCacheCounts> counts;
+        opt.pixelCache = &counts;
+        texcache::TextureSpaceCache cache(rs, opt.texture);
+        for (int frame = 0; frame < 2; ++frame) {  // cold, then warm
+            const texcache::RenderResult r = texcache::Render(rs, opt, &cache);
+            ASSERT_EQ(counts.size(), size_t(48 * 32));
+            uint64_t lookups = 0, hits = 0, shaded = 0;
+            for (const texcache::PixelCacheCounts& c : counts) {
+                EXPECT_LE(c.texelHits, c.lookups);
+                lookups += c.lookups, hits += c.texelHits, shaded += c.samplesShaded;
+            }
+            SCOPED_TRACE("integrator " + std::to_string(int(k)) + ", frame " +
+                         std::to_string(frame));
+            EXPECT_GT(lookups, 0u);
+            EXPECT_EQ(lookups, r.stats.cache.lookups);
+            EXPECT_EQ(hits, r.stats.cache.texelHits);
+            EXPECT_EQ(shaded, r.stats.cache.samplesShaded);
+            if (frame == 1) {
+                EXPECT_EQ(hits, lookups);  // the same frame again: every texel is cached
+            }
+        }
+    }
 }
 
 TEST(Preview, WithoutADisplayFailsCleanly) {

@@ -16,6 +16,8 @@ struct PreviewArgs {
     float orbitDegrees = 20.0f;       ///< headless / bench: camera orbit spread over the frames
     std::string filterName = "none";  ///< as given, for reports
     bool saveCamera = false;          ///< headless: write the final camera into the scene file
+    bool play = false;                ///< headless: advance the scene time 1/fps per frame
+    float fps = 24.0f;                ///< frames per second of --play and the timeline's steps
 };
 
 /// Opens the window (or runs the headless frames); returns the exit code. Throws InputError when

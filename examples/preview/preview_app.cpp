@@ -2,6 +2,7 @@
 // The preview window: GLFW + OpenGL 3 + Dear ImGui. The UI thread draws the last published frame
 // and the panel and turns input into camera / settings posts; all rendering is on the
 // ProgressiveRenderer's worker, so the window never waits for a frame.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -70,6 +71,83 @@ int IndexOf(const std::vector<std::string>& names, const std::string& n) {
     return 0;
 }
 
+/// A linear colour as ImGui draws it (the image is shown sRGB-encoded, so legends match it).
+ImU32 DisplayColour(glm::vec3 c) {
+    return IM_COL32(LinearToSrgb8(c.x), LinearToSrgb8(c.y), LinearToSrgb8(c.z), 255);
+}
+
+/// A colour bar of `ramp(t)`, t in [0, 1] left to right, with `labels[i]` under position
+/// `at[i]`.
+template <typename Ramp>
+void LegendBar(Ramp&& ramp, const std::vector<float>& at, const std::vector<std::string>& labels) {
+    const float w = ImGui::GetContentRegionAvail().x, h = 14.0f;
+    const ImVec2 p = ImGui::GetCursorScreenPos();
+    ImDrawList* dl = ImGui::GetWindowDrawList();
+    constexpr int kSteps = 32;
+    for (int i = 0; i < kSteps; ++i) {
+        const float x0 = p.x + w * float(i) / kSteps, x1 = p.x + w * float(i + 1) / kSteps;
+        const ImU32 a = DisplayColour(ramp(float(i) / kSteps));
+        const ImU32 b = DisplayColour(ramp(float(i + 1) / kSteps));
+        dl->AddRectFilledMultiColor(ImVec2(x0, p.y), ImVec2(x1, p.y + h), a, b, b, a);
+    }
+    const float textY = p.y + h + 2.0f;
+    for (size_t i = 0; i < at.size() && i < labels.size(); ++i) {
+        const float tw = ImGui::CalcTextSize(labels[i].c_str()).x;
+        const float x = std::clamp(p.x + at[i] * w - 0.5f * tw, p.x, p.x + w - tw);
+        dl->AddText(ImVec2(x, textY), ImGui::GetColorU32(ImGuiCol_Text), labels[i].c_str());
+    }
+    ImGui::Dummy(ImVec2(w, h + 4.0f + ImGui::GetTextLineHeight()));
+}
+
+/// A small swatch of a colour followed by a caption on the same line.
+void LegendSwatch(glm::vec3 colour, const char* caption) {
+    const float s = ImGui::GetTextLineHeight();
+    const ImVec2 p = ImGui::GetCursorScreenPos();
+    ImGui::GetWindowDrawList()->AddRectFilled(p, ImVec2(p.x + s, p.y + s), DisplayColour(colour));
+    ImGui::Dummy(ImVec2(s, s));
+    ImGui::SameLine();
+    ImGui::TextUnformatted(caption);
+}
+
+/// The legend of the heat-map views (nothing for the others).
+void DrawViewLegend(ViewMode view, const FrameStats& st) {
+    if (view == ViewMode::HitMiss) {
+        LegendBar([](float t) { return HitMissColour(t); }, {0.0f, 0.5f, 1.0f},
+                  {"all missed", "half hit", "all hit"});
+        LegendSwatch(NoLookupColour(), "no cache lookup");
+        ImGui::TextWrapped(
+            "fraction of each pixel's texel lookups that hit, in the frame after the last "
+            "change: %.1f %% of %llu lookups hit",
+            100.0 * st.texelHitRate, (unsigned long long)st.lookups);
+    } else if (view == ViewMode::Overshading) {
+        // Integer counts (0 and powers of two) where they fall on the log scale; a label that
+        // would touch the one before it is left out, the top one always stays.
+        const uint32_t top = std::max(st.overshadeTop, 1u);
+        const float width = ImGui::GetContentRegionAvail().x;
+        std::vector<float> at;
+        std::vector<std::string> labels;
+        float lastRight = -1e30f;
+        for (uint32_t n = 0; n <= top; n = n ? 2 * n : 1) {
+            const std::string text = std::to_string(n);
+            const float t = OvershadeScale(float(n), top);
+            const float half = 0.5f * ImGui::CalcTextSize(text.c_str()).x + 4.0f;
+            if (t * width - half < lastRight) {
+                if (n != top) continue;
+                at.pop_back(), labels.pop_back();
+            }
+            at.push_back(t), labels.push_back(text);
+            lastRight = t * width + half;
+            if (n >= (1u << 31)) break;
+        }
+        LegendBar([](float t) { return HeatColour(t); }, at, labels);
+        LegendSwatch(NoLookupColour(), "no cache lookup");
+        ImGui::TextWrapped(
+            "samples shaded per pixel by its lookups in the frame after the last change (log "
+            "scale): %llu in all",
+            (unsigned long long)st.samplesShaded);
+    }
+}
+
 /// The window's contents as a linear image (sRGB decoded, so WriteImage's PNG encoding gives the
 /// read-back bytes again), rows flipped to top-first.
 Image ReadWindow(int width, int height) {
@@ -113,6 +191,12 @@ struct Ui {
     ImVec2 imageMin{0, 0}, imageMax{0, 0};
     double lastTime = 0.0;
     bool dragged = false;
+    // Timeline (animated scenes only).
+    SceneAnimation anim;
+    float timeMin = 0.0f, timeMax = 0.0f;  // the slider's range: the keyframes and the start time
+    bool playing = false, loop = true, followCamera = true;
+    float speed = 1.0f, fps = 24.0f;
+    float posedTime = 0.0f;  // the time the camera was last made to follow
 };
 
 void UploadFrame(Ui& ui, ProgressiveRenderer& r) {
@@ -150,7 +234,7 @@ void DrawImage(Ui& ui) {
 }
 
 void FrameSelected(Ui& ui) {
-    const float t = ui.sceneCopy.settings.time;
+    const float t = ui.settings.time;
     ui.camera.Frame(ui.selected >= 0 ? ObjectBounds(ui.sceneCopy, ui.selected, t)
                                      : SceneBounds(ui.sceneCopy, t));
 }
@@ -158,7 +242,7 @@ void FrameSelected(Ui& ui) {
 /// Mouse and keyboard -> camera (only when ImGui does not want them).
 void HandleInput(Ui& ui, ProgressiveRenderer& r, double dt) {
     const ImGuiIO& io = ImGui::GetIO();
-    const float radius = SceneBounds(ui.sceneCopy, ui.sceneCopy.settings.time).Radius();
+    const float radius = SceneBounds(ui.sceneCopy, ui.settings.time).Radius();
     if (!io.WantCaptureMouse) {
         const float imageH = std::max(1.0f, ui.imageMax.y - ui.imageMin.y);
         const ImVec2 d = io.MouseDelta;
@@ -194,7 +278,39 @@ void HandleInput(Ui& ui, ProgressiveRenderer& r, double dt) {
         if (f != 0.0f || rt != 0.0f || up != 0.0f) ui.camera.Fly(speed * f, speed * rt, speed * up);
         if (ImGui::IsKeyPressed(GLFW_KEY_R, false)) ui.camera = ui.home;
         if (ImGui::IsKeyPressed(GLFW_KEY_F, false)) FrameSelected(ui);
+        if (ui.anim.animated && ImGui::IsKeyPressed(GLFW_KEY_SPACE, false))
+            ui.playing = !ui.playing;
     }
+}
+
+/// Playback: advances the scene time by the wall-clock step (times the speed), looping or
+/// stopping at the end; an animated camera is followed when asked. Frames the worker cannot
+/// keep up with are skipped (it renders the newest time posted).
+void AdvanceTime(Ui& ui, double dt) {
+    if (!ui.anim.animated) return;
+    float& t = ui.settings.time;
+    if (ui.playing) {
+        t += float(dt) * ui.speed;
+        const float span = ui.timeMax - ui.timeMin;
+        if (t > ui.timeMax) {
+            if (ui.loop && span > 0.0f) {
+                t = ui.timeMin + std::fmod(t - ui.timeMin, span);
+            } else {
+                t = ui.timeMax;
+                ui.playing = false;
+            }
+        }
+    }
+    if (ui.anim.cameraAnimated && ui.followCamera && t != ui.posedTime)
+        ui.camera.FromScene(ui.sceneCopy, t);
+    ui.posedTime = t;
+}
+
+/// Steps the time by whole frames at the timeline's frame rate (paused).
+void StepFrames(Ui& ui, int frames) {
+    ui.playing = false;
+    const float frame = std::round(ui.settings.time * ui.fps) + float(frames);
+    ui.settings.time = std::clamp(frame / ui.fps, ui.timeMin, ui.timeMax);
 }
 
 void SaveImage(Ui& ui, const ProgressiveRenderer& r) {
@@ -261,10 +377,11 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         if (NameCombo("integrator", ui.integrators, &integrator))
             s.integrator = ParseIntegrator(ui.integrators[integrator], "integrator");
         int view = int(s.view);
-        const char* views[] = {ViewModeName(ViewMode::Beauty), ViewModeName(ViewMode::FaceId),
-                               ViewModeName(ViewMode::TexelMip), ViewModeName(ViewMode::Texels)};
-        ImGui::Combo("view", &view, views, 4);
+        const char* views[kNumViewModes];
+        for (int i = 0; i < kNumViewModes; ++i) views[i] = ViewModeName(ViewMode(i));
+        ImGui::Combo("view", &view, views, kNumViewModes);
         s.view = ViewMode(view);
+        DrawViewLegend(s.view, st);
         ImGui::SliderInt("spp / frame", &s.sppPerFrame, 1, 64);
         ImGui::SliderInt("AO rays / sample", &s.aoSamples, 1, 256, "%d",
                          ImGuiSliderFlags_Logarithmic);
@@ -274,6 +391,38 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         if (ImGui::IsItemDeactivatedAfterEdit()) s.tessellationRate = ui.tessellationEdit;
         ImGui::SliderFloat("exposure", &s.exposure, -6.0f, 6.0f, "%.1f stops");
         ImGui::SliderInt("max frames", &s.maxFrames, 1, 4096, "%d", ImGuiSliderFlags_Logarithmic);
+    }
+    // ---- timeline (animated scenes only)
+    if (ui.anim.animated && ImGui::CollapsingHeader("Timeline", ImGuiTreeNodeFlags_DefaultOpen)) {
+        if (ImGui::Button(ui.playing ? "pause" : "play", ImVec2(60.0f, 0.0f))) {
+            // Play from the start again once a non-looping playback has reached the end.
+            if (!ui.playing && !ui.loop && s.time >= ui.timeMax) s.time = ui.timeMin;
+            ui.playing = !ui.playing;
+        }
+        ImGui::SameLine();
+        if (ImGui::Button("|<")) {
+            ui.playing = false;
+            s.time = ui.timeMin;
+        }
+        ImGui::SameLine();
+        if (ImGui::Button("<")) StepFrames(ui, -1);
+        ImGui::SameLine();
+        if (ImGui::Button(">")) StepFrames(ui, 1);
+        ImGui::SameLine();
+        ImGui::Text("frame %d (space: play)", int(std::lround(s.time * ui.fps)));
+        ImGui::SliderFloat("time", &s.time, ui.timeMin, ui.timeMax, "%.3f s");
+        if (ImGui::IsItemActive()) ui.playing = false;  // scrubbing
+        ImGui::Checkbox("loop", &ui.loop);
+        ImGui::SameLine();
+        ImGui::SetNextItemWidth(120.0f);
+        ImGui::SliderFloat("speed", &ui.speed, 0.05f, 4.0f, "%.2fx", ImGuiSliderFlags_Logarithmic);
+        ImGui::SliderFloat("fps (steps)", &ui.fps, 1.0f, 120.0f, "%.0f");
+        if (ui.anim.cameraAnimated) ImGui::Checkbox("follow the scene camera", &ui.followCamera);
+        if (ui.anim.posesAnimated)
+            ImGui::TextDisabled("each new time re-shades the cache (cache frame %u)",
+                                st.cacheFrame);
+        else
+            ImGui::TextDisabled("only the camera moves: the cache is kept");
     }
     // ---- texture-space cache
     if (ImGui::CollapsingHeader("Texture-space cache", ImGuiTreeNodeFlags_DefaultOpen)) {
@@ -390,6 +539,11 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
     ui.filters = SplitNames(TextureFilterNames());
     ui.home.FromScene(scene, scene.settings.time);
     ui.camera = ui.home;
+    ui.anim = AnimationOf(scene);
+    ui.timeMin = std::min(ui.anim.start, settings.time);
+    ui.timeMax = std::max(ui.anim.end, settings.time);
+    ui.fps = args.fps;
+    ui.posedTime = settings.time;
     if (headless) ui.settings.maxFrames = 1;  // one frame per scripted camera step
     glGenTextures(1, &ui.texture);
     glBindTexture(GL_TEXTURE_2D, ui.texture);
@@ -423,14 +577,19 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
         };
 
         if (headless) {
-            // Scripted orbit: frame 0 at the scene camera, the last one `orbitDegrees` around.
+            // Scripted orbit: frame 0 at the scene camera, the last one `orbitDegrees` around;
+            // with --play, frame i at the start time + i / fps (an animated camera followed).
             const int n = args.frames;
+            const float startTime = ui.settings.time;
             FrameStats last;
             for (int i = 0; i < n && exitCode == 0; ++i) {
+                if (args.play) ui.settings.time = startTime + float(i) / args.fps;
                 OrbitCamera cam = ui.home;
+                if (args.play && ui.anim.cameraAnimated)
+                    cam.FromScene(ui.sceneCopy, ui.settings.time);
                 cam.Orbit(n > 1 ? args.orbitDegrees * float(i) / float(n - 1) : 0.0f, 0.0f);
                 ui.camera = cam;
-                const uint64_t v = renderer.SetCamera(cam);
+                const uint64_t v = renderer.Post(ui.settings, cam);
                 if (!renderer.WaitForFrame(v)) {
                     std::fprintf(stderr, "texcache: error: %s\n", renderer.Error().c_str());
                     exitCode = 2;
@@ -441,10 +600,10 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
                 uiFrame(i == n - 1 && !args.screenshot.empty(), &shot);
                 last = renderer.Stats();
                 std::printf(
-                    "frame %d: %.1f ms, %.2f Mrays/s, cache hit rate %.2f %%, %llu samples "
-                    "shaded\n",
-                    i, last.seconds * 1e3, last.raysPerSecond * 1e-6, 100.0 * last.texelHitRate,
-                    (unsigned long long)last.samplesShaded);
+                    "frame %d: t = %.3f s, %.1f ms, %.2f Mrays/s, cache hit rate %.2f %%, %llu "
+                    "samples shaded\n",
+                    i, last.time, last.seconds * 1e3, last.raysPerSecond * 1e-6,
+                    100.0 * last.texelHitRate, (unsigned long long)last.samplesShaded);
                 if (shot.width > 0) {
                     WriteImage(args.screenshot, shot);
                     std::printf("wrote %s (%dx%d)\n", args.screenshot.c_str(), shot.width,
@@ -462,6 +621,9 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
                                 100.0 * last.texelHitRate);
                 else
                     std::printf("cache hit rate after the move: n/a (texture-space cache off)\n");
+                if (ui.settings.view == ViewMode::Overshading)
+                    std::printf("overshading scale: 0 to %u samples shaded per pixel\n",
+                                last.overshadeTop);
             }
         } else {
             ui.lastTime = glfwGetTime();
@@ -476,8 +638,8 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
                 if (renderer.PickResult(&picked)) ui.selected = picked;
                 uiFrame(false, nullptr);
                 HandleInput(ui, renderer, dt);
-                renderer.SetSettings(ui.settings);
-                renderer.SetCamera(ui.camera);
+                AdvanceTime(ui, dt);
+                renderer.Post(ui.settings, ui.camera);
                 if (ImGui::IsKeyPressed(GLFW_KEY_ESCAPE, false) &&
                     !ImGui::GetIO().WantCaptureKeyboard)
                     glfwSetWindowShouldClose(window, GLFW_TRUE);

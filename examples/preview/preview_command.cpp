@@ -30,6 +30,10 @@ struct PreviewCliArgs {
     float lodBias = 1.0f;  // half the shading rate (Sec. 6.2): ~1 texel per pixel, high reuse
     double sampleCacheMb = 64.0, texelCacheMb = 64.0;
     float exposure = 0.0f;
+    std::string view = "beauty";
+    float time = NAN;  // NAN: the scene's render.time
+    bool play = false;
+    float fps = 24.0f;
     bool saveCamera = false;
     bool bench = false;
     int benchFrames = 36;
@@ -57,6 +61,9 @@ int RunPreview(const PreviewCliArgs& a) {
     s.sampleCacheMb = float(CheckRange("--sample-cache-mb", a.sampleCacheMb, 1.0, 65536.0));
     s.texelCacheMb = float(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0));
     s.exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
+    s.view = preview::ParseViewMode(a.view, "--view");
+    if (!std::isnan(a.time)) scene.settings.time = CheckRange("--time", a.time, -1e6f, 1e6f);
+    s.time = scene.settings.time;
     s.aoDistance = scene.settings.aoDistance;
     s.maxDepth = scene.settings.maxDepth;
     s.tessellationRate = scene.settings.tessellationRate;
@@ -72,6 +79,10 @@ int RunPreview(const PreviewCliArgs& a) {
     p.orbitDegrees = CheckRange("--orbit", a.orbit, -3600.0f, 3600.0f);
     p.filterName = a.filter;
     p.saveCamera = a.saveCamera;
+    p.play = a.play;
+    p.fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
+    if (a.play && p.frames == 0)
+        throw InputError("--play", "needs --frames N (the window has a timeline for it)");
     if (a.saveCamera && p.frames == 0)
         throw InputError("--save-camera", "needs --frames N (the window has a button for it)");
     if (a.saveCamera && std::filesystem::path(a.scene).extension() != ".json")
@@ -125,6 +136,15 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--texel-cache-mb", a->texelCacheMb, "Texel cache size (MiB)")
         ->capture_default_str();
     cmd->add_option("--exposure", a->exposure, "Display exposure in stops")->capture_default_str();
+    cmd->add_option("--view", a->view,
+                    "What the window shows: beauty, faceid, mip, texels, hitmiss (texel-cache hits "
+                    "and misses of the frame), overshading (samples shaded per pixel)")
+        ->capture_default_str();
+    cmd->add_option("--time", a->time, "Scene time to render (seconds; default: the scene's)");
+    cmd->add_flag("--play", a->play,
+                  "Headless: advance the scene time by 1/fps per frame (animated scenes)");
+    cmd->add_option("--fps", a->fps, "Frames per second of --play and of the timeline's steps")
+        ->capture_default_str();
     cmd->add_flag("--bench", a->bench,
                   "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
                   "(no window)");

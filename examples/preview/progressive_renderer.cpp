@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <climits>
+#include <cmath>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -11,6 +12,7 @@
 #include "renderer/camera.h"
 #include "renderer/render_scene.h"
 #include "renderer/texture_space.h"
+#include "texcache/error.h"
 
 namespace texcache::preview {
 
@@ -76,8 +78,130 @@ const char* ViewModeName(ViewMode m) {
             return "texel mip level";
         case ViewMode::Texels:
             return "cache texels";
+        case ViewMode::HitMiss:
+            return "cache hit / miss";
+        case ViewMode::Overshading:
+            return "overshading";
     }
     return "?";
+}
+
+const char* ViewModeKey(ViewMode m) {
+    switch (m) {
+        case ViewMode::Beauty:
+            return "beauty";
+        case ViewMode::FaceId:
+            return "faceid";
+        case ViewMode::TexelMip:
+            return "mip";
+        case ViewMode::Texels:
+            return "texels";
+        case ViewMode::HitMiss:
+            return "hitmiss";
+        case ViewMode::Overshading:
+            return "overshading";
+    }
+    return "?";
+}
+
+ViewMode ParseViewMode(const std::string& key, const std::string& where) {
+    std::string valid;
+    for (int i = 0; i < kNumViewModes; ++i) {
+        if (key == ViewModeKey(ViewMode(i))) return ViewMode(i);
+        valid += std::string(i ? ", " : "") + ViewModeKey(ViewMode(i));
+    }
+    throw InputError(where, "unknown view '" + key + "' (valid: " + valid + ")");
+}
+
+glm::vec3 HitMissColour(float hit) {
+    // Through yellow rather than a muddy brown, so a half-hit pixel reads as neither.
+    const glm::vec3 miss(0.9f, 0.08f, 0.05f), half(0.9f, 0.8f, 0.05f), all(0.1f, 0.85f, 0.1f);
+    hit = std::clamp(hit, 0.0f, 1.0f);
+    return hit < 0.5f ? glm::mix(miss, half, 2.0f * hit) : glm::mix(half, all, 2.0f * hit - 1.0f);
+}
+
+glm::vec3 NoLookupColour() {
+    return glm::vec3(0.45f);
+}
+
+glm::vec3 HeatColour(float t) {
+    static const glm::vec3 stops[] = {{0.02f, 0.02f, 0.25f},
+                                      {0.0f, 0.45f, 0.9f},
+                                      {0.05f, 0.8f, 0.35f},
+                                      {0.95f, 0.85f, 0.05f},
+                                      {0.95f, 0.1f, 0.05f}};
+    constexpr int n = int(sizeof stops / sizeof stops[0]);
+    const float x = std::clamp(t, 0.0f, 1.0f) * float(n - 1);
+    const int i = std::min(int(x), n - 2);
+    return glm::mix(stops[i], stops[i + 1], x - float(i));
+}
+
+uint32_t OvershadeTop(uint32_t maxShaded) {
+    uint32_t top = 1;
+    while (top < maxShaded && top < (1u << 31)) top <<= 1;
+    return top;
+}
+
+float OvershadeScale(float samples, uint32_t top) {
+    return std::clamp(std::log1p(std::max(samples, 0.0f)) / std::log1p(float(top)), 0.0f, 1.0f);
+}
+
+float OvershadeAt(float t, uint32_t top) {
+    return std::expm1(std::clamp(t, 0.0f, 1.0f) * std::log1p(float(top)));
+}
+
+uint32_t RenderHeatView(const RenderScene& rs, float frameTime,
+                        const std::vector<PixelCacheCounts>& counts, ViewMode mode, Image* out) {
+    uint32_t maxShaded = 0;
+    if (mode == ViewMode::Overshading)
+        for (const PixelCacheCounts& c : counts) maxShaded = std::max(maxShaded, c.samplesShaded);
+    const uint32_t top = mode == ViewMode::Overshading ? OvershadeTop(maxShaded) : 0;
+    const CameraModel camera(rs.scene().camera, frameTime, out->width, out->height);
+    tbb::parallel_for(0, out->height, [&](int y) {
+        for (int x = 0; x < out->width; ++x) {
+            float* px = out->At(x, y);
+            const Ray ray =
+                camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f), nullptr);
+            Hit hit;
+            glm::vec3 c(0.0f);
+            if (rs.Intersect(ray, &hit)) {
+                const PixelCacheCounts& n = counts[size_t(y) * out->width + x];
+                glm::vec3 colour = NoLookupColour();
+                if (n.lookups > 0)
+                    colour = mode == ViewMode::HitMiss
+                                 ? HitMissColour(float(n.texelHits) / float(n.lookups))
+                                 : HeatColour(OvershadeScale(float(n.samplesShaded), top));
+                // Shaded by the view angle, like the cache views, so the shape stays readable
+                // under the false colour.
+                const glm::vec3 N = hit.object >= 0 ? rs.Interact(ray, hit).N : -ray.dir;
+                const float shade = 0.35f + 0.65f * std::abs(glm::dot(N, ray.dir));
+                c = shade * colour;
+            }
+            px[0] = c.x, px[1] = c.y, px[2] = c.z;
+        }
+    });
+    return top;
+}
+
+SceneAnimation AnimationOf(const Scene& scene) {
+    SceneAnimation a;
+    bool first = true;
+    auto track = [&](const TransformTrack& t, bool camera) {
+        if (!t.IsAnimated()) return;
+        a.animated = true;
+        a.cameraAnimated = a.cameraAnimated || camera;
+        a.posesAnimated = a.posesAnimated || !camera;
+        for (const Keyframe& k : t.keys) {
+            a.start = first ? k.time : std::min(a.start, k.time);
+            a.end = first ? k.time : std::max(a.end, k.time);
+            first = false;
+        }
+    };
+    track(scene.camera.pose, true);
+    for (const Object& o : scene.objects) track(o.transform, false);
+    for (const QuadLight& l : scene.quadLights) track(l.transform, false);
+    for (const DistantLight& l : scene.distantLights) track(l.transform, false);
+    return a;
 }
 
 void RenderCacheView(const RenderScene& rs, const TextureSpaceCache& cache, float frameTime,
@@ -121,18 +245,10 @@ ProgressiveRenderer::~ProgressiveRenderer() {
     worker_.join();
 }
 
-uint64_t ProgressiveRenderer::SetSettings(const PreviewSettings& s) {
+uint64_t ProgressiveRenderer::Post(const PreviewSettings& s, const OrbitCamera& c) {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (s == postedSettings_) return version_;
-    postedSettings_ = s;
-    wake_.notify_all();
-    return ++version_;
-}
-
-uint64_t ProgressiveRenderer::SetCamera(const OrbitCamera& c) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (c == postedCamera_) return version_;
-    postedCamera_ = c;
+    if (s == postedSettings_ && c == postedCamera_) return version_;
+    postedSettings_ = s, postedCamera_ = c;
     wake_.notify_all();
     return ++version_;
 }
@@ -183,6 +299,11 @@ void ProgressiveRenderer::Run() {
     PreviewSettings built, accumSettings;
     OrbitCamera accumCamera;
     int accumulated = 0;
+    float builtTime = 0.0f;                     // scene time the RenderScene is posed at
+    uint32_t cacheFrame = 0;                    // cache frames begun (time changes)
+    std::vector<PixelCacheCounts> pixelCounts;  // heat views: the frame's per-pixel lookups
+    // Before the orbit camera replaces the scene camera's keys below.
+    const bool posesAnimated = AnimationOf(scene_).posesAnimated;
     float shownExposure = 0.0f;
     // Worker-side buffers, swapped with the published ones (no allocation per frame once sized).
     std::vector<uint8_t> display;
@@ -234,16 +355,26 @@ void ProgressiveRenderer::Run() {
             std::swap(pickX, pickX_), std::swap(pickY, pickY_);
         }
         try {
-            const float frameTime = scene_.settings.time;
-            if (!rs || cur.tessellationRate != built.tessellationRate) {
-                cache.reset();
+            const float frameTime = cur.time;
+            const bool retessellate = !rs || cur.tessellationRate != built.tessellationRate;
+            // Only moving objects and lights change the RenderScene and the shading; the camera
+            // is the orbit camera's (an animated one is followed by the UI).
+            const bool timeChanged = rs && frameTime != builtTime && posesAnimated;
+            builtTime = frameTime;
+            if (retessellate || timeChanged) {
+                // A new time only re-poses objects and lights: the cache (object-space grids)
+                // stays, but what it holds was shaded for the old pose (and the surroundings it
+                // saw), so a cache frame begins and everything is re-shaded on demand.
+                if (retessellate) cache.reset();
                 rs.reset();
                 scene_.settings.tessellationRate = cur.tessellationRate;
+                scene_.settings.time = frameTime;
                 RenderSceneOptions ro;
                 ro.frameTime = frameTime;
                 // Lights always: the integrator can be switched to direct/path at any time.
                 rs = std::make_unique<RenderScene>(scene_, ro);
                 built.tessellationRate = cur.tessellationRate;
+                if (timeChanged && cache) cache->BeginFrame(++cacheFrame);
                 std::lock_guard<std::mutex> lock(mutex_);
                 ready_ = true;
             }
@@ -268,6 +399,8 @@ void ProgressiveRenderer::Run() {
             }
 
             const bool cacheView = cur.view == ViewMode::TexelMip || cur.view == ViewMode::Texels;
+            const bool heatView =
+                cur.view == ViewMode::HitMiss || cur.view == ViewMode::Overshading;
             const bool wantCache =
                 (cur.textureSpace && CachedIntegrator(cur.integrator)) || cacheView;
             if (wantCache && (!cache || !SameCacheContents(cur, built))) {
@@ -310,19 +443,30 @@ void ProgressiveRenderer::Run() {
                 opt.progress = false;
                 opt.texture = cache ? cache->options() : TextureOptions(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
+                // Heat views record each pixel's lookups during this very frame (a probe of the
+                // cache afterwards would find everything it just stored).
+                opt.pixelCache = heatView ? &pixelCounts : nullptr;
                 if (cur.refineCacheWhenStill && accumulated > 0 && opt.texture.enabled)
                     cache->cache().InvalidateAll();
                 const RenderResult r =
                     Render(*rs, opt, opt.texture.enabled ? cache.get() : nullptr);
-                ++accumulated;
-                const double inv = 1.0 / double(accumulated);
-                tbb::parallel_for(tbb::blocked_range<size_t>(0, accum_.size(), 16384),
-                                  [&](auto range) {
-                                      for (size_t i = range.begin(); i < range.end(); ++i) {
-                                          accum_[i] += double(r.beauty.data[i]);
-                                          mean.data[i] = float(accum_[i] * inv);
-                                      }
-                                  });
+                if (heatView) {
+                    // One frame per change: the map shows what the frame after a move looked up;
+                    // further frames of a still view would only show a warm cache.
+                    frame.overshadeTop =
+                        RenderHeatView(*rs, frameTime, pixelCounts, cur.view, &mean);
+                    accumulated = INT_MAX;
+                } else {
+                    ++accumulated;
+                    const double inv = 1.0 / double(accumulated);
+                    tbb::parallel_for(tbb::blocked_range<size_t>(0, accum_.size(), 16384),
+                                      [&](auto range) {
+                                          for (size_t i = range.begin(); i < range.end(); ++i) {
+                                              accum_[i] += double(r.beauty.data[i]);
+                                              mean.data[i] = float(accum_[i] * inv);
+                                          }
+                                      });
+                }
                 frame.raysPerSecond =
                     r.stats.seconds > 0.0 ? double(r.stats.TotalRays()) / r.stats.seconds : 0.0;
                 frame.textureSpace = opt.texture.enabled && CachedIntegrator(opt.integrator);
@@ -334,6 +478,8 @@ void ProgressiveRenderer::Run() {
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             frame.accumulated = accumulated == INT_MAX ? 1 : accumulated;
             frame.cacheBytes = cache ? cache->cache().BytesUsed() : 0;
+            frame.time = frameTime;
+            frame.cacheFrame = cacheFrame;
             publish(cur, version, &frame);
         } catch (const std::exception& e) {
             std::lock_guard<std::mutex> lock(mutex_);

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // Progressive rendering for the preview on a worker thread.
 //
-// Threading: the UI thread only posts settings and camera (SetSettings, SetCamera, RequestPick)
+// Threading: the UI thread only posts settings and camera (Post, RequestPick)
 // and reads results (WithDisplay, Stats, CopyImage); it never waits for a frame (except the
 // headless mode's WaitForFrame). The worker owns the Scene, the RenderScene and the
 // TextureSpaceCache; one mutex guards the posted state and the published results, and is never
@@ -10,7 +10,10 @@
 // accumulation instead of being averaged with stale frames.
 //
 // Ownership: the texture-space cache lives as long as the settings that shape it (filters, sizes,
-// LOD bias, cached term); camera moves keep it, which is the point of the preview.
+// LOD bias, cached term); camera moves keep it, which is the point of the preview. A change of
+// scene time (animation) re-poses the RenderScene and starts a cache frame (BeginFrame: every
+// sample and texel re-shaded), as `texcache render --frames` does between frames; when only the
+// camera is animated, shading does not change and the cache is kept, as for any camera move.
 #pragma once
 #include <atomic>
 #include <condition_variable>
@@ -28,9 +31,16 @@
 
 namespace texcache::preview {
 
-/// What the preview window shows.
-enum class ViewMode { Beauty, FaceId, TexelMip, Texels };
+/// What the preview window shows. HitMiss and Overshading are heat maps of the texel-cache
+/// lookups of the frame rendered after the last change (camera, settings or time).
+enum class ViewMode { Beauty, FaceId, TexelMip, Texels, HitMiss, Overshading };
+constexpr int kNumViewModes = 6;
+/// The panel's name of a view.
 const char* ViewModeName(ViewMode m);
+/// The command line's name of a view (--view), e.g. "hitmiss".
+const char* ViewModeKey(ViewMode m);
+/// Parses a --view name; throws InputError listing the valid names.
+ViewMode ParseViewMode(const std::string& key, const std::string& where);
 
 /// Everything the panel can change. Compared field by field to decide what to rebuild.
 struct PreviewSettings {
@@ -51,6 +61,7 @@ struct PreviewSettings {
     float exposure = 0.0f;
     ViewMode view = ViewMode::Beauty;
     int maxFrames = 256;  ///< accumulation stops here (the CPU then idles)
+    float time = 0.0f;    ///< scene time rendered (seconds); a change starts a cache frame
     /// Re-shade the cache on every accumulated frame of a still view, so texture-space noise
     /// converges too (otherwise only anti-aliasing improves while still).
     bool refineCacheWhenStill = false;
@@ -70,6 +81,9 @@ struct FrameStats {
     double texelHitRate = 0.0;
     uint64_t lookups = 0, samplesShaded = 0;
     size_t cacheBytes = 0;
+    float time = 0.0f;          ///< scene time of the frame
+    uint32_t cacheFrame = 0;    ///< cache frames begun so far (one per time change)
+    uint32_t overshadeTop = 0;  ///< Overshading view: samples per pixel at the top of the scale
 };
 
 class ProgressiveRenderer {
@@ -80,9 +94,9 @@ public:
     ProgressiveRenderer(const ProgressiveRenderer&) = delete;
     ProgressiveRenderer& operator=(const ProgressiveRenderer&) = delete;
 
-    /// Posts new settings / camera; returns the version that frames with them will carry.
-    uint64_t SetSettings(const PreviewSettings& s);
-    uint64_t SetCamera(const OrbitCamera& c);
+    /// Posts new settings and camera together (no frame mixes new settings with an old camera);
+    /// returns the version that frames with them will carry.
+    uint64_t Post(const PreviewSettings& s, const OrbitCamera& c);
     /// Asks which object is under pixel (x, y) of the image; the answer comes with PickResult().
     void RequestPick(int x, int y);
     /// The object picked by the last request (-1: nothing), and whether it is new since the last
@@ -145,5 +159,37 @@ private:
 /// per pixel centre; `cache` only addresses texels (nothing is shaded or stored).
 void RenderCacheView(const RenderScene& rs, const TextureSpaceCache& cache, float frameTime,
                      ViewMode mode, Image* out);
+
+/// Hit/miss colour of a pixel whose lookups hit a fraction `hit` of the time: red (all missed)
+/// through yellow to green (all hit).
+glm::vec3 HitMissColour(float hit);
+/// Colour of a pixel whose lookups found no texel (the cache is off, or the material shades per
+/// hit): neutral grey.
+glm::vec3 NoLookupColour();
+/// Heat ramp for t in [0, 1]: dark blue (none) through cyan, green and yellow to red (the top).
+glm::vec3 HeatColour(float t);
+/// Top of the overshading scale for a frame whose busiest pixel shaded `maxShaded` samples: the
+/// next power of two (at least 1), so the legend stays put while the maximum wobbles.
+uint32_t OvershadeTop(uint32_t maxShaded);
+/// Position of a count on the log overshading scale: log(1 + n) / log(1 + top), in [0, 1].
+float OvershadeScale(float samples, uint32_t top);
+/// Inverse of OvershadeScale: the count at scale position t (for the legend's numbers).
+float OvershadeAt(float t, uint32_t top);
+
+/// Renders a heat map of a frame's per-pixel cache counts (HitMiss or Overshading) into `out`,
+/// shaded by the view angle of a ray through each pixel centre (the geometry is traced again;
+/// the cache is not touched). Returns the overshading scale's top (0 for HitMiss).
+uint32_t RenderHeatView(const RenderScene& rs, float frameTime,
+                        const std::vector<PixelCacheCounts>& counts, ViewMode mode, Image* out);
+
+/// What of a scene moves over time, and the span of its keyframes (for the preview's timeline).
+struct SceneAnimation {
+    bool animated = false;        ///< any object, light or the camera moves
+    bool cameraAnimated = false;  ///< the camera moves
+    bool posesAnimated = false;   ///< an object or a light moves (shading changes over time)
+    float start = 0.0f, end = 0.0f;
+};
+/// Looks at every keyframe track of the scene.
+SceneAnimation AnimationOf(const Scene& scene);
 
 }  // namespace texcache::preview
