@@ -15,6 +15,8 @@
 #include <optional>
 #include <thread>
 
+#include <unistd.h>
+
 #include <tbb/blocked_range2d.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -805,8 +807,16 @@ private:
             const double t = std::chrono::duration<double>(Clock::now() - start_).count();
             if (t < 1.0) continue;
             const double f = std::clamp(fraction_(), 0.0, 1.0);
-            const int w = 30, n = int(f * w);
             const double eta = f > 0.0 ? t / f - t : 0.0;
+            if (!tty_) {
+                // A log file gets a plain line every 10 s, not a redrawn bar every 250 ms.
+                if (t < nextLine_) continue;
+                nextLine_ = t + 10.0;
+                std::fprintf(stderr, "render %3d%%  %.0fs elapsed, %.0fs left\n", int(f * 100.0), t,
+                             eta);
+                continue;
+            }
+            const int w = 30, n = int(f * w);
             std::fprintf(stderr, "\rrender [%.*s%*s] %3d%%  %.1fs elapsed, %.1fs left  ", n,
                          "==============================", w - n, "", int(f * 100.0), t, eta);
             std::fflush(stderr);
@@ -819,6 +829,8 @@ private:
     std::mutex m_;
     std::condition_variable cv_;
     bool done_ = false, printed_ = false;
+    bool tty_ = isatty(fileno(stderr)) != 0;
+    double nextLine_ = 0.0;
 };
 
 }  // namespace
