@@ -110,16 +110,17 @@ public:
         *pdf = GgxPdfReflect(wo, wi, alpha_);
         if (!(*pdf > 0.0f)) return false;
         // f cos / pdf of visible-normal sampling: F G2 / G1(wo).
-        *weight = FresnelSchlick(f0_, glm::dot(wo, wm)) *
-                  (GgxG(wo, wi, alpha_) / GgxG1(wo, alpha_));
+        *weight =
+            FresnelSchlick(f0_, glm::dot(wo, wm)) * (GgxG(wo, wi, alpha_) / GgxG1(wo, alpha_));
         return true;
     }
 
     /// Samples the diffuse lobe alone (cosine); `weight` = DiffuseReflectance(). False when the
-    /// direction lies below the geometric surface, where Eval() is 0.
-    bool SampleDiffuse(glm::vec2 u, glm::vec3* wiW) const {
+    /// direction lies below the geometric surface or wo below the shading normal, where Eval() is
+    /// 0 (wiW is set in either case).
+    bool SampleDiffuse(glm::vec3 woW, glm::vec2 u, glm::vec3* wiW) const {
         *wiW = frame_.FromLocal(SampleCosineHemisphere(u));
-        return glm::dot(*wiW, ng_) > 0.0f;
+        return glm::dot(woW, frame_.n) > 0.0f && glm::dot(*wiW, ng_) > 0.0f;
     }
 
     const Frame& frame() const { return frame_; }

@@ -7,8 +7,8 @@
 
 #include <cmath>
 #include <filesystem>
-#include <limits>
 #include <functional>
+#include <limits>
 #include <map>
 #include <type_traits>
 
@@ -27,8 +27,8 @@ screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, in
     const glm::mat4 camToWorld = cam.pose.Eval(time);
     // CameraModel looks down -Z with the vertical field of view over the height and square
     // pixels; the near plane only sets clip z, which Project() does not use.
-    const glm::mat4 proj = glm::perspective(glm::radians(cam.fovYDegrees),
-                                            float(width) / float(height), 1e-3f, 1e6f);
+    const glm::mat4 proj =
+        glm::perspective(glm::radians(cam.fovYDegrees), float(width) / float(height), 1e-3f, 1e6f);
     fc.worldToClip = proj * glm::inverse(camToWorld);
     fc.position = glm::vec3(camToWorld[3]);
     fc.width = width;
@@ -43,9 +43,9 @@ template <typename Float>
 struct Layer {
     std::string name;
     std::vector<std::string> channels;
-    Float* data;                 // channels.size() floats per pixel, `stride` floats apart
-    size_t stride;               // floats from one pixel's entry to the next
-    size_t count;                // entries in the buffer (0: empty, not written)
+    Float* data;                  // channels.size() floats per pixel, `stride` floats apart
+    size_t stride;                // floats from one pixel's entry to the next
+    size_t count;                 // entries in the buffer (0: empty, not written)
     std::function<void()> clear;  // empties the buffer (reading: the layer is missing)
 };
 
@@ -118,8 +118,8 @@ void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn
     fbIn.Validate(path);
     const fs::path dir = fs::path(path).parent_path();
     if (!dir.empty() && !fs::is_directory(dir))
-        throw InputError(path, "cannot write frame buffers: directory '" + dir.string() +
-                                   "' does not exist");
+        throw InputError(
+            path, "cannot write frame buffers: directory '" + dir.string() + "' does not exist");
     const screen::FrameBuffers& fb = fbIn;
     std::vector<float> ids;
     const auto layers = Layers(fb, false, &ids);
@@ -154,8 +154,8 @@ void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn
     const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
     auto out = ImageOutput::create("openexr");
     if (!out) throw InputError(path, "cannot write frame buffers: " + OIIO::geterror());
-    const bool ok = out->open(tmp, spec) && out->write_image(TypeDesc::FLOAT, px.data()) &&
-                    out->close();
+    const bool ok =
+        out->open(tmp, spec) && out->write_image(TypeDesc::FLOAT, px.data()) && out->close();
     std::error_code ec;
     if (!ok) {
         const std::string err = out->geterror();
@@ -191,8 +191,9 @@ screen::FrameBuffers ReadFrameBuffers(const std::string& path) {
     if (!spec.getattribute("texcache:worldToClip", TypeMatrix44, &m[0][0]) ||
         !spec.getattribute("texcache:cameraPosition", TypeVector, &cam.x) ||
         !spec.getattribute("texcache:time", TypeFloat, &time))
-        throw InputError(path, "cannot read frame buffers: no texcache camera attributes (not "
-                               "written by WriteFrameBuffers?)");
+        throw InputError(path,
+                         "cannot read frame buffers: no texcache camera attributes (not "
+                         "written by WriteFrameBuffers?)");
     fb.camera.worldToClip = m;
     fb.camera.position = cam;
     fb.camera.width = fb.width;

@@ -1010,8 +1010,7 @@ glm::vec3 FiniteOrZero(glm::vec3 v) {
 /// The light sample of one frame-buffer sample: unshadowed shading into `px`, and its shadow ray
 /// with the blocker and light point when blocked (see frame_buffers_render.h).
 void FrameDirectSample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
-                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px,
-                       RayCounts& rays) {
+                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
     LightSample ls;
     const float uPick = rng.Next1D();
     const glm::vec2 u = rng.Next2D();
@@ -1023,8 +1022,7 @@ void FrameDirectSample(const Context& c, const FrameMotion& motion, const Surfac
                             ? 1.0f
                             : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
     const float cosi = std::abs(glm::dot(ls.wi, si.N));
-    const glm::vec3 S =
-        FiniteOrZero((fd + wSpec * fs) * ls.Li * (ls.delta ? cosi : cosi / ls.pdf));
+    const glm::vec3 S = FiniteOrZero((fd + wSpec * fs) * ls.Li * (ls.delta ? cosi : cosi / ls.pdf));
     if (S == glm::vec3(0.0f)) return;  // no shadow ray: counts as visible (see the header)
     px.shadingSum += S;
     const float w = Luminance(glm::abs(S));
@@ -1055,8 +1053,7 @@ void FrameDirectSample(const Context& c, const FrameMotion& motion, const Surfac
 
 /// The specular lobe's path of one sample into px.glossySum (and its first hit).
 void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
-                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px,
-                       RayCounts& rays) {
+                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
     glm::vec3 wi, weight;
     float pdf;
     if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
@@ -1069,8 +1066,7 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
     glm::vec3 L(0.0f);
     if (!found) {
         // Direct light from the environment: the light sample's MIS partner.
-        if (c.env)
-            L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(wi) * c.PickPdf());
+        if (c.env) L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(wi) * c.PickPdf());
     } else if (hit.light >= 0) {
         L = c.QuadEmission(hit.light, wi) *
             PowerHeuristic(1, pdf, 1, c.QuadPdf(hit.light, wi, hit.t));
@@ -1088,11 +1084,11 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
 /// The diffuse lobe's path of one sample: incident indirect radiance into px.diffuseSum and its
 /// cone.
 void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
-                        const std::array<glm::vec3, screen::kNumCones>& axes, Rng& rng,
-                        FramePixel& px, RayCounts& rays) {
+                        glm::vec3 wo, const std::array<glm::vec3, screen::kNumCones>& axes,
+                        Rng& rng, FramePixel& px, RayCounts& rays) {
     glm::vec3 wi;
     glm::vec3 L(0.0f);
-    if (bsdf.SampleDiffuse(rng.Next2D(), &wi)) {
+    if (bsdf.SampleDiffuse(wo, rng.Next2D(), &wi)) {
         Ray ray;
         ray.org = OffsetOrigin(si.P, si.Ng, wi);
         ray.dir = wi;
@@ -1150,7 +1146,10 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
     if (c.opt.maxDepth < 1) return;  // the path tracer sees emission only
 
     const glm::vec3 wo = -ray.dir;
-    const bool diffuse = bsdf.DiffuseReflectance() != glm::vec3(0.0f) && c.opt.maxDepth >= 2;
+    // The shading normal can face away from the camera where the tessellation does not: the
+    // BSDF is 0 there, and there is no diffuse ray (nor cone sample).
+    const bool diffuse = bsdf.DiffuseReflectance() != glm::vec3(0.0f) && c.opt.maxDepth >= 2 &&
+                         glm::dot(wo, si.N) > 0.0f;
     // Diffuse materials take indirect light from the texture-space cache, as Render() does.
     const bool cachedIndirect = diffuse && c.tsc && m.type == Material::Type::Diffuse;
     if (cachedIndirect) {
@@ -1166,7 +1165,7 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
         Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
         FrameDirectSample(c, motion, si, bsdf, wo, rng, px, rays);
         if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
-        if (diffuse && !cachedIndirect) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
+        if (diffuse && !cachedIndirect) FrameDiffuseSample(c, si, bsdf, wo, axes, rng, px, rays);
     }
     const float inv = 1.0f / float(spp);
     fb.shading[p] = px.shadingSum * inv;
@@ -1188,9 +1187,8 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
 
 }  // namespace
 
-RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& options,
-                               float prevTime, screen::FrameBuffers* out,
-                               TextureSpaceCache* cache) {
+RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& options, float prevTime,
+                               screen::FrameBuffers* out, TextureSpaceCache* cache) {
     using Clock = std::chrono::steady_clock;
     const auto start = Clock::now();
     if (options.width <= 0 || options.height <= 0)

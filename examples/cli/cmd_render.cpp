@@ -195,8 +195,8 @@ int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, 
                     int first, int last, float fps) {
     const char* opt_ = "--frame-buffers";
     if (!a.integrator.empty() && a.integrator != "path")
-        throw InputError(opt_, "renders the path tracer's decomposition: drop --integrator " +
-                                   a.integrator);
+        throw InputError(
+            opt_, "renders the path tracer's decomposition: drop --integrator " + a.integrator);
     if (!std::isnan(a.seconds)) throw InputError(opt_, "renders --spp samples: drop --seconds");
     if (!a.aovs.empty()) throw InputError(opt_, "writes every buffer already: drop --aov");
     if (a.overshading) throw InputError(opt_, "cannot be combined with --overshading");
@@ -244,10 +244,11 @@ int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, 
                        a.exposure);
         }
         total += NowSeconds() - tf;
-        std::printf("frame %d (%d of %d, t = %.3f): %.3f s render (%.2f Mrays/s), %.3f s total -> %s\n",
-                    f, f - first + 1, last - first + 1, fo.frameTime, st.seconds,
-                    double(st.TotalRays()) / std::max(st.seconds, 1e-9) * 1e-6, NowSeconds() - tf,
-                    exr.c_str());
+        std::printf(
+            "frame %d (%d of %d, t = %.3f): %.3f s render (%.2f Mrays/s), %.3f s total -> %s\n", f,
+            f - first + 1, last - first + 1, fo.frameTime, st.seconds,
+            double(st.TotalRays()) / std::max(st.seconds, 1e-9) * 1e-6, NowSeconds() - tf,
+            exr.c_str());
         std::fflush(stdout);
     }
     std::printf("wrote frame buffers of %d frames of %s in %.2f s (%dx%d, %d spp) to %s\n",
