@@ -507,10 +507,12 @@ TEST(FrameBuffers, AnimatedScenesRenderFramePairs) {
         if (std::string(c.what) == "camera") {
             moved = frames[0].camera.worldToClip != frames[1].camera.worldToClip;
             // Nothing else moves: every point's previous position is itself.
-            for (size_t p = 0; p < frames[0].NumPixels(); ++p)
-                if (Finite(frames[0].position[p]))
+            for (size_t p = 0; p < frames[0].NumPixels(); ++p) {
+                if (Finite(frames[0].position[p])) {
                     EXPECT_NEAR(glm::distance(frames[0].position[p], frames[0].prevPosition[p]),
                                 0.0f, 1e-5f);
+                }
+            }
         }
         EXPECT_GT(moved, 0) << c.what;
         EXPECT_GT(surfaces, 48 * 27 / 2);
@@ -613,7 +615,9 @@ TEST(FrameBuffers, TextureSpaceCacheComposes) {
             int cones = 0;
             for (int k = 0; k < screen::kNumCones; ++k)
                 cones += Finite(fb.cones[p * screen::kNumCones + k]);
-            if (diffuse) EXPECT_EQ(cones, 0) << p;
+            if (diffuse) {
+                EXPECT_EQ(cones, 0) << p;
+            }
         }
         for (const glm::vec3& c : fb.Compose()) cached += Luminance(c);
         o.texture.enabled = false;
