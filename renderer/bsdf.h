@@ -68,6 +68,61 @@ public:
         return true;
     }
 
+    // ---- The lobes separately (the screen-space frame buffers keep them apart) ----
+
+    /// Whether there is a specular (GGX) lobe.
+    bool HasSpecular() const { return ggx_; }
+    /// GGX alpha of the specular lobe (0 without one).
+    float Alpha() const { return ggx_ ? alpha_ : 0.0f; }
+    /// Reflectance of the diffuse lobe: albedo, times (1 - max F0) under a specular layer.
+    glm::vec3 DiffuseReflectance() const { return kd_ * albedo_; }
+
+    /// Eval() split into the diffuse and the specular lobe (their sum is Eval()).
+    void EvalLobes(glm::vec3 woW, glm::vec3 wiW, glm::vec3* diffuse, glm::vec3* specular) const {
+        *diffuse = *specular = glm::vec3(0.0f);
+        if (glm::dot(wiW, ng_) <= 0.0f) return;
+        const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
+        if (wi.z <= 0.0f || wo.z <= 0.0f) return;
+        *diffuse = kd_ * albedo_ * kInvPi;
+        if (ggx_) {
+            const glm::vec3 wm = glm::normalize(wo + wi);
+            *specular = FresnelSchlick(f0_, glm::dot(wo, wm)) *
+                        (GgxD(wm, alpha_) * GgxG(wo, wi, alpha_) / (4.0f * wo.z * wi.z));
+        }
+    }
+
+    /// Solid-angle pdf of SampleSpecular() producing wiW.
+    float PdfSpecular(glm::vec3 woW, glm::vec3 wiW) const {
+        if (!ggx_) return 0.0f;
+        return GgxPdfReflect(frame_.ToLocal(woW), frame_.ToLocal(wiW), alpha_);
+    }
+
+    /// Samples the specular lobe alone (visible normals); `weight` = f_spec * cos / pdf.
+    bool SampleSpecular(glm::vec3 woW, glm::vec2 u, glm::vec3* wiW, glm::vec3* weight,
+                        float* pdf) const {
+        const glm::vec3 wo = frame_.ToLocal(woW);
+        if (!ggx_ || wo.z <= 0.0f) return false;
+        const glm::vec3 wm = GgxSampleVisibleNormal(wo, alpha_, u);
+        const glm::vec3 wi = glm::reflect(-wo, wm);
+        if (wi.z <= 0.0f) return false;
+        *wiW = frame_.FromLocal(wi);
+        if (glm::dot(*wiW, ng_) <= 0.0f) return false;
+        *pdf = GgxPdfReflect(wo, wi, alpha_);
+        if (!(*pdf > 0.0f)) return false;
+        // f cos / pdf of visible-normal sampling: F G2 / G1(wo).
+        *weight =
+            FresnelSchlick(f0_, glm::dot(wo, wm)) * (GgxG(wo, wi, alpha_) / GgxG1(wo, alpha_));
+        return true;
+    }
+
+    /// Samples the diffuse lobe alone (cosine); `weight` = DiffuseReflectance(). False when the
+    /// direction lies below the geometric surface or wo below the shading normal, where Eval() is
+    /// 0 (wiW is set in either case).
+    bool SampleDiffuse(glm::vec3 woW, glm::vec2 u, glm::vec3* wiW) const {
+        *wiW = frame_.FromLocal(SampleCosineHemisphere(u));
+        return glm::dot(woW, frame_.n) > 0.0f && glm::dot(*wiW, ng_) > 0.0f;
+    }
+
     const Frame& frame() const { return frame_; }
 
 private:

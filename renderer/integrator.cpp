@@ -4,12 +4,14 @@
 #include <pmmintrin.h>
 #include <xmmintrin.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -26,6 +28,7 @@
 #include "renderer/bsdf.h"
 #include "renderer/camera.h"
 #include "renderer/envmap.h"
+#include "renderer/frame_buffers_render.h"
 #include "renderer/sampling.h"
 #include "texcache/error.h"
 
@@ -70,7 +73,8 @@ struct LightSample {
     glm::vec3 Li;  // incident radiance (irradiance for delta lights)
     float pdf;     // solid angle, includes light selection; 0 for delta lights (no MIS)
     bool delta;
-    int quad = -1;  // the quad light sampled, -1 for other lights
+    int quad = -1;     // the quad light sampled, -1 for other lights
+    int distant = -1;  // the distant light sampled, -1 for other lights
 };
 
 /// Everything the per-sample code reads, resolved once per frame.
@@ -168,6 +172,7 @@ struct Context {
             s->Li = distantE[i] * float(numLights);  // divided by the pick probability
             s->pdf = 0.0f;
             s->delta = true;
+            s->distant = i;
             return true;
         }
         float pdf;
@@ -620,7 +625,8 @@ glm::vec3 SplitAtHit(const Context& c, int x, int y, int s, Rng& rng, LiFn&& li)
 
 glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCounts& rays) {
     Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
-    const glm::vec2 jitter = rng.Next2D();
+    glm::vec2 jitter = rng.Next2D();
+    if (c.opt.pixelCentre) jitter = glm::vec2(0.5f);  // drawn anyway: same streams either way
     const glm::vec2 lens = rng.Next2D();
     const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
     // Differentials feed the cache's mip selection and the debug views; skip them otherwise.
@@ -717,7 +723,8 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         for (int x = x0; x < x1; ++x)
             for (int s = s0; s < s1; ++s) {
                 Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
-                const glm::vec2 jitter = rng.Next2D();
+                glm::vec2 jitter = rng.Next2D();
+                if (c.opt.pixelCentre) jitter = glm::vec2(0.5f);
                 const glm::vec2 lens = rng.Next2D();
                 const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
                 Pending p{Ray{}, Hit{}, rng, y * c.opt.width + x, false, {}};
@@ -992,6 +999,331 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     result.stats.sppDone = done;
     result.stats.seconds = elapsed();
     return result;
+}
+
+// ---- screen-space frame buffers (frame_buffers_render.h) ------------------------------------
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+const glm::vec3 kNaN3(kNaN);
+
+/// Where everything that moves was at the previous frame: world at the frame time -> world at
+/// prevTime, per object and per quad light (T^-1 of Zeng eq. 1/3/5), and distant lights'
+/// direction rotations.
+struct FrameMotion {
+    std::vector<glm::mat4> object, light;
+    std::vector<glm::mat3> objectN, lightN;  // their normal matrices
+    std::vector<glm::mat3> distant;
+    float infinity = 1e4f;  // distance at which points of lights at infinity are put
+
+    FrameMotion(const RenderScene& rs, const RenderOptions& opt, float prevTime) {
+        const Scene& scene = rs.scene();
+        auto normalMatrix = [](const glm::mat4& m) {
+            return glm::transpose(glm::inverse(glm::mat3(m)));
+        };
+        float extent = glm::length(glm::vec3(scene.camera.pose.Eval(opt.frameTime)[3]));
+        for (size_t o = 0; o < scene.objects.size(); ++o) {
+            // The frame's pose is the render scene's (shutter time 0), so moved points start
+            // exactly where the rays found them.
+            const glm::mat4 now = rs.ObjectToWorld(int(o), 0.0f);
+            object.push_back(scene.objects[o].transform.Eval(prevTime) * glm::inverse(now));
+            objectN.push_back(normalMatrix(object.back()));
+            for (const auto& p : scene.meshes[scene.objects[o].mesh].positions)
+                extent = std::max(extent,
+                                  glm::length(glm::vec3(now * glm::vec4(p[0], p[1], p[2], 1.0f))));
+        }
+        for (const QuadLight& q : scene.quadLights) {
+            light.push_back(q.transform.Eval(prevTime) *
+                            glm::inverse(q.transform.Eval(opt.frameTime)));
+            lightN.push_back(normalMatrix(light.back()));
+        }
+        for (const DistantLight& d : scene.distantLights)
+            distant.push_back(glm::mat3(d.transform.Eval(prevTime)) *
+                              glm::inverse(glm::mat3(d.transform.Eval(opt.frameTime))));
+        // Far enough that the line from a blocker to it has the light's direction to ~1e-4.
+        infinity = 1e4f * std::max(extent, 1e-3f);
+    }
+
+    /// A point on what a ray hit, moved to the previous frame.
+    glm::vec3 Point(const Hit& h, glm::vec3 p) const {
+        const glm::mat4& m = h.object >= 0 ? object[h.object] : light[h.light];
+        return glm::vec3(m * glm::vec4(p, 1.0f));
+    }
+    glm::vec3 Normal(const Hit& h, glm::vec3 n) const {
+        return glm::normalize((h.object >= 0 ? objectN[h.object] : lightN[h.light]) * n);
+    }
+};
+
+/// One pixel's buffers while its samples are taken.
+struct FramePixel {
+    glm::vec3 shadingSum{0.0f}, glossySum{0.0f}, diffuseSum{0.0f};
+    float weightSum = 0.0f, visibleWeightSum = 0.0f;
+    float blockerWeight = -1.0f;  // shading luminance of the recorded blocked sample
+    glm::vec3 blocker = kNaN3, prevBlocker = kNaN3, light = kNaN3, prevLight = kNaN3;
+    glm::vec3 glossyHit = kNaN3, prevGlossyHit = kNaN3;
+    std::array<glm::vec3, screen::kNumCones> coneSum{};
+    std::array<int, screen::kNumCones> coneCount{};
+};
+
+glm::vec3 FiniteOrZero(glm::vec3 v) {
+    return std::isfinite(v.x + v.y + v.z) ? v : glm::vec3(0.0f);
+}
+
+/// The light sample of one frame-buffer sample: unshadowed shading into `px`, and its shadow ray
+/// with the blocker and light point when blocked (see frame_buffers_render.h).
+void FrameDirectSample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
+                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+    LightSample ls;
+    const float uPick = rng.Next1D();
+    const glm::vec2 u = rng.Next2D();
+    if (!c.SampleLight(si.P, uPick, u, &ls)) return;
+    glm::vec3 fd, fs;
+    bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
+    // The specular ray may find this light too (in `glossy`): MIS between the two for that lobe.
+    const float wSpec = ls.delta || !bsdf.HasSpecular()
+                            ? 1.0f
+                            : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
+    const float cosi = std::abs(glm::dot(ls.wi, si.N));
+    const glm::vec3 S = FiniteOrZero((fd + wSpec * fs) * ls.Li * (ls.delta ? cosi : cosi / ls.pdf));
+    if (S == glm::vec3(0.0f)) return;  // no shadow ray: counts as visible (see the header)
+    px.shadingSum += S;
+    const float w = Luminance(glm::abs(S));
+    px.weightSum += w;
+    const Ray shadow = ShadowRay(si, ls, 0.0f);
+    Hit bh;
+    ++rays.shadow;
+    if (!c.rs.Intersect(shadow, &bh)) {
+        px.visibleWeightSum += w;
+        return;
+    }
+    if (w <= px.blockerWeight) return;
+    px.blockerWeight = w;
+    px.blocker = shadow.org + bh.t * shadow.dir;
+    px.prevBlocker = motion.Point(bh, px.blocker);
+    if (ls.quad >= 0) {
+        px.light = si.P + ls.dist * ls.wi;  // the sampled point of the quad
+        px.prevLight = glm::vec3(motion.light[ls.quad] * glm::vec4(px.light, 1.0f));
+    } else {
+        // At infinity: a far point along the light direction from the blocker, so the line from
+        // the light point through the blocker has the light's direction in both frames.
+        const glm::vec3 prevDir =
+            ls.distant >= 0 ? glm::normalize(motion.distant[ls.distant] * ls.wi) : ls.wi;
+        px.light = px.blocker + motion.infinity * ls.wi;
+        px.prevLight = px.prevBlocker + motion.infinity * prevDir;
+    }
+}
+
+/// The specular lobe's path of one sample into px.glossySum (and its first hit).
+void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
+                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+    glm::vec3 wi, weight;
+    float pdf;
+    if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
+    Ray ray;
+    ray.org = OffsetOrigin(si.P, si.Ng, wi);
+    ray.dir = wi;
+    Hit hit;
+    ++rays.bounce;
+    const bool found = c.rs.Intersect(ray, &hit);
+    glm::vec3 L(0.0f);
+    if (!found) {
+        // Direct light from the environment: the light sample's MIS partner.
+        if (c.env) L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(wi) * c.PickPdf());
+    } else if (hit.light >= 0) {
+        L = c.QuadEmission(hit.light, wi) *
+            PowerHeuristic(1, pdf, 1, c.QuadPdf(hit.light, wi, hit.t));
+    } else {
+        // Light found at the hit (NEE) and beyond; emission at this hit was handled above.
+        L = LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+    }
+    px.glossySum += FiniteOrZero(weight * L);
+    if (found && !std::isfinite(px.glossyHit.x)) {
+        px.glossyHit = ray.org + hit.t * ray.dir;
+        px.prevGlossyHit = motion.Point(hit, px.glossyHit);
+    }
+}
+
+/// The diffuse lobe's path of one sample: incident indirect radiance into px.diffuseSum and its
+/// cone.
+void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
+                        glm::vec3 wo, const std::array<glm::vec3, screen::kNumCones>& axes,
+                        Rng& rng, FramePixel& px, RayCounts& rays) {
+    glm::vec3 wi;
+    glm::vec3 L(0.0f);
+    if (bsdf.SampleDiffuse(wo, rng.Next2D(), &wi)) {
+        Ray ray;
+        ray.org = OffsetOrigin(si.P, si.Ng, wi);
+        ray.dir = wi;
+        Hit hit;
+        ++rays.bounce;
+        const bool found = c.rs.Intersect(ray, &hit);
+        // Light hit directly is the light sample's: emitFirst = false.
+        L = FiniteOrZero(LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false));
+    }
+    px.diffuseSum += L;
+    const int k = screen::ConeOf(axes, wi);
+    px.coneSum[k] += L;
+    ++px.coneCount[k];
+}
+
+/// All buffers of pixel (x, y).
+void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y,
+                       screen::FrameBuffers& fb, RayCounts& rays) {
+    const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
+    RayDifferentials diff;
+    // Pixel centre, lens centre, shutter open: exact guides (see the header).
+    Ray ray = c.camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f),
+                                c.tsc ? &diff : nullptr);
+    ray.time = 0.0f;
+    ++rays.camera;
+    Hit hit;
+    if (!c.rs.Intersect(ray, &hit)) {
+        if (c.env) fb.emitted[p] = c.env->Eval(ray.dir);
+        return;
+    }
+    if (hit.light >= 0) {
+        fb.emitted[p] = c.QuadEmission(hit.light, ray.dir);
+        const glm::vec3 P = ray.org + hit.t * ray.dir;
+        glm::vec3 n = c.quads[hit.light].n;
+        if (glm::dot(n, ray.dir) > 0.0f) n = -n;
+        fb.position[p] = P;
+        fb.normal[p] = n;
+        fb.depth[p] = hit.t;
+        fb.prevPosition[p] = motion.Point(hit, P);
+        fb.prevNormal[p] = motion.Normal(hit, n);
+        return;
+    }
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, c.tsc ? &diff : nullptr);
+    const Bsdf bsdf = MakeBsdf(c, si);
+    const Material& m = c.scene.materials[si.material];
+    fb.position[p] = si.P;
+    fb.normal[p] = si.N;
+    fb.depth[p] = hit.t;
+    fb.roughness[p] = bsdf.Alpha();
+    fb.albedo[p] = bsdf.DiffuseReflectance();
+    fb.specular[p] = bsdf.HasSpecular() ? m.specular : glm::vec3(0.0f);
+    fb.objectId[p] = si.object;
+    fb.prevPosition[p] = motion.Point(hit, si.P);
+    fb.prevNormal[p] = motion.Normal(hit, si.N);
+    if (c.opt.maxDepth < 1) return;  // the path tracer sees emission only
+
+    const glm::vec3 wo = -ray.dir;
+    // The shading normal can face away from the camera where the tessellation does not: the
+    // BSDF is 0 there, and there is no diffuse ray (nor cone sample).
+    const bool diffuse = bsdf.DiffuseReflectance() != glm::vec3(0.0f) && c.opt.maxDepth >= 2 &&
+                         glm::dot(wo, si.N) > 0.0f;
+    // Diffuse materials take indirect light from the texture-space cache, as Render() does.
+    const bool cachedIndirect = diffuse && c.tsc && m.type == Material::Type::Diffuse;
+    if (cachedIndirect) {
+        const glm::vec3 E = CachedLookup(
+            c, si, [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, false, rays); },
+            c.opt.texture.indirectSamples);
+        fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
+    }
+    const std::array<glm::vec3, screen::kNumCones> axes = screen::ConeAxes(si.N);
+    FramePixel px;
+    const int spp = std::max(c.opt.spp, 1);
+    for (int s = 0; s < spp; ++s) {
+        Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
+        FrameDirectSample(c, motion, si, bsdf, wo, rng, px, rays);
+        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
+        if (diffuse && !cachedIndirect) FrameDiffuseSample(c, si, bsdf, wo, axes, rng, px, rays);
+    }
+    const float inv = 1.0f / float(spp);
+    fb.shading[p] = px.shadingSum * inv;
+    fb.visibility[p] = px.weightSum > 0.0f ? px.visibleWeightSum / px.weightSum : 1.0f;
+    fb.glossy[p] = px.glossySum * inv;
+    if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
+    if (fb.visibility[p] < 1.0f) {
+        fb.blocker[p] = px.blocker;
+        fb.prevBlocker[p] = px.prevBlocker;
+        fb.lightSample[p] = px.light;
+        fb.prevLightSample[p] = px.prevLight;
+    }
+    fb.glossyHit[p] = px.glossyHit;
+    fb.prevGlossyHit[p] = px.prevGlossyHit;
+    for (int k = 0; k < screen::kNumCones; ++k)
+        if (px.coneCount[k] > 0)
+            fb.cones[p * screen::kNumCones + k] = px.coneSum[k] / float(px.coneCount[k]);
+}
+
+}  // namespace
+
+RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& options, float prevTime,
+                               screen::FrameBuffers* out, TextureSpaceCache* cache) {
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    if (options.width <= 0 || options.height <= 0)
+        throw InputError("frame buffers", "frame size must be positive, got " +
+                                              std::to_string(options.width) + "x" +
+                                              std::to_string(options.height));
+    if (!std::isfinite(prevTime))
+        throw InputError("frame buffers", "the previous frame's time is not finite");
+    RenderOptions opt = options;
+    opt.integrator = IntegratorKind::Path;  // the Context builds the lights for it
+    Context ctx(rs, opt);
+    std::unique_ptr<TextureSpaceCache> frameCache;
+    tbb::enumerable_thread_specific<CacheStats> cacheStats;
+    if (opt.texture.enabled) {
+        if (!cache) {
+            frameCache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
+            cache = frameCache.get();
+        }
+        ctx.tsc = cache;
+        ctx.cacheStats = &cacheStats;
+    }
+    const FrameMotion motion(rs, opt, prevTime);
+
+    screen::FrameBuffers& fb = *out;
+    const int W = opt.width, H = opt.height;
+    fb.width = W;
+    fb.height = H;
+    fb.time = opt.frameTime;
+    fb.camera = MakeFrameCamera(rs.scene().camera, opt.frameTime, W, H);
+    const size_t n = fb.NumPixels();
+    // assign() keeps the capacity of a FrameBuffers reused across frames.
+    const glm::vec3 zero(0.0f);
+    fb.emitted.assign(n, zero);
+    fb.shading.assign(n, zero);
+    fb.visibility.assign(n, 1.0f);
+    fb.glossy.assign(n, zero);
+    fb.indirect.assign(n, zero);
+    fb.position.assign(n, kNaN3);
+    fb.normal.assign(n, kNaN3);
+    fb.depth.assign(n, INFINITY);
+    fb.roughness.assign(n, 0.0f);
+    fb.albedo.assign(n, zero);
+    fb.specular.assign(n, zero);
+    fb.objectId.assign(n, -1);
+    fb.prevPosition.assign(n, kNaN3);
+    fb.prevNormal.assign(n, kNaN3);
+    for (auto* v : {&fb.blocker, &fb.prevBlocker, &fb.lightSample, &fb.prevLightSample,
+                    &fb.glossyHit, &fb.prevGlossyHit})
+        v->assign(n, kNaN3);
+    fb.cones.assign(n * screen::kNumCones, kNaN3);
+
+    tbb::enumerable_thread_specific<RayCounts> counts;
+    tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
+                      [&](const tbb::blocked_range2d<int>& r) {
+                          _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                          _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                          RayCounts& rc = counts.local();
+                          for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+                              for (int x = r.cols().begin(); x < r.cols().end(); ++x)
+                                  FramePixelBuffers(ctx, motion, x, y, fb, rc);
+                      });
+
+    RenderStats stats;
+    for (const RayCounts& rc : counts) {
+        stats.cameraRays += rc.camera;
+        stats.shadowRays += rc.shadow;
+        stats.bounceRays += rc.bounce;
+    }
+    for (const CacheStats& cs : cacheStats) stats.cache.Merge(cs);
+    stats.sppDone = std::max(opt.spp, 1);
+    stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return stats;
 }
 
 }  // namespace texcache

@@ -47,6 +47,9 @@ struct RenderOptions {
     int hitSamples = 1;
     float aoDistance = 1e30f;
     float frameTime = 0.0f;  ///< scene time at shutter open
+    /// Every camera ray through its pixel's centre (no antialiasing), as the screen-space frame
+    /// buffers trace them (frame_buffers_render.h): for comparing the two pixel by pixel.
+    bool pixelCentre = false;
     AovFlags aovs;
     TextureSpaceOptions texture;  ///< cached AO / diffuse indirect when texture.enabled
     bool progress = true;         ///< progress bar on stderr for renders longer than a second

@@ -281,8 +281,16 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             if (m.roughness.texture >= 0) texUsed[m.roughness.texture] = 1;
         }
         I.textures.resize(scene.textures.size());
-        for (size_t t = 0; t < scene.textures.size(); ++t)
-            if (texUsed[t]) I.textures[t] = std::make_unique<TextureImage>(scene.textures[t]);
+        for (size_t t = 0; t < scene.textures.size(); ++t) {
+            if (!texUsed[t]) continue;
+            try {
+                I.textures[t] = std::make_unique<TextureImage>(scene.textures[t]);
+            } catch (const InputError& e) {
+                // The image's own error names the file; add the scene key that refers to it.
+                if (scene.textures[t].where.empty()) throw;
+                throw InputError(scene.textures[t].where, e.what());
+            }
+        }
     }
 }
 

@@ -47,6 +47,9 @@ struct Texture {
     std::string path;                      ///< Image
     glm::vec3 colorA{0.8f}, colorB{0.2f};  ///< Checker
     float scale = 8.0f;                    ///< Checker: squares per uv unit
+    /// Where the scene file names it ("scene.json: key 'materials.m.albedo.texture'"), for
+    /// errors found when the image is read; empty for textures made in code.
+    std::string where;
 };
 
 /// A colour or scalar that is either a constant or a texture index.

@@ -259,6 +259,7 @@ int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
         t.kind = Texture::Kind::Image;
         t.path = Resolve(base, name);
         RequireFile(n["texture"], t.path, "texture file");
+        t.where = n["texture"].Where();
     }
     scene->textures.push_back(t);
     return int(scene->textures.size()) - 1;

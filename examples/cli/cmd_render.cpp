@@ -12,6 +12,7 @@
 
 #include "cli_util.h"
 #include "commands.h"
+#include "renderer/frame_buffers_render.h"
 #include "renderer/integrator.h"
 #include "renderer/scene_loader.h"
 #include "renderer/texture_space.h"
@@ -59,6 +60,9 @@ struct RenderArgs {
     int hitSamples = 1;
     std::string cachedLight = "indirect";
     std::string statsFile;
+    // Screen-space frame buffers: one multi-layer EXR per frame in this directory.
+    std::string frameBuffers;
+    bool outputGiven = false;
 };
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
@@ -187,6 +191,74 @@ std::string FramePath(const std::string& output, int f) {
     return (p.parent_path() / (p.stem().string() + num + p.extension().string())).string();
 }
 
+/// --frame-buffers DIR: each frame's screen-space buffers as DIR/frame_NNNN.exr (+ the composed
+/// image as a PNG), 1 spp unless --spp; the texture-space cache (if any) lives across frames.
+int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool sppGiven,
+                    int first, int last, float fps) {
+    const char* opt_ = "--frame-buffers";
+    if (!a.integrator.empty() && a.integrator != "path")
+        throw InputError(
+            opt_, "renders the path tracer's decomposition: drop --integrator " + a.integrator);
+    if (!std::isnan(a.seconds)) throw InputError(opt_, "renders --spp samples: drop --seconds");
+    if (!a.aovs.empty()) throw InputError(opt_, "writes every buffer already: drop --aov");
+    if (a.overshading) throw InputError(opt_, "cannot be combined with --overshading");
+    if (!a.statsFile.empty()) throw InputError(opt_, "cannot be combined with --stats");
+    if (a.outputGiven) throw InputError(opt_, "names the output directory: drop -o/--output");
+    if (!sppGiven) opt.spp = 1;  // the real-time setting the buffers are for
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::create_directories(a.frameBuffers, ec);
+    if (!fs::is_directory(a.frameBuffers))
+        throw InputError(opt_, "cannot create directory '" + a.frameBuffers + "'" +
+                                   (ec ? ": " + ec.message() : ""));
+
+    std::unique_ptr<tbb::global_control> limit;
+    if (a.threads > 0)
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      a.threads);
+    RenderSceneOptions ro;
+    ro.threads = a.threads;
+    std::unique_ptr<TextureSpaceCache> cache;
+    screen::FrameBuffers fb;
+    const float start = opt.frameTime;
+    double total = 0.0;
+    for (int f = first; f <= last; ++f) {
+        const double tf = NowSeconds();
+        ro.frameTime = opt.frameTime = start + float(f) / fps;
+        RenderScene rs(scene, ro);
+        if (opt.texture.enabled && !cache)
+            cache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
+        if (cache) cache->BeginFrame(uint32_t(f));
+        RenderOptions fo = opt;
+        fo.seed = opt.seed + uint64_t(f) * 0x9E3779B9ull;  // fresh noise per frame
+        const RenderStats st =
+            RenderFrameBuffers(rs, fo, fo.frameTime - 1.0f / fps, &fb, cache.get());
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%04d", f);
+        const std::string exr = (fs::path(a.frameBuffers) / (std::string(name) + ".exr")).string();
+        WriteFrameBuffers(exr, fb);
+        if (!a.noPng) {
+            const std::vector<glm::vec3> c = fb.Compose();
+            Image img(fb.width, fb.height, 3);
+            for (size_t p = 0; p < c.size(); ++p)
+                for (int k = 0; k < 3; ++k) img.data[3 * p + k] = c[p][k];
+            WriteImage((fs::path(a.frameBuffers) / (std::string(name) + ".png")).string(), img, {},
+                       a.exposure);
+        }
+        total += NowSeconds() - tf;
+        std::printf(
+            "frame %d (%d of %d, t = %.3f): %.3f s render (%.2f Mrays/s), %.3f s total -> %s\n", f,
+            f - first + 1, last - first + 1, fo.frameTime, st.seconds,
+            double(st.TotalRays()) / std::max(st.seconds, 1e-9) * 1e-6, NowSeconds() - tf,
+            exr.c_str());
+        std::fflush(stdout);
+    }
+    std::printf("wrote frame buffers of %d frames of %s in %.2f s (%dx%d, %d spp) to %s\n",
+                last - first + 1, scene.path.c_str(), total, opt.width, opt.height, opt.spp,
+                a.frameBuffers.c_str());
+    return 0;
+}
+
 int RunRender(const RenderArgs& a) {
     std::vector<std::string> warnings;
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
@@ -211,6 +283,22 @@ int RunRender(const RenderArgs& a) {
     if (!std::isnan(a.time)) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     CheckRange("--threads", a.threads, 0, 4096);
 
+    if (!a.frameBuffers.empty()) {
+        // Frame buffers are always the path tracer's split, whatever the scene's integrator.
+        RenderOptions fbo;
+        fbo.width = s.width;
+        fbo.height = s.height;
+        fbo.spp = s.spp;
+        fbo.seed = s.seed;
+        fbo.maxDepth = s.maxDepth;
+        fbo.frameTime = s.time;
+        fbo.texture = ParseTextureOptions(a);
+        fbo.progress = false;
+        int first = 0, last = 0;
+        if (!a.frames.empty()) ParseFrames(a.frames, &first, &last);
+        const float fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
+        return RunFrameBuffers(a, scene, fbo, a.spp != kUnset, first, last, fps);
+    }
     RenderOptions opt;
     opt.integrator = ParseIntegrator(s.integrator, a.integrator.empty()
                                                        ? scene.path + ": key 'render.integrator'"
@@ -335,9 +423,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     CLI::App* cmd = app.add_subcommand("render", "Render a scene file (.json) or a bare OBJ cage");
     cmd->add_option("scene", args->scene, "Scene file (.json) or OBJ control cage (.obj)")
         ->required();
-    cmd->add_option("-o,--output", args->output,
-                    "Output image (.exr writes a .png beside it; .png only)")
-        ->capture_default_str();
+    CLI::Option* output = cmd->add_option("-o,--output", args->output,
+                                          "Output image (.exr writes a .png beside it; .png only)")
+                              ->capture_default_str();
     cmd->add_option("--spp", args->spp, "Samples per pixel (a cap when --seconds is given)");
     cmd->add_option("--seconds", args->seconds, "Time budget in seconds (progressive passes)");
     cmd->add_option("--resolution", args->resolution, "Image size WxH, e.g. 1280x720");
@@ -403,7 +491,16 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
         "--overshading", args->overshading,
         "Also render with unbounded caches and report the extra shading of the bounded ones");
     cmd->add_option("--stats", args->statsFile, "Write cache statistics as JSON to FILE");
-    cmd->callback([args, &exitCode] { exitCode = RunRender(*args); });
+    cmd->add_option("--frame-buffers", args->frameBuffers,
+                    "Screen-space stage input: write each frame's buffers (components, guides, "
+                    "motion-vector inputs, cones) as DIR/frame_NNNN.exr (+ the composed image as "
+                    ".png) instead of an image; 1 spp unless --spp; with --frames/--fps, 'prev' "
+                    "buffers are at t - 1/fps")
+        ->type_name("DIR");
+    cmd->callback([args, output, &exitCode] {
+        args->outputGiven = output->count() > 0;
+        exitCode = RunRender(*args);
+    });
 }
 
 }  // namespace texcache::cli

@@ -1,0 +1,91 @@
+// SPDX-License-Identifier: Apache-2.0
+// The renderer's side of the screen-space stage: a frame rendered as screen::FrameBuffers (see
+// filters/screen_space/frame_buffers.h for what each buffer means), and their EXR files.
+//
+// What RenderFrameBuffers puts in the buffers (the decisions frame_buffers.h leaves open):
+//
+// * Samples. One camera ray per pixel through the pixel centre (no jitter, no lens, no motion
+//   blur: the guides are exact and noise-free, and projecting `position` with `camera` lands on
+//   the centre). Each of the `spp` samples (default 1: the papers' real-time setting) traces from
+//   that primary hit one light sample + its shadow ray, one specular-lobe ray (GGX materials) and
+//   one diffuse-lobe ray, each continued by the path tracer below (NEE + MIS, max_depth).
+// * The split is unbiased: emitted + shading * visibility + glossy + indirect has the path
+//   tracer's expectation (at 1 spp exactly; with spp > 1 see `visibility`). Direct light is
+//   counted once: by the light sample, except that the specular lobe's share is MIS-weighted
+//   (power heuristic) between the light sample (in `shading`) and the specular ray hitting the
+//   light (in `glossy`, where a highlight moves like a reflection); the diffuse ray and the paths
+//   below the first bounce do not count light they hit directly at their first hit.
+// * shading: (f_diffuse + w_mis f_specular) Le cos / pdf of the light sample, no shadow ray, mean
+//   over spp. 0 where no light was sampled (no lights, one-sided quad seen from behind) or the
+//   sample lies below the surface.
+// * visibility: the shadow ray's 0/1. A sample with zero shading traces no shadow ray and counts
+//   as visible (1): its product is 0 anyway, and a 1 keeps the attached shadows of a surface
+//   turning away from the light from bleeding into lit pixels when the stage filters visibility.
+//   With spp > 1 it is the mean of the samples weighted by the luminance of their shading (the
+//   ratio estimator), so shading * visibility is the mean of the shadowed samples for white
+//   light (consistent, not unbiased, for coloured light).
+// * blocker / lightSample: the first surface the shadow ray hit (quad lights block too, as in the
+//   path tracer) and the sampled light point; NaN exactly where visibility is 1. With spp > 1
+//   they are those of the blocked sample with the most shading. Lights at infinity (distant,
+//   environment) get the point 1e4 scene extents from the blocker along the light direction.
+//   prevBlocker / prevLightSample: moved to `prevTime` by the blocker's object (or light) and by
+//   the light's keyframes (distant lights: the direction rotated; the environment does not move).
+// * glossy: GGX materials only (0 elsewhere): the specular lobe's visible-normal-sampled ray,
+//   path-traced below (light hit directly MIS-weighted, see above). glossyHit: its first hit (a
+//   surface or a quad light; NaN when it left the scene or there is no specular lobe), of the
+//   first sample that hit something; prevGlossyHit: moved by that hit's object or light.
+// * indirect: the diffuse lobe's cosine-sampled path (direct light at its first hit excluded),
+//   times the diffuse reflectance. GGX materials have a diffuse base too: their indirect is that
+//   of the base, so `albedo` is the diffuse lobe's reflectance ((1 - max F0) * albedo for GGX) and
+//   indirect / albedo is the indirect irradiance / pi for every material.
+// * cones (kNumCones per pixel): the radiance that the diffuse ray brought back along its
+//   direction (light that bounced at least once: the `indirect` path before the reflectance),
+//   recorded in ConeOf(ConeAxes(normal), direction); with spp > 1 the mean of the samples that
+//   fell in a cone. A cone that got no ray is NaN (unknown, not dark), and so are all six where
+//   there is no diffuse ray (background, lights, cached indirect). A ray below the tessellated
+//   surface brings back 0 and still counts. Sampling density is cos/pi about the normal.
+// * guides: position = primary hit (tessellated surface), normal = limit shading normal facing
+//   the camera, depth = ray distance, roughness = the GGX alpha used (max(r^2, 1e-3); 0 for
+//   diffuse), specular = F0 (0 for diffuse), objectId = scene object. prevPosition / prevNormal:
+//   moved by the object's keyframes from the frame time to `prevTime`.
+// * A quad light seen directly: `emitted` only, with position / normal / depth / prevPosition /
+//   prevNormal of the light's surface (moved by its keyframes) and objectId -1 (not an object).
+//   The environment seen directly: `emitted` only, every guide NaN / INF / -1.
+// * Texture-space shading (options.texture.enabled): diffuse materials take `indirect` from the
+//   cache, as the path integrator does (albedo * cached indirect irradiance / pi; no diffuse ray,
+//   cones NaN); direct light always stays per hit here (the split needs its visibility), so
+//   options.texture.cacheDirect is ignored. GGX materials are shaded per hit as above.
+#pragma once
+#include <string>
+
+#include "filters/screen_space/frame_buffers.h"
+#include "renderer/integrator.h"
+#include "renderer/scene.h"
+
+namespace texcache {
+
+/// Renders the frame at options.frameTime (the time `scene` was built for) into `out` (every
+/// buffer filled, sizes options.width x options.height, options.spp samples per pixel); "prev"
+/// buffers are moved to `prevTime` (usually frameTime - 1/fps). options.integrator, seconds,
+/// aovs and the camera's lens and shutter are ignored. With options.texture.enabled the cache
+/// is `cache`, or one made for this frame when null. Throws InputError on bad options.
+RenderStats RenderFrameBuffers(const RenderScene& scene, const RenderOptions& options,
+                               float prevTime, screen::FrameBuffers* out,
+                               TextureSpaceCache* cache = nullptr);
+
+/// The screen-space camera of `cam` at scene time `time` for a width x height raster: the pinhole
+/// projection CameraModel traces (lens and shutter ignored).
+screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, int height);
+
+/// Writes a frame's buffers as one multi-layer EXR (32-bit float, lossless): R,G,B = Compose(),
+/// then a layer per buffer ("shading.R", "visibility.Y", "position.X", "objectId.Y", "cone3.G",
+/// ...; empty buffers are left out) and the camera and time as header attributes
+/// ("texcache:worldToClip", "texcache:cameraPosition", "texcache:time"). Writes a temporary file
+/// and renames it over `path`. Throws InputError naming the path.
+void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fb);
+
+/// Reads a file WriteFrameBuffers wrote (missing layers stay empty); throws InputError naming the
+/// path when it cannot be read or lacks the camera attributes.
+screen::FrameBuffers ReadFrameBuffers(const std::string& path);
+
+}  // namespace texcache
