@@ -10,6 +10,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <ctime>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -863,6 +864,7 @@ bool IntegratorUsesLights(IntegratorKind k) {
 RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpaceCache* cache) {
     using Clock = std::chrono::steady_clock;
     const auto start = Clock::now();
+    const std::clock_t cpuStart = std::clock();
     Context ctx(rs, opt);
     std::unique_ptr<TextureSpaceCache> frameCache;
     tbb::enumerable_thread_specific<CacheStats> cacheStats;
@@ -998,6 +1000,7 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     for (const CacheStats& cs : cacheStats) result.stats.cache.Merge(cs);
     result.stats.sppDone = done;
     result.stats.seconds = elapsed();
+    result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
     return result;
 }
 

@@ -60,7 +60,8 @@ struct RenderOptions {
 };
 
 struct RenderStats {
-    double seconds = 0.0;
+    double seconds = 0.0;     ///< wall clock
+    double cpuSeconds = 0.0;  ///< process CPU time, all threads: the work, however busy the machine
     int sppDone = 0;
     uint64_t cameraRays = 0, shadowRays = 0, bounceRays = 0;
     uint64_t TotalRays() const { return cameraRays + shadowRays + bounceRays; }

@@ -49,8 +49,11 @@ Run TimedRender(const RenderScene& rs, const RenderOptions& o, int repeats, bool
     Run best;
     for (int i = 0; i < std::max(repeats, 1); ++i) {
         RenderResult r = Render(rs, o);
-        if (i == 0 || r.stats.seconds < best.seconds) {
+        // Best of the repeats by CPU time: on a shared machine wall time also counts other
+        // processes' work; CPU time counts ours (2 threads: wall ~ CPU / 2 when idle).
+        if (i == 0 || r.stats.cpuSeconds < best.cpuSeconds) {
             best.seconds = r.stats.seconds;
+            best.cpuSeconds = r.stats.cpuSeconds;
             best.stats = r.stats;
             best.image = std::move(r.beauty);
         }

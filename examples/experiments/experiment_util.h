@@ -42,7 +42,8 @@ RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int wid
 /// One timed render: the image, its render seconds (best of `repeats`) and statistics.
 struct Run {
     Image image;
-    double seconds = 0.0;
+    double seconds = 0.0;     ///< wall clock of the render with the least CPU time
+    double cpuSeconds = 0.0;  ///< its CPU time (all threads): the cost measure of the experiments
     RenderStats stats;
 };
 /// With `warmUp`, one untimed render first: Embree tessellates subdivision patches lazily on

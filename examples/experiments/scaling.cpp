@@ -152,7 +152,7 @@ int FilterSize(const Setup& s) {
     const LoadedScene& car = *carp;
     const int W = s.quick ? 128 : 640, H = W * 9 / 16;
     const int repeats = s.quick ? 1 : 3;
-    Table t({"width", "radius", "seconds", "samples_shaded", "relative_time",
+    Table t({"width", "radius", "cpu_seconds", "samples_shaded", "relative_time",
              "relative_invocations", "relmse"});
     const Image ref = CarAoReference(s, car, W, H);
     double t0 = 0.0, n0 = 0.0;
@@ -161,19 +161,19 @@ int FilterSize(const Setup& s) {
         const RenderOptions o = CachedAo(car, W, H, 4, 4, radius);
         const Run r = TimedRender(*car.rs, o, repeats, radius == 0);
         const double n = double(r.stats.cache.samplesShaded);
-        if (radius == 0) t0 = r.seconds, n0 = n;
-        rel.push_back(r.seconds / t0);
+        if (radius == 0) t0 = r.cpuSeconds, n0 = n;
+        rel.push_back(r.cpuSeconds / t0);
         const double e = RelMSE(r.image, ref);
         t.Row()
             .Add(2 * radius + 1)
             .Add(radius)
-            .Add(r.seconds)
+            .Add(r.cpuSeconds)
             .Add(n)
-            .Add(r.seconds / t0)
+            .Add(r.cpuSeconds / t0)
             .Add(n / n0)
             .Add(e);
-        Say("[filter-size] %2dx%-2d: %.3f s (%.2fx), %.0f samples shaded (%.2fx), relMSE %.5f",
-            2 * radius + 1, 2 * radius + 1, r.seconds, r.seconds / t0, n, n / n0, e);
+        Say("[filter-size] %2dx%-2d: %.3f s CPU (%.2fx), %.0f samples shaded (%.2fx), relMSE %.5f",
+            2 * radius + 1, 2 * radius + 1, r.cpuSeconds, r.cpuSeconds / t0, n, n / n0, e);
         if (radius == 0 || radius == 6 || radius == 10)
             WriteImage(Out(s, Format("filter_size_%d.png", 2 * radius + 1)), r.image);
     }
@@ -190,7 +190,8 @@ int FilterSize(const Setup& s) {
     if (s.quick) md += "**Quick mode: test-size image; not for conclusions.**\n\n";
     md += Format(
         "Car, %dx%d, 4 spp, texture-space AO with 4 rays per sample, normal-weighted box "
-        "filter of width 1..21; best of %d; ratios against the 1x1 render of this run.\n\n",
+        "filter of width 1..21; render CPU time (all threads), best of %d; ratios against the 1x1 "
+        "render of this run.\n\n",
         W, H, repeats);
     md += Format(
         "- 21x21 costs **%.2fx** the unfiltered render (goal: at most 1.5x — %s); the "
@@ -279,13 +280,14 @@ int LodBias(const Setup& s) {
     const int W = s.quick ? 128 : 640, H = W * 9 / 16;
     const int repeats = s.quick ? 1 : 3;
     const Image ref = CarAoReference(s, car, W, H);
-    Table t({"lod_bias", "seconds", "relative_time", "samples_shaded", "relmse"});
+    Table t({"lod_bias", "cpu_seconds", "relative_time", "samples_shaded", "relmse"});
     std::string md = "# Shading LOD bias\n\n";
     if (s.quick) md += "**Quick mode: test-size image; not for conclusions.**\n\n";
     md += Format(
         "Car, %dx%d, 4 spp, texture-space AO with 8 rays per sample, 13x13 normal filter; "
         "mip level biased by 0..3 (eq. 1 + bias: each level quarters the shading rate). "
-        "Best of %d.\n\n| LOD bias | seconds | relative time | samples shaded | relMSE | "
+        "Render CPU time (all threads), best of %d.\n\n| LOD bias | CPU seconds | relative time | "
+        "samples shaded | relMSE | "
         "image |\n|---|---|---|---|---|---|\n",
         W, H, repeats);
     double t0 = 0.0;
@@ -293,16 +295,16 @@ int LodBias(const Setup& s) {
         RenderOptions o = CachedAo(car, W, H, 4, 8, 6);
         o.texture.cache.lodBias = float(bias);
         const Run r = TimedRender(*car.rs, o, repeats, bias == 0);
-        if (bias == 0) t0 = r.seconds;
+        if (bias == 0) t0 = r.cpuSeconds;
         const double e = RelMSE(r.image, ref);
         const double n = double(r.stats.cache.samplesShaded);
-        t.Row().Add(bias).Add(r.seconds).Add(r.seconds / t0).Add(n).Add(e);
+        t.Row().Add(bias).Add(r.cpuSeconds).Add(r.cpuSeconds / t0).Add(n).Add(e);
         const std::string png = Format("lod_bias_%d.png", bias);
         WriteImage(Out(s, png), r.image);
-        md += Format("| %d | %.3f | %.2fx | %.0f | %.5f | ![](%s) |\n", bias, r.seconds,
-                     r.seconds / t0, n, e, png.c_str());
-        Say("[lod-bias] bias %d: %.3f s (%.2fx), %.0f samples, relMSE %.5f", bias, r.seconds,
-            r.seconds / t0, n, e);
+        md += Format("| %d | %.3f | %.2fx | %.0f | %.5f | ![](%s) |\n", bias, r.cpuSeconds,
+                     r.cpuSeconds / t0, n, e, png.c_str());
+        Say("[lod-bias] bias %d: %.3f s (%.2fx), %.0f samples, relMSE %.5f", bias, r.cpuSeconds,
+            r.cpuSeconds / t0, n, e);
     }
     const std::string csv = Out(s, "lod_bias.csv");
     t.Write(csv);
