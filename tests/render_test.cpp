@@ -156,14 +156,20 @@ TEST(Render, RayDifferentialsMatchNeighbourHitsOnTorus) {
     EXPECT_GT(checked, 20);
 }
 
-// Same seed, same image, for 1 and 2 threads (bit-exact: every pixel sums its own samples in
-// sample order whatever thread runs it).
-TEST(Render, DeterministicAcrossThreadCounts) {
+/// A grey pawn under a bluish sky, seen from the front: a small scene with edges and shading.
+Scene PawnUnderSky() {
     Scene s = test::OneObjectScene(test::LoadMesh("catmark_pawn"), glm::vec3(0.7f));
     s.camera.pose.keys = {test::LookAt({0.0f, 3.0f, 8.0f}, {0, 1.5f, 0})};
     EnvironmentLight env;
     env.constant = glm::vec3(0.8f, 0.9f, 1.0f);
     s.environments.push_back(env);
+    return s;
+}
+
+// Same seed, same image, for 1 and 2 threads (bit-exact: every pixel sums its own samples in
+// sample order whatever thread runs it).
+TEST(Render, DeterministicAcrossThreadCounts) {
+    const Scene s = PawnUnderSky();
     RenderScene rs(s, {});
     RenderOptions o = SmallOptions(IntegratorKind::Path, 4);
     o.seed = 42;
@@ -188,11 +194,7 @@ TEST(Render, DeterministicAcrossThreadCounts) {
 // 256 splits): the error of 16 splits against it is at most 1/4 of 1 split's (variance ~1/16,
 // leaving room for the reference's own noise and the sampling of the error itself).
 TEST(Render, HitSamplesShareCameraRaysAndConverge) {
-    Scene s = test::OneObjectScene(test::LoadMesh("catmark_pawn"), glm::vec3(0.7f));
-    s.camera.pose.keys = {test::LookAt({0.0f, 3.0f, 8.0f}, {0, 1.5f, 0})};
-    EnvironmentLight env;
-    env.constant = glm::vec3(0.8f, 0.9f, 1.0f);
-    s.environments.push_back(env);
+    const Scene s = PawnUnderSky();
     RenderScene rs(s, {});
     RenderOptions o = SmallOptions(IntegratorKind::Path, 2);
     o.seed = 7;

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <optional>
 
 #include <tbb/global_control.h>
 
@@ -193,6 +194,26 @@ std::string FramePath(const std::string& output, int f) {
 
 /// --frame-buffers DIR: each frame's screen-space buffers as DIR/frame_NNNN.exr (+ the composed
 /// image as a PNG), 1 spp unless --spp; the texture-space cache (if any) lives across frames.
+/// One frame of an animation: the scene posed at `start + f / fps`, the texture-space cache (made
+/// on the first frame, kept across frames) told that a frame begins, and the frame's options
+/// (its time, fresh noise per frame).
+struct AnimationFrame {
+    std::optional<RenderScene> rs;
+    RenderOptions options;
+
+    void Pose(const Scene& scene, RenderSceneOptions* ro, const RenderOptions& opt, float start,
+              int f, float fps, std::unique_ptr<TextureSpaceCache>* cache) {
+        ro->frameTime = start + float(f) / fps;
+        rs.emplace(scene, *ro);
+        if (opt.texture.enabled && !*cache)
+            *cache = std::make_unique<TextureSpaceCache>(*rs, opt.texture);
+        if (*cache) (*cache)->BeginFrame(uint32_t(f));
+        options = opt;
+        options.frameTime = ro->frameTime;
+        options.seed = opt.seed + uint64_t(f) * 0x9E3779B9ull;
+    }
+};
+
 int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool sppGiven,
                     int first, int last, float fps) {
     const char* opt_ = "--frame-buffers";
@@ -220,19 +241,14 @@ int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, 
     ro.threads = a.threads;
     std::unique_ptr<TextureSpaceCache> cache;
     screen::FrameBuffers fb;
-    const float start = opt.frameTime;
+    AnimationFrame frame;
     double total = 0.0;
     for (int f = first; f <= last; ++f) {
         const double tf = NowSeconds();
-        ro.frameTime = opt.frameTime = start + float(f) / fps;
-        RenderScene rs(scene, ro);
-        if (opt.texture.enabled && !cache)
-            cache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
-        if (cache) cache->BeginFrame(uint32_t(f));
-        RenderOptions fo = opt;
-        fo.seed = opt.seed + uint64_t(f) * 0x9E3779B9ull;  // fresh noise per frame
+        frame.Pose(scene, &ro, opt, opt.frameTime, f, fps, &cache);
+        const RenderOptions& fo = frame.options;
         const RenderStats st =
-            RenderFrameBuffers(rs, fo, fo.frameTime - 1.0f / fps, &fb, cache.get());
+            RenderFrameBuffers(*frame.rs, fo, fo.frameTime - 1.0f / fps, &fb, cache.get());
         char name[32];
         std::snprintf(name, sizeof name, "frame_%04d", f);
         const std::string exr = (fs::path(a.frameBuffers) / (std::string(name) + ".exr")).string();
@@ -343,20 +359,16 @@ int RunRender(const RenderArgs& a) {
         for (int f = first; f <= last; ++f)
             outs.push_back(PlanOutputs(FramePath(a.output, f), !a.noPng));
         std::unique_ptr<TextureSpaceCache> cache;
+        AnimationFrame frame;
         double total = 0.0;
         for (int f = first; f <= last; ++f) {
             // Scene geometry and lights are posed per frame; the cache (and its temporal
             // history) persists, keyed by each object's own grids.
             const double tf = NowSeconds();
-            ro.frameTime = opt.frameTime = s.time + float(f) / fps;
-            RenderScene rs(scene, ro);
-            if (opt.texture.enabled && !cache)
-                cache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
-            if (cache) cache->BeginFrame(uint32_t(f));
-            RenderOptions fo = opt;
-            fo.seed = opt.seed + uint64_t(f) * 0x9E3779B9ull;  // fresh noise per frame
+            frame.Pose(scene, &ro, opt, s.time, f, fps, &cache);
+            RenderOptions& fo = frame.options;
             fo.progress = false;
-            RenderResult r = Render(rs, fo, cache.get());
+            RenderResult r = Render(*frame.rs, fo, cache.get());
             OutputPaths& out = outs[size_t(f - first)];
             WriteOutputs(out, r.beauty, r.aovs, a.exposure);
             total += NowSeconds() - tf;
