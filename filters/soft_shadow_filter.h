@@ -10,11 +10,13 @@
 // Omega_y to 1 / sigma_l, so V over x is band-limited to Omega_x = 1 / (sigma_l s). The
 // axis-aligned filter that keeps the widest such band is a Gaussian on the receiver with
 //   beta = sigma_l * s_min   (world units),  s_min = smallest slope among the occluders seen,
-// which the sample shader stores per sample as ShadedSample::blurRadius (inf when no shadow ray
-// was blocked). As Mehta et al. do for pixels with no occluded sample of their own, a texel takes
-// s_min over a small window (radius 2) around it; with no occluder anywhere there the light is
-// unblocked and any width is right, so the widest is used. In texels, beta / texelSize is clamped
-// to [0.5, R / 2] so that the Gaussian fits the footprint of radius R. Taps whose normal differs
+// which the sample shader stores per sample in texels of its own grid, beta / texelSize, as
+// ShadedSample::blurTexels (inf when no shadow ray was blocked; the texels of neighbouring faces
+// have about the same world size, see MeshGrids). As Mehta et al. do for pixels with no occluded
+// sample of their own, a texel takes the smallest blur over a small window (radius 2) around it;
+// with no occluder anywhere there the light is unblocked and any width is right, so the widest is
+// used. The width is clamped to [0.5, R / 2] texels so that the Gaussian fits the footprint of
+// radius R. Taps whose normal differs
 // from the centre's (cos <= cosThreshold) are skipped like the normal filter's.
 #pragma once
 #include <algorithm>
@@ -36,13 +38,12 @@ struct SoftShadowFilter {
             const FootprintSample& t = in.taps[i];
             R = std::max({R, std::abs(t.dx), std::abs(t.dy)});
             if (std::abs(t.dx) <= slopeWindow && std::abs(t.dy) <= slopeWindow &&
-                in.samples[i].blurRadius >= 0.0f)  // NaN fails the test: skipped
-                blur = std::min(blur, in.samples[i].blurRadius);
+                in.samples[i].blurTexels >= 0.0f)  // NaN fails the test: skipped
+                blur = std::min(blur, in.samples[i].blurTexels);
         }
         const float maxSigma = std::max(0.5f * float(R), 0.5f);
         float sigma = maxSigma;
-        if (std::isfinite(blur) && c.texelSize > 0.0f && std::isfinite(c.texelSize))
-            sigma = std::clamp(blur / c.texelSize, 0.5f, maxSigma);
+        if (std::isfinite(blur)) sigma = std::clamp(blur, 0.5f, maxSigma);
         const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
         const glm::vec3 nc = c.normal;
         glm::vec3 sum(0.0f);

@@ -1,6 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "filters/texture_filters.h"
 
+#include <cmath>
+
+#include <algorithm>
+
 #include "texcache/error.h"
 
 namespace texcache {
@@ -16,6 +20,45 @@ TextureFilterKind ParseTextureFilter(const std::string& name, const std::string&
 
 const char* TextureFilterNames() {
     return "none, normal, gaussian, regression, softshadow";
+}
+
+namespace {
+// A coordinate in [-1, 1] to 0..65534 and back: 65535 is left for the reserved codes.
+uint32_t QuantizeOct(float v) {
+    return uint32_t(std::lround((std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f) * 65534.0f));
+}
+float DequantizeOct(uint32_t q) {
+    return float(q) * (2.0f / 65534.0f) - 1.0f;
+}
+float SignNotZero(float v) {
+    return v >= 0.0f ? 1.0f : -1.0f;
+}
+}  // namespace
+
+uint32_t EncodeOctNormal(glm::vec3 n) {
+    const float l1 = std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
+    if (!std::isfinite(l1)) return PackedShadedSample::kNanNormal;
+    if (!(l1 > 0.0f)) return PackedShadedSample::kZeroNormal;
+    float x = n.x / l1, y = n.y / l1;
+    if (n.z < 0.0f) {  // fold the lower hemisphere over the diagonals
+        const float ox = x;
+        x = (1.0f - std::abs(y)) * SignNotZero(ox);
+        y = (1.0f - std::abs(ox)) * SignNotZero(y);
+    }
+    return QuantizeOct(x) | (QuantizeOct(y) << 16);
+}
+
+glm::vec3 DecodeOctNormal(uint32_t code) {
+    if (code == PackedShadedSample::kZeroNormal) return glm::vec3(0.0f);
+    if (code == PackedShadedSample::kNanNormal) return glm::vec3(NAN);
+    glm::vec3 n(DequantizeOct(code & 0xFFFFu), DequantizeOct(code >> 16), 0.0f);
+    n.z = 1.0f - std::abs(n.x) - std::abs(n.y);
+    if (n.z < 0.0f) {
+        const float ox = n.x;
+        n.x = (1.0f - std::abs(n.y)) * SignNotZero(ox);
+        n.y = (1.0f - std::abs(ox)) * SignNotZero(n.y);
+    }
+    return glm::normalize(n);
 }
 
 }  // namespace texcache

@@ -481,7 +481,9 @@ ShadedSample ShadeShadowSample(const Context& c, const SampleRequest& r, RayCoun
     const float V = counted ? float(open) / float(counted) : 1.0f;
     const float res = float(c.tsc->cache().Mesh(r.mesh).Res(r.face, r.mip));
     const float texel = std::max(glm::length(ss.dPdu), glm::length(ss.dPdv)) / res;
-    return {glm::vec3(V), ss.N, counted ? V * (1.0f - V) / float(counted) : 0.0f, blur, texel};
+    // The blur in texels of this sample's grid; a degenerate texel allows any width.
+    const float blurTexels = texel > 0.0f && std::isfinite(texel) ? blur / texel : INFINITY;
+    return {glm::vec3(V), ss.N, counted ? V * (1.0f - V) / float(counted) : 0.0f, blurTexels};
 }
 
 /// The texel a shading point maps to (eq. 1 and 2) in its object's (front or back) grids.

@@ -267,21 +267,64 @@ TEST(NormalWeightedFilter, AllTapsRejectedFallsBackToTheMean) {
 TEST(SoftShadowFilter, WidthFollowsTheOccluderDistance) {
     auto vis = [](int dx, int) { return glm::vec3(dx < 0 ? 0.0f : 1.0f); };
     Footprint f = Square(8, vis);
-    for (auto& s : f.samples) s.texelSize = 0.01f;
-    for (auto& s : f.samples) s.blurRadius = 0.001f;  // 0.1 texel: clamped to 0.5
+    for (auto& s : f.samples) s.blurTexels = 0.1f;  // clamped to 0.5
     glm::vec3 v = SoftShadowFilter{}(f.Input());
     // A 0.5-texel Gaussian: the centre's lit side weighs 1.44 against 0.17 for the dark column.
     EXPECT_GT(v.x, 0.85f);
-    for (auto& s : f.samples) s.blurRadius = INFINITY;  // nothing blocked: widest filter
+    for (auto& s : f.samples) s.blurTexels = INFINITY;  // nothing blocked: widest filter
     v = SoftShadowFilter{}(f.Input());
     EXPECT_NEAR(v.x, 9.0f / 17.0f, 0.1f);
-    for (auto& s : f.samples) s.blurRadius = NAN;
+    for (auto& s : f.samples) s.blurTexels = NAN;
     v = SoftShadowFilter{}(f.Input());
     EXPECT_TRUE(Finite(v));
-    for (auto& s : f.samples) s.blurRadius = 0.04f;  // 4 texels: a penumbra-wide blur
+    for (auto& s : f.samples) s.blurTexels = 4.0f;  // a penumbra-wide blur
     v = SoftShadowFilter{}(f.Input());
     EXPECT_GT(v.x, 0.5f);
     EXPECT_LT(v.x, 0.9f);
+}
+
+// The sample cache's compact form: values, variance and the extra exact; normals within 1e-4
+// radians over the whole sphere (poles, equator, octant seams); zero and non-finite normals keep
+// their meaning (filters reject both); 24 bytes.
+TEST(SampleCodec, PackedSamplesRoundTrip) {
+    static_assert(sizeof(PackedShadedSample) == 24);
+    using Codec = SampleCodec<ShadedSample>;
+    std::vector<glm::vec3> normals = {{0, 0, 1},  {0, 0, -1}, {1, 0, 0},        {-1, 0, 0},
+                                      {0, 1, 0},  {0, -1, 0}, {1, 1, 1},        {-1, -1, -1},
+                                      {1, -1, 0}, {-1, 1, 0}, {1e-7f, 0, -1.0f}};
+    uint64_t state = 12345;
+    auto next = [&] {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return float(state >> 40) / float(1 << 24) * 2.0f - 1.0f;
+    };
+    for (int i = 0; i < 10000; ++i) normals.push_back({next(), next(), next()});
+    double worst = 0.0;
+    for (glm::vec3 n : normals) {
+        if (glm::length(n) == 0.0f) continue;
+        n = glm::normalize(n);
+        const ShadedSample s(glm::vec3(0.25f, 1e6f, -3.0f), n, 0.125f, 0.5f);
+        const ShadedSample d = Codec::Decode(Codec::Encode(s));
+        EXPECT_EQ(d.value, s.value);
+        EXPECT_EQ(d.variance, s.variance);
+        EXPECT_EQ(d.roughness, s.roughness);
+        ASSERT_TRUE(std::isfinite(d.normal.x + d.normal.y + d.normal.z));
+        // atan2(|a x b|, a . b) in double: acos of a float dot product cannot resolve angles
+        // below ~3e-4 radians.
+        const glm::dvec3 a(n), b(d.normal);
+        worst = std::max(worst, std::atan2(glm::length(glm::cross(a, b)), glm::dot(a, b)));
+    }
+    EXPECT_LT(worst, 1e-4) << "worst angular error " << worst;
+    EXPECT_EQ(DecodeOctNormal(EncodeOctNormal(glm::vec3(0.0f))), glm::vec3(0.0f));
+    const glm::vec3 bad = DecodeOctNormal(EncodeOctNormal(glm::vec3(NAN, 0.0f, 1.0f)));
+    EXPECT_TRUE(std::isnan(bad.x));
+    EXPECT_TRUE(std::isnan(DecodeOctNormal(EncodeOctNormal(glm::vec3(INFINITY, 0, 0))).x));
+    // Reserved codes are never produced by a real direction.
+    for (glm::vec3 n : normals) {
+        if (glm::length(n) == 0.0f) continue;
+        const uint32_t c = EncodeOctNormal(n);
+        EXPECT_NE(c, PackedShadedSample::kZeroNormal);
+        EXPECT_NE(c, PackedShadedSample::kNanNormal);
+    }
 }
 
 }  // namespace

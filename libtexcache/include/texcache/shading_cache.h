@@ -77,6 +77,17 @@ struct CacheStats {
     double TexelHitRate() const { return lookups ? double(texelHits) / double(lookups) : 0.0; }
 };
 
+/// How a Sample is kept in the sample cache. By default as it is; specialise it to store a compact
+/// encoding (more samples per byte of cache). Filters, the tap memo and the shader only ever see
+/// decoded samples; a freshly shaded sample is used as Decode(Encode(s)) too, so every texel
+/// filters the same value whichever thread shaded it.
+template <typename Sample>
+struct SampleCodec {
+    using Stored = Sample;
+    static Stored Encode(const Sample& s) { return s; }
+    static Sample Decode(const Stored& s) { return s; }
+};
+
 /// Where the sample shader is asked to shade: a texel centre of a mesh's Ptex face.
 struct SampleRequest {
     int mesh;
@@ -193,6 +204,9 @@ inline uint64_t MixFaceMip(uint32_t face, int mip) {
 
 template <typename Sample, typename Texel>
 class ShadingCache {
+    using Codec = SampleCodec<Sample>;
+    using Stored = typename Codec::Stored;
+
 public:
     /// Allocates both caches (or the unbounded reference stores); throws InputError on bad
     /// settings.
@@ -200,10 +214,10 @@ public:
         : settings_(settings), id_(NextInstanceId()) {
         settings.Validate();
         if (settings.referenceMode) {
-            refSamples_ = std::make_unique<internal::UnboundedCache<Sample>>();
+            refSamples_ = std::make_unique<internal::UnboundedCache<Stored>>();
             refTexels_ = std::make_unique<internal::UnboundedCache<Texel>>();
         } else {
-            samples_ = std::make_unique<DirectMappedCache<Sample>>(settings.sampleCacheBytes,
+            samples_ = std::make_unique<DirectMappedCache<Stored>>(settings.sampleCacheBytes,
                                                                    settings.sampleTwoChoices);
             texels_ = std::make_unique<DirectMappedCache<Texel>>(settings.texelCacheBytes,
                                                                  settings.texelTwoChoices);
@@ -240,7 +254,7 @@ public:
     }
     /// Whether a sample is in the sample cache right now (read-only, like ContainsTexel).
     bool ContainsSample(const TexelKey& key) const {
-        Sample s;
+        Stored s;
         return samples_ && samples_->Find(key.Pack(), Hash(key), &s);
     }
 
@@ -324,7 +338,7 @@ public:
     /// each thread that filtered also holds one tap memo of kTapMemoBytes).
     size_t BytesUsed() const {
         if (refSamples_)
-            return refSamples_->Size() * (sizeof(Sample) + 32) +
+            return refSamples_->Size() * (sizeof(Stored) + 32) +
                    refTexels_->Size() * (sizeof(Texel) + 32);
         return samples_->BytesUsed() + texels_->BytesUsed();
     }
@@ -445,35 +459,40 @@ private:
         const int localFace = int(tap.key.face - g.FaceOffset());
         const SampleRequest req{mesh, localFace, tap.key.mip, tap.u, tap.v, tap.key};
         ++st.sampleLookups;
+        // Shades the sample as it will be stored (see SampleCodec).
+        auto shadeStored = [&](Stored* stored) {
+            *stored = Codec::Encode(shade(req));
+            *out = Codec::Decode(*stored);
+            ++st.samplesShaded;
+        };
         for (int spins = 0;; ++spins) {
             SlotTicket ticket;
-            const AcquireResult r = refSamples_ ? refSamples_->Acquire(key, out)
-                                                : samples_->Acquire(key, hash, out, &ticket);
+            Stored stored;
+            const AcquireResult r = refSamples_ ? refSamples_->Acquire(key, &stored)
+                                                : samples_->Acquire(key, hash, &stored, &ticket);
             switch (r) {
                 case AcquireResult::Hit:
                     ++st.sampleHits;
+                    *out = Codec::Decode(stored);
                     return true;
                 case AcquireResult::Claimed:
                     if (ticket.evicted) ++st.sampleEvictions;
-                    *out = shade(req);
-                    ++st.samplesShaded;
+                    shadeStored(&stored);
                     if (refSamples_)
-                        refSamples_->Publish(key, *out);
+                        refSamples_->Publish(key, stored);
                     else
-                        samples_->Publish(ticket, *out);
+                        samples_->Publish(ticket, stored);
                     return true;
                 case AcquireResult::Conflict:
                     // The slot is busy with an unrelated key: shade for this filter only.
-                    *out = shade(req);
-                    ++st.samplesShaded;
+                    shadeStored(&stored);
                     ++st.samplesUncached;
                     return true;
                 case AcquireResult::Pending:
                     if (!wait) return false;
                     ++st.waits;
                     if (spins > 1000000) {  // the owner is stuck far longer than any shader takes
-                        *out = shade(req);
-                        ++st.samplesShaded;
+                        shadeStored(&stored);
                         ++st.samplesUncached;
                         return true;
                     }
@@ -488,9 +507,9 @@ private:
     std::atomic<uint64_t> epoch_{0};  ///< bumped by every invalidation (see Filter)
     std::vector<std::unique_ptr<MeshGrids>> meshes_;
     uint32_t nextFace_ = 0;
-    std::unique_ptr<DirectMappedCache<Sample>> samples_;
+    std::unique_ptr<DirectMappedCache<Stored>> samples_;
     std::unique_ptr<DirectMappedCache<Texel>> texels_;
-    std::unique_ptr<internal::UnboundedCache<Sample>> refSamples_;
+    std::unique_ptr<internal::UnboundedCache<Stored>> refSamples_;
     std::unique_ptr<internal::UnboundedCache<Texel>> refTexels_;
 };
 
