@@ -5,6 +5,8 @@
 
 #include <algorithm>
 
+#include <glm/gtc/packing.hpp>
+
 #include "texcache/error.h"
 
 namespace texcache {
@@ -59,6 +61,15 @@ glm::vec3 DecodeOctNormal(uint32_t code) {
         n.y = (1.0f - std::abs(ox)) * SignNotZero(n.y);
     }
     return glm::normalize(n);
+}
+
+uint16_t EncodeHalf(float v) {
+    if (std::isfinite(v)) v = std::clamp(v, -65504.0f, 65504.0f);
+    return uint16_t(glm::packHalf1x16(v));
+}
+
+float DecodeHalf(uint16_t h) {
+    return glm::unpackHalf1x16(h);
 }
 
 }  // namespace texcache

@@ -283,11 +283,12 @@ TEST(SoftShadowFilter, WidthFollowsTheOccluderDistance) {
     EXPECT_LT(v.x, 0.9f);
 }
 
-// The sample cache's compact form: values, variance and the extra exact; normals within 1e-4
-// radians over the whole sphere (poles, equator, octant seams); zero and non-finite normals keep
-// their meaning (filters reject both); 24 bytes.
+// The sample cache's compact form: values, variance and the extra within half precision (2^-11
+// relative), clamped at 65504, inf and NaN kept; normals within 1e-4 radians over the whole sphere
+// (poles, equator, octant seams); zero and non-finite normals keep their meaning (filters reject
+// both); 16 bytes.
 TEST(SampleCodec, PackedSamplesRoundTrip) {
-    static_assert(sizeof(PackedShadedSample) == 24);
+    static_assert(sizeof(PackedShadedSample) == 16);
     using Codec = SampleCodec<ShadedSample>;
     std::vector<glm::vec3> normals = {{0, 0, 1},  {0, 0, -1}, {1, 0, 0},        {-1, 0, 0},
                                       {0, 1, 0},  {0, -1, 0}, {1, 1, 1},        {-1, -1, -1},
@@ -302,11 +303,12 @@ TEST(SampleCodec, PackedSamplesRoundTrip) {
     for (glm::vec3 n : normals) {
         if (glm::length(n) == 0.0f) continue;
         n = glm::normalize(n);
-        const ShadedSample s(glm::vec3(0.25f, 1e6f, -3.0f), n, 0.125f, 0.5f);
+        const ShadedSample s(glm::vec3(0.3f, 1234.5f, -3e-3f), n, 1.7e-3f, 0.37f);
         const ShadedSample d = Codec::Decode(Codec::Encode(s));
-        EXPECT_EQ(d.value, s.value);
-        EXPECT_EQ(d.variance, s.variance);
-        EXPECT_EQ(d.roughness, s.roughness);
+        for (int k = 0; k < 3; ++k)
+            EXPECT_NEAR(d.value[k], s.value[k], std::abs(s.value[k]) / 2048);
+        EXPECT_NEAR(d.variance, s.variance, s.variance / 2048);
+        EXPECT_NEAR(d.roughness, s.roughness, s.roughness / 2048);
         ASSERT_TRUE(std::isfinite(d.normal.x + d.normal.y + d.normal.z));
         // atan2(|a x b|, a . b) in double: acos of a float dot product cannot resolve angles
         // below ~3e-4 radians.
@@ -318,6 +320,13 @@ TEST(SampleCodec, PackedSamplesRoundTrip) {
     const glm::vec3 bad = DecodeOctNormal(EncodeOctNormal(glm::vec3(NAN, 0.0f, 1.0f)));
     EXPECT_TRUE(std::isnan(bad.x));
     EXPECT_TRUE(std::isnan(DecodeOctNormal(EncodeOctNormal(glm::vec3(INFINITY, 0, 0))).x));
+    // Values: a 1e6 firefly is clamped to the largest half; inf, NaN and 0 survive.
+    EXPECT_EQ(DecodeHalf(EncodeHalf(1e6f)), 65504.0f);
+    EXPECT_EQ(DecodeHalf(EncodeHalf(-1e6f)), -65504.0f);
+    EXPECT_EQ(DecodeHalf(EncodeHalf(INFINITY)), INFINITY);
+    EXPECT_TRUE(std::isnan(DecodeHalf(EncodeHalf(NAN))));
+    EXPECT_EQ(DecodeHalf(EncodeHalf(0.0f)), 0.0f);
+    EXPECT_EQ(DecodeHalf(EncodeHalf(1.0f)), 1.0f);
     // Reserved codes are never produced by a real direction.
     for (glm::vec3 n : normals) {
         if (glm::length(n) == 0.0f) continue;
