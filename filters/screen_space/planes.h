@@ -1,0 +1,120 @@
+// SPDX-License-Identifier: Apache-2.0
+// Internal to the screen-space stage: padded float planes (structure of arrays) and the
+// vectorized per-row kernels every denoiser is built from.
+//
+// Design note. Every pass is a loop over a row whose innermost loop runs over x with contiguous
+// loads, so GCC vectorizes it; the kernels are compiled twice (AVX2+FMA and the x86-64 baseline)
+// and the right clone is picked once by the loader (ifunc), like Embree's per-ISA kernels. A
+// plane keeps kPad zero columns left and right of every row: horizontal taps up to kPad away need
+// no bounds test, and the padding's validity is 0, so it never contributes. Rows outside the
+// image are skipped per tap in the vertical passes. Pixels whose guides are unusable (background,
+// NaN/Inf) have a zero normal, so every edge-stopping weight towards them is 0; samples that are
+// unusable (NaN/Inf in a component) have validity 0 and value 0.
+#pragma once
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace texcache::screen::detail {
+
+/// Columns of zero padding on each side of a row: the widest horizontal tap offset (a-trous
+/// level 4: 2 x 16).
+inline constexpr int kPad = 32;
+
+/// A width x height float image with kPad zero columns on both sides of every row.
+template <class T>
+class BasicPlane {
+public:
+    /// Sets the size; contents (and padding) become `fill`.
+    void Resize(int w, int h, T fill = T(0)) {
+        width_ = w, height_ = h;
+        stride_ = size_t(w) + 2 * kPad;
+        data_.assign(stride_ * size_t(h), fill);
+    }
+    /// Sets every entry (padding included) to `v`.
+    void Fill(T v) { std::fill(data_.begin(), data_.end(), v); }
+    T* Row(int y) { return data_.data() + size_t(y) * stride_ + kPad; }
+    const T* Row(int y) const { return data_.data() + size_t(y) * stride_ + kPad; }
+    T& At(int x, int y) { return Row(y)[x]; }
+    T At(int x, int y) const { return Row(y)[x]; }
+    int Width() const { return width_; }
+    int Height() const { return height_; }
+    size_t Stride() const { return stride_; }
+    bool Empty() const { return data_.empty(); }
+    void Swap(BasicPlane& o) {
+        data_.swap(o.data_);
+        std::swap(width_, o.width_), std::swap(height_, o.height_), std::swap(stride_, o.stride_);
+    }
+
+private:
+    std::vector<T> data_;
+    int width_ = 0, height_ = 0;
+    size_t stride_ = 0;
+};
+using Plane = BasicPlane<float>;
+using IntPlane = BasicPlane<int32_t>;
+using BytePlane = BasicPlane<uint8_t>;
+
+/// Guides of one frame, as planes: what every edge-stopping weight reads.
+struct Guides {
+    Plane px, py, pz;   ///< world position (0 where invalid)
+    Plane nx, ny, nz;   ///< unit normal; (0,0,0) where the pixel's geometry is unusable
+    Plane depth;        ///< distance from the camera (0 where invalid)
+    Plane invDzX;       ///< 1 / (local |d depth / dx| + 1e-3 depth): depth tolerance, x passes
+    Plane invDzY;       ///< the same for y passes
+    IntPlane objectId;  ///< -2 where invalid (never matches a real id or the background's -1)
+    BytePlane valid;    ///< 1 where the geometry is usable
+    void Resize(int w, int h);
+};
+
+// ---- Kernels (kernels.cpp) ----------------------------------------------------------------
+
+/// One separable pass of an edge-avoiding filter over `nc` (1 or 3) channels.
+struct PassArgs {
+    int nc = 1;
+    bool vertical = false;
+    const Plane* in[3] = {nullptr, nullptr, nullptr};
+    Plane* out[3] = {nullptr, nullptr, nullptr};
+    const Plane* valid = nullptr;   ///< sample validity (0/1) of `in`
+    const Plane* var = nullptr;     ///< a-trous: luminance variance of `in` (filtered along)
+    Plane* outVar = nullptr;        ///< a-trous: propagated variance, sum w^2 var / (sum w)^2
+    Plane* outValid = nullptr;      ///< optional: 1 where any tap had weight (the output is usable)
+    const Plane* invLum = nullptr;  ///< a-trous: per-pixel 1 / (sigma_l sqrt(var) + eps)
+    const Plane* sigma = nullptr;   ///< clean-up: per-pixel Gaussian std in pixels (0: copy)
+    const Guides* g = nullptr;
+    int taps = 0;                ///< number of taps (<= 33)
+    int offset[33] = {};         ///< tap offsets in pixels along the pass direction
+    float weight[33] = {};       ///< fixed spatial weights (clean-up: ignored)
+    float normalPower = 128.0f;  ///< weight exp(-normalPower (1 - n.n')) ~ max(0, n.n')^128
+    float depthSigma = 1.0f;     ///< weight exp(-|dz| invDz / (depthSigma |offset|))
+};
+
+/// Runs a pass over rows [y0, y1).
+void FilterRows(const PassArgs& a, int y0, int y1);
+/// Runs a pass over the whole image on the TBB pool.
+void FilterPlanes(const PassArgs& a);
+
+/// Sum over a (2r+1) x (2r+1) box of each of `nc` planes, unweighted, clamped at the borders
+/// (out-of-image taps contribute nothing). `tmp` holds the horizontal sums.
+void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp, int r);
+
+/// Fast 2^t for t <= 0 (clamped at -126): cubic polynomial on the fraction + exponent bits,
+/// relative error < 2e-4. Vectorizes (no floor, no table).
+inline float Exp2Neg(float t) {
+    t = t > -126.0f ? t : -126.0f;
+    const int i = int(t);                 // truncation: ceil for t <= 0, so f in (-1, 0]
+    const float f = t - float(i) + 1.0f;  // in (0, 1]
+    const float p = 1.0f + f * (0.69583356f + f * (0.22606716f + f * 0.078024523f));
+    // 2^(i - 1): the polynomial is 2^(f + 1); i = -126 gives 0 (a flush to zero)
+    return p * std::bit_cast<float>((i + 126) << 23);
+}
+
+/// Rec. 709 luminance.
+inline float Luma(float r, float g, float b) {
+    return 0.2126f * r + 0.7152f * g + 0.0722f * b;
+}
+
+}  // namespace texcache::screen::detail
