@@ -155,7 +155,7 @@ struct ComponentPlanes {
 
 struct History {
     Plane c[3], m1, m2, len;
-    std::vector<float> cones;  // Reliable indirect: kConeFloats per pixel
+    HugeArray<float> cones;  // Reliable indirect: kConeFloats per pixel
     bool valid = false;
 };
 
@@ -202,7 +202,7 @@ void ScreenSpaceDenoiser::State::Resize(int width, int height) {
         for (History& hh : hc) {
             for (Plane& p : hh.c) p.Resize(w, h);
             hh.m1.Resize(w, h), hh.m2.Resize(w, h), hh.len.Resize(w, h);
-            hh.cones.clear();
+            hh.cones.Assign(0, 0.0f);
             hh.valid = false;
         }
     for (MotionField* m : {&trad, &shadow, &glossy, &occl}) m->Resize(w, h);
@@ -753,7 +753,7 @@ void ConesComponent(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const 
     const History& prev = s.hist[kIndirect][s.cur ^ 1];
     const size_t np = size_t(s.w) * size_t(s.h);
     const History* hp = mf && prev.valid && prev.cones.size() == np * kConeFloats ? &prev : nullptr;
-    hc.cones.resize(np * kConeFloats);
+    if (hc.cones.size() != np * kConeFloats) hc.cones.Assign(np * kConeFloats, 0.0f);
     const float alpha = s.set.alpha, clampK = s.set.reliableClampK;
     auto t0 = Clock::now();
     const Plane* in[3] = {&cp.v[0], &cp.v[1], &cp.v[2]};
@@ -866,6 +866,13 @@ void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<g
 
 std::vector<glm::vec3> ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
                                                     Demodulation demodulation) {
+    std::vector<glm::vec3> image;
+    Denoise(frame, method, demodulation, &image);
+    return image;
+}
+
+void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
+                                  Demodulation demodulation, std::vector<glm::vec3>* image) {
     State& s = *s_;
     const auto t0 = Clock::now();
     frame.Validate("ScreenSpaceDenoiser::Denoise");
@@ -936,8 +943,7 @@ std::vector<glm::vec3> ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, M
     }
 
     auto t3 = Clock::now();
-    std::vector<glm::vec3> image;
-    Compose(s, frame, &image);
+    Compose(s, frame, image);
     s.prevCam = frame.camera;
     s.cur ^= 1;
     s.hasPrev = true;
@@ -945,7 +951,6 @@ std::vector<glm::vec3> ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, M
     const auto t4 = Clock::now();
     s.timings.compose = Ms(t3, t4);
     s.timings.total = Ms(t0, t4);
-    return image;
 }
 
 // ---- Accessors -----------------------------------------------------------------------------

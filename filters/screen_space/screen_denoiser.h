@@ -100,6 +100,11 @@ public:
     /// a frame Validate() rejects or that lacks a buffer the method needs.
     std::vector<glm::vec3> Denoise(const FrameBuffers& frame, Method method,
                                    Demodulation demodulation = Demodulation::On);
+    /// The same into `image` (resized), whose allocation is reused from frame to frame: on
+    /// machines where first-touch page faults are slow, a fresh 1080p image costs more than the
+    /// whole stage.
+    void Denoise(const FrameBuffers& frame, Method method, Demodulation demodulation,
+                 std::vector<glm::vec3>* image);
     /// Forgets the history: the next frame is treated as the first.
     void Reset();
 
