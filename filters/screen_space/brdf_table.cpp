@@ -37,7 +37,7 @@ struct DiskSet {
 };
 
 // Sum of (A, B) over the disk points for one (cos theta_o, alpha).
-__attribute__((target_clones("arch=x86-64-v3", "default"))) void Accumulate(
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void Accumulate(
     const float* p1s, const float* p2s, int n, float cosTheta, float alpha, double* outA,
     double* outB) {
     const float c = std::max(cosTheta, 1e-4f);

@@ -1,17 +1,20 @@
 // SPDX-License-Identifier: Apache-2.0
-// The vectorized row kernels of the screen-space stage (see planes.h for the layout).
+// The vectorized kernels of the screen-space stage (see planes.h for the layout).
 //
-// Design note. A pass is processed in chunks of kChunk pixels of one row. Per-pixel centre data
-// (depth, normal, tolerances) is staged in small arrays, then the tap loop runs outside and the
-// pixel loop inside, so the innermost loop is a straight-line, branch-free sweep over contiguous
-// floats that GCC turns into AVX2 code; the accumulators stay in L1. Every edge-stopping factor is
-// folded into one exponent so a tap costs one Exp2Neg:
-//     w = h_t * valid_q * 2^-(|z_q - z_p| cz_t idz_p + kn (1 - n_p.n_q) + |l_q - l_p| il_p
-//                            + off_t^2 s_p)
-// (the depth, normal, luminance and clean-up-Gaussian terms of SVGF's a-trous and of a joint
-// bilateral filter), all in log2 units.
+// Design note. At 1920x1080 a pass over one float plane is 8 MB, so the filters are bound by
+// memory traffic as much as by arithmetic; both are kept down the same way:
+//   * The a-trous level is one 2D 3x3 pass for all components together (SVGF uses 5x5; 3x3 with
+//     steps 1, 2, 4, 8 reaches +-15 pixels at 8 instead of 24 taps per level). Per chunk of a row,
+//     the depth + normal weight of each tap is computed once into a small array (phase 1), then
+//     each component sweeps the chunk with its 9 taps unrolled and its accumulators in registers
+//     (phase 2). Validity travels in the variance (< 0: unusable), not in a plane of its own.
+//   * Weights use max(0, 1 - x/n)^n instead of exp(-x): a multiply-add and log2(n) squarings.
+//   * The separable passes (the joint bilateral and the clean-up) run tap-outer over a chunk with
+//     accumulators in L1; the clean-up skips chunks whose pixels all have std 0 (most of them).
+// Every innermost loop is branch-free over contiguous floats; the functions are compiled for
+// AVX2+FMA and for the x86-64 baseline and the loader picks one (ifunc), like Embree's per-ISA
+// kernels.
 #include <algorithm>
-#include <bit>
 #include <cmath>
 
 #include <tbb/blocked_range.h>
@@ -22,7 +25,7 @@
 namespace texcache::screen::detail {
 
 void Guides::Resize(int w, int h) {
-    for (Plane* p : {&px, &py, &pz, &nx, &ny, &nz, &depth, &invDzX, &invDzY}) p->Resize(w, h);
+    for (Plane* p : {&px, &py, &pz, &nx, &ny, &nz, &depth, &invDz}) p->Resize(w, h);
     objectId.Resize(w, h, -2);
     valid.Resize(w, h, 0);
 }
@@ -30,66 +33,53 @@ void Guides::Resize(int w, int h) {
 namespace {
 
 constexpr int kChunk = 256;
-constexpr float kLog2e = 1.44269504f;
 
-enum class Mode { Bilateral, Atrous, Cleanup };
+template <class Body>
+void ForRowBlocks(int h, Body&& body) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4),
+                      [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
+}
 
-template <int NC, Mode M>
-inline __attribute__((always_inline)) void FilterRowImpl(const PassArgs& a, int y) {
+// ---- Separable passes ------------------------------------------------------------------------
+
+template <int NC, bool Cleanup>
+inline __attribute__((always_inline)) void SeparableRow(const PassArgs& a, int y) {
     const Guides& g = *a.g;
     const int w = g.depth.Width(), h = g.depth.Height();
-    const float kn = a.normalPower * kLog2e;
-    const Plane* invDz = a.vertical ? &g.invDzY : &g.invDzX;
-
-    alignas(64) float zc[kChunk], nxc[kChunk], nyc[kChunk], nzc[kChunk], idz[kChunk];
-    alignas(64) float lc[kChunk], il[kChunk], sc[kChunk];
-    alignas(64) float acc[NC][kChunk], wsum[kChunk], vacc[kChunk];
-
+    alignas(64) float zc[kChunk], nxc[kChunk], nyc[kChunk], nzc[kChunk], idz[kChunk], sc[kChunk];
+    alignas(64) float acc[NC][kChunk], wsum[kChunk];
     float cz[33];
     for (int t = 0; t < a.taps; ++t)
-        cz[t] = a.offset[t] == 0 ? 0.0f : kLog2e / (a.depthSigma * float(std::abs(a.offset[t])));
+        cz[t] = a.offset[t] == 0 ? 0.0f : 1.0f / (a.depthSigma * float(std::abs(a.offset[t])));
+    const float kn = a.normalPower;
 
     for (int x0 = 0; x0 < w; x0 += kChunk) {
         const int n = std::min(kChunk, w - x0);
+        if constexpr (Cleanup) {
+            const float* s = a.sigma->Row(y) + x0;
+            float smax = 0.0f;
+            for (int i = 0; i < n; ++i) smax = std::max(smax, s[i]);
+            if (smax <= 0.05f) {  // nothing to clean up here: copy
+                for (int c = 0; c < NC; ++c)
+                    std::copy_n(a.in[c]->Row(y) + x0, n, a.out[c]->Row(y) + x0);
+                if (a.outValid) std::copy_n(a.valid->Row(y) + x0, n, a.outValid->Row(y) + x0);
+                continue;
+            }
+            for (int i = 0; i < n; ++i)  // 1 / (2 sigma^2); huge below 0.05 px: centre only
+                sc[i] = s[i] > 0.05f ? 1.0f / (2.0f * s[i] * s[i]) : 1e30f;
+        }
         {
             const float* z = g.depth.Row(y) + x0;
             const float* nx = g.nx.Row(y) + x0;
             const float* ny = g.ny.Row(y) + x0;
             const float* nz = g.nz.Row(y) + x0;
-            const float* iz = invDz->Row(y) + x0;
+            const float* iz = g.invDz.Row(y) + x0;
             for (int i = 0; i < n; ++i) {
                 zc[i] = z[i], nxc[i] = nx[i], nyc[i] = ny[i], nzc[i] = nz[i], idz[i] = iz[i];
-                wsum[i] = 0.0f, vacc[i] = 0.0f;
+                wsum[i] = 0.0f;
             }
             for (int c = 0; c < NC; ++c)
                 for (int i = 0; i < n; ++i) acc[c][i] = 0.0f;
-            if constexpr (M == Mode::Atrous) {
-                const float* ilr = a.invLum->Row(y) + x0;
-                if constexpr (NC == 3) {
-                    const float* r = a.in[0]->Row(y) + x0;
-                    const float* gg = a.in[1]->Row(y) + x0;
-                    const float* b = a.in[2]->Row(y) + x0;
-                    for (int i = 0; i < n; ++i) lc[i] = Luma(r[i], gg[i], b[i]);
-                } else {
-                    const float* v = a.in[0]->Row(y) + x0;
-                    for (int i = 0; i < n; ++i) lc[i] = v[i];
-                }
-                for (int i = 0; i < n; ++i) il[i] = ilr[i] * kLog2e;
-            }
-            if constexpr (M == Mode::Cleanup) {
-                const float* s = a.sigma->Row(y) + x0;
-                float smax = 0.0f;
-                for (int i = 0; i < n; ++i) {
-                    // 1 / (2 sigma^2); a huge finite value below ~0.05 px keeps only the centre.
-                    sc[i] = s[i] > 0.05f ? kLog2e / (2.0f * s[i] * s[i]) : 1e30f;
-                    smax = std::max(smax, s[i]);
-                }
-                if (smax <= 0.05f) {  // nothing to clean up in this chunk: copy
-                    for (int c = 0; c < NC; ++c)
-                        std::copy_n(a.in[c]->Row(y) + x0, n, a.out[c]->Row(y) + x0);
-                    continue;
-                }
-            }
         }
         for (int t = 0; t < a.taps; ++t) {
             const int off = a.offset[t];
@@ -100,7 +90,7 @@ inline __attribute__((always_inline)) void FilterRowImpl(const PassArgs& a, int 
             } else {
                 xs = x0 + off;
             }
-            const float ht = a.weight[t];
+            const float ht = Cleanup ? 1.0f : a.weight[t];
             const float czt = cz[t];
             const float off2 = float(off) * float(off);
             const float* zq = g.depth.Row(yq) + xs;
@@ -111,34 +101,22 @@ inline __attribute__((always_inline)) void FilterRowImpl(const PassArgs& a, int 
             const float* in0 = a.in[0]->Row(yq) + xs;
             const float* in1 = NC == 3 ? a.in[1]->Row(yq) + xs : in0;
             const float* in2 = NC == 3 ? a.in[2]->Row(yq) + xs : in0;
-            const float* varq = M == Mode::Atrous ? a.var->Row(yq) + xs : in0;
             for (int i = 0; i < n; ++i) {
                 const float dot = nxc[i] * nxq[i] + nyc[i] * nyq[i] + nzc[i] * nzq[i];
                 float e = std::fabs(zq[i] - zc[i]) * idz[i] * czt + kn * (1.0f - dot);
-                float lq = 0.0f;
-                if constexpr (M == Mode::Atrous) {
-                    lq = NC == 3 ? Luma(in0[i], in1[i], in2[i]) : in0[i];
-                    e += std::fabs(lq - lc[i]) * il[i];
-                }
-                if constexpr (M == Mode::Cleanup) e += off2 * sc[i];
-                float wt = (M == Mode::Cleanup ? 1.0f : ht) * vq[i] * Exp2Neg(-e);
+                if constexpr (Cleanup) e += off2 * sc[i];
+                const float wt = ht * vq[i] * ExpNeg16(e);
                 wsum[i] += wt;
                 acc[0][i] += wt * in0[i];
                 if constexpr (NC == 3) {
                     acc[1][i] += wt * in1[i];
                     acc[2][i] += wt * in2[i];
                 }
-                if constexpr (M == Mode::Atrous) vacc[i] += wt * wt * varq[i];
             }
         }
         for (int c = 0; c < NC; ++c) {
             float* o = a.out[c]->Row(y) + x0;
             for (int i = 0; i < n; ++i) o[i] = wsum[i] > 0.0f ? acc[c][i] / wsum[i] : 0.0f;
-        }
-        if constexpr (M == Mode::Atrous) {
-            float* ov = a.outVar->Row(y) + x0;
-            for (int i = 0; i < n; ++i)
-                ov[i] = wsum[i] > 0.0f ? vacc[i] / (wsum[i] * wsum[i]) : 0.0f;
         }
         if (a.outValid) {
             float* ov = a.outValid->Row(y) + x0;
@@ -147,44 +125,172 @@ inline __attribute__((always_inline)) void FilterRowImpl(const PassArgs& a, int 
     }
 }
 
-// One clone per ISA of each instantiation; the loader picks one (ifunc) at start-up.
-#define TEXCACHE_KERNEL(name, NC, M)                                                         \
-    __attribute__((target_clones("arch=x86-64-v3", "default"))) void name(const PassArgs& a, \
-                                                                          int y0, int y1) {  \
-        for (int y = y0; y < y1; ++y) FilterRowImpl<NC, M>(a, y);                            \
+#define TEXCACHE_SEPARABLE(name, NC, CLEANUP)                                                \
+    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
+        const PassArgs& a, int y0, int y1) {                                                 \
+        for (int y = y0; y < y1; ++y) SeparableRow<NC, CLEANUP>(a, y);                       \
     }
-TEXCACHE_KERNEL(Bilateral1, 1, Mode::Bilateral)
-TEXCACHE_KERNEL(Bilateral3, 3, Mode::Bilateral)
-TEXCACHE_KERNEL(Atrous1, 1, Mode::Atrous)
-TEXCACHE_KERNEL(Atrous3, 3, Mode::Atrous)
-TEXCACHE_KERNEL(Cleanup1, 1, Mode::Cleanup)
-TEXCACHE_KERNEL(Cleanup3, 3, Mode::Cleanup)
-#undef TEXCACHE_KERNEL
+TEXCACHE_SEPARABLE(Bilateral1, 1, false)
+TEXCACHE_SEPARABLE(Bilateral3, 3, false)
+TEXCACHE_SEPARABLE(Cleanup1, 1, true)
+TEXCACHE_SEPARABLE(Cleanup3, 3, true)
+#undef TEXCACHE_SEPARABLE
+
+// ---- The fused a-trous level -----------------------------------------------------------------
+
+// 3x3 B-spline (1 2 1)^T (1 2 1) / 16; tap t = 3 (dy + 1) + (dx + 1).
+constexpr float kH[9] = {1.0f / 16, 2.0f / 16, 1.0f / 16, 2.0f / 16, 4.0f / 16,
+                         2.0f / 16, 1.0f / 16, 2.0f / 16, 1.0f / 16};
+
+template <int NC, bool Lum>
+inline __attribute__((always_inline)) void AtrousComponentChunk(const AtrousArgs& a,
+                                                                const AtrousComponent& c,
+                                                                const int* rows, int x0, int n,
+                                                                const float (*wg)[kChunk], int y) {
+    const int s = a.step;
+    // Tap pointers (row, column offset); rows outside the image point at the centre row with a
+    // zero geometric weight.
+    const float* in0[9];
+    const float* in1[9];
+    const float* in2[9];
+    const float* var[9];
+    for (int t = 0; t < 9; ++t) {
+        const int r = rows[t / 3], dx = (t % 3 - 1) * s;
+        in0[t] = c.in[0]->Row(r) + x0 + dx;
+        in1[t] = NC == 3 ? c.in[1]->Row(r) + x0 + dx : in0[t];
+        in2[t] = NC == 3 ? c.in[2]->Row(r) + x0 + dx : in0[t];
+        var[t] = c.var->Row(r) + x0 + dx;
+    }
+    // Results go to local arrays first: they cannot alias the 36 input pointers, so the loop
+    // needs no run-time alias checks (which GCC gives up on beyond 10) to vectorize.
+    alignas(64) float o0[kChunk], o1[kChunk], o2[kChunk], ov[kChunk];
+    const float sl = a.luminanceSigma;
+    for (int i = 0; i < n; ++i) {
+        float lc = 0.0f, il = 0.0f;
+        if constexpr (Lum) {
+            lc = NC == 3 ? Luma(in0[4][i], in1[4][i], in2[4][i]) : in0[4][i];
+            const float vc = var[4][i];
+            // SVGF: exp(-|l - l_c| / (sigma_l sqrt(var) + eps)); no luminance stopping for an
+            // unusable centre (its value is 0, not a luminance).
+            il = vc >= 0.0f ? 1.0f / (sl * std::sqrt(vc) + 1e-6f) : 0.0f;
+        }
+        float wsum = 0.0f, a0 = 0.0f, a1 = 0.0f, a2 = 0.0f, av = 0.0f;
+#pragma GCC unroll 9
+        for (int t = 0; t < 9; ++t) {
+            const float vq = var[t][i];
+            float w = vq >= 0.0f ? wg[t][i] : 0.0f;
+            const float v0 = in0[t][i];
+            const float v1 = NC == 3 ? in1[t][i] : 0.0f;
+            const float v2 = NC == 3 ? in2[t][i] : 0.0f;
+            if constexpr (Lum) {
+                const float lq = NC == 3 ? Luma(v0, v1, v2) : v0;
+                w *= ExpNeg8(std::fabs(lq - lc) * il);
+            }
+            wsum += w;
+            a0 += w * v0;
+            if constexpr (NC == 3) a1 += w * v1, a2 += w * v2;
+            av += w * w * (vq > 0.0f ? vq : 0.0f);
+        }
+        const float inv = wsum > 0.0f ? 1.0f / wsum : 0.0f;
+        o0[i] = a0 * inv;
+        if constexpr (NC == 3) o1[i] = a1 * inv, o2[i] = a2 * inv;
+        ov[i] = wsum > 0.0f ? av * inv * inv : -1.0f;
+    }
+    std::copy_n(o0, n, c.out[0]->Row(y) + x0);
+    if constexpr (NC == 3) {
+        std::copy_n(o1, n, c.out[1]->Row(y) + x0);
+        std::copy_n(o2, n, c.out[2]->Row(y) + x0);
+    }
+    std::copy_n(ov, n, c.outVar->Row(y) + x0);
+}
+
+inline __attribute__((always_inline)) void AtrousRowImpl(const AtrousArgs& a, int y) {
+    const Guides& g = *a.g;
+    const int w = g.depth.Width(), h = g.depth.Height();
+    const int s = a.step;
+    const int rows[3] = {y - s >= 0 ? y - s : y, y, y + s < h ? y + s : y};
+    const bool rowOk[3] = {y - s >= 0, true, y + s < h};
+    alignas(64) float wg[9][kChunk];
+    alignas(64) float zc[kChunk], nxc[kChunk], nyc[kChunk], nzc[kChunk], tol[kChunk];
+    const float kn = a.normalPower;
+    for (int x0 = 0; x0 < w; x0 += kChunk) {
+        const int n = std::min(kChunk, w - x0);
+        {
+            const float* z = g.depth.Row(y) + x0;
+            const float* nx = g.nx.Row(y) + x0;
+            const float* ny = g.ny.Row(y) + x0;
+            const float* nz = g.nz.Row(y) + x0;
+            const float* iz = g.invDz.Row(y) + x0;
+            const float k = 1.0f / (a.depthSigma * float(s));
+            for (int i = 0; i < n; ++i) {
+                zc[i] = z[i], nxc[i] = nx[i], nyc[i] = ny[i], nzc[i] = nz[i];
+                tol[i] = iz[i] * k;
+            }
+        }
+        // Phase 1: depth + normal weight of each tap (SVGF: exp(-|dz| / (sigma_z |grad z . o|))
+        // * max(0, n.n')^sigma_n), times the B-spline weight.
+        for (int t = 0; t < 9; ++t) {
+            float* wt = wg[t];
+            if (!rowOk[t / 3]) {
+                std::fill_n(wt, n, 0.0f);
+                continue;
+            }
+            const int r = rows[t / 3], dx = (t % 3 - 1) * s;
+            const float dist = (t == 0 || t == 2 || t == 6 || t == 8) ? 0.70710678f : 1.0f;
+            const float ht = kH[t];
+            const float* zq = g.depth.Row(r) + x0 + dx;
+            const float* nxq = g.nx.Row(r) + x0 + dx;
+            const float* nyq = g.ny.Row(r) + x0 + dx;
+            const float* nzq = g.nz.Row(r) + x0 + dx;
+            for (int i = 0; i < n; ++i) {
+                const float dot = nxc[i] * nxq[i] + nyc[i] * nyq[i] + nzc[i] * nzq[i];
+                const float e = std::fabs(zq[i] - zc[i]) * tol[i] * dist + kn * (1.0f - dot);
+                wt[i] = ht * ExpNeg16(e);
+            }
+        }
+        // Phase 2: each component.
+        for (const AtrousComponent& c : a.comp) {
+            if (c.nc == 3) {
+                if (c.luminance)
+                    AtrousComponentChunk<3, true>(a, c, rows, x0, n, wg, y);
+                else
+                    AtrousComponentChunk<3, false>(a, c, rows, x0, n, wg, y);
+            } else if (c.nc == 1) {
+                if (c.luminance)
+                    AtrousComponentChunk<1, true>(a, c, rows, x0, n, wg, y);
+                else
+                    AtrousComponentChunk<1, false>(a, c, rows, x0, n, wg, y);
+            }
+        }
+    }
+}
+
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void AtrousRows(
+    const AtrousArgs& a, int y0, int y1) {
+    for (int y = y0; y < y1; ++y) AtrousRowImpl(a, y);
+}
 
 }  // namespace
 
-void FilterRows(const PassArgs& a, int y0, int y1) {
-    const bool three = a.nc == 3;
-    if (a.sigma)
-        three ? Cleanup3(a, y0, y1) : Cleanup1(a, y0, y1);
-    else if (a.var)
-        three ? Atrous3(a, y0, y1) : Atrous1(a, y0, y1);
-    else
-        three ? Bilateral3(a, y0, y1) : Bilateral1(a, y0, y1);
+void FilterPlanes(const PassArgs& a) {
+    ForRowBlocks(a.g->depth.Height(), [&](int y0, int y1) {
+        const bool three = a.nc == 3;
+        if (a.sigma)
+            three ? Cleanup3(a, y0, y1) : Cleanup1(a, y0, y1);
+        else
+            three ? Bilateral3(a, y0, y1) : Bilateral1(a, y0, y1);
+    });
 }
 
-void FilterPlanes(const PassArgs& a) {
-    const int h = a.g->depth.Height();
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4),
-                      [&](const tbb::blocked_range<int>& r) { FilterRows(a, r.begin(), r.end()); });
+void AtrousLevel(const AtrousArgs& a) {
+    ForRowBlocks(a.g->depth.Height(), [&](int y0, int y1) { AtrousRows(a, y0, y1); });
 }
 
 void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp, int r) {
     const int w = in[0]->Width(), h = in[0]->Height();
-    // Horizontal: running sums along each row (out-of-image taps are the zero padding or
-    // skipped), in double so long rows do not drift.
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 8), [&](const tbb::blocked_range<int>& rr) {
-        for (int y = rr.begin(); y < rr.end(); ++y)
+    // Horizontal: running sums along each row, in double so long rows do not drift.
+    ForRowBlocks(h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y)
             for (int c = 0; c < nc; ++c) {
                 const float* s = in[c]->Row(y);
                 float* d = tmp[c]->Row(y);
@@ -198,8 +304,8 @@ void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp
             }
     });
     // Vertical: a direct sum over the 2r+1 rows, vectorized across x.
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 8), [&](const tbb::blocked_range<int>& rr) {
-        for (int y = rr.begin(); y < rr.end(); ++y)
+    ForRowBlocks(h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y)
             for (int c = 0; c < nc; ++c) {
                 float* d = out[c]->Row(y);
                 std::fill_n(d, w, 0.0f);

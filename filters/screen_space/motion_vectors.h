@@ -11,6 +11,8 @@
 //                a disoccluded pixel from its own surface, never from the occluder).
 // A pixel without any usable tap has no history.
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 
 #include "filters/screen_space/frame_buffers.h"
@@ -73,6 +75,45 @@ inline bool MakeFootprint(float sx, float sy, int width, int height, Footprint* 
     fp->w[0] = (1.0f - ax) * (1.0f - ay), fp->w[1] = ax * (1.0f - ay);
     fp->w[2] = (1.0f - ax) * ay, fp->w[3] = ax * ay;
     return true;
+}
+
+/// Gather addresses and weights of a pixel's history, for planes laid out like `Plane` (index
+/// relative to Row(0) - kPad): the 4 taps of the footprint of (sx, sy), the weights of the
+/// unusable ones (mask bit clear) zeroed and the rest renormalized. Branch-free, so loops over
+/// a row vectorize (with gathers). `ok` is 0 when the usable taps carry less than 5% of the
+/// bilinear weight (mostly rejected surfaces: no history rather than an extrapolation).
+struct Bilinear {
+    int i00, i10, i01, i11;
+    float w00, w10, w01, w11;
+    float ok;  ///< 1 or 0 (a float, not a bool: keeps callers' loops vectorizable)
+};
+inline Bilinear BilinearTaps(float sx, float sy, int mask, int width, int height, int stride) {
+    // Integer and float arithmetic only (no 8-bit booleans), so that GCC vectorizes callers.
+    // A pixel without usable taps may have a NaN or far-away position: use a safe one.
+    sx = mask != 0 ? sx : 0.5f, sy = mask != 0 ? sy : 0.5f;
+    const float fx = sx - 0.5f, fy = sy - 0.5f;
+    const float bx = std::floor(fx), by = std::floor(fy);
+    const float ax = fx - bx, ay = fy - by;
+    const int x0 = std::min(std::max(int(bx), -2), width);  // columns -2..width+1 are padding
+    const int y0 = int(by);
+    // Rows outside the image carry no weight (mask); address a valid row instead.
+    const int r0 = std::min(std::max(y0, 0), height - 1);
+    const int r1 = std::min(std::max(y0 + 1, 0), height - 1);
+    Bilinear b;
+    b.i00 = r0 * stride + kPad + x0, b.i10 = b.i00 + 1;
+    b.i01 = r1 * stride + kPad + x0, b.i11 = b.i01 + 1;
+    const float m0 = float(mask & 1), m1 = float((mask >> 1) & 1);
+    const float m2 = float((mask >> 2) & 1), m3 = float((mask >> 3) & 1);
+    b.w00 = (1.0f - ax) * (1.0f - ay) * m0, b.w10 = ax * (1.0f - ay) * m1;
+    b.w01 = (1.0f - ax) * ay * m2, b.w11 = ax * ay * m3;
+    const float sum = b.w00 + b.w10 + b.w01 + b.w11;
+    b.ok = sum >= 0.05f ? 1.0f : 0.0f;
+    const float inv = sum >= 0.05f ? 1.0f / sum : 0.0f;
+    b.w00 *= inv, b.w10 *= inv, b.w01 *= inv, b.w11 *= inv;
+    return b;
+}
+inline float Gather(const float* base, const Bilinear& b) {
+    return b.w00 * base[b.i00] + b.w10 * base[b.i10] + b.w01 * base[b.i01] + b.w11 * base[b.i11];
 }
 
 /// Usable-tap mask of a footprint: bit k set when tap k is inside the image, has usable

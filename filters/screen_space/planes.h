@@ -98,6 +98,8 @@ public:
     void Fill(T v) { std::fill_n(data_.data(), data_.size(), v); }
     T* Row(int y) { return data_.data() + size_t(y) * stride_ + kPad; }
     const T* Row(int y) const { return data_.data() + size_t(y) * stride_ + kPad; }
+    /// Start of the allocation: index r * Stride() + kPad + x addresses (x, r).
+    const T* Base() const { return data_.data(); }
     T& At(int x, int y) { return Row(y)[x]; }
     T At(int x, int y) const { return Row(y)[x]; }
     int Width() const { return width_; }
@@ -123,8 +125,7 @@ struct Guides {
     Plane px, py, pz;   ///< world position (0 where invalid)
     Plane nx, ny, nz;   ///< unit normal; (0,0,0) where the pixel's geometry is unusable
     Plane depth;        ///< distance from the camera (0 where invalid)
-    Plane invDzX;       ///< 1 / (local |d depth / dx| + 1e-3 depth): depth tolerance, x passes
-    Plane invDzY;       ///< the same for y passes
+    Plane invDz;        ///< 1 / (local depth step per pixel + 1e-3 depth): depth tolerance
     IntPlane objectId;  ///< -2 where invalid (never matches a real id or the background's -1)
     BytePlane valid;    ///< 1 where the geometry is usable
     void Resize(int w, int h);
@@ -132,29 +133,50 @@ struct Guides {
 
 // ---- Kernels (kernels.cpp) ----------------------------------------------------------------
 
-/// One separable pass of an edge-avoiding filter over `nc` (1 or 3) channels.
+/// One separable pass of an edge-avoiding filter over `nc` (1 or 3) channels: the joint
+/// bilateral (depth + normal) and, with `sigma`, Zeng's clean-up Gaussian of per-pixel std.
 struct PassArgs {
     int nc = 1;
     bool vertical = false;
     const Plane* in[3] = {nullptr, nullptr, nullptr};
     Plane* out[3] = {nullptr, nullptr, nullptr};
-    const Plane* valid = nullptr;   ///< sample validity (0/1) of `in`
-    const Plane* var = nullptr;     ///< a-trous: luminance variance of `in` (filtered along)
-    Plane* outVar = nullptr;        ///< a-trous: propagated variance, sum w^2 var / (sum w)^2
-    Plane* outValid = nullptr;      ///< optional: 1 where any tap had weight (the output is usable)
-    const Plane* invLum = nullptr;  ///< a-trous: per-pixel 1 / (sigma_l sqrt(var) + eps)
-    const Plane* sigma = nullptr;   ///< clean-up: per-pixel Gaussian std in pixels (0: copy)
+    const Plane* valid = nullptr;  ///< sample validity (0/1) of `in`
+    Plane* outValid = nullptr;     ///< optional: 1 where any tap had weight (the output is usable)
+    const Plane* sigma = nullptr;  ///< clean-up: per-pixel Gaussian std in pixels (< 0.05: copy)
     const Guides* g = nullptr;
     int taps = 0;                ///< number of taps (<= 33)
     int offset[33] = {};         ///< tap offsets in pixels along the pass direction
     float weight[33] = {};       ///< fixed spatial weights (clean-up: ignored)
-    float normalPower = 128.0f;  ///< weight exp(-normalPower (1 - n.n')) ~ max(0, n.n')^128
-    float depthSigma = 1.0f;     ///< weight exp(-|dz| invDz / (depthSigma |offset|))
+    float normalPower = 128.0f;  ///< weight ~ max(0, n.n')^normalPower
+    float depthSigma = 1.0f;     ///< depth weight ~ exp(-|dz| invDz / (depthSigma |offset|))
 };
 
-/// Runs a pass over rows [y0, y1).
-void FilterRows(const PassArgs& a, int y0, int y1);
-/// Runs a pass over the whole image on the TBB pool.
+/// One component of an a-trous level: `nc` (1 or 3) planes and their luminance variance. A
+/// negative variance marks an unusable sample (no weight); the output's variance is
+/// sum w^2 var / (sum w)^2, or -1 where no tap had weight.
+struct AtrousComponent {
+    int nc = 0;  ///< 0: unused slot
+    const Plane* in[3] = {nullptr, nullptr, nullptr};
+    const Plane* var = nullptr;
+    Plane* out[3] = {nullptr, nullptr, nullptr};
+    Plane* outVar = nullptr;
+    bool luminance = true;  ///< SVGF's luminance stopping; false: geometry only (joint bilateral)
+};
+
+/// One a-trous level (Dammertz et al.; SVGF's edge-stopping functions) over up to 3 components
+/// at once: a 3x3 B-spline kernel with taps `step` pixels apart. The depth and normal weights
+/// of a tap are computed once and shared by the components.
+struct AtrousArgs {
+    const Guides* g = nullptr;
+    int step = 1;
+    float normalPower = 128.0f, depthSigma = 1.0f, luminanceSigma = 4.0f;
+    AtrousComponent comp[3];
+};
+
+/// Runs one a-trous level over the whole image on the TBB pool. Outputs must not alias inputs.
+void AtrousLevel(const AtrousArgs& a);
+
+/// Runs a separable pass over the whole image on the TBB pool.
 void FilterPlanes(const PassArgs& a);
 
 /// Sum over a (2r+1) x (2r+1) box of each of `nc` planes, unweighted, clamped at the borders
@@ -170,6 +192,22 @@ inline float Exp2Neg(float t) {
     const float p = 1.0f + f * (0.69583356f + f * (0.22606716f + f * 0.078024523f));
     // 2^(i - 1): the polynomial is 2^(f + 1); i = -126 gives 0 (a flush to zero)
     return p * std::bit_cast<float>((i + 126) << 23);
+}
+
+/// max(0, 1 - x/16)^16: a cheap, vectorizable stand-in for exp(-x) on x >= 0 (within a few
+/// percent for x < 2; exactly 0 from x = 16 on, where exp(-x) < 1e-7).
+inline float ExpNeg16(float x) {
+    float t = 1.0f - x * (1.0f / 16.0f);
+    t = t > 0.0f ? t : 0.0f;
+    t *= t, t *= t, t *= t;
+    return t * t;
+}
+/// max(0, 1 - x/8)^8: the same, coarser (luminance weights).
+inline float ExpNeg8(float x) {
+    float t = 1.0f - x * (1.0f / 8.0f);
+    t = t > 0.0f ? t : 0.0f;
+    t *= t, t *= t;
+    return t * t;
 }
 
 /// Rec. 709 luminance.

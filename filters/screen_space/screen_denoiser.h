@@ -71,7 +71,7 @@ struct DenoiserSettings {
     unsigned seed = 1;             ///< glossy motion-vector sampling
 };
 
-/// Wall-clock milliseconds of the passes of the last Denoise() (all components together).
+/// Milliseconds of the passes of the last Denoise() (all components together).
 struct StageTimings {
     double prepare = 0.0;            ///< validation, guide planes, (de)modulation inputs
     double traditionalMotion = 0.0;  ///< back-projection + disocclusion test
@@ -108,8 +108,11 @@ public:
     /// Forgets the history: the next frame is treated as the first.
     void Reset();
 
-    /// Pass timings of the last Denoise().
+    /// Pass timings of the last Denoise(), wall clock.
     const StageTimings& Timings() const;
+    /// The same in process CPU time (all threads): what the passes cost regardless of how much
+    /// of the machine other processes leave us.
+    const StageTimings& CpuTimings() const;
     /// The denoised visibility of the last frame (0 where the pixel has no usable geometry).
     std::vector<float> Visibility() const;
     /// The denoised, remodulated glossy component of the last frame (empty if it had none).
