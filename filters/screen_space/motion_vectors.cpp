@@ -209,10 +209,25 @@ void GlossyMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& pre
             const float nl = glm::length(pn);
             if (!(nl > 0.0f)) continue;
             pn /= nl;
-            // eq. 5: the hit's mirror image in the reflector's previous plane, projected.
+            // eq. 5: the hit's mirror image in the reflector's previous plane, projected. Its
+            // motion since the previous frame is applied to this pixel (x + mu_prev - mu_now,
+            // mu_now from this frame's hit, plane and camera) rather than mu_prev taken as the
+            // position itself: identical for a mirror, but for a sampled glossy direction the
+            // virtual image is not at x, and the absolute position would reuse a pixel up to the
+            // lobe's footprint away even in a static scene (a blur that never converges).
             const glm::vec3 hv = hg - 2.0f * glm::dot(hg - pp, pn) * pn;
             glm::vec2 mu;
             if (!prev.camera.Project(hv, &mu)) continue;
+            {
+                const glm::vec3 hc = f.glossyHit[i];
+                const glm::vec3 pc = f.position[i];
+                const glm::vec3 nc(cur.nx.At(x, y), cur.ny.At(x, y), cur.nz.At(x, y));
+                glm::vec2 muNow;
+                if (!Finite(hc) ||
+                    !f.camera.Project(hc - 2.0f * glm::dot(hc - pc, nc) * nc, &muNow))
+                    continue;
+                mu += glm::vec2(float(x) + 0.5f, float(y) + 0.5f) - muNow;
+            }
             // s^C: where the camera ray to the virtual image crosses the plane.
             const glm::vec3 cam = prev.camera.position;
             const float den = glm::dot(hv - cam, pn);

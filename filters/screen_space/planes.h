@@ -133,8 +133,9 @@ struct Guides {
 
 // ---- Kernels (kernels.cpp) ----------------------------------------------------------------
 
-/// One separable pass of an edge-avoiding filter over `nc` (1 or 3) channels: the joint
-/// bilateral (depth + normal) and, with `sigma`, Zeng's clean-up Gaussian of per-pixel std.
+/// One separable pass of an edge-avoiding filter over `nc` (1 or 3) channels: a joint bilateral
+/// (depth + normal guides) with fixed spatial weights, or with `sigma` a Gaussian of per-pixel
+/// std (Zeng's clean-up and shadow filters).
 struct PassArgs {
     int nc = 1;
     bool vertical = false;
@@ -142,7 +143,7 @@ struct PassArgs {
     Plane* out[3] = {nullptr, nullptr, nullptr};
     const Plane* valid = nullptr;  ///< sample validity (0/1) of `in`
     Plane* outValid = nullptr;     ///< optional: 1 where any tap had weight (the output is usable)
-    const Plane* sigma = nullptr;  ///< clean-up: per-pixel Gaussian std in pixels (< 0.05: copy)
+    const Plane* sigma = nullptr;  ///< per-pixel Gaussian std in pixels (< 0.05: copy)
     const Guides* g = nullptr;
     int taps = 0;                ///< number of taps (<= 33)
     int offset[33] = {};         ///< tap offsets in pixels along the pass direction

@@ -55,20 +55,25 @@ enum class MotionKind {
 
 /// Parameters; defaults follow the papers. Validated by the denoiser (InputError).
 struct DenoiserSettings {
-    float alpha = 0.2f;           ///< weight of the current frame in the temporal blend (eq. 2)
-    float baselineClampK = 1.0f;  ///< BaselineClamp: history in mu +- k sigma (3x3)
-    float reliableClampK = 3.0f;  ///< Reliable: history in mu +- k sigma (3x3; Sec. 5)
-    int atrousLevels = 4;         ///< a-trous iterations, steps 1, 2, 4, 8 (1..5)
-    float sigmaLuminance = 4.0f;  ///< SVGF's sigma_l
-    float sigmaDepth = 1.0f;      ///< SVGF's sigma_z (relative to the local depth slope)
-    float normalPower = 128.0f;   ///< SVGF's sigma_n (weight max(0, n.n')^sigma_n)
-    int shadowRadius = 15;        ///< Reliable: separable joint bilateral for visibility (1..16)
-    int shadowSplatRadius = 8;    ///< Reliable: window shadow vectors are splatted through
+    float alpha = 0.2f;               ///< weight of the current frame in the temporal blend (eq. 2)
+    float baselineClampK = 1.0f;      ///< BaselineClamp: history in mu +- k sigma (3x3)
+    float reliableClampK = 3.0f;      ///< Reliable: history in mu +- k sigma (3x3; Sec. 5)
+    int atrousLevels = 4;             ///< a-trous iterations, steps 1, 2, 4, 8 (1..5)
+    float sigmaLuminance = 4.0f;      ///< SVGF's sigma_l
+    float sigmaDepth = 1.0f;          ///< SVGF's sigma_z (relative to the local depth slope)
+    float normalPower = 128.0f;       ///< SVGF's sigma_n (weight max(0, n.n')^sigma_n)
+    int shadowRadius = 15;            ///< Reliable: reach of the shadow filter (31x31, 1..16)
+    int shadowSplatRadius = 8;        ///< Reliable: window shadow vectors and sizes splat through
     float shadowFalloffSigma = 0.1f;  ///< Reliable: eq. 4's sigma (radians)
     float glossyLobeScale = 1.0f;     ///< Reliable: glossy lobe's angular std = scale * GGX alpha
-    float maxGlossyJitter = 8.0f;  ///< Reliable: cap (pixels) on the glossy vector's Gaussian axes
-    int brdfSamples = 1024;        ///< samples per BRDF-table entry (Zhuang et al.'s count)
-    unsigned seed = 1;             ///< glossy motion-vector sampling
+    /// Reliable: cap (pixels) on the glossy vector's Gaussian axes. Zeng's Sigma spans the
+    /// lobe's footprint, tens of pixels at 1080p for alpha > 0.2; history that far away is
+    /// another part of the reflection, and in a static scene the jitter is a blur that never
+    /// converges (glossy RMSE after 16 static frames, 96x64 test: 0.025 at 8 px, 0.023 at 4,
+    /// 0.017 without jitter).
+    float maxGlossyJitter = 4.0f;
+    int brdfSamples = 1024;  ///< samples per BRDF-table entry (Zhuang et al.'s count)
+    unsigned seed = 1;       ///< glossy motion-vector sampling
 };
 
 /// Milliseconds of the passes of the last Denoise() (all components together).
