@@ -32,6 +32,8 @@ public:
     }
     /// The table entry (i = cos index, j = alpha index).
     glm::vec2 Entry(int i, int j) const { return table_[size_t(j) * kSize + i]; }
+    /// All entries, alpha-major (entry (i, j) at j * kSize + i).
+    const glm::vec2* Data() const { return table_.data(); }
     /// Samples per entry the table was built with.
     int Samples() const { return samples_; }
 

@@ -35,7 +35,7 @@ struct History {
     Plane c[3];              ///< colour (demodulated); SVGF: the first a-trous level's output
     Plane m1, m2;            ///< SVGF: luminance moments
     Plane len;               ///< frames accumulated (0: none)
-    HugeArray<float> cones;  ///< Reliable indirect: 18 floats per pixel (6 cones x RGB)
+    HugeArray<float> cones;  ///< Reliable indirect: per pixel 3 x 8 floats (RGB x 6 cones + 2)
     bool valid = false;
 };
 
@@ -71,6 +71,7 @@ struct ScreenSpaceDenoiser::State {
     detail::Plane shadowAlpha, sigma, shadowSigma;
     detail::IntPlane occluder;
     detail::Plane splat[8];
+    std::vector<uint8_t> zeroRow;  // validity flags of a row outside the image
     StageTimings timings, cpuTimings;
 
     detail::Guides& G() { return guides[cur]; }

@@ -45,36 +45,119 @@ constexpr float kNormalCos = 0.9f;
 
 }  // namespace
 
+namespace {
+
+// Everything the traditional pass reads for one row, as plain pointers and values, so that the
+// kernel (a target_clones function) sees no aliasing and vectorizes: AoS loads of the frame's
+// vec3 buffers become strided loads, the previous frame's guides at the 4 taps become gathers.
+struct TradRowArgs {
+    int w, h, stride;
+    const float* pp;  // prevPosition of the row, xyz interleaved
+    const float* pn;  // prevNormal of the row
+    const uint8_t* valid;
+    const int32_t* id;
+    const float* gx;  // previous guides, bases (index r * stride + kPad + x)
+    const float* gy;
+    const float* gz;
+    const float* gnx;
+    const float* gny;
+    const float* gnz;
+    const int32_t* gid;
+    float m[16];  // previous worldToClip, column-major
+    float cam[3];
+    float* ox;
+    float* oy;
+    uint8_t* om;
+};
+
+// 1 when the previous frame's surface at `idx` is the same object, on this pixel's previous
+// tangent plane and facing the same way (0/1 floats throughout: GCC 12 does not vectorize
+// loops mixing boolean widths).
+inline float TapPass(const TradRowArgs& a, int idx, float inside, int id, float ppx, float ppy,
+                     float ppz, float nx, float ny, float nz, float tol) {
+    const float qx = a.gx[idx] - ppx, qy = a.gy[idx] - ppy, qz = a.gz[idx] - ppz;
+    const float plane = std::fabs(qx * nx + qy * ny + qz * nz);
+    const float cosn = a.gnx[idx] * nx + a.gny[idx] * ny + a.gnz[idx] * nz;
+    const float same = a.gid[idx] == id ? 1.0f : 0.0f;
+    return inside * same * (plane < tol ? 1.0f : 0.0f) * (cosn > kNormalCos ? 1.0f : 0.0f);
+}
+inline float InRange(int v, int n) {
+    return (v >= 0 ? 1.0f : 0.0f) * (v < n ? 1.0f : 0.0f);
+}
+
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void TradRow(
+    const TradRowArgs& args) {
+    const TradRowArgs a = args;
+    constexpr int kC = 256;
+    alignas(64) int mask[kC];
+    alignas(64) float ox[kC], oy[kC];  // local results: no aliasing with the gathers
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float ppx = a.pp[3 * x], ppy = a.pp[3 * x + 1], ppz = a.pp[3 * x + 2];
+            float nx = a.pn[3 * x], ny = a.pn[3 * x + 1], nz = a.pn[3 * x + 2];
+            const float cx = a.m[0] * ppx + a.m[4] * ppy + a.m[8] * ppz + a.m[12];
+            const float cy = a.m[1] * ppx + a.m[5] * ppy + a.m[9] * ppz + a.m[13];
+            const float cw = a.m[3] * ppx + a.m[7] * ppy + a.m[11] * ppz + a.m[15];
+            const float nl2 = nx * nx + ny * ny + nz * nz;
+            // NaN/Inf anywhere fail these comparisons (and cw > 0: in front of the camera).
+            const float okf =
+                (a.valid[x] != 0 ? 1.0f : 0.0f) * (cw > 0.0f ? 1.0f : 0.0f) *
+                (nl2 > 0.0f ? 1.0f : 0.0f) * (nl2 < 1e30f ? 1.0f : 0.0f) *
+                (std::fabs(ppx) + std::fabs(ppy) + std::fabs(ppz) < 1e30f ? 1.0f : 0.0f);
+            const bool ok = okf > 0.0f;
+            const float iw = ok ? 1.0f / cw : 0.0f;
+            const float rx = (cx * iw * 0.5f + 0.5f) * float(a.w);
+            const float ry = (0.5f - cy * iw * 0.5f) * float(a.h);
+            ox[i] = ok ? rx : kNaN, oy[i] = ok ? ry : kNaN;
+            const float inl = ok ? 1.0f / std::sqrt(nl2) : 0.0f;
+            nx *= inl, ny *= inl, nz *= inl;
+            // Footprint (clamped so far-away positions stay integers; their taps are outside).
+            const float fx = std::min(std::max(rx, -4.0f), float(a.w) + 4.0f) - 0.5f;
+            const float fy = std::min(std::max(ry, -4.0f), float(a.h) + 4.0f) - 0.5f;
+            const int x0i = int(std::floor(fx)), y0i = int(std::floor(fy));
+            const int r0 = std::min(std::max(y0i, 0), a.h - 1);
+            const int r1 = std::min(std::max(y0i + 1, 0), a.h - 1);
+            const int cx0 = std::min(std::max(x0i, -1), a.w - 1);
+            const int i00 = r0 * a.stride + kPad + cx0, i01 = r1 * a.stride + kPad + cx0;
+            const float inX0 = InRange(x0i, a.w), inX1 = InRange(x0i + 1, a.w);
+            const float inY0 = InRange(y0i, a.h), inY1 = InRange(y0i + 1, a.h);
+            const float dx = ppx - a.cam[0], dy = ppy - a.cam[1], dz = ppz - a.cam[2];
+            const float tol = kPlaneTol * std::sqrt(dx * dx + dy * dy + dz * dz) + 1e-6f;
+            const int id = a.id[x];
+            const float m0 = TapPass(a, i00, inX0 * inY0, id, ppx, ppy, ppz, nx, ny, nz, tol);
+            const float m1 = TapPass(a, i00 + 1, inX1 * inY0, id, ppx, ppy, ppz, nx, ny, nz, tol);
+            const float m2 = TapPass(a, i01, inX0 * inY1, id, ppx, ppy, ppz, nx, ny, nz, tol);
+            const float m3 = TapPass(a, i01 + 1, inX1 * inY1, id, ppx, ppy, ppz, nx, ny, nz, tol);
+            mask[i] = int(okf * (m0 + 2.0f * m1 + 4.0f * m2 + 8.0f * m3));
+        }
+        for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(mask[i]);
+        std::copy_n(ox, n, a.ox + x0), std::copy_n(oy, n, a.oy + x0);
+    }
+}
+
+}  // namespace
+
 void TraditionalMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& prev,
                        MotionField* out) {
     const int w = f.width, h = f.height;
     const Guides& pg = *prev.g;
     ForRows(h, [&](int y) {
-        float* ox = out->x.Row(y);
-        float* oy = out->y.Row(y);
-        uint8_t* om = out->taps.Row(y);
-        for (int x = 0; x < w; ++x) {
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
-            ox[x] = kNaN, oy[x] = kNaN, om[x] = 0;
-            if (!cur.valid.At(x, y)) continue;
-            const glm::vec3 pp = f.prevPosition[i];
-            glm::vec3 pn = f.prevNormal[i];
-            glm::vec2 r;
-            if (!Finite(pp) || !Finite(pn) || !prev.camera.Project(pp, &r)) continue;
-            const float nl = glm::length(pn);
-            if (!(nl > 0.0f)) continue;
-            pn /= nl;
-            ox[x] = r.x, oy[x] = r.y;
-            Footprint fp;
-            if (!MakeFootprint(r.x, r.y, w, h, &fp)) continue;
-            const int id = cur.objectId.At(x, y);
-            const float tol = kPlaneTol * glm::length(pp - prev.camera.position) + 1e-6f;
-            om[x] = TapMask(fp, pg, [&](int tx, int ty) {
-                return pg.objectId.At(tx, ty) == id &&
-                       std::abs(glm::dot(PrevPos(pg, tx, ty) - pp, pn)) < tol &&
-                       glm::dot(PrevNrm(pg, tx, ty), pn) > kNormalCos;
-            });
-        }
+        TradRowArgs a;
+        a.w = w, a.h = h, a.stride = int(pg.depth.Stride());
+        a.pp = &f.prevPosition[size_t(y) * size_t(w)].x;
+        a.pn = &f.prevNormal[size_t(y) * size_t(w)].x;
+        a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
+        a.gx = pg.px.Base(), a.gy = pg.py.Base(), a.gz = pg.pz.Base();
+        a.gnx = pg.nx.Base(), a.gny = pg.ny.Base(), a.gnz = pg.nz.Base();
+        a.gid = pg.objectId.Base();
+        for (int c = 0; c < 4; ++c)
+            for (int r = 0; r < 4; ++r) a.m[4 * c + r] = prev.camera.worldToClip[c][r];
+        a.cam[0] = prev.camera.position.x, a.cam[1] = prev.camera.position.y;
+        a.cam[2] = prev.camera.position.z;
+        a.ox = out->x.Row(y), a.oy = out->y.Row(y), a.om = out->taps.Row(y);
+        TradRow(a);
     });
 }
 

@@ -100,6 +100,7 @@ public:
     const T* Row(int y) const { return data_.data() + size_t(y) * stride_ + kPad; }
     /// Start of the allocation: index r * Stride() + kPad + x addresses (x, r).
     const T* Base() const { return data_.data(); }
+    T* Base() { return data_.data(); }
     T& At(int x, int y) { return Row(y)[x]; }
     T At(int x, int y) const { return Row(y)[x]; }
     int Width() const { return width_; }

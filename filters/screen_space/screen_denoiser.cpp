@@ -137,6 +137,7 @@ void ScreenSpaceDenoiser::State::Resize(int width, int height) {
     shadowAlpha.Resize(w, h), sigma.Resize(w, h), shadowSigma.Resize(w, h);
     occluder.Resize(w, h, -1);
     for (Plane& p : splat) p.Resize(w, h);
+    zeroRow.assign(size_t(w) + 2 * kPad, 0);
     hasPrev = false;
 }
 
@@ -237,6 +238,232 @@ void CheckInputs(const FrameBuffers& f, Method m, Demodulation d) {
         need(f.albedo.size(), "albedo", "shading the indirect cones");
 }
 
+// ---- Preparation kernels: one row each, everything read through plain pointers and written
+// to local arrays first, so that GCC vectorizes them (the frame's vec3 buffers become strided
+// loads, the BRDF table lookups gathers); validity is carried as 0/1 floats (GCC 12 gives up on
+// loops that mix boolean widths).
+
+inline float Fin(float v) {
+    return std::fabs(v) < 3.0e38f ? 1.0f : 0.0f;
+}  // 0 for NaN / Inf
+
+// A plain copy loop rather than std::copy_n: memcpy would take the address of a kernel's local
+// result arrays, after which GCC assumes any incoming pointer may alias them.
+template <class T>
+inline __attribute__((always_inline)) void CopyRow(const T* src, int n, T* dst) {
+    for (int i = 0; i < n; ++i) dst[i] = src[i];
+}
+
+constexpr int kPrepChunk = 256;
+
+// Guides and visibility of one row.
+struct GuideRow {
+    int w;
+    const float* pos;  // xyz interleaved
+    const float* nrm;
+    const float* depth;
+    const int32_t* id;
+    const float* vis;
+    float *px, *py, *pz, *nx, *ny, *nz, *dz, *vv, *vok;
+    int32_t* oid;
+    uint8_t* ok;
+};
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void PrepGuides(
+    const GuideRow& args) {
+    const GuideRow a = args;
+    constexpr int kC = kPrepChunk;
+    alignas(64) float px[kC], py[kC], pz[kC], nx[kC], ny[kC], nz[kC], dz[kC], vv[kC], vok[kC],
+        okf[kC];
+    alignas(64) int oid[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float p0 = a.pos[3 * x], p1 = a.pos[3 * x + 1], p2 = a.pos[3 * x + 2];
+            const float n0 = a.nrm[3 * x], n1 = a.nrm[3 * x + 1], n2 = a.nrm[3 * x + 2];
+            const float z = a.depth[x];
+            const float nl2 = n0 * n0 + n1 * n1 + n2 * n2;
+            const float good = Fin(p0 + p1 + p2) * Fin(nl2) * (nl2 > 0.0f ? 1.0f : 0.0f) * Fin(z) *
+                               (z > 0.0f ? 1.0f : 0.0f);
+            const float inl = good > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
+            px[i] = good > 0.0f ? p0 : 0.0f, py[i] = good > 0.0f ? p1 : 0.0f;
+            pz[i] = good > 0.0f ? p2 : 0.0f;
+            nx[i] = n0 * inl, ny[i] = n1 * inl, nz[i] = n2 * inl;
+            dz[i] = good > 0.0f ? z : 0.0f;
+            oid[i] = good > 0.0f ? a.id[x] : -2;
+            okf[i] = good;
+            const float v = a.vis[x];
+            const float vg = good * Fin(v);
+            vv[i] = vg > 0.0f ? v : 0.0f, vok[i] = vg;
+        }
+        CopyRow(px, n, a.px + x0), CopyRow(py, n, a.py + x0), CopyRow(pz, n, a.pz + x0);
+        CopyRow(nx, n, a.nx + x0), CopyRow(ny, n, a.ny + x0), CopyRow(nz, n, a.nz + x0);
+        CopyRow(dz, n, a.dz + x0), CopyRow(vv, n, a.vv + x0), CopyRow(vok, n, a.vok + x0);
+        CopyRow(oid, n, a.oid + x0);
+        for (int i = 0; i < n; ++i) a.ok[x0 + i] = okf[i] > 0.0f ? 1 : 0;
+    }
+}
+
+// Glossy of one row, divided by F_beta = F0 A + B at (n.v, alpha) (bilinear in the table) when
+// demodulating.
+struct GlossyRow {
+    int w;
+    const float* c;   // glossy, xyz interleaved
+    const float* f0;  // specular
+    const float* rough;
+    const float* table;                        // (A, B) pairs, 256 x 256, alpha-major
+    const float *px, *py, *pz, *nx, *ny, *nz;  // this frame's guides (planes)
+    const uint8_t* ok;
+    float cam[3];
+    float *v[3], *r[3], *valid;
+};
+template <bool Demod>
+inline __attribute__((always_inline)) void PrepGlossyImpl(const GlossyRow& args) {
+    const GlossyRow a = args;
+    constexpr int kC = kPrepChunk;
+    constexpr int kT = BrdfPreintegration::kSize;
+    alignas(64) float gv[3][kC], gr[3][kC], gok[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float c0 = a.c[3 * x], c1 = a.c[3 * x + 1], c2 = a.c[3 * x + 2];
+            const float good = a.ok[x] ? 1.0f : 0.0f;
+            float r0 = 1.0f, r1 = 1.0f, r2 = 1.0f;
+            if constexpr (Demod) {
+                const float f0 = a.f0[3 * x], f1 = a.f0[3 * x + 1], f2 = a.f0[3 * x + 2];
+                const float ro = a.rough[x];
+                const float vx = a.cam[0] - a.px[x], vy = a.cam[1] - a.py[x],
+                            vz = a.cam[2] - a.pz[x];
+                const float vl2 = vx * vx + vy * vy + vz * vz;
+                const float cosT =
+                    (a.nx[x] * vx + a.ny[x] * vy + a.nz[x] * vz) / std::sqrt(std::max(vl2, 1e-30f));
+                const float use = good * Fin(f0 + f1 + f2) * Fin(ro) * Fin(cosT);
+                constexpr float kS = float(kT - 1);
+                const float u = std::min(std::max(use > 0.0f ? cosT : 0.0f, 0.0f), 1.0f) * kS;
+                const float t = std::min(std::max(use > 0.0f ? ro : 0.0f, 0.0f), 1.0f) * kS;
+                const int iu = std::min(int(u), kT - 2), it = std::min(int(t), kT - 2);
+                const float fu = u - float(iu), ft = t - float(it);
+                const int e00 = 2 * (it * kT + iu), e01 = e00 + 2 * kT;
+                const float* tb = a.table;
+                const float sa = (1.0f - ft) * ((1.0f - fu) * tb[e00] + fu * tb[e00 + 2]) +
+                                 ft * ((1.0f - fu) * tb[e01] + fu * tb[e01 + 2]);
+                const float sb = (1.0f - ft) * ((1.0f - fu) * tb[e00 + 1] + fu * tb[e00 + 3]) +
+                                 ft * ((1.0f - fu) * tb[e01 + 1] + fu * tb[e01 + 3]);
+                const float b0 = f0 * sa + sb, b1 = f1 * sa + sb, b2 = f2 * sa + sb;
+                r0 = use > 0.0f && b0 > kMinRemod ? b0 : 1.0f;
+                r1 = use > 0.0f && b1 > kMinRemod ? b1 : 1.0f;
+                r2 = use > 0.0f && b2 > kMinRemod ? b2 : 1.0f;
+            }
+            const float cg = good * Fin(c0 + c1 + c2);
+            gv[0][i] = cg > 0.0f ? c0 / r0 : 0.0f, gv[1][i] = cg > 0.0f ? c1 / r1 : 0.0f;
+            gv[2][i] = cg > 0.0f ? c2 / r2 : 0.0f;
+            gr[0][i] = r0, gr[1][i] = r1, gr[2][i] = r2, gok[i] = cg;
+        }
+        for (int c = 0; c < 3; ++c) CopyRow(gv[c], n, a.v[c] + x0), CopyRow(gr[c], n, a.r[c] + x0);
+        CopyRow(gok, n, a.valid + x0);
+    }
+}
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void PrepGlossy(
+    const GlossyRow& a) {
+    PrepGlossyImpl<false>(a);
+}
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void PrepGlossyDemod(
+    const GlossyRow& a) {
+    PrepGlossyImpl<true>(a);
+}
+
+// Indirect of one row: colour (divided by the albedo when demodulating) or, on the cones path,
+// the cones' diffuse shading (the albedo multiplies it back in any mode).
+struct IndirectRow {
+    int w;
+    const float* c;       // indirect, xyz interleaved (colour path)
+    const float* cones;   // 18 floats per pixel (cones path)
+    const float* albedo;  // xyz interleaved (null on the colour path without demodulation)
+    const uint8_t* ok;
+    float *v[3], *r[3], *valid;
+};
+enum class IndMode { Colour, ColourDemod, Cones };
+template <IndMode M>
+inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& args) {
+    const IndirectRow a = args;
+    constexpr int kC = kPrepChunk;
+    alignas(64) float iv[3][kC], ir[3][kC], iok[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float good = a.ok[x] ? 1.0f : 0.0f;
+            float c0, c1, c2, r0 = 1.0f, r1 = 1.0f, r2 = 1.0f, cg;
+            if constexpr (M == IndMode::Cones) {
+                // ShadeCones: 6 cones x RGB interleaved; written per channel so the loop over
+                // pixels vectorizes with gathers (a group of 18 floats is beyond GCC's strided
+                // loads).
+                c0 = c1 = c2 = 0.0f;
+                float fin = 0.0f;
+#pragma GCC unroll 6
+                for (int k = 0; k < kNumCones; ++k) {
+                    const int b = 18 * x + 3 * k;
+                    const float q0 = a.cones[b], q1 = a.cones[b + 1], q2 = a.cones[b + 2];
+                    c0 += kConeShadeWeight[k] * q0, c1 += kConeShadeWeight[k] * q1;
+                    c2 += kConeShadeWeight[k] * q2;
+                    fin += q0 + q1 + q2;
+                }
+                cg = good * Fin(fin);
+                const float a0 = a.albedo[3 * x], a1 = a.albedo[3 * x + 1],
+                            a2 = a.albedo[3 * x + 2];
+                const float af = Fin(a0 + a1 + a2);
+                r0 = af > 0.0f ? a0 : 0.0f, r1 = af > 0.0f ? a1 : 0.0f, r2 = af > 0.0f ? a2 : 0.0f;
+            } else {
+                c0 = a.c[3 * x], c1 = a.c[3 * x + 1], c2 = a.c[3 * x + 2];
+                cg = good * Fin(c0 + c1 + c2);
+                if constexpr (M == IndMode::ColourDemod) {
+                    const float a0 = a.albedo[3 * x], a1 = a.albedo[3 * x + 1],
+                                a2 = a.albedo[3 * x + 2];
+                    const float af = Fin(a0 + a1 + a2);
+                    r0 = af * (a0 > kMinRemod ? 1.0f : 0.0f) > 0.0f ? a0 : 1.0f;
+                    r1 = af * (a1 > kMinRemod ? 1.0f : 0.0f) > 0.0f ? a1 : 1.0f;
+                    r2 = af * (a2 > kMinRemod ? 1.0f : 0.0f) > 0.0f ? a2 : 1.0f;
+                    c0 /= r0, c1 /= r1, c2 /= r2;
+                }
+            }
+            iv[0][i] = cg > 0.0f ? c0 : 0.0f, iv[1][i] = cg > 0.0f ? c1 : 0.0f;
+            iv[2][i] = cg > 0.0f ? c2 : 0.0f;
+            ir[0][i] = r0, ir[1][i] = r1, ir[2][i] = r2, iok[i] = cg;
+        }
+        for (int c = 0; c < 3; ++c) CopyRow(iv[c], n, a.v[c] + x0), CopyRow(ir[c], n, a.r[c] + x0);
+        CopyRow(iok, n, a.valid + x0);
+    }
+}
+#define TEXCACHE_PREP_IND(name, M)                                                           \
+    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
+        const IndirectRow& a) {                                                              \
+        PrepIndirectImpl<M>(a);                                                              \
+    }
+TEXCACHE_PREP_IND(PrepIndirect, IndMode::Colour)
+TEXCACHE_PREP_IND(PrepIndirectDemod, IndMode::ColourDemod)
+TEXCACHE_PREP_IND(PrepIndirectCones, IndMode::Cones)
+#undef TEXCACHE_PREP_IND
+
+// Depth tolerance of the edge-stopping weights: 1 / (the larger of the per-axis depth steps +
+// 0.1% of the depth), each step the smaller one-sided step to a usable neighbour (so an edge
+// does not widen its own tolerance).
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void DepthTolRow(
+    int w, const float* z, const float* zu, const float* zd, const uint8_t* ok, const uint8_t* oku,
+    const uint8_t* okd, float* out) {
+    constexpr float kBig = 3.0e38f;
+    for (int x = 0; x < w; ++x) {
+        // Padding columns have ok = 0 (the guides' valid plane is padded with 0).
+        const float l = ok[x - 1] ? std::fabs(z[x] - z[x - 1]) : kBig;
+        const float r = ok[x + 1] ? std::fabs(z[x] - z[x + 1]) : kBig;
+        const float u = oku[x] ? std::fabs(z[x] - zu[x]) : kBig;
+        const float d = okd[x] ? std::fabs(z[x] - zd[x]) : kBig;
+        float gx = std::min(l, r), gy = std::min(u, d);
+        gx = gx < kBig ? gx : 0.0f, gy = gy < kBig ? gy : 0.0f;
+        out[x] = ok[x] ? 1.0f / (std::max(gx, gy) + 1e-3f * z[x]) : 0.0f;
+    }
+}
+
 // One sweep over the frame's buffers: guides and demodulated components as planes.
 void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPreintegration* brdf,
              bool demod) {
@@ -245,118 +472,52 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
     ComponentPlanes& vis = s.comp[kVis];
     ComponentPlanes& gl = s.comp[kGlossy];
     ComponentPlanes& ind = s.comp[kIndirect];
-    const bool hasGl = gl.present, hasInd = ind.present, cones = s.conesPath;
-    const glm::vec3 camPos = f.camera.position;
     ForRows(s.h, [&](int y) {
         const size_t row = size_t(y) * size_t(w);
-        float* px = g.px.Row(y);
-        float* py = g.py.Row(y);
-        float* pz = g.pz.Row(y);
-        float* nx = g.nx.Row(y);
-        float* ny = g.ny.Row(y);
-        float* nz = g.nz.Row(y);
-        float* dz = g.depth.Row(y);
-        int32_t* id = g.objectId.Row(y);
-        uint8_t* ok = g.valid.Row(y);
-        float* vv = vis.v[0].Row(y);
-        float* vok = vis.valid.Row(y);
-        for (int x = 0; x < w; ++x) {
-            const size_t i = row + size_t(x);
-            const glm::vec3 p = f.position[i];
-            glm::vec3 n = f.normal[i];
-            const float z = f.depth[i];
-            const float nl = glm::length(n);
-            const bool good = Finite(p) && Finite(n) && nl > 0.0f && std::isfinite(z) && z > 0.0f;
-            n = good ? n / nl : glm::vec3(0.0f);
-            px[x] = good ? p.x : 0.0f, py[x] = good ? p.y : 0.0f, pz[x] = good ? p.z : 0.0f;
-            nx[x] = n.x, ny[x] = n.y, nz[x] = n.z;
-            dz[x] = good ? z : 0.0f;
-            id[x] = good ? f.objectId[i] : -2;
-            ok[x] = good ? 1 : 0;
-            const float v = f.visibility[i];
-            const bool vgood = good && std::isfinite(v);
-            vv[x] = vgood ? v : 0.0f;
-            vok[x] = vgood ? 1.0f : 0.0f;
+        GuideRow a;
+        a.w = w;
+        a.pos = &f.position[row].x, a.nrm = &f.normal[row].x;
+        a.depth = &f.depth[row], a.id = &f.objectId[row], a.vis = &f.visibility[row];
+        a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
+        a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+        a.dz = g.depth.Row(y), a.oid = g.objectId.Row(y), a.ok = g.valid.Row(y);
+        a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
+        PrepGuides(a);
+        if (gl.present) {
+            GlossyRow b;
+            b.w = w, b.c = &f.glossy[row].x;
+            const bool dm = demod && brdf;
+            b.f0 = dm ? &f.specular[row].x : nullptr, b.rough = dm ? &f.roughness[row] : nullptr;
+            b.table = dm ? &brdf->Data()->x : nullptr;
+            b.px = g.px.Row(y), b.py = g.py.Row(y), b.pz = g.pz.Row(y);
+            b.nx = g.nx.Row(y), b.ny = g.ny.Row(y), b.nz = g.nz.Row(y);
+            b.ok = g.valid.Row(y);
+            b.cam[0] = f.camera.position.x, b.cam[1] = f.camera.position.y;
+            b.cam[2] = f.camera.position.z;
+            for (int c = 0; c < 3; ++c) b.v[c] = gl.v[c].Row(y), b.r[c] = gl.remod[c].Row(y);
+            b.valid = gl.valid.Row(y);
+            dm ? PrepGlossyDemod(b) : PrepGlossy(b);
         }
-        if (hasGl) {
-            float* gv[3] = {gl.v[0].Row(y), gl.v[1].Row(y), gl.v[2].Row(y)};
-            float* gr[3] = {gl.remod[0].Row(y), gl.remod[1].Row(y), gl.remod[2].Row(y)};
-            float* gok = gl.valid.Row(y);
-            for (int x = 0; x < w; ++x) {
-                const size_t i = row + size_t(x);
-                const glm::vec3 c = f.glossy[i];
-                glm::vec3 r(1.0f);
-                if (demod && ok[x]) {
-                    const glm::vec3 f0 = f.specular[i];
-                    const float rough = f.roughness[i];
-                    const glm::vec3 n(nx[x], ny[x], nz[x]);
-                    const glm::vec3 p(px[x], py[x], pz[x]);
-                    const float cosT = glm::dot(n, glm::normalize(camPos - p));
-                    if (Finite(f0) && std::isfinite(rough) && std::isfinite(cosT)) {
-                        const glm::vec3 fb = brdf->Evaluate(f0, std::max(cosT, 0.0f), rough);
-                        for (int k = 0; k < 3; ++k) r[k] = fb[k] > kMinRemod ? fb[k] : 1.0f;
-                    }
-                }
-                const bool cgood = ok[x] && Finite(c);
-                for (int k = 0; k < 3; ++k) gv[k][x] = cgood ? c[k] / r[k] : 0.0f, gr[k][x] = r[k];
-                gok[x] = cgood ? 1.0f : 0.0f;
-            }
-        }
-        if (hasInd) {
-            float* iv[3] = {ind.v[0].Row(y), ind.v[1].Row(y), ind.v[2].Row(y)};
-            float* ir[3] = {ind.remod[0].Row(y), ind.remod[1].Row(y), ind.remod[2].Row(y)};
-            float* iok = ind.valid.Row(y);
-            for (int x = 0; x < w; ++x) {
-                const size_t i = row + size_t(x);
-                glm::vec3 c(0.0f), r(1.0f);
-                bool cgood = ok[x];
-                if (cones) {
-                    // The cones' diffuse shading; the albedo multiplies it back in any mode.
-                    const glm::vec3* cp = f.cones.data() + i * kNumCones;
-                    for (int k = 0; k < kNumCones; ++k) cgood = cgood && Finite(cp[k]);
-                    if (cgood) c = ShadeCones(cp);
-                    const glm::vec3 al = f.albedo[i];
-                    r = Finite(al) ? al : glm::vec3(0.0f);
-                } else {
-                    c = f.indirect[i];
-                    cgood = cgood && Finite(c);
-                    if (demod) {
-                        const glm::vec3 al = f.albedo[i];
-                        if (Finite(al))
-                            for (int k = 0; k < 3; ++k) r[k] = al[k] > kMinRemod ? al[k] : 1.0f;
-                    }
-                    c /= r;
-                }
-                for (int k = 0; k < 3; ++k) iv[k][x] = cgood ? c[k] : 0.0f, ir[k][x] = r[k];
-                iok[x] = cgood ? 1.0f : 0.0f;
-            }
+        if (ind.present) {
+            IndirectRow c;
+            c.w = w, c.c = &f.indirect[row].x;
+            c.cones = s.conesPath ? &f.cones[row * kNumCones].x : nullptr;
+            c.albedo = f.albedo.empty() ? nullptr : &f.albedo[row].x;
+            c.ok = g.valid.Row(y);
+            for (int k = 0; k < 3; ++k) c.v[k] = ind.v[k].Row(y), c.r[k] = ind.remod[k].Row(y);
+            c.valid = ind.valid.Row(y);
+            if (s.conesPath)
+                PrepIndirectCones(c);
+            else
+                demod ? PrepIndirectDemod(c) : PrepIndirect(c);
         }
     });
-    // Depth tolerance of the edge-stopping weights: the larger of the per-axis depth steps, each
-    // the smaller one-sided step to a usable neighbour (so an edge does not widen its own
-    // tolerance), plus 0.1% of the depth.
     ForRows(s.h, [&](int y) {
-        const float* z = g.depth.Row(y);
-        const uint8_t* ok = g.valid.Row(y);
-        const float* zu = y > 0 ? g.depth.Row(y - 1) : nullptr;
-        const float* zd = y + 1 < s.h ? g.depth.Row(y + 1) : nullptr;
-        const uint8_t* oku = y > 0 ? g.valid.Row(y - 1) : nullptr;
-        const uint8_t* okd = y + 1 < s.h ? g.valid.Row(y + 1) : nullptr;
-        float* iz = g.invDz.Row(y);
-        constexpr float kBig = std::numeric_limits<float>::max();
-        for (int x = 0; x < w; ++x) {
-            if (!ok[x]) {
-                iz[x] = 0.0f;
-                continue;
-            }
-            float gx = kBig, gy = kBig;
-            if (x > 0 && ok[x - 1]) gx = std::min(gx, std::abs(z[x] - z[x - 1]));
-            if (x + 1 < w && ok[x + 1]) gx = std::min(gx, std::abs(z[x] - z[x + 1]));
-            if (zu && oku[x]) gy = std::min(gy, std::abs(z[x] - zu[x]));
-            if (zd && okd[x]) gy = std::min(gy, std::abs(z[x] - zd[x]));
-            gx = gx == kBig ? 0.0f : gx, gy = gy == kBig ? 0.0f : gy;
-            iz[x] = 1.0f / (std::max(gx, gy) + 1e-3f * z[x]);
-        }
+        const int yu = y > 0 ? y - 1 : y, yd = y + 1 < s.h ? y + 1 : y;
+        // A neighbour row outside the image gets validity flags that are all 0.
+        DepthTolRow(w, g.depth.Row(y), g.depth.Row(yu), g.depth.Row(yd), g.valid.Row(y),
+                    y > 0 ? g.valid.Row(yu) : s.zeroRow.data() + kPad,
+                    y + 1 < s.h ? g.valid.Row(yd) : s.zeroRow.data() + kPad, g.invDz.Row(y));
     });
 }
 

@@ -10,6 +10,7 @@
 // done per pixel, vectorized across the cones' channels.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -19,8 +20,8 @@
 namespace texcache::screen::detail {
 namespace {
 
-constexpr float kMaxLen = 255.0f;  // history lengths only select alpha and the variance
-constexpr int kConeFloats = 3 * kNumCones;
+constexpr float kMaxLen = 255.0f;           // history lengths only select alpha and the variance
+constexpr int kConeFloats = 3 * kNumCones;  // a pixel's cones in FrameBuffers
 
 template <class Body>
 void ForRowBlocks(int h, Body&& body) {
@@ -319,8 +320,32 @@ void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, c
 }
 
 // ---- Cones ---------------------------------------------------------------------------------
+//
+// History layout: per pixel 3 vectors of 8 floats, one per colour channel, lanes 0..5 the 6 cones
+// (lanes 6, 7 zero), so the bilinear fetch, the overlap transfer and the blend are 8-wide vector
+// operations (GCC vector extensions: AVX2/AVX-512 clones, split in two on the baseline).
 
 namespace {
+
+typedef float V8 __attribute__((vector_size(32)));
+// V8 values are passed between internal functions that are inlined into each ISA clone, so the
+// baseline clone's different vector ABI (-Wpsabi) never matters.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+constexpr int kConeStride = 24;  // floats per pixel in the history
+
+inline V8 Load8(const float* p) {
+    V8 v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+}
+inline void Store8(float* p, V8 v) {
+    std::memcpy(p, &v, sizeof v);
+}
+inline float Sum6(V8 v, V8 w) {
+    const V8 m = v * w;
+    return m[0] + m[1] + m[2] + m[3] + m[4] + m[5];
+}
 
 // Cone axes with the azimuths' sines and cosines as constants (ConeAxes() evaluates them).
 inline void FastConeAxes(glm::vec3 n, glm::vec3* axes) {
@@ -333,40 +358,209 @@ inline void FastConeAxes(glm::vec3 n, glm::vec3* axes) {
         axes[k] = 0.86602540f * (kC[k - 1] * t1 + kS[k - 1] * t2) + 0.5f * n;
 }
 
-// History cones `hp` (recorded in the cone frame of normal np) as seen from the cone frame of n:
-// cone k takes the overlap-weighted mean of the history cones (eqs. 9-10); `cover[k]` is how
-// much of its usual overlap it found (1 for the same frame; less where the hemispheres only
-// partly overlap, so the blend leans on the current frame there).
-inline void TransferCones(const ConeOverlapTable& t, glm::vec3 n, glm::vec3 np, const float* hp,
-                          float* h, float* cover) {
-    if (glm::dot(n, np) > 0.9999f && (n.z >= 0.0f) == (np.z >= 0.0f)) {
-        for (int k = 0; k < kNumCones; ++k) {
-            float acc[3] = {0, 0, 0};
-            for (int j = 0; j < kNumCones; ++j) {
-                const float wkj = t.SameFrame(k, j);
-                for (int c = 0; c < 3; ++c) acc[c] += wkj * hp[3 * j + c];
-            }
-            const float inv = 1.0f / t.SameFrameRowSum(k);
-            for (int c = 0; c < 3; ++c) h[3 * k + c] = acc[c] * inv;
-            cover[k] = 1.0f;
-        }
-        return;
+// The overlap transfer (eqs. 9-10) of history cones recorded in the cone frame of normal np into
+// the cone frame of n: cone k takes the overlap-weighted mean of the history cones. Returned as
+// 6 columns: out = sum_j col[j] * raw[j] (per channel), and `cover`, how much of its usual
+// overlap cone k found (1 for the same frame; less where the hemispheres only partly overlap,
+// so the blend leans on the current frame there).
+struct ConeTransfer {
+    V8 col[kNumCones];
+    V8 cover;
+};
+inline void SameFrameTransfer(const ConeOverlapTable& t, ConeTransfer* tr) {
+    for (int j = 0; j < kNumCones; ++j) {
+        V8 c = {};
+        for (int k = 0; k < kNumCones; ++k) c[k] = t.SameFrame(k, j) / t.SameFrameRowSum(k);
+        tr->col[j] = c;
     }
+    tr->cover = V8{1, 1, 1, 1, 1, 1, 0, 0};
+}
+inline void GeneralTransfer(const ConeOverlapTable& t, glm::vec3 n, glm::vec3 np,
+                            ConeTransfer* tr) {
     glm::vec3 a[kNumCones], ap[kNumCones];
     FastConeAxes(n, a);
     FastConeAxes(np, ap);
+    float w[kNumCones][kNumCones], sum[kNumCones];
     for (int k = 0; k < kNumCones; ++k) {
-        float acc[3] = {0, 0, 0}, sum = 0.0f;
+        sum[k] = 0.0f;
         for (int j = 0; j < kNumCones; ++j) {
-            const float wkj = t.Overlap(glm::dot(a[k], ap[j]));
-            sum += wkj;
-            for (int c = 0; c < 3; ++c) acc[c] += wkj * hp[3 * j + c];
+            w[k][j] = t.Overlap(glm::dot(a[k], ap[j]));
+            sum[k] += w[k][j];
         }
-        const float inv = sum > 0.0f ? 1.0f / sum : 0.0f;
-        for (int c = 0; c < 3; ++c) h[3 * k + c] = acc[c] * inv;
-        cover[k] = std::min(1.0f, sum / t.SameFrameRowSum(k));
+    }
+    for (int j = 0; j < kNumCones; ++j) {
+        V8 c = {};
+        for (int k = 0; k < kNumCones; ++k) c[k] = sum[k] > 0.0f ? w[k][j] / sum[k] : 0.0f;
+        tr->col[j] = c;
+    }
+    V8 cv = {};
+    for (int k = 0; k < kNumCones; ++k) cv[k] = std::min(1.0f, sum[k] / t.SameFrameRowSum(k));
+    tr->cover = cv;
+}
+
+struct ConeArgs {
+    int w, h, stride;
+    const float* ec[3][3];  // current shading [channel][row]
+    const float* valid[3];  // [row]
+    float rowF[3];
+    const uint8_t* guideValid;
+    const float* mx;
+    const float* my;
+    const uint8_t* mt;
+    const float* hm1;
+    const float* hm2;
+    const float* hlen;
+    const float* curCones;   // this frame's cones of the row: [cone][rgb], 18 floats per pixel
+    const float* histCones;  // previous history, padded pixel index x kConeStride
+    float* outCones;         // this frame's history of the row
+    const float* nx;         // this frame's normals of the row
+    const float* ny;
+    const float* nz;
+    const float* pnx;  // previous normals, bases
+    const float* pny;
+    const float* pnz;
+    const ConeOverlapTable* table;
+    const ConeTransfer* same;
+    float alpha, clampK;
+    float* out[3];
+    float* outVar;
+    float* m1;
+    float* m2;
+    float* len;
+};
+
+template <bool Hist>
+inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
+    constexpr int kC = 128;
+    alignas(64) float mu[3][kC], sg[3][kC], spv[kC], wt[4][kC], hf[kC], hm1[kC], hm2[kC], hl[kC];
+    alignas(64) int idx[4][kC];
+    alignas(64) float oe[3][kC], om1[kC], om2[kC], olen[kC], ovar[kC];
+    const V8 shade = {kConeShadeWeight[0],
+                      kConeShadeWeight[1],
+                      kConeShadeWeight[2],
+                      kConeShadeWeight[3],
+                      kConeShadeWeight[4],
+                      kConeShadeWeight[5],
+                      0,
+                      0};
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        // Pass 1 (vectorized across pixels): 3x3 statistics of the current shading, the history
+        // footprints and moments.
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
+#pragma GCC unroll 3
+            for (int r = 0; r < 3; ++r)
+#pragma GCC unroll 3
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const float ok = a.valid[r][x + dx] * a.rowF[r];
+                    const float v0 = a.ec[0][r][x + dx], v1 = a.ec[1][r][x + dx],
+                                v2 = a.ec[2][r][x + dx];
+                    const float l = Luma(v0, v1, v2);
+                    cnt += ok, sl += ok * l, sl2 += ok * l * l;
+                    s1[0] += ok * v0, s1[1] += ok * v1, s1[2] += ok * v2;
+                    s2[0] += ok * v0 * v0, s2[1] += ok * v1 * v1, s2[2] += ok * v2 * v2;
+                }
+            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+#pragma GCC unroll 3
+            for (int c = 0; c < 3; ++c) {
+                mu[c][i] = s1[c] * in;
+                sg[c][i] = std::sqrt(std::max(0.0f, s2[c] * in - mu[c][i] * mu[c][i]));
+            }
+            spv[i] = std::max(0.0f, sl2 * in - sl * in * sl * in);
+            if constexpr (Hist) {
+                const Bilinear b = BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+                idx[0][i] = b.i00, idx[1][i] = b.i10, idx[2][i] = b.i01, idx[3][i] = b.i11;
+                wt[0][i] = b.w00, wt[1][i] = b.w10, wt[2][i] = b.w01, wt[3][i] = b.w11;
+                const float l = Gather(a.hlen, b);
+                hf[i] = b.ok * (l >= 0.5f ? 1.0f : 0.0f);
+                hm1[i] = hf[i] * Gather(a.hm1, b), hm2[i] = hf[i] * Gather(a.hm2, b);
+                hl[i] = hf[i] * l;
+            } else {
+                hf[i] = hm1[i] = hm2[i] = hl[i] = 0.0f;
+            }
+        }
+        // Pass 2: the cones, pixel by pixel, 8-wide across the cones of a channel.
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            float* lo = a.outCones + size_t(x) * kConeStride;
+            const float cv = a.valid[1][x];
+            const bool hist = Hist && hf[i] > 0.0f;
+            if (!a.guideValid[x]) {
+                std::fill_n(lo, kConeStride, 0.0f);
+                oe[0][i] = oe[1][i] = oe[2][i] = 0.0f;
+                om1[i] = om2[i] = olen[i] = 0.0f, ovar[i] = -1.0f;
+                continue;
+            }
+            V8 hc[3] = {V8{}, V8{}, V8{}};
+            V8 cover = {1, 1, 1, 1, 1, 1, 0, 0};
+            if (hist) {
+                V8 raw[3] = {V8{}, V8{}, V8{}};
+                int dom = 0;
+                for (int k = 0; k < 4; ++k) {
+                    const float wk = wt[k][i];
+                    const float* src = a.histCones + size_t(idx[k][i]) * kConeStride;
+                    for (int c = 0; c < 3; ++c) raw[c] += wk * Load8(src + 8 * c);
+                    dom = wk > wt[dom][i] ? k : dom;
+                }
+                const glm::vec3 nc(a.nx[x], a.ny[x], a.nz[x]);
+                const int id = idx[dom][i];
+                const glm::vec3 np(a.pnx[id], a.pny[id], a.pnz[id]);
+                ConeTransfer general;
+                const ConeTransfer* tr = a.same;
+                if (!(glm::dot(nc, np) > 0.9999f && (nc.z >= 0.0f) == (np.z >= 0.0f))) {
+                    GeneralTransfer(*a.table, nc, np, &general);
+                    tr = &general;
+                }
+                cover = tr->cover;
+                for (int c = 0; c < 3; ++c)
+                    for (int j = 0; j < kNumCones; ++j) hc[c] += tr->col[j] * raw[c][j];
+                // Clamp the history's shading to mu +- k sigma of the current shading; the
+                // cones are scaled alike.
+                for (int c = 0; c < 3; ++c) {
+                    const float sh = Sum6(hc[c], shade);
+                    const float cl = std::clamp(sh, mu[c][i] - a.clampK * sg[c][i],
+                                                mu[c][i] + a.clampK * sg[c][i]);
+                    hc[c] *= sh > 1e-12f ? cl / sh : 1.0f;
+                }
+            }
+            const float len =
+                cv * (hist ? std::min(hl[i] + 1.0f, kMaxLen) : 1.0f) + (1.0f - cv) * hl[i];
+            const float al = cv * (hist ? std::max(a.alpha, 1.0f / std::max(len, 1.0f)) : 1.0f);
+            // A cone only partly covered by the history's cones leans on the current frame.
+            const V8 ak = 1.0f - (1.0f - al) * cover;
+            const float* cur = a.curCones + size_t(x) * kConeFloats;
+            for (int c = 0; c < 3; ++c) {
+                V8 cu = {};
+                if (cv > 0.0f)
+                    for (int k = 0; k < kNumCones; ++k) cu[k] = cur[3 * k + c];
+                const V8 r = cv > 0.0f ? hc[c] + ak * (cu - hc[c]) : hc[c];
+                Store8(lo + 8 * c, r);
+                oe[c][i] = Sum6(r, shade);
+            }
+            const float l = Luma(a.ec[0][1][x], a.ec[1][1][x], a.ec[2][1][x]);
+            const float m1 = hm1[i] + al * (l - hm1[i]), m2 = hm2[i] + al * (l * l - hm2[i]);
+            om1[i] = m1, om2[i] = m2, olen[i] = len;
+            const bool any = cv > 0.0f || hist;
+            ovar[i] = any ? (len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spv[i]) : -1.0f;
+        }
+        for (int c = 0; c < 3; ++c) std::copy_n(oe[c], n, a.out[c] + x0);
+        std::copy_n(ovar, n, a.outVar + x0);
+        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
+        std::copy_n(olen, n, a.len + x0);
     }
 }
+
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ConeRow(
+    const ConeArgs& a) {
+    ConeRowImpl<false>(a);
+}
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ConeRowH(
+    const ConeArgs& a) {
+    ConeRowImpl<true>(a);
+}
+#pragma GCC diagnostic pop
 
 }  // namespace
 
@@ -376,105 +570,40 @@ void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const M
     History& hc = s.hist[kIndirect][s.cur];
     const History& prev = s.hist[kIndirect][s.cur ^ 1];
     const int stride = int(cp.valid.Stride());
-    const size_t nCones = size_t(stride) * size_t(s.h) * kConeFloats;
+    const size_t nCones = size_t(stride) * size_t(s.h) * kConeStride;
     const History* hp = mf && prev.valid && prev.cones.size() == nCones ? &prev : nullptr;
     if (hc.cones.size() != nCones) hc.cones.Assign(nCones, 0.0f);
-    const float alpha = s.set.alpha, clampK = s.set.reliableClampK;
+    ConeTransfer same;
+    SameFrameTransfer(s.coneTable, &same);
     const Guides& g = s.G();
     const Guides& pg = s.PrevG();
-    const ConeOverlapTable& table = s.coneTable;
     ForRowBlocks(s.h, [&](int y0, int y1) {
         for (int y = y0; y < y1; ++y) {
             const Rows3 r3(y, s.h);
-            for (int x = 0; x < s.w; ++x) {
-                const int ip = y * stride + kPad + x;
-                float* lo = hc.cones.data() + size_t(ip) * kConeFloats;
-                // 3x3 statistics of the current shading (clamping, short-history variance).
-                float n = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
-                for (int r = 0; r < 3; ++r)
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const int xx = x + dx, yy = r3.r[r];
-                        const float ok = cp.valid.At(xx, yy) * r3.f[r];
-                        const float v0 = cp.v[0].At(xx, yy), v1 = cp.v[1].At(xx, yy),
-                                    v2 = cp.v[2].At(xx, yy);
-                        const float l = Luma(v0, v1, v2);
-                        n += ok, sl += ok * l, sl2 += ok * l * l;
-                        s1[0] += ok * v0, s1[1] += ok * v1, s1[2] += ok * v2;
-                        s2[0] += ok * v0 * v0, s2[1] += ok * v1 * v1, s2[2] += ok * v2 * v2;
-                    }
-                const float in = n > 0.0f ? 1.0f / n : 0.0f;
-                const float spVar = std::max(0.0f, sl2 * in - sl * in * sl * in);
-                float e[3] = {0, 0, 0}, m1 = 0, m2 = 0, len = 0;
-                bool any = false;
-                if (g.valid.At(x, y)) {
-                    bool hist = false;
-                    float hcones[kConeFloats], cover[kNumCones], hm1 = 0, hm2 = 0, hl = 0;
-                    if (hp) {
-                        const Bilinear b = BilinearTaps(mf->x.At(x, y), mf->y.At(x, y),
-                                                        mf->taps.At(x, y), s.w, s.h, stride);
-                        hl = Gather(hp->len.Base(), b);
-                        hist = b.ok > 0.0f && hl >= 0.5f;
-                        if (hist) {
-                            const int idx[4] = {b.i00, b.i10, b.i01, b.i11};
-                            const float wt[4] = {b.w00, b.w10, b.w01, b.w11};
-                            float hraw[kConeFloats] = {};
-                            int dom = 0;
-                            for (int k = 0; k < 4; ++k) {
-                                const float* src = hp->cones.data() + size_t(idx[k]) * kConeFloats;
-                                for (int c = 0; c < kConeFloats; ++c) hraw[c] += wt[k] * src[c];
-                                if (wt[k] > wt[dom]) dom = k;
-                            }
-                            const glm::vec3 nc(g.nx.At(x, y), g.ny.At(x, y), g.nz.At(x, y));
-                            const glm::vec3 np(pg.nx.Base()[idx[dom]], pg.ny.Base()[idx[dom]],
-                                               pg.nz.Base()[idx[dom]]);
-                            TransferCones(table, nc, np, hraw, hcones, cover);
-                            hm1 = Gather(hp->m1.Base(), b), hm2 = Gather(hp->m2.Base(), b);
-                            // Clamp the history's shading to mu +- k sigma of the current
-                            // shading; the cones are scaled alike.
-                            float sh[3] = {0, 0, 0};
-                            for (int k = 0; k < kNumCones; ++k)
-                                for (int c = 0; c < 3; ++c)
-                                    sh[c] += kConeShadeWeight[k] * hcones[3 * k + c];
-                            for (int c = 0; c < 3; ++c) {
-                                const float mu = s1[c] * in;
-                                const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
-                                const float cl =
-                                    std::clamp(sh[c], mu - clampK * sg, mu + clampK * sg);
-                                const float fct = sh[c] > 1e-12f ? cl / sh[c] : 1.0f;
-                                for (int k = 0; k < kNumCones; ++k) hcones[3 * k + c] *= fct;
-                            }
-                        }
-                    }
-                    if (cp.valid.At(x, y) > 0.0f) {
-                        const size_t i = size_t(y) * size_t(s.w) + size_t(x);
-                        const glm::vec3* cur = f.cones.data() + i * kNumCones;
-                        const float l = Luma(cp.v[0].At(x, y), cp.v[1].At(x, y), cp.v[2].At(x, y));
-                        len = hist ? std::min(hl + 1.0f, kMaxLen) : 1.0f;
-                        const float a = hist ? std::max(alpha, 1.0f / len) : 1.0f;
-                        for (int k = 0; k < kNumCones; ++k) {
-                            const float ak = hist ? 1.0f - (1.0f - a) * cover[k] : 1.0f;
-                            for (int c = 0; c < 3; ++c) {
-                                const float hv = hist ? hcones[3 * k + c] : 0.0f;
-                                lo[3 * k + c] = hv + ak * (cur[k][c] - hv);
-                            }
-                        }
-                        m1 = hm1 + a * (l - hm1), m2 = hm2 + a * (l * l - hm2);
-                        any = true;
-                    } else if (hist) {
-                        std::copy_n(hcones, kConeFloats, lo);
-                        m1 = hm1, m2 = hm2, len = hl, any = true;
-                    }
-                    if (!any) std::fill_n(lo, kConeFloats, 0.0f);
-                    for (int k = 0; k < kNumCones; ++k)
-                        for (int c = 0; c < 3; ++c) e[c] += kConeShadeWeight[k] * lo[3 * k + c];
-                } else {
-                    std::fill_n(lo, kConeFloats, 0.0f);
-                }
-                for (int c = 0; c < 3; ++c) sc.t[c].At(x, y) = e[c];
-                hc.m1.At(x, y) = m1, hc.m2.At(x, y) = m2, hc.len.At(x, y) = len;
-                sc.tVar.At(x, y) =
-                    any ? (len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar) : -1.0f;
+            ConeArgs a;
+            a.w = s.w, a.h = s.h, a.stride = stride;
+            for (int r = 0; r < 3; ++r) {
+                for (int c = 0; c < 3; ++c) a.ec[c][r] = cp.v[c].Row(r3.r[r]);
+                a.valid[r] = cp.valid.Row(r3.r[r]);
+                a.rowF[r] = r3.f[r];
             }
+            a.guideValid = g.valid.Row(y);
+            if (hp) {
+                a.mx = mf->x.Row(y), a.my = mf->y.Row(y), a.mt = mf->taps.Row(y);
+                a.hm1 = hp->m1.Base(), a.hm2 = hp->m2.Base(), a.hlen = hp->len.Base();
+                a.histCones = hp->cones.data();
+                a.pnx = pg.nx.Base(), a.pny = pg.ny.Base(), a.pnz = pg.nz.Base();
+            }
+            a.curCones = &f.cones[size_t(y) * size_t(s.w) * kNumCones].x;
+            a.outCones = hc.cones.data() + (size_t(y) * size_t(stride) + kPad) * kConeStride;
+            a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+            a.table = &s.coneTable;
+            a.same = &same;
+            a.alpha = s.set.alpha, a.clampK = s.set.reliableClampK;
+            for (int c = 0; c < 3; ++c) a.out[c] = sc.t[c].Row(y);
+            a.outVar = sc.tVar.Row(y);
+            a.m1 = hc.m1.Row(y), a.m2 = hc.m2.Row(y), a.len = hc.len.Row(y);
+            hp ? ConeRowH(a) : ConeRow(a);
         }
     });
 }
