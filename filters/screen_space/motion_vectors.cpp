@@ -43,6 +43,19 @@ constexpr float kPlaneTol = 0.01f;
 constexpr float kShadowPlaneTol = 0.02f;
 constexpr float kNormalCos = 0.9f;
 
+inline float Fin(float v) {
+    return std::fabs(v) < 3.0e38f ? 1.0f : 0.0f;
+}  // 0 for NaN / Inf
+inline float InRange(int v, int n) {
+    return (v >= 0 ? 1.0f : 0.0f) * (v < n ? 1.0f : 0.0f);
+}
+// A plain copy loop rather than std::copy_n: memcpy would take the address of a kernel's local
+// result arrays, after which GCC assumes any incoming pointer may alias them.
+template <class T>
+inline __attribute__((always_inline)) void CopyRow(const T* src, int n, T* dst) {
+    for (int i = 0; i < n; ++i) dst[i] = src[i];
+}
+
 }  // namespace
 
 namespace {
@@ -80,9 +93,6 @@ inline float TapPass(const TradRowArgs& a, int idx, float inside, int id, float 
     const float cosn = a.gnx[idx] * nx + a.gny[idx] * ny + a.gnz[idx] * nz;
     const float same = a.gid[idx] == id ? 1.0f : 0.0f;
     return inside * same * (plane < tol ? 1.0f : 0.0f) * (cosn > kNormalCos ? 1.0f : 0.0f);
-}
-inline float InRange(int v, int n) {
-    return (v >= 0 ? 1.0f : 0.0f) * (v < n ? 1.0f : 0.0f);
 }
 
 __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void TradRow(
@@ -133,7 +143,7 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
             mask[i] = int(okf * (m0 + 2.0f * m1 + 4.0f * m2 + 8.0f * m3));
         }
         for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(mask[i]);
-        std::copy_n(ox, n, a.ox + x0), std::copy_n(oy, n, a.oy + x0);
+        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0);
     }
 }
 
@@ -161,199 +171,449 @@ void TraditionalMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame
     });
 }
 
+namespace {
+
+// The 4 taps of a footprint as gather indices (rows clamped into the image, columns into the
+// padding) and 0/1 in-image factors.
+struct Foot4 {
+    int i00, i01;
+    float in00, in10, in01, in11;
+};
+inline Foot4 MakeFoot4(float rx, float ry, int w, int h, int stride) {
+    const float fx = std::min(std::max(rx, -4.0f), float(w) + 4.0f) - 0.5f;
+    const float fy = std::min(std::max(ry, -4.0f), float(h) + 4.0f) - 0.5f;
+    const int x0 = int(std::floor(fx)), y0 = int(std::floor(fy));
+    const int r0 = std::min(std::max(y0, 0), h - 1), r1 = std::min(std::max(y0 + 1, 0), h - 1);
+    const int cx = std::min(std::max(x0, -1), w - 1);
+    Foot4 f;
+    f.i00 = r0 * stride + kPad + cx, f.i01 = r1 * stride + kPad + cx;
+    const float ix0 = InRange(x0, w), ix1 = InRange(x0 + 1, w);
+    const float iy0 = InRange(y0, h), iy1 = InRange(y0 + 1, h);
+    f.in00 = ix0 * iy0, f.in10 = ix1 * iy0, f.in01 = ix0 * iy1, f.in11 = ix1 * iy1;
+    return f;
+}
+inline int MaskBits(float m0, float m1, float m2, float m3) {
+    return int(m0 + 2.0f * m1 + 4.0f * m2 + 8.0f * m3);
+}
+
+// 1 when tap `idx` of the previous frame may hold this pixel's shadow history: the same object,
+// or any surface within `tol` of the receiver's plane through `q`.
+inline float ShadowTap(const float* gx, const float* gy, const float* gz, const int32_t* gid,
+                       int idx, float inside, int id, float qx, float qy, float qz, float nx,
+                       float ny, float nz, float tol) {
+    const float pl = std::fabs((gx[idx] - qx) * nx + (gy[idx] - qy) * ny + (gz[idx] - qz) * nz);
+    const float same = gid[idx] == id ? 1.0f : 0.0f;
+    const float near = pl < tol ? 1.0f : 0.0f;
+    return inside * std::max(same, near);
+}
+
+struct ShadowRowArgs {
+    int w, h, stride, y;
+    const float* pb;  // prevBlocker, xyz interleaved
+    const float* pl;  // prevLightSample
+    const float* pp;  // prevPosition
+    const float* pn;  // prevNormal
+    const uint8_t* valid;
+    const int32_t* id;
+    const float *gx, *gy, *gz;  // previous guides, bases
+    const int32_t* gid;
+    float pm[16], cam[3];
+    float alpha, inv2s2;
+    float *ox, *oy, *oa, *mask, *sdx, *sdy, *sal;
+    uint8_t* om;
+};
+
+// eq. 3 for one row: in-shadow pixels' vectors, eq. 4's alpha^V, and the splat inputs.
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ShadowRow(
+    const ShadowRowArgs& args) {
+    const ShadowRowArgs a = args;
+    constexpr int kC = 256;
+    // Two loops per chunk (geometry, then eq. 4 and the taps): one loop with everything has too
+    // many conditionals for GCC's if-conversion, and then it does not vectorize.
+    alignas(64) float ok[kC], vxs[kC], vys[kC], vzs[kC], nxs[kC], nys[kC], nzs[kC], rxs[kC],
+        rys[kC], pxs[kC], pys[kC], pzs[kC];
+    alignas(64) float ox[kC], oy[kC], oa[kC], mk[kC], sdx[kC], sdy[kC], sal[kC];
+    alignas(64) int om[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float bx = a.pb[3 * x], by = a.pb[3 * x + 1], bz = a.pb[3 * x + 2];
+            const float lx = a.pl[3 * x], ly = a.pl[3 * x + 1], lz = a.pl[3 * x + 2];
+            const float px = a.pp[3 * x], py = a.pp[3 * x + 1], pz = a.pp[3 * x + 2];
+            float nx = a.pn[3 * x], ny = a.pn[3 * x + 1], nz = a.pn[3 * x + 2];
+            const float nl2 = nx * nx + ny * ny + nz * nz;
+            // Lit pixels (NaN blocker) and unusable inputs fail here.
+            float okf = (a.valid[x] ? 1.0f : 0.0f) * Fin(bx + by + bz) * Fin(lx + ly + lz) *
+                        Fin(px + py + pz) * Fin(nl2) * (nl2 > 0.0f ? 1.0f : 0.0f);
+            const float inl = okf > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
+            nx *= inl, ny *= inl, nz *= inl;
+            // eq. 3: the previous light sample -> blocker line against the receiver's previous
+            // tangent plane.
+            const float dx = bx - lx, dy = by - ly, dz = bz - lz;
+            const float den = dx * nx + dy * ny + dz * nz;
+            const float dl = std::sqrt(dx * dx + dy * dy + dz * dz);
+            okf *= std::fabs(den) > 1e-8f * dl ? 1.0f : 0.0f;
+            const float t =
+                okf > 0.0f ? ((px - lx) * nx + (py - ly) * ny + (pz - lz) * nz) / den : 0.0f;
+            okf *= t > 0.0f ? 1.0f : 0.0f;
+            const float vx = lx + t * dx, vy = ly + t * dy, vz = lz + t * dz;
+            const float cx = a.pm[0] * vx + a.pm[4] * vy + a.pm[8] * vz + a.pm[12];
+            const float cy = a.pm[1] * vx + a.pm[5] * vy + a.pm[9] * vz + a.pm[13];
+            const float cw = a.pm[3] * vx + a.pm[7] * vy + a.pm[11] * vz + a.pm[15];
+            okf *= cw > 0.0f ? 1.0f : 0.0f;
+            const float iw = okf > 0.0f ? 1.0f / cw : 0.0f;
+            const float rx = (cx * iw * 0.5f + 0.5f) * float(a.w);
+            const float ry = (0.5f - cy * iw * 0.5f) * float(a.h);
+            okf *= (rx > -1.0f ? 1.0f : 0.0f) * (rx < float(a.w) + 1.0f ? 1.0f : 0.0f) *
+                   (ry > -1.0f ? 1.0f : 0.0f) * (ry < float(a.h) + 1.0f ? 1.0f : 0.0f);
+            ok[i] = okf;
+            vxs[i] = vx, vys[i] = vy, vzs[i] = vz, nxs[i] = nx, nys[i] = ny, nzs[i] = nz;
+            rxs[i] = okf > 0.0f ? rx : 0.5f, rys[i] = okf > 0.0f ? ry : 0.5f;
+            pxs[i] = px, pys[i] = py, pzs[i] = pz;
+        }
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float rx = rxs[i], ry = rys[i];
+            const float px = pxs[i], py = pys[i], pz = pzs[i];
+            const float nx = nxs[i], ny = nys[i], nz = nzs[i];
+            const float vx = vxs[i], vy = vys[i], vz = vzs[i];
+            float okf = ok[i];
+            // eq. 4: how far the surface actually seen at x^V is off the receiver's plane:
+            // theta - pi/2 = -asin(cos theta), asin by its Taylor series (the Gaussian is ~0
+            // beyond |theta - pi/2| = 0.5, where the series is still within 1%).
+            const int qx = std::min(std::max(int(rx), 0), a.w - 1);
+            const int qy = std::min(std::max(int(ry), 0), a.h - 1);
+            const int qi = qy * a.stride + kPad + qx;
+            okf *= a.gid[qi] != -2 ? 1.0f : 0.0f;  // -2: no usable geometry there
+            const float ex = a.gx[qi] - px, ey = a.gy[qi] - py, ez = a.gz[qi] - pz;
+            const float el = std::sqrt(ex * ex + ey * ey + ez * ez);
+            const float ux = px - a.cam[0], uy = py - a.cam[1], uz = pz - a.cam[2];
+            const float dist = std::sqrt(ux * ux + uy * uy + uz * uz);
+            const float c = std::min(
+                std::max((ex * nx + ey * ny + ez * nz) / std::max(el, 1e-30f), -1.0f), 1.0f);
+            const float sn = c * (1.0f + c * c * (1.0f / 6.0f + c * c * (3.0f / 40.0f)));
+            const float gauss = ExpNeg16(sn * sn * a.inv2s2);  // within a few % of exp
+            const float g = el > 1e-6f * dist ? gauss : 1.0f;
+            const float tol = kShadowPlaneTol * dist + 1e-6f;
+            const Foot4 fp = MakeFoot4(rx, ry, a.w, a.h, a.stride);
+            const int id = a.id[x];
+            const float m0 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i00, fp.in00, id, vx, vy, vz, nx,
+                                       ny, nz, tol);
+            const float m1 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i00 + 1, fp.in10, id, vx, vy, vz,
+                                       nx, ny, nz, tol);
+            const float m2 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i01, fp.in01, id, vx, vy, vz, nx,
+                                       ny, nz, tol);
+            const float m3 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i01 + 1, fp.in11, id, vx, vy, vz,
+                                       nx, ny, nz, tol);
+            const int bits = okf > 0.0f ? MaskBits(m0, m1, m2, m3) : 0;
+            const bool has = bits != 0;
+            const float av = 1.0f - g * (1.0f - a.alpha);
+            ox[i] = has ? rx : kNaN, oy[i] = has ? ry : kNaN, om[i] = bits;
+            oa[i] = has ? av : a.alpha;
+            mk[i] = has ? 1.0f : 0.0f;
+            sdx[i] = has ? rx - (float(x) + 0.5f) : 0.0f;
+            sdy[i] = has ? ry - (float(a.y) + 0.5f) : 0.0f;
+            sal[i] = has ? av : 0.0f;
+        }
+        for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
+        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0), CopyRow(oa, n, a.oa + x0);
+        CopyRow(mk, n, a.mask + x0), CopyRow(sdx, n, a.sdx + x0), CopyRow(sdy, n, a.sdy + x0);
+        CopyRow(sal, n, a.sal + x0);
+    }
+}
+
+struct SplatRowArgs {
+    int w, h, stride, y;
+    const float *cnt, *sdx, *sdy, *sal;  // box sums of the row
+    const float* pp;
+    const float* pn;
+    const uint8_t* valid;
+    const int32_t* id;
+    const float *gx, *gy, *gz;
+    const int32_t* gid;
+    const float *tx, *ty;
+    const uint8_t* tm;
+    float cam[3];
+    float *ox, *oy, *oa;
+    uint8_t* om;
+};
+
+// Pixels without a shadow vector of their own: the mean vector of the in-shadow pixels around,
+// or the traditional one far from shadows.
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void SplatRow(
+    const SplatRowArgs& args) {
+    const SplatRowArgs a = args;
+    constexpr int kC = 256;
+    alignas(64) float ox[kC], oy[kC], oa[kC];
+    alignas(64) int om[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const int own = a.om[x];
+            const float cnt = a.cnt[x];
+            const float ic = cnt > 0.5f ? 1.0f / cnt : 0.0f;
+            const float px = a.pp[3 * x], py = a.pp[3 * x + 1], pz = a.pp[3 * x + 2];
+            float nx = a.pn[3 * x], ny = a.pn[3 * x + 1], nz = a.pn[3 * x + 2];
+            const float nl2 = nx * nx + ny * ny + nz * nz;
+            const float okf = (a.valid[x] ? 1.0f : 0.0f) * Fin(px + py + pz) * Fin(nl2) *
+                              (nl2 > 0.0f ? 1.0f : 0.0f);
+            const float inl = okf > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
+            nx *= inl, ny *= inl, nz *= inl;
+            const float sx = float(x) + 0.5f + a.sdx[x] * ic;
+            const float sy = float(a.y) + 0.5f + a.sdy[x] * ic;
+            const float ux = px - a.cam[0], uy = py - a.cam[1], uz = pz - a.cam[2];
+            const float tol = kShadowPlaneTol * std::sqrt(ux * ux + uy * uy + uz * uz) + 1e-6f;
+            const Foot4 fp = MakeFoot4(sx, sy, a.w, a.h, a.stride);
+            const int id = a.id[x];
+            const float m0 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i00, fp.in00, id, px, py, pz, nx,
+                                       ny, nz, tol);
+            const float m1 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i00 + 1, fp.in10, id, px, py, pz,
+                                       nx, ny, nz, tol);
+            const float m2 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i01, fp.in01, id, px, py, pz, nx,
+                                       ny, nz, tol);
+            const float m3 = ShadowTap(a.gx, a.gy, a.gz, a.gid, fp.i01 + 1, fp.in11, id, px, py, pz,
+                                       nx, ny, nz, tol);
+            // Loads before the selects: a load only under a condition is control flow.
+            const float tx = a.tx[x], ty = a.ty[x], sal = a.sal[x];
+            const float cx = a.ox[x], cy = a.oy[x], ca = a.oa[x];
+            const int tm = a.tm[x];
+            const bool splat = own == 0 && cnt > 0.5f;
+            const bool trad = own == 0 && !(cnt > 0.5f);
+            ox[i] = splat ? (okf > 0.0f ? sx : kNaN) : trad ? tx : cx;
+            oy[i] = splat ? (okf > 0.0f ? sy : kNaN) : trad ? ty : cy;
+            oa[i] = splat ? sal * ic : ca;
+            om[i] = splat ? (okf > 0.0f ? MaskBits(m0, m1, m2, m3) : 0) : trad ? tm : own;
+        }
+        for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
+        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0), CopyRow(oa, n, a.oa + x0);
+    }
+}
+
+}  // namespace
+
 void ShadowMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& prev,
                   const MotionField& trad, float alpha, float falloffSigma, int splatRadius,
                   MotionField* out, Plane* alphaV, Plane* scratch) {
     const int w = f.width, h = f.height;
     const Guides& pg = *prev.g;
-    const float inv2s2 = 1.0f / (2.0f * falloffSigma * falloffSigma);
-    // scratch[0..3]: splat inputs (in-shadow mask, mask * dx, mask * dy, mask * alpha^V);
-    // scratch[4..7]: their box sums.
-    Plane& mask = scratch[0];
-    Plane& sdx = scratch[1];
-    Plane& sdy = scratch[2];
-    Plane& sal = scratch[3];
+    // scratch[0..3]: splat inputs (in-shadow mask, mask * dx, mask * dy, mask * alpha^V), then
+    // their box sums; scratch[4..7]: BoxSum's temporaries.
     ForRows(h, [&](int y) {
-        float* ox = out->x.Row(y);
-        float* oy = out->y.Row(y);
-        uint8_t* om = out->taps.Row(y);
-        float* oa = alphaV->Row(y);
-        for (int x = 0; x < w; ++x) {
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
-            ox[x] = kNaN, oy[x] = kNaN, om[x] = 0, oa[x] = alpha;
-            mask.At(x, y) = 0.0f, sdx.At(x, y) = 0.0f, sdy.At(x, y) = 0.0f, sal.At(x, y) = 0.0f;
-            if (!cur.valid.At(x, y)) continue;
-            const glm::vec3 pb = f.prevBlocker[i], pl = f.prevLightSample[i];
-            if (!Finite(pb) || !Finite(pl)) continue;  // lit (or no shadow ray)
-            const glm::vec3 pp = f.prevPosition[i];
-            glm::vec3 pn = f.prevNormal[i];
-            if (!Finite(pp) || !Finite(pn)) continue;
-            const float nl = glm::length(pn);
-            if (!(nl > 0.0f)) continue;
-            pn /= nl;
-            // eq. 3: the previous light sample -> blocker line against the receiver's previous
-            // tangent plane.
-            const glm::vec3 d = pb - pl;
-            const float denom = glm::dot(d, pn);
-            if (!(std::abs(denom) > 1e-8f * glm::length(d))) continue;
-            const float t = glm::dot(pp - pl, pn) / denom;
-            if (!(t > 0.0f)) continue;
-            const glm::vec3 sv = pl + t * d;
-            glm::vec2 r;
-            if (!prev.camera.Project(sv, &r)) continue;
-            Footprint fp;
-            if (!MakeFootprint(r.x, r.y, w, h, &fp)) continue;
-            // eq. 4: how far the surface actually seen at x^V is off the receiver's plane.
-            const int qx = std::clamp(int(r.x), 0, w - 1), qy = std::clamp(int(r.y), 0, h - 1);
-            if (!pg.valid.At(qx, qy)) continue;
-            const glm::vec3 dir = PrevPos(pg, qx, qy) - pp;
-            const float dl = glm::length(dir);
-            const float dist = glm::length(pp - prev.camera.position);
-            float g = 1.0f;
-            if (dl > 1e-6f * dist) {
-                const float s = std::asin(std::clamp(glm::dot(pn, dir) / dl, -1.0f, 1.0f));
-                g = std::exp(-s * s * inv2s2);  // theta - pi/2 = -asin(cos theta)
-            }
-            const int id = cur.objectId.At(x, y);
-            const float tol = kShadowPlaneTol * dist + 1e-6f;
-            const uint8_t m = TapMask(fp, pg, [&](int tx, int ty) {
-                return pg.objectId.At(tx, ty) == id ||
-                       std::abs(glm::dot(PrevPos(pg, tx, ty) - sv, pn)) < tol;
-            });
-            if (!m) continue;
-            const float av = 1.0f - g * (1.0f - alpha);
-            ox[x] = r.x, oy[x] = r.y, om[x] = m, oa[x] = av;
-            mask.At(x, y) = 1.0f;
-            sdx.At(x, y) = r.x - (float(x) + 0.5f);
-            sdy.At(x, y) = r.y - (float(y) + 0.5f);
-            sal.At(x, y) = av;
-        }
+        ShadowRowArgs a;
+        const size_t row = size_t(y) * size_t(w);
+        a.w = w, a.h = h, a.stride = int(pg.depth.Stride()), a.y = y;
+        a.pb = &f.prevBlocker[row].x, a.pl = &f.prevLightSample[row].x;
+        a.pp = &f.prevPosition[row].x, a.pn = &f.prevNormal[row].x;
+        a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
+        a.gx = pg.px.Base(), a.gy = pg.py.Base(), a.gz = pg.pz.Base();
+        a.gid = pg.objectId.Base();
+        for (int c = 0; c < 4; ++c)
+            for (int r = 0; r < 4; ++r) a.pm[4 * c + r] = prev.camera.worldToClip[c][r];
+        a.cam[0] = prev.camera.position.x, a.cam[1] = prev.camera.position.y;
+        a.cam[2] = prev.camera.position.z;
+        a.alpha = alpha, a.inv2s2 = 1.0f / (2.0f * falloffSigma * falloffSigma);
+        a.ox = out->x.Row(y), a.oy = out->y.Row(y), a.om = out->taps.Row(y);
+        a.oa = alphaV->Row(y);
+        a.mask = scratch[0].Row(y), a.sdx = scratch[1].Row(y), a.sdy = scratch[2].Row(y);
+        a.sal = scratch[3].Row(y);
+        ShadowRow(a);
     });
     // Splat: pixels near in-shadow pixels take their mean vector (Sec. 4.1: "in-shadow pixels'
     // visibilities and their shadow motion vectors are propagated into the centre of each
     // filter"), so the lit side of a moving shadow edge follows the shadow too.
-    // The sums overwrite the inputs (BoxSum's horizontal pass finishes before its vertical one).
     const Plane* in[4] = {&scratch[0], &scratch[1], &scratch[2], &scratch[3]};
     Plane* sums[4] = {&scratch[0], &scratch[1], &scratch[2], &scratch[3]};
     Plane* tmp[4] = {&scratch[4], &scratch[5], &scratch[6], &scratch[7]};
     BoxSum(4, in, sums, tmp, splatRadius);
     ForRows(h, [&](int y) {
-        float* ox = out->x.Row(y);
-        float* oy = out->y.Row(y);
-        uint8_t* om = out->taps.Row(y);
-        float* oa = alphaV->Row(y);
-        for (int x = 0; x < w; ++x) {
-            if (om[x] || !cur.valid.At(x, y)) continue;  // has its own shadow vector
-            const float cnt = sums[0]->At(x, y);
-            if (cnt < 0.5f) {  // far from shadows: the receiver's own motion
-                ox[x] = trad.x.At(x, y), oy[x] = trad.y.At(x, y), om[x] = trad.taps.At(x, y);
-                continue;
-            }
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
-            const glm::vec3 pp = f.prevPosition[i];
-            glm::vec3 pn = f.prevNormal[i];
-            const float sx = float(x) + 0.5f + sums[1]->At(x, y) / cnt;
-            const float sy = float(y) + 0.5f + sums[2]->At(x, y) / cnt;
-            Footprint fp;
-            if (!Finite(pp) || !Finite(pn) || !MakeFootprint(sx, sy, w, h, &fp)) continue;
-            pn = glm::normalize(pn);
-            const int id = cur.objectId.At(x, y);
-            const float tol = kShadowPlaneTol * glm::length(pp - prev.camera.position) + 1e-6f;
-            ox[x] = sx, oy[x] = sy, oa[x] = sums[3]->At(x, y) / cnt;
-            om[x] = TapMask(fp, pg, [&](int tx, int ty) {
-                return pg.objectId.At(tx, ty) == id ||
-                       std::abs(glm::dot(PrevPos(pg, tx, ty) - pp, pn)) < tol;
-            });
-        }
+        SplatRowArgs a;
+        const size_t row = size_t(y) * size_t(w);
+        a.w = w, a.h = h, a.stride = int(pg.depth.Stride()), a.y = y;
+        a.cnt = scratch[0].Row(y), a.sdx = scratch[1].Row(y), a.sdy = scratch[2].Row(y);
+        a.sal = scratch[3].Row(y);
+        a.pp = &f.prevPosition[row].x, a.pn = &f.prevNormal[row].x;
+        a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
+        a.gx = pg.px.Base(), a.gy = pg.py.Base(), a.gz = pg.pz.Base();
+        a.gid = pg.objectId.Base();
+        a.tx = trad.x.Row(y), a.ty = trad.y.Row(y), a.tm = trad.taps.Row(y);
+        a.cam[0] = prev.camera.position.x, a.cam[1] = prev.camera.position.y;
+        a.cam[2] = prev.camera.position.z;
+        a.ox = out->x.Row(y), a.oy = out->y.Row(y), a.om = out->taps.Row(y);
+        a.oa = alphaV->Row(y);
+        SplatRow(a);
     });
 }
+
+namespace {
+
+struct GlossyRowArgs {
+    int w, h, stride, y;
+    const float* phg;  // prevGlossyHit, xyz interleaved
+    const float* hg;   // glossyHit
+    const float* pp;   // prevPosition
+    const float* pn;   // prevNormal
+    const float* rough;
+    const uint8_t* valid;
+    const int32_t* id;
+    const float *cx, *cy, *cz, *cnx, *cny, *cnz;  // this frame's guides (planes) of the row
+    const int32_t* gid;                           // previous objectId, base
+    const float *tx, *ty;                         // traditional vectors of the row
+    const uint8_t* tm;
+    float pm[16], cm[16];  // previous / current worldToClip, column-major
+    float cam[3];
+    float lobe, maxJitter;
+    uint32_t seed;
+    const float* gauss;
+    float *ox, *oy;
+    uint8_t* om;
+};
+
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void GlossyRow(
+    const GlossyRowArgs& args) {
+    const GlossyRowArgs a = args;
+    constexpr int kC = 256;
+    alignas(64) float ox[kC], oy[kC];
+    alignas(64) int om[kC];
+    const float hw = 0.5f * float(a.w), hh = 0.5f * float(a.h);
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float px = a.pp[3 * x], py = a.pp[3 * x + 1], pz = a.pp[3 * x + 2];
+            float nx = a.pn[3 * x], ny = a.pn[3 * x + 1], nz = a.pn[3 * x + 2];
+            const float gx = a.phg[3 * x], gy = a.phg[3 * x + 1], gz = a.phg[3 * x + 2];
+            const float hx = a.hg[3 * x], hy = a.hg[3 * x + 1], hz = a.hg[3 * x + 2];
+            const float nl2 = nx * nx + ny * ny + nz * nz;
+            float okf = (a.valid[x] ? 1.0f : 0.0f) * Fin(px + py + pz) * Fin(nl2) *
+                        (nl2 > 0.0f ? 1.0f : 0.0f) * Fin(gx + gy + gz) * Fin(hx + hy + hz);
+            const float inl = okf > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
+            nx *= inl, ny *= inl, nz *= inl;
+            // eq. 5: the hit's mirror image in the reflector's previous plane, projected...
+            const float dp = (gx - px) * nx + (gy - py) * ny + (gz - pz) * nz;
+            const float vx = gx - 2.0f * dp * nx, vy = gy - 2.0f * dp * ny,
+                        vz = gz - 2.0f * dp * nz;
+            const float pcx = a.pm[0] * vx + a.pm[4] * vy + a.pm[8] * vz + a.pm[12];
+            const float pcy = a.pm[1] * vx + a.pm[5] * vy + a.pm[9] * vz + a.pm[13];
+            const float pcw = a.pm[3] * vx + a.pm[7] * vy + a.pm[11] * vz + a.pm[15];
+            // ... and its motion applied to this pixel: mu_now from this frame's hit, plane and
+            // camera (see GlossyMotion).
+            const float cnx = a.cnx[x], cny = a.cny[x], cnz = a.cnz[x];
+            const float dc = (hx - a.cx[x]) * cnx + (hy - a.cy[x]) * cny + (hz - a.cz[x]) * cnz;
+            const float wx = hx - 2.0f * dc * cnx, wy = hy - 2.0f * dc * cny,
+                        wz = hz - 2.0f * dc * cnz;
+            const float ccx = a.cm[0] * wx + a.cm[4] * wy + a.cm[8] * wz + a.cm[12];
+            const float ccy = a.cm[1] * wx + a.cm[5] * wy + a.cm[9] * wz + a.cm[13];
+            const float ccw = a.cm[3] * wx + a.cm[7] * wy + a.cm[11] * wz + a.cm[15];
+            okf *= (pcw > 0.0f ? 1.0f : 0.0f) * (ccw > 0.0f ? 1.0f : 0.0f);
+            const float ipw = okf > 0.0f ? 1.0f / pcw : 0.0f, icw = okf > 0.0f ? 1.0f / ccw : 0.0f;
+            const float mux = (pcx * ipw - ccx * icw) * hw + float(x) + 0.5f;
+            const float muy = (ccy * icw - pcy * ipw) * hh + float(a.y) + 0.5f;
+            // s^C: where the camera ray to the virtual image crosses the plane.
+            const float ex = vx - a.cam[0], ey = vy - a.cam[1], ez = vz - a.cam[2];
+            const float den = ex * nx + ey * ny + ez * nz;
+            const float num = (px - a.cam[0]) * nx + (py - a.cam[1]) * ny + (pz - a.cam[2]) * nz;
+            const float tt = std::fabs(den) > 1e-12f ? num / den : 1.0f;
+            const float sx = a.cam[0] + tt * ex, sy = a.cam[1] + tt * ey, sz = a.cam[2] + tt * ez;
+            // Sigma (see GlossyMotion): rho = |hv - sc| lobeScale alpha, axes J rho t1, J rho t2.
+            const float r = a.rough[x];
+            const float rr = Fin(r) * (r > 0.0f ? r : 0.0f);
+            const float qx = vx - sx, qy = vy - sy, qz = vz - sz;
+            const float rho = std::sqrt(qx * qx + qy * qy + qz * qz) * a.lobe * rr;
+            const float sg = nz >= 0.0f ? 1.0f : -1.0f;
+            const float ia = -1.0f / (sg + nz), bb = nx * ny * ia;
+            const float t1x = (1.0f + sg * nx * nx * ia) * rho, t1y = sg * bb * rho,
+                        t1z = -sg * nx * rho;
+            const float t2x = bb * rho, t2y = (sg + ny * ny * ia) * rho, t2z = -ny * rho;
+            const float scx = a.pm[0] * sx + a.pm[4] * sy + a.pm[8] * sz + a.pm[12];
+            const float scy = a.pm[1] * sx + a.pm[5] * sy + a.pm[9] * sz + a.pm[13];
+            const float scw = a.pm[3] * sx + a.pm[7] * sy + a.pm[11] * sz + a.pm[15];
+            const float isw = scw > 0.0f ? 1.0f / scw : 0.0f;
+            const float d1x = a.pm[0] * t1x + a.pm[4] * t1y + a.pm[8] * t1z;
+            const float d1y = a.pm[1] * t1x + a.pm[5] * t1y + a.pm[9] * t1z;
+            const float d1w = a.pm[3] * t1x + a.pm[7] * t1y + a.pm[11] * t1z;
+            const float d2x = a.pm[0] * t2x + a.pm[4] * t2y + a.pm[8] * t2z;
+            const float d2y = a.pm[1] * t2x + a.pm[5] * t2y + a.pm[9] * t2z;
+            const float d2w = a.pm[3] * t2x + a.pm[7] * t2y + a.pm[11] * t2z;
+            float e1x = hw * (d1x - scx * isw * d1w) * isw,
+                  e1y = -hh * (d1y - scy * isw * d1w) * isw;
+            float e2x = hw * (d2x - scx * isw * d2w) * isw,
+                  e2y = -hh * (d2y - scy * isw * d2w) * isw;
+            const float l1 = std::sqrt(e1x * e1x + e1y * e1y),
+                        l2 = std::sqrt(e2x * e2x + e2y * e2y);
+            const float k1 = l1 > a.maxJitter ? a.maxJitter / l1 : 1.0f;
+            const float k2 = l2 > a.maxJitter ? a.maxJitter / l2 : 1.0f;
+            e1x *= k1, e1y *= k1, e2x *= k2, e2y *= k2;
+            uint32_t hs = uint32_t(x) * 0x9E3779B1u ^ uint32_t(a.y) * 0x85EBCA77u ^ a.seed;
+            hs ^= hs >> 16, hs *= 0x7FEB352Du, hs ^= hs >> 15, hs *= 0x846CA68Bu, hs ^= hs >> 16;
+            const int gi = int(hs & 4095u) * 2;
+            const float g0 = a.gauss[gi], g1 = a.gauss[gi + 1];
+            const float fin = Fin(e1x + e1y + e2x + e2y);
+            const float rx = mux + fin * (g0 * e1x + g1 * e2x);
+            const float ry = muy + fin * (g0 * e1y + g1 * e2y);
+            // Usable taps: the same reflector.
+            const Foot4 fp = MakeFoot4(rx, ry, a.w, a.h, a.stride);
+            const int id = a.id[x];
+            const float m0 = fp.in00 * (a.gid[fp.i00] == id ? 1.0f : 0.0f);
+            const float m1 = fp.in10 * (a.gid[fp.i00 + 1] == id ? 1.0f : 0.0f);
+            const float m2 = fp.in01 * (a.gid[fp.i01] == id ? 1.0f : 0.0f);
+            const float m3 = fp.in11 * (a.gid[fp.i01 + 1] == id ? 1.0f : 0.0f);
+            // Loads before the selects: a load only under a condition is control flow.
+            const float tx = a.tx[x], ty = a.ty[x];
+            const int tm = a.tm[x];
+            const bool ok = okf > 0.0f;
+            ox[i] = ok ? rx : tx, oy[i] = ok ? ry : ty;
+            om[i] = ok ? MaskBits(m0, m1, m2, m3) : tm;
+        }
+        for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
+        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0);
+    }
+}
+
+}  // namespace
 
 void GlossyMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& prev,
                   const MotionField& trad, float lobeScale, float maxJitter, uint32_t frameSeed,
                   const float* gauss, MotionField* out) {
+    // Default: the reflector's own motion (no glossy hit: environment, or not glossy).
+    // eq. 5: the hit's mirror image in the reflector's previous plane, projected. Its motion
+    // since the previous frame is applied to this pixel (x + mu_prev - mu_now, mu_now from this
+    // frame's hit, plane and camera) rather than mu_prev taken as the position itself:
+    // identical for a mirror, but for a sampled glossy direction the virtual image is not at x,
+    // and the absolute position would reuse a pixel up to the lobe's footprint away even in a
+    // static scene (a blur that never converges).
+    // Sigma: the lobe, a Gaussian of angular std sigma_t = lobeScale * alpha around the mirror
+    // direction, traced from the virtual image to the plane covers a disc of radius
+    // rho = |hv - sc| sigma_t (isotropic on the plane, the 1/cos elongation along the incidence
+    // plane ignored); its image under the projection's Jacobian J at s^C is the ellipse with axes
+    // J rho t1, J rho t2 (t1, t2 any tangent basis: the covariance rho^2 J J^T does not depend on
+    // it). Each axis is capped at maxJitter pixels: farther history is unlikely to be the same
+    // reflection. The sample uses a per-pixel hash of (x, y, frame) into a table of normal
+    // numbers.
     const int w = f.width, h = f.height;
     const Guides& pg = *prev.g;
-    const glm::mat4& m = prev.camera.worldToClip;
-    const float hw = 0.5f * float(w), hh = 0.5f * float(h);
     ForRows(h, [&](int y) {
-        float* ox = out->x.Row(y);
-        float* oy = out->y.Row(y);
-        uint8_t* om = out->taps.Row(y);
-        for (int x = 0; x < w; ++x) {
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
-            // Default: the reflector's own motion (no glossy hit: environment, or not glossy).
-            ox[x] = trad.x.At(x, y), oy[x] = trad.y.At(x, y), om[x] = trad.taps.At(x, y);
-            if (!cur.valid.At(x, y)) continue;
-            const glm::vec3 hg = f.prevGlossyHit[i];
-            if (!Finite(hg)) continue;
-            const glm::vec3 pp = f.prevPosition[i];
-            glm::vec3 pn = f.prevNormal[i];
-            if (!Finite(pp) || !Finite(pn)) continue;
-            const float nl = glm::length(pn);
-            if (!(nl > 0.0f)) continue;
-            pn /= nl;
-            // eq. 5: the hit's mirror image in the reflector's previous plane, projected. Its
-            // motion since the previous frame is applied to this pixel (x + mu_prev - mu_now,
-            // mu_now from this frame's hit, plane and camera) rather than mu_prev taken as the
-            // position itself: identical for a mirror, but for a sampled glossy direction the
-            // virtual image is not at x, and the absolute position would reuse a pixel up to the
-            // lobe's footprint away even in a static scene (a blur that never converges).
-            const glm::vec3 hv = hg - 2.0f * glm::dot(hg - pp, pn) * pn;
-            glm::vec2 mu;
-            if (!prev.camera.Project(hv, &mu)) continue;
-            {
-                const glm::vec3 hc = f.glossyHit[i];
-                const glm::vec3 pc = f.position[i];
-                const glm::vec3 nc(cur.nx.At(x, y), cur.ny.At(x, y), cur.nz.At(x, y));
-                glm::vec2 muNow;
-                if (!Finite(hc) ||
-                    !f.camera.Project(hc - 2.0f * glm::dot(hc - pc, nc) * nc, &muNow))
-                    continue;
-                mu += glm::vec2(float(x) + 0.5f, float(y) + 0.5f) - muNow;
-            }
-            // s^C: where the camera ray to the virtual image crosses the plane.
-            const glm::vec3 cam = prev.camera.position;
-            const float den = glm::dot(hv - cam, pn);
-            glm::vec3 sc = pp;
-            if (std::abs(den) > 1e-12f) sc = cam + (glm::dot(pp - cam, pn) / den) * (hv - cam);
-            // Sigma: the lobe, a Gaussian of angular std sigma_t = lobeScale * alpha around the
-            // mirror direction, traced from the virtual image to the plane covers a disc of
-            // radius rho = |hv - sc| sigma_t (isotropic on the plane, the 1/cos elongation along
-            // the incidence plane ignored); its image under the projection's Jacobian J at s^C
-            // is the ellipse with axes J rho t1, J rho t2 (t1, t2 any tangent basis: the
-            // covariance rho^2 J J^T does not depend on it). Each axis is capped at maxJitter
-            // pixels: farther history is unlikely to be the same reflection.
-            const float rough = f.roughness.empty() ? 0.0f : f.roughness[i];
-            const float rho =
-                glm::length(hv - sc) * lobeScale * (std::isfinite(rough) ? rough : 0.0f);
-            float sx = mu.x, sy = mu.y;
-            if (rho > 0.0f) {
-                glm::vec3 t1, t2;
-                ConeFrame(pn, &t1, &t2);
-                const glm::vec4 c = m * glm::vec4(sc, 1.0f);
-                if (c.w > 0.0f) {
-                    const float iw = 1.0f / c.w;
-                    auto axis = [&](glm::vec3 t) {
-                        const glm::vec4 d = m * glm::vec4(rho * t, 0.0f);
-                        glm::vec2 e(hw * (d.x - c.x * iw * d.w) * iw,
-                                    -hh * (d.y - c.y * iw * d.w) * iw);
-                        const float l = glm::length(e);
-                        return l > maxJitter ? e * (maxJitter / l) : e;
-                    };
-                    const glm::vec2 e1 = axis(t1), e2 = axis(t2);
-                    uint32_t s = uint32_t(x) * 0x9E3779B1u ^ uint32_t(y) * 0x85EBCA77u ^ frameSeed;
-                    s ^= s >> 16, s *= 0x7FEB352Du, s ^= s >> 15, s *= 0x846CA68Bu, s ^= s >> 16;
-                    const float* g = gauss + 2 * (s & 4095u);
-                    sx += g[0] * e1.x + g[1] * e2.x;
-                    sy += g[0] * e1.y + g[1] * e2.y;
-                }
-            }
-            Footprint fp;
-            ox[x] = sx, oy[x] = sy, om[x] = 0;
-            if (!MakeFootprint(sx, sy, w, h, &fp)) continue;
-            const int id = cur.objectId.At(x, y);
-            om[x] = TapMask(fp, pg, [&](int tx, int ty) { return pg.objectId.At(tx, ty) == id; });
-        }
+        GlossyRowArgs a;
+        const size_t row = size_t(y) * size_t(w);
+        a.w = w, a.h = h, a.stride = int(pg.depth.Stride()), a.y = y;
+        a.phg = &f.prevGlossyHit[row].x, a.hg = &f.glossyHit[row].x;
+        a.pp = &f.prevPosition[row].x, a.pn = &f.prevNormal[row].x;
+        a.rough = &f.roughness[row];
+        a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
+        a.cx = cur.px.Row(y), a.cy = cur.py.Row(y), a.cz = cur.pz.Row(y);
+        a.cnx = cur.nx.Row(y), a.cny = cur.ny.Row(y), a.cnz = cur.nz.Row(y);
+        a.gid = pg.objectId.Base();
+        a.tx = trad.x.Row(y), a.ty = trad.y.Row(y), a.tm = trad.taps.Row(y);
+        for (int c = 0; c < 4; ++c)
+            for (int r = 0; r < 4; ++r)
+                a.pm[4 * c + r] = prev.camera.worldToClip[c][r],
+                             a.cm[4 * c + r] = f.camera.worldToClip[c][r];
+        a.cam[0] = prev.camera.position.x, a.cam[1] = prev.camera.position.y;
+        a.cam[2] = prev.camera.position.z;
+        a.lobe = lobeScale, a.maxJitter = maxJitter, a.seed = frameSeed, a.gauss = gauss;
+        a.ox = out->x.Row(y), a.oy = out->y.Row(y), a.om = out->taps.Row(y);
+        GlossyRow(a);
     });
 }
 

@@ -31,6 +31,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <ctime>
 #include <limits>
 #include <random>
@@ -384,6 +385,36 @@ struct IndirectRow {
     float *v[3], *r[3], *valid;
 };
 enum class IndMode { Colour, ColourDemod, Cones };
+
+typedef float V8 __attribute__((vector_size(32)));
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // inlined into each ISA clone; no ABI boundary
+// The shading of one pixel's cones (kConeShadeWeight per cone, per channel) and whether all 18
+// floats are finite (1 / 0).
+inline __attribute__((always_inline)) void ConeShade(const float* q, float* c0, float* c1,
+                                                     float* c2, float* finite) {
+    V8 v[3] = {};
+    std::memcpy(&v[0], q, 32), std::memcpy(&v[1], q + 8, 32);
+    v[2] = V8{q[16], q[17], 0, 0, 0, 0, 0, 0};
+    float out[3];
+    for (int c = 0; c < 3; ++c) {
+        V8 acc = {};
+        for (int b = 0; b < 3; ++b) {
+            V8 wv = {};
+            for (int l = 0; l < 8; ++l) {
+                const int j = 8 * b + l;  // float j of the pixel: cone j / 3, channel j % 3
+                wv[l] = j < 18 && j % 3 == c ? kConeShadeWeight[j / 3] : 0.0f;
+            }
+            acc += v[b] * wv;
+        }
+        out[c] = acc[0] + acc[1] + acc[2] + acc[3] + acc[4] + acc[5] + acc[6] + acc[7];
+    }
+    const V8 s = v[0] + v[1] + v[2];
+    const float sum = s[0] + s[1] + s[2] + s[3] + s[4] + s[5] + s[6] + s[7];
+    *c0 = out[0], *c1 = out[1], *c2 = out[2];
+    *finite = Fin(sum);
+}
+#pragma GCC diagnostic pop
 template <IndMode M>
 inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& args) {
     const IndirectRow a = args;
@@ -396,20 +427,10 @@ inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& a
             const float good = a.ok[x] ? 1.0f : 0.0f;
             float c0, c1, c2, r0 = 1.0f, r1 = 1.0f, r2 = 1.0f, cg;
             if constexpr (M == IndMode::Cones) {
-                // ShadeCones: 6 cones x RGB interleaved; written per channel so the loop over
-                // pixels vectorizes with gathers (a group of 18 floats is beyond GCC's strided
-                // loads).
-                c0 = c1 = c2 = 0.0f;
-                float fin = 0.0f;
-#pragma GCC unroll 6
-                for (int k = 0; k < kNumCones; ++k) {
-                    const int b = 18 * x + 3 * k;
-                    const float q0 = a.cones[b], q1 = a.cones[b + 1], q2 = a.cones[b + 2];
-                    c0 += kConeShadeWeight[k] * q0, c1 += kConeShadeWeight[k] * q1;
-                    c2 += kConeShadeWeight[k] * q2;
-                    fin += q0 + q1 + q2;
-                }
-                cg = good * Fin(fin);
+                // ShadeCones on the pixel's 18 floats (6 cones x RGB) as 8-wide vectors: GCC
+                // does not vectorize across pixels with a stride of 18.
+                ConeShade(a.cones + size_t(x) * 18, &c0, &c1, &c2, &cg);
+                cg *= good;
                 const float a0 = a.albedo[3 * x], a1 = a.albedo[3 * x + 1],
                             a2 = a.albedo[3 * x + 2];
                 const float af = Fin(a0 + a1 + a2);
