@@ -236,6 +236,19 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
     alignas(64) int om[kC];
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
+        {
+            // Chunks where every pixel is lit (NaN blockers): nothing to compute.
+            bool any = false;
+            for (int i = 0; i < n && !any; ++i) any = std::isfinite(a.pb[3 * (x0 + i)]);
+            if (!any) {
+                for (int i = 0; i < n; ++i) {
+                    const int x = x0 + i;
+                    a.ox[x] = kNaN, a.oy[x] = kNaN, a.om[x] = 0, a.oa[x] = a.alpha;
+                    a.mask[x] = a.sdx[x] = a.sdy[x] = a.sal[x] = 0.0f;
+                }
+                continue;
+            }
+        }
         for (int i = 0; i < n; ++i) {
             const int x = x0 + i;
             const float bx = a.pb[3 * x], by = a.pb[3 * x + 1], bz = a.pb[3 * x + 2];
@@ -349,6 +362,19 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
     alignas(64) int om[kC];
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
+        {
+            // Chunks where no pixel lacks its own vector near a shadow: only the traditional
+            // vectors of pixels without one to copy.
+            bool any = false;
+            for (int i = 0; i < n && !any; ++i) any = a.om[x0 + i] == 0 && a.cnt[x0 + i] > 0.5f;
+            if (!any) {
+                for (int i = 0; i < n; ++i) {
+                    const int x = x0 + i;
+                    if (a.om[x] == 0) a.ox[x] = a.tx[x], a.oy[x] = a.ty[x], a.om[x] = a.tm[x];
+                }
+                continue;
+            }
+        }
         for (int i = 0; i < n; ++i) {
             const int x = x0 + i;
             const int own = a.om[x];
@@ -479,6 +505,16 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
     const float hw = 0.5f * float(a.w), hh = 0.5f * float(a.h);
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
+        {
+            // Chunks without a glossy hit keep the traditional vectors (a cheap scan first).
+            bool any = false;
+            for (int i = 0; i < n && !any; ++i) any = std::isfinite(a.phg[3 * (x0 + i)]);
+            if (!any) {
+                for (int i = 0; i < n; ++i) a.om[x0 + i] = a.tm[x0 + i];
+                CopyRow(a.tx + x0, n, a.ox + x0), CopyRow(a.ty + x0, n, a.oy + x0);
+                continue;
+            }
+        }
         for (int i = 0; i < n; ++i) {
             const int x = x0 + i;
             const float px = a.pp[3 * x], py = a.pp[3 * x + 1], pz = a.pp[3 * x + 2];
@@ -655,12 +691,16 @@ void OcclusionMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& 
     ForRows(h, [&](int y) {
         std::vector<int>& ids = idsTls.local();
         int32_t* oc = occluder->Row(y);
+        const float* tx = trad.x.Row(y);
+        const float* ty = trad.y.Row(y);
+        const uint8_t* tm = trad.taps.Row(y);
+        const uint8_t* ok = cur.valid.Row(y);
+        std::copy_n(tx, w, out->x.Row(y)), std::copy_n(ty, w, out->y.Row(y));
+        std::copy_n(tm, w, out->taps.Row(y));
+        std::fill_n(oc, w, -1);
         for (int x = 0; x < w; ++x) {
-            oc[x] = -1;
-            out->x.At(x, y) = trad.x.At(x, y), out->y.At(x, y) = trad.y.At(x, y);
-            out->taps.At(x, y) = trad.taps.At(x, y);
-            if (trad.taps.At(x, y) || !cur.valid.At(x, y)) continue;
-            const float sx = trad.x.At(x, y), sy = trad.y.At(x, y);
+            if (tm[x] || !ok[x]) continue;
+            const float sx = tx[x], sy = ty[x];
             if (!(sx >= 0.0f && sy >= 0.0f && sx < float(w) && sy < float(h))) continue;
             const int qx = int(sx), qy = int(sy);
             if (!pg.valid.At(qx, qy) || pg.objectId.At(qx, qy) < 0) continue;
