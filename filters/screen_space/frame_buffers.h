@@ -72,6 +72,32 @@ inline int ConeOf(const std::array<glm::vec3, kNumCones>& axes, glm::vec3 w) {
     return best;
 }
 
+/// How a diffuse surface is shaded from its cones (Zeng eq. 11 with the cosine put back): cone k
+/// stands for the directions closest to its axis (the ConeOf cell), and its weight is that cell's
+/// cosine-weighted share of the hemisphere, (1/pi) int_cell cos dw; the weights sum to 1, so
+///     indirect = albedo * sum_k kConeShadeWeight[k] * cones[k].
+/// Computed once by quadrature (tests/screen_space_test.cpp checks them).
+inline constexpr float kConeShadeWeight[kNumCones] = {0.2772876f, 0.1445425f, 0.1445425f,
+                                                      0.1445425f, 0.1445425f, 0.1445425f};
+
+/// Diffuse irradiance / pi from the 6 cones of one pixel (multiply by the albedo to shade).
+inline glm::vec3 ShadeCones(const glm::vec3* cones) {
+    glm::vec3 s(0.0f);
+    for (int k = 0; k < kNumCones; ++k) s += kConeShadeWeight[k] * cones[k];
+    return s;
+}
+
+/// Records one incident-radiance sample in the cones of a pixel: `estimate` is the sample's
+/// estimate of irradiance / pi, L(w) cos(theta) / (pi pdf(w)) (= L for cosine-weighted
+/// sampling). It goes to the cone of `w`, scaled by 1 / kConeShadeWeight, so that each cone's
+/// expectation is the cosine-weighted mean radiance of its cell and ShadeCones() reproduces the
+/// sample's own diffuse estimate exactly.
+inline void AddConeSample(const std::array<glm::vec3, kNumCones>& axes, glm::vec3 w,
+                          glm::vec3 estimate, glm::vec3* cones) {
+    const int k = ConeOf(axes, w);
+    cones[k] += estimate / kConeShadeWeight[k];
+}
+
 /// The camera of a frame: world -> raster with (0,0) the top-left corner of pixel (0,0) and
 /// (width, height) the bottom-right corner of the last pixel; `w` of the clip position > 0 in
 /// front of the camera.
@@ -125,7 +151,8 @@ struct FrameBuffers {
     std::vector<glm::vec3> glossyHit, prevGlossyHit;
 
     // Dual motion vectors for occlusion (Sec. 4.3): incident indirect radiance per cone
-    // (kNumCones entries per pixel, pixel-major), axes from ConeAxes(normal).
+    // (kNumCones entries per pixel, pixel-major), axes from ConeAxes(normal). Recorded with
+    // AddConeSample(), so that indirect = albedo * ShadeCones(cones of the pixel).
     std::vector<glm::vec3> cones;
 
     size_t NumPixels() const { return size_t(width) * size_t(height); }

@@ -1,0 +1,109 @@
+// SPDX-License-Identifier: Apache-2.0
+// Internal to the screen-space stage: what a ScreenSpaceDenoiser keeps, and the temporal passes
+// (temporal.cpp) that read and write it.
+//
+// Ownership. Two sets of guides and of component histories (index `cur` = this frame's, cur ^ 1
+// = the previous frame's) are swapped after every frame; nothing is copied between frames. All
+// planes are allocated when the size changes, never per frame.
+#pragma once
+#include <memory>
+#include <vector>
+
+#include "filters/screen_space/brdf_table.h"
+#include "filters/screen_space/cone_overlap.h"
+#include "filters/screen_space/motion_vectors.h"
+#include "filters/screen_space/planes.h"
+#include "filters/screen_space/screen_denoiser.h"
+
+namespace texcache::screen {
+namespace detail {
+
+inline constexpr int kVis = 0, kGlossy = 1, kIndirect = 2;
+
+/// One component's input and result.
+struct ComponentPlanes {
+    int nc = 1;
+    bool present = false;
+    Plane v[3];      ///< the input, demodulated (0 where unusable)
+    Plane valid;     ///< 1 where the input sample and the pixel's geometry are usable
+    Plane remod[3];  ///< glossy: the remodulation factor F_beta (1 where not demodulated)
+    const Plane* res[3] = {nullptr, nullptr, nullptr};  ///< the result (demodulated)
+};
+
+/// What a component carries to the next frame.
+struct History {
+    Plane c[3];              ///< colour (demodulated); SVGF: the first a-trous level's output
+    Plane m1, m2;            ///< SVGF: luminance moments
+    Plane len;               ///< frames accumulated (0: none)
+    HugeArray<float> cones;  ///< Reliable indirect: 18 floats per pixel (6 cones x RGB)
+    bool valid = false;
+};
+
+/// Scratch planes of one component for the filters: two ping-pong sets and a temporal output.
+struct ComponentScratch {
+    Plane t[3], tVar;  ///< temporal output / filter input
+    Plane a[3], aVar;  ///< a-trous ping
+    Plane b[3], bVar;  ///< a-trous pong
+    Plane out[3], outVar;
+};
+
+}  // namespace detail
+
+struct ScreenSpaceDenoiser::State {
+    DenoiserSettings set;
+    std::shared_ptr<const BrdfPreintegration> brdf;
+    ConeOverlapTable coneTable;
+    std::vector<float> gauss;  // 2 x 4096 standard normal numbers (glossy vectors)
+    int w = 0, h = 0;
+    bool hasPrev = false;
+    Method method = Method::SpatialOnly;
+    Demodulation demod = Demodulation::Off;
+    uint32_t frameIndex = 0;
+    detail::Guides guides[2];
+    int cur = 0;
+    FrameCamera prevCam;
+    detail::ComponentPlanes comp[3];
+    detail::History hist[3][2];
+    detail::ComponentScratch scratch[3];
+    bool conesPath = false, prevConesPath = false;
+    detail::MotionField trad, shadow, glossy, occl;
+    bool motionValid[4] = {false, false, false, false};
+    detail::Plane shadowAlpha, sigma, shadowSigma;
+    detail::IntPlane occluder;
+    detail::Plane splat[8];
+    StageTimings timings, cpuTimings;
+
+    detail::Guides& G() { return guides[cur]; }
+    const detail::Guides& PrevG() const { return guides[cur ^ 1]; }
+    void Resize(int width, int height);
+};
+
+namespace detail {
+
+/// SVGF's temporal step for component `ci`: the history (if `mf`) reprojected bilinearly over
+/// the usable taps, clamped to mu +- clampK sigma of the current 3x3 neighbourhood when
+/// clampK > 0, blended with weight max(alpha, 1 / length), luminance moments alike; writes the
+/// integrated colour and its variance (moments, or the 3x3 spatial variance for histories
+/// shorter than 4 frames; -1 where unusable) to scratch[ci].t / tVar and the moments and length
+/// to this frame's history.
+void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK);
+
+/// The 3x3 spatial luminance variance of component `ci`'s input (-1 where unusable) into
+/// scratch[ci].tVar, its input copied to scratch[ci].t: a-trous input without history.
+void SpatialInput(ScreenSpaceDenoiser::State& s, int ci);
+
+/// Zeng's temporal step for component `ci` whose spatially filtered frame is in `sp` / `spVar`
+/// (variance < 0: unusable): history reprojected with `mf`, clamped to mu +- clampK sigma of
+/// sp's 3x3 neighbourhood, blended with alpha or `alphaV` (eq. 4); the clean-up std
+/// min(w_A + w_C, 5) (eqs. 7-8) goes to s.sigma. Writes the blend to scratch[ci].t / tVar
+/// (variance 0 or -1: validity only) and the length to this frame's history.
+void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, const Plane& spVar,
+                      const MotionField* mf, const Plane* alphaV);
+
+/// Zeng's per-cone temporal step for diffuse indirect (Sec. 4.3, eqs. 9-10) along `mf`; writes
+/// the shaded result to scratch[kIndirect].t / tVar and the cones, moments and length to this
+/// frame's history.
+void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const MotionField* mf);
+
+}  // namespace detail
+}  // namespace texcache::screen

@@ -1,0 +1,733 @@
+// SPDX-License-Identifier: Apache-2.0
+// The screen-space stage (see screen_denoiser.h for what each method does).
+//
+// Design note. A frame goes through: Prepare (one sweep over the frame's AoS buffers into padded
+// SoA planes: guides, demodulated components, remodulation factors) -> motion vectors -> the
+// temporal passes (temporal.cpp) -> the fused a-trous levels (kernels.cpp) -> Compose. Two orders
+// are used:
+//   SVGF order (everything but the Reliable visibility): the noisy input is accumulated with the
+//     history first (along the method's motion vectors, clamped to mu +- k sigma when the method
+//     clamps), its luminance moments give the variance that steers the a-trous iterations, and
+//     the output of the first iteration is the next history (for the Reliable indirect the
+//     history is the cones).
+//   Zeng order (Reliable visibility): the current frame is filtered spatially first (c~_i, the
+//     separable joint bilateral sized by the penumbra), the history fetched with the shadow
+//     vector is clamped to mu +- 3 sigma of c~_i and blended (eq. 2 with alpha^V), then the
+//     clean-up runs with std min(w_A + w_C, 5) (eqs. 7-8); its output is the next history.
+// Why not Zeng's order for glossy too: a spatial filter that only ever sees 1 spp keeps its bias
+// however many frames are averaged (on a static glossy sphere the glossy RMSE after 16 frames
+// was 0.026, against 0.017 accumulating first, which lets the a-trous sharpen as the temporal
+// variance drops); Zeng et al. use a BRDF-lobe-sized glossy filter we do not have. The glossy
+// component keeps the stochastic glossy vectors and the 3-sigma clamp; its a-trous, which runs
+// after the blend, takes the clean-up's place.
+// All a-trous work of a frame runs as one pass per level over every component that needs it, so
+// the depth/normal weights are computed once per tap. The Reliable indirect keeps incident
+// radiance in 6 cones per pixel as its history (Sec. 4.3): history cones are moved into the
+// current pixel's cone frame with Mazonka overlap weights and blended per cone; the a-trous then
+// runs on their diffuse shading (ShadeCones), 3 channels instead of 18 (filtering every cone
+// spatially would cost about as much as the whole stage's filtering at 1080p).
+#include "filters/screen_space/screen_denoiser.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <limits>
+#include <random>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "filters/screen_space/denoiser_state.h"
+#include "texcache/error.h"
+
+namespace texcache::screen {
+
+using namespace detail;
+
+const char* MethodName(Method m) {
+    switch (m) {
+        case Method::SpatialOnly:
+            return "spatial";
+        case Method::Baseline:
+            return "baseline";
+        case Method::BaselineClamp:
+            return "baseline+clamp";
+        case Method::Reliable:
+            return "reliable";
+    }
+    return "?";
+}
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+// Below this a remodulation factor (F_beta, albedo) is not divided out: nothing to recover.
+constexpr float kMinRemod = 1e-3f;
+
+using Clock = std::chrono::steady_clock;
+
+double CpuMs() {
+    timespec t;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return double(t.tv_sec) * 1e3 + double(t.tv_nsec) * 1e-6;
+}
+
+// Charges the wall-clock and process-CPU time since the last lap to one pass.
+class PassClock {
+public:
+    PassClock(StageTimings* wall, StageTimings* cpu) : wall_(wall), cpu_(cpu) {
+        *wall = StageTimings{}, *cpu = StageTimings{};
+        t0_ = last_ = Clock::now(), c0_ = lastCpu_ = CpuMs();
+    }
+    void Lap(double StageTimings::*pass) {
+        const auto now = Clock::now();
+        const double c = CpuMs();
+        wall_->*pass += std::chrono::duration<double, std::milli>(now - last_).count();
+        cpu_->*pass += c - lastCpu_;
+        last_ = now, lastCpu_ = c;
+    }
+    void Finish() {
+        wall_->total = std::chrono::duration<double, std::milli>(last_ - t0_).count();
+        cpu_->total = lastCpu_ - c0_;
+    }
+
+private:
+    StageTimings* wall_;
+    StageTimings* cpu_;
+    Clock::time_point t0_, last_;
+    double c0_, lastCpu_;
+};
+
+inline bool Finite(glm::vec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+template <class Body>
+void ForRows(int h, Body&& body) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4), [&](const tbb::blocked_range<int>& r) {
+        for (int y = r.begin(); y < r.end(); ++y) body(y);
+    });
+}
+
+}  // namespace
+
+void ScreenSpaceDenoiser::State::Resize(int width, int height) {
+    w = width, h = height;
+    for (Guides& g : guides) g.Resize(w, h);
+    for (ComponentPlanes& c : comp) {
+        for (int k = 0; k < 3; ++k) c.v[k].Resize(w, h), c.remod[k].Resize(w, h, 1.0f);
+        c.valid.Resize(w, h);
+        for (const Plane*& r : c.res) r = nullptr;
+    }
+    for (auto& hc : hist)
+        for (History& hh : hc) {
+            for (Plane& p : hh.c) p.Resize(w, h);
+            hh.m1.Resize(w, h), hh.m2.Resize(w, h), hh.len.Resize(w, h);
+            hh.cones.Assign(0, 0.0f);
+            hh.valid = false;
+        }
+    for (ComponentScratch& sc : scratch) {
+        for (int k = 0; k < 3; ++k)
+            sc.t[k].Resize(w, h), sc.a[k].Resize(w, h), sc.b[k].Resize(w, h),
+                sc.out[k].Resize(w, h);
+        sc.tVar.Resize(w, h), sc.aVar.Resize(w, h), sc.bVar.Resize(w, h), sc.outVar.Resize(w, h);
+    }
+    for (MotionField* m : {&trad, &shadow, &glossy, &occl}) m->Resize(w, h);
+    shadowAlpha.Resize(w, h), sigma.Resize(w, h), shadowSigma.Resize(w, h);
+    occluder.Resize(w, h, -1);
+    for (Plane& p : splat) p.Resize(w, h);
+    hasPrev = false;
+}
+
+// ---- Construction ----------------------------------------------------------------------------
+
+namespace {
+
+void CheckSettings(const DenoiserSettings& s) {
+    const std::string where = "DenoiserSettings";
+    auto fail = [&](const std::string& what) { throw InputError(where, what); };
+    if (!(s.alpha > 0.0f && s.alpha <= 1.0f))
+        fail("alpha must be in (0, 1], got " + std::to_string(s.alpha));
+    if (!(s.baselineClampK > 0.0f) || !(s.reliableClampK > 0.0f))
+        fail("clamping k must be positive");
+    if (s.atrousLevels < 1 || s.atrousLevels > 5)
+        fail("atrousLevels must be in 1..5 (steps up to 16), got " +
+             std::to_string(s.atrousLevels));
+    if (!(s.sigmaLuminance > 0.0f) || !(s.sigmaDepth > 0.0f) || !(s.normalPower >= 0.0f))
+        fail("sigmaLuminance and sigmaDepth must be positive, normalPower non-negative");
+    if (s.shadowRadius < 1 || s.shadowRadius > 16)
+        fail("shadowRadius must be in 1..16, got " + std::to_string(s.shadowRadius));
+    if (s.shadowSplatRadius < 0 || s.shadowSplatRadius > 64)
+        fail("shadowSplatRadius must be in 0..64, got " + std::to_string(s.shadowSplatRadius));
+    if (!(s.shadowFalloffSigma > 0.0f)) fail("shadowFalloffSigma must be positive");
+    if (!(s.glossyLobeScale >= 0.0f) || !(s.maxGlossyJitter >= 0.0f))
+        fail("glossyLobeScale and maxGlossyJitter must be non-negative");
+    if (s.brdfSamples < 1) fail("brdfSamples must be at least 1");
+}
+
+}  // namespace
+
+ScreenSpaceDenoiser::ScreenSpaceDenoiser(const DenoiserSettings& settings)
+    : ScreenSpaceDenoiser(settings, nullptr) {}
+
+ScreenSpaceDenoiser::ScreenSpaceDenoiser(const DenoiserSettings& settings,
+                                         std::shared_ptr<const BrdfPreintegration> brdf)
+    : s_(std::make_unique<State>()) {
+    CheckSettings(settings);
+    s_->set = settings;
+    s_->brdf = std::move(brdf);
+    std::mt19937 rng(settings.seed);
+    std::normal_distribution<float> nd(0.0f, 1.0f);
+    s_->gauss.resize(2 * 4096);
+    for (float& g : s_->gauss) g = nd(rng);
+}
+
+ScreenSpaceDenoiser::~ScreenSpaceDenoiser() = default;
+
+void ScreenSpaceDenoiser::Reset() {
+    s_->hasPrev = false;
+    for (auto& hc : s_->hist)
+        for (History& hh : hc) hh.valid = false;
+}
+
+const StageTimings& ScreenSpaceDenoiser::Timings() const {
+    return s_->timings;
+}
+
+const StageTimings& ScreenSpaceDenoiser::CpuTimings() const {
+    return s_->cpuTimings;
+}
+
+const BrdfPreintegration& ScreenSpaceDenoiser::Brdf() {
+    if (!s_->brdf) s_->brdf = std::make_shared<BrdfPreintegration>(s_->set.brdfSamples);
+    return *s_->brdf;
+}
+
+// ---- Input checks and preparation ------------------------------------------------------------
+
+namespace {
+
+void CheckInputs(const FrameBuffers& f, Method m, Demodulation d) {
+    const std::string where = "ScreenSpaceDenoiser::Denoise";
+    auto need = [&](size_t size, const char* buffer, const char* why) {
+        if (size == 0)
+            throw InputError(where, std::string("buffer '") + buffer + "' is missing (" + why +
+                                        ", method '" + MethodName(m) + "')");
+    };
+    if (d == Demodulation::On) {
+        if (!f.glossy.empty()) {
+            need(f.specular.size(), "specular", "BRDF demodulation of glossy");
+            need(f.roughness.size(), "roughness", "BRDF demodulation of glossy");
+        }
+        if (!f.indirect.empty()) need(f.albedo.size(), "albedo", "albedo demodulation");
+    }
+    if (m == Method::SpatialOnly) return;
+    need(f.prevPosition.size(), "prevPosition", "motion vectors");
+    need(f.prevNormal.size(), "prevNormal", "motion vectors");
+    if (m != Method::Reliable) return;
+    need(f.prevBlocker.size(), "prevBlocker", "shadow motion vectors");
+    need(f.prevLightSample.size(), "prevLightSample", "shadow motion vectors");
+    if (!f.glossy.empty()) {
+        need(f.glossyHit.size(), "glossyHit", "glossy motion vectors");
+        need(f.prevGlossyHit.size(), "prevGlossyHit", "glossy motion vectors");
+        need(f.roughness.size(), "roughness", "glossy motion vectors");
+    }
+    if (!f.indirect.empty() && !f.cones.empty())
+        need(f.albedo.size(), "albedo", "shading the indirect cones");
+}
+
+// One sweep over the frame's buffers: guides and demodulated components as planes.
+void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPreintegration* brdf,
+             bool demod) {
+    Guides& g = s.G();
+    const int w = s.w;
+    ComponentPlanes& vis = s.comp[kVis];
+    ComponentPlanes& gl = s.comp[kGlossy];
+    ComponentPlanes& ind = s.comp[kIndirect];
+    const bool hasGl = gl.present, hasInd = ind.present, cones = s.conesPath;
+    const glm::vec3 camPos = f.camera.position;
+    ForRows(s.h, [&](int y) {
+        const size_t row = size_t(y) * size_t(w);
+        float* px = g.px.Row(y);
+        float* py = g.py.Row(y);
+        float* pz = g.pz.Row(y);
+        float* nx = g.nx.Row(y);
+        float* ny = g.ny.Row(y);
+        float* nz = g.nz.Row(y);
+        float* dz = g.depth.Row(y);
+        int32_t* id = g.objectId.Row(y);
+        uint8_t* ok = g.valid.Row(y);
+        float* vv = vis.v[0].Row(y);
+        float* vok = vis.valid.Row(y);
+        for (int x = 0; x < w; ++x) {
+            const size_t i = row + size_t(x);
+            const glm::vec3 p = f.position[i];
+            glm::vec3 n = f.normal[i];
+            const float z = f.depth[i];
+            const float nl = glm::length(n);
+            const bool good = Finite(p) && Finite(n) && nl > 0.0f && std::isfinite(z) && z > 0.0f;
+            n = good ? n / nl : glm::vec3(0.0f);
+            px[x] = good ? p.x : 0.0f, py[x] = good ? p.y : 0.0f, pz[x] = good ? p.z : 0.0f;
+            nx[x] = n.x, ny[x] = n.y, nz[x] = n.z;
+            dz[x] = good ? z : 0.0f;
+            id[x] = good ? f.objectId[i] : -2;
+            ok[x] = good ? 1 : 0;
+            const float v = f.visibility[i];
+            const bool vgood = good && std::isfinite(v);
+            vv[x] = vgood ? v : 0.0f;
+            vok[x] = vgood ? 1.0f : 0.0f;
+        }
+        if (hasGl) {
+            float* gv[3] = {gl.v[0].Row(y), gl.v[1].Row(y), gl.v[2].Row(y)};
+            float* gr[3] = {gl.remod[0].Row(y), gl.remod[1].Row(y), gl.remod[2].Row(y)};
+            float* gok = gl.valid.Row(y);
+            for (int x = 0; x < w; ++x) {
+                const size_t i = row + size_t(x);
+                const glm::vec3 c = f.glossy[i];
+                glm::vec3 r(1.0f);
+                if (demod && ok[x]) {
+                    const glm::vec3 f0 = f.specular[i];
+                    const float rough = f.roughness[i];
+                    const glm::vec3 n(nx[x], ny[x], nz[x]);
+                    const glm::vec3 p(px[x], py[x], pz[x]);
+                    const float cosT = glm::dot(n, glm::normalize(camPos - p));
+                    if (Finite(f0) && std::isfinite(rough) && std::isfinite(cosT)) {
+                        const glm::vec3 fb = brdf->Evaluate(f0, std::max(cosT, 0.0f), rough);
+                        for (int k = 0; k < 3; ++k) r[k] = fb[k] > kMinRemod ? fb[k] : 1.0f;
+                    }
+                }
+                const bool cgood = ok[x] && Finite(c);
+                for (int k = 0; k < 3; ++k) gv[k][x] = cgood ? c[k] / r[k] : 0.0f, gr[k][x] = r[k];
+                gok[x] = cgood ? 1.0f : 0.0f;
+            }
+        }
+        if (hasInd) {
+            float* iv[3] = {ind.v[0].Row(y), ind.v[1].Row(y), ind.v[2].Row(y)};
+            float* ir[3] = {ind.remod[0].Row(y), ind.remod[1].Row(y), ind.remod[2].Row(y)};
+            float* iok = ind.valid.Row(y);
+            for (int x = 0; x < w; ++x) {
+                const size_t i = row + size_t(x);
+                glm::vec3 c(0.0f), r(1.0f);
+                bool cgood = ok[x];
+                if (cones) {
+                    // The cones' diffuse shading; the albedo multiplies it back in any mode.
+                    const glm::vec3* cp = f.cones.data() + i * kNumCones;
+                    for (int k = 0; k < kNumCones; ++k) cgood = cgood && Finite(cp[k]);
+                    if (cgood) c = ShadeCones(cp);
+                    const glm::vec3 al = f.albedo[i];
+                    r = Finite(al) ? al : glm::vec3(0.0f);
+                } else {
+                    c = f.indirect[i];
+                    cgood = cgood && Finite(c);
+                    if (demod) {
+                        const glm::vec3 al = f.albedo[i];
+                        if (Finite(al))
+                            for (int k = 0; k < 3; ++k) r[k] = al[k] > kMinRemod ? al[k] : 1.0f;
+                    }
+                    c /= r;
+                }
+                for (int k = 0; k < 3; ++k) iv[k][x] = cgood ? c[k] : 0.0f, ir[k][x] = r[k];
+                iok[x] = cgood ? 1.0f : 0.0f;
+            }
+        }
+    });
+    // Depth tolerance of the edge-stopping weights: the larger of the per-axis depth steps, each
+    // the smaller one-sided step to a usable neighbour (so an edge does not widen its own
+    // tolerance), plus 0.1% of the depth.
+    ForRows(s.h, [&](int y) {
+        const float* z = g.depth.Row(y);
+        const uint8_t* ok = g.valid.Row(y);
+        const float* zu = y > 0 ? g.depth.Row(y - 1) : nullptr;
+        const float* zd = y + 1 < s.h ? g.depth.Row(y + 1) : nullptr;
+        const uint8_t* oku = y > 0 ? g.valid.Row(y - 1) : nullptr;
+        const uint8_t* okd = y + 1 < s.h ? g.valid.Row(y + 1) : nullptr;
+        float* iz = g.invDz.Row(y);
+        constexpr float kBig = std::numeric_limits<float>::max();
+        for (int x = 0; x < w; ++x) {
+            if (!ok[x]) {
+                iz[x] = 0.0f;
+                continue;
+            }
+            float gx = kBig, gy = kBig;
+            if (x > 0 && ok[x - 1]) gx = std::min(gx, std::abs(z[x] - z[x - 1]));
+            if (x + 1 < w && ok[x + 1]) gx = std::min(gx, std::abs(z[x] - z[x + 1]));
+            if (zu && oku[x]) gy = std::min(gy, std::abs(z[x] - zu[x]));
+            if (zd && okd[x]) gy = std::min(gy, std::abs(z[x] - zd[x]));
+            gx = gx == kBig ? 0.0f : gx, gy = gy == kBig ? 0.0f : gy;
+            iz[x] = 1.0f / (std::max(gx, gy) + 1e-3f * z[x]);
+        }
+    });
+}
+
+// ---- Filters -------------------------------------------------------------------------------
+
+PassArgs BaseArgs(const ScreenSpaceDenoiser::State& s, int nc) {
+    PassArgs a;
+    a.nc = nc;
+    a.g = &s.guides[s.cur];
+    a.normalPower = s.set.normalPower;
+    a.depthSigma = s.set.sigmaDepth;
+    return a;
+}
+
+// One a-trous job: a component's input (planes + variance) and where its levels go.
+struct AtrousJob {
+    int ci = -1;
+    bool luminance = true;
+    Plane* feedback[3] = {nullptr, nullptr, nullptr};  // SVGF: the first level's output
+};
+
+// The a-trous iterations of up to 3 components together: inputs in scratch[ci].t / tVar,
+// results in scratch[ci].out / outVar; levels ping-pong through scratch[ci].a / b.
+void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) {
+    const int levels = s.set.atrousLevels;
+    for (int level = 0; level < levels; ++level) {
+        AtrousArgs a;
+        a.g = &s.G();
+        a.step = 1 << level;
+        a.normalPower = s.set.normalPower;
+        a.depthSigma = s.set.sigmaDepth;
+        a.luminanceSigma = s.set.sigmaLuminance;
+        const bool last = level == levels - 1;
+        for (int j = 0; j < njobs; ++j) {
+            ComponentScratch& sc = s.scratch[jobs[j].ci];
+            AtrousComponent& c = a.comp[j];
+            c.nc = s.comp[jobs[j].ci].nc;
+            c.luminance = jobs[j].luminance;
+            // Level l reads what level l-1 wrote: t -> (feedback or a) -> b -> a -> ... -> out.
+            auto src = [&](int l, int k) -> Plane* {
+                if (l < 0) return &sc.t[k];
+                if (l == 0 && jobs[j].feedback[0]) return jobs[j].feedback[k];
+                return (l & 1) ? &sc.b[k] : &sc.a[k];
+            };
+            auto srcVar = [&](int l) -> Plane* {
+                if (l < 0) return &sc.tVar;
+                return (l & 1) ? &sc.bVar : &sc.aVar;
+            };
+            for (int k = 0; k < c.nc; ++k) {
+                c.in[k] = src(level - 1, k);
+                c.out[k] = last ? &sc.out[k] : src(level, k);
+            }
+            c.var = srcVar(level - 1);
+            c.outVar = last ? &sc.outVar : srcVar(level);
+        }
+        AtrousLevel(a);
+        if (last) break;
+    }
+    for (int j = 0; j < njobs; ++j) {
+        ComponentScratch& sc = s.scratch[jobs[j].ci];
+        // With a single level the output is also the feedback.
+        if (levels == 1 && jobs[j].feedback[0])
+            for (int k = 0; k < s.comp[jobs[j].ci].nc; ++k)
+                ForRows(s.h, [&](int y) {
+                    std::copy_n(sc.out[k].Row(y), s.w, jobs[j].feedback[k]->Row(y));
+                });
+        for (int k = 0; k < 3; ++k) s.comp[jobs[j].ci].res[k] = &sc.out[k];
+    }
+}
+
+// The shadow filter's per-pixel size (Zeng Sec. 4.1 takes it from Liu et al. [HA19]: the
+// penumbra width, PCSS-style): for an in-shadow pixel the penumbra is
+//     w = 2 r_light (d_receiver - d_blocker) / d_blocker
+// wide (distances from the light), r_light being the light's extent, estimated as the RMS spread
+// of the light samples of the in-shadow pixels in the 5x5 neighbourhood (a point light: 0, a
+// sphere of radius r sampled uniformly: r). In pixels, w / (world size of a pixel at the
+// receiver); std w / 4, at most shadowRadius / 2. Splatted like the shadow vectors: every pixel
+// within the splat window of in-shadow pixels takes their mean, so the lit side of a penumbra is
+// filtered too; elsewhere 0 (the pass copies those pixels).
+void ShadowFilterSize(ScreenSpaceDenoiser::State& s, const FrameBuffers& f) {
+    const int w = s.w, h = s.h;
+    const Guides& g = s.G();
+    // Pixels per world unit at distance 1: half the height times the y row's scale of the
+    // projection (|row| = 1 / tan(fov_y / 2) for a perspective camera times a rotation).
+    const glm::mat4& m = f.camera.worldToClip;
+    const float fpx = 0.5f * float(h) * glm::length(glm::vec3(m[0][1], m[1][1], m[2][1]));
+    const float maxSigma = 0.5f * float(s.set.shadowRadius);
+    Plane& mask = s.splat[0];
+    Plane& msig = s.splat[1];
+    ForRows(h, [&](int y) {
+        for (int x = 0; x < w; ++x) {
+            mask.At(x, y) = 0.0f, msig.At(x, y) = 0.0f;
+            if (!g.valid.At(x, y) || f.lightSample.empty() || f.blocker.empty()) continue;
+            const size_t i = size_t(y) * size_t(w) + size_t(x);
+            const glm::vec3 b = f.blocker[i];
+            if (!Finite(b) || !Finite(f.lightSample[i])) continue;
+            glm::vec3 sum(0.0f), sum2(0.0f);
+            int n = 0;
+            for (int dy = -2; dy <= 2; ++dy)
+                for (int dx = -2; dx <= 2; ++dx) {
+                    const int xx = x + dx, yy = y + dy;
+                    if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+                    const size_t j = size_t(yy) * size_t(w) + size_t(xx);
+                    const glm::vec3 l = f.lightSample[j];
+                    if (!Finite(l) || !Finite(f.blocker[j])) continue;
+                    sum += l, sum2 += l * l, ++n;
+                }
+            const glm::vec3 lc = sum / float(n);
+            const glm::vec3 var = glm::max(sum2 / float(n) - lc * lc, glm::vec3(0.0f));
+            const float rl = n >= 3 ? std::sqrt(var.x + var.y + var.z) : 0.0f;
+            const glm::vec3 p(g.px.At(x, y), g.py.At(x, y), g.pz.At(x, y));
+            const float dr = glm::length(p - lc), db = glm::length(b - lc);
+            if (!(db > 0.0f)) continue;
+            const float wWorld = 2.0f * rl * std::max(0.0f, dr - db) / db;
+            const float wPx = wWorld * fpx / std::max(g.depth.At(x, y), 1e-6f);
+            mask.At(x, y) = 1.0f;
+            msig.At(x, y) = std::min(0.25f * wPx, maxSigma);
+        }
+    });
+    const Plane* in[2] = {&s.splat[0], &s.splat[1]};
+    Plane* sums[2] = {&s.splat[0], &s.splat[1]};
+    Plane* tmp[2] = {&s.splat[2], &s.splat[3]};
+    BoxSum(2, in, sums, tmp, s.set.shadowSplatRadius);
+    ForRows(h, [&](int y) {
+        const float* cnt = s.splat[0].Row(y);
+        const float* sg = s.splat[1].Row(y);
+        float* o = s.shadowSigma.Row(y);
+        for (int x = 0; x < w; ++x) o[x] = cnt[x] > 0.5f ? sg[x] / cnt[x] : 0.0f;
+    });
+}
+
+// Zeng's shadow filter: a separable joint bilateral (depth + normal guides) of the per-pixel
+// std ShadowFilterSize() found, over at most +-shadowRadius pixels.
+void ShadowBilateral(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, Plane* out,
+                     Plane* outValid) {
+    ShadowFilterSize(s, f);
+    ComponentPlanes& cp = s.comp[kVis];
+    const int radius = s.set.shadowRadius;
+    PassArgs a = BaseArgs(s, 1);
+    a.taps = 2 * radius + 1;
+    for (int k = 0; k < a.taps; ++k) a.offset[k] = k - radius, a.weight[k] = 1.0f;
+    a.sigma = &s.shadowSigma;
+    ComponentScratch& sc = s.scratch[kVis];
+    a.in[0] = &cp.v[0], a.out[0] = &sc.a[0];
+    a.valid = &cp.valid, a.outValid = &sc.aVar;
+    FilterPlanes(a);
+    a.vertical = true;
+    a.in[0] = &sc.a[0], a.out[0] = out;
+    a.valid = &sc.aVar, a.outValid = outValid;
+    FilterPlanes(a);
+}
+
+// Zeng's clean-up: separable joint bilateral 9x9 with the per-pixel std in s.sigma, from
+// scratch[ci].t (validity in tVar) into this frame's history colour.
+void Cleanup(ScreenSpaceDenoiser::State& s, int ci) {
+    ComponentScratch& sc = s.scratch[ci];
+    History& hc = s.hist[ci][s.cur];
+    const int nc = s.comp[ci].nc;
+    PassArgs a = BaseArgs(s, nc);
+    a.taps = 9;
+    for (int k = 0; k < 9; ++k) a.offset[k] = k - 4, a.weight[k] = 1.0f;
+    a.sigma = &s.sigma;
+    for (int c = 0; c < nc; ++c) a.in[c] = &sc.t[c], a.out[c] = &sc.a[c];
+    a.valid = &sc.tVar, a.outValid = &sc.aVar;
+    FilterPlanes(a);
+    a.vertical = true;
+    for (int c = 0; c < nc; ++c) a.in[c] = &sc.a[c], a.out[c] = &hc.c[c];
+    a.valid = &sc.aVar, a.outValid = nullptr;
+    FilterPlanes(a);
+    for (int c = 0; c < 3; ++c) s.comp[ci].res[c] = &hc.c[c];
+    hc.valid = true;
+}
+
+void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<glm::vec3>* out) {
+    out->resize(size_t(s.w) * size_t(s.h));
+    const ComponentPlanes& vis = s.comp[kVis];
+    const ComponentPlanes& gl = s.comp[kGlossy];
+    const ComponentPlanes& ind = s.comp[kIndirect];
+    ForRows(s.h, [&](int y) {
+        const float* vr = vis.res[0]->Row(y);
+        for (int x = 0; x < s.w; ++x) {
+            const size_t i = size_t(y) * size_t(s.w) + size_t(x);
+            glm::vec3 c(0.0f);
+            if (!f.emitted.empty() && Finite(f.emitted[i])) c += f.emitted[i];
+            if (Finite(f.shading[i])) c += f.shading[i] * vr[x];
+            for (const ComponentPlanes* cp : {&gl, &ind}) {
+                if (!cp->present) continue;
+                for (int k = 0; k < 3; ++k) c[k] += cp->remod[k].At(x, y) * cp->res[k]->At(x, y);
+            }
+            (*out)[i] = c;
+        }
+    });
+}
+
+}  // namespace
+
+// ---- Denoise -------------------------------------------------------------------------------
+
+std::vector<glm::vec3> ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
+                                                    Demodulation demodulation) {
+    std::vector<glm::vec3> image;
+    Denoise(frame, method, demodulation, &image);
+    return image;
+}
+
+void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
+                                  Demodulation demodulation, std::vector<glm::vec3>* image) {
+    State& s = *s_;
+    PassClock clock(&s.timings, &s.cpuTimings);
+    frame.Validate("ScreenSpaceDenoiser::Denoise");
+    CheckInputs(frame, method, demodulation);
+    if (frame.width != s.w || frame.height != s.h)
+        s.Resize(frame.width, frame.height);
+    else if (method != s.method || demodulation != s.demod)
+        Reset();
+    s.method = method, s.demod = demodulation;
+    const bool reliable = method == Method::Reliable;
+    const bool demod = demodulation == Demodulation::On;
+    s.comp[kVis].nc = 1, s.comp[kVis].present = true;
+    s.comp[kGlossy].nc = 3, s.comp[kGlossy].present = !frame.glossy.empty();
+    s.comp[kIndirect].nc = 3, s.comp[kIndirect].present = !frame.indirect.empty();
+    s.conesPath = reliable && !frame.indirect.empty() && !frame.cones.empty();
+    // The indirect history's format (cones or colour) must match this frame's path.
+    if (s.conesPath != s.prevConesPath) s.hist[kIndirect][s.cur ^ 1].valid = false;
+    s.prevConesPath = s.conesPath;
+    for (int c = 0; c < 3; ++c) {
+        if (!s.comp[c].present) s.hist[c][s.cur].valid = false;
+        for (const Plane*& r : s.comp[c].res) r = nullptr;
+    }
+    const BrdfPreintegration* brdf = demod && s.comp[kGlossy].present ? &Brdf() : nullptr;
+    Prepare(s, frame, brdf, demod);
+    clock.Lap(&StageTimings::prepare);
+
+    const bool temporal = method != Method::SpatialOnly && s.hasPrev;
+    std::fill(std::begin(s.motionValid), std::end(s.motionValid), false);
+    if (temporal) {
+        const PrevFrame pf{&s.PrevG(), s.prevCam};
+        TraditionalMotion(frame, s.G(), pf, &s.trad);
+        s.motionValid[int(MotionKind::Traditional)] = true;
+        clock.Lap(&StageTimings::traditionalMotion);
+        if (reliable) {
+            ShadowMotion(frame, s.G(), pf, s.trad, s.set.alpha, s.set.shadowFalloffSigma,
+                         s.set.shadowSplatRadius, &s.shadow, &s.shadowAlpha, s.splat);
+            s.motionValid[int(MotionKind::Shadow)] = true;
+            if (s.comp[kGlossy].present) {
+                GlossyMotion(frame, s.G(), pf, s.trad, s.set.glossyLobeScale, s.set.maxGlossyJitter,
+                             s.set.seed * 0x9E3779B9u ^ s.frameIndex, s.gauss.data(), &s.glossy);
+                s.motionValid[int(MotionKind::Glossy)] = true;
+            }
+            if (s.comp[kIndirect].present) {
+                OcclusionMotion(frame, s.G(), pf, s.trad, &s.occluder, &s.occl);
+                s.motionValid[int(MotionKind::Occlusion)] = true;
+            }
+            clock.Lap(&StageTimings::reliableMotion);
+        }
+    }
+
+    const bool hasGl = s.comp[kGlossy].present, hasInd = s.comp[kIndirect].present;
+    AtrousJob jobs[3];
+    int njobs = 0;
+    if (!reliable) {
+        const float k = method == Method::BaselineClamp ? s.set.baselineClampK : 0.0f;
+        const MotionField* mf = temporal ? &s.trad : nullptr;
+        for (int c = 0; c < 3; ++c) {
+            if (!s.comp[c].present) continue;
+            SvgfTemporal(s, c, mf, k);
+            AtrousJob& j = jobs[njobs++];
+            j.ci = c;
+            for (int k3 = 0; k3 < 3; ++k3) j.feedback[k3] = &s.hist[c][s.cur].c[k3];
+        }
+        clock.Lap(&StageTimings::temporal);
+        RunAtrous(s, jobs, njobs);
+        for (int j = 0; j < njobs; ++j) s.hist[jobs[j].ci][s.cur].valid = true;
+        clock.Lap(&StageTimings::spatial);
+    } else {
+        // Indirect: temporal first (cones, or colour along the occlusion vectors).
+        if (hasInd) {
+            const MotionField* occl = temporal ? &s.occl : nullptr;
+            if (s.conesPath) {
+                ConesTemporal(s, frame, occl);
+            } else {
+                SvgfTemporal(s, kIndirect, occl, s.set.reliableClampK);
+                for (int k3 = 0; k3 < 3; ++k3)
+                    jobs[njobs].feedback[k3] = &s.hist[kIndirect][s.cur].c[k3];
+            }
+            jobs[njobs++].ci = kIndirect;
+            s.hist[kIndirect][s.cur].valid = true;
+        }
+        // Glossy: temporal first too, along the stochastic glossy vectors (see the design note).
+        if (hasGl) {
+            SvgfTemporal(s, kGlossy, temporal ? &s.glossy : nullptr, s.set.reliableClampK);
+            for (int k3 = 0; k3 < 3; ++k3) jobs[njobs].feedback[k3] = &s.hist[kGlossy][s.cur].c[k3];
+            jobs[njobs++].ci = kGlossy;
+            s.hist[kGlossy][s.cur].valid = true;
+        }
+        clock.Lap(&StageTimings::temporal);
+        if (njobs) RunAtrous(s, jobs, njobs);
+        // Visibility: the shadow filter into scratch.b (validity in bVar).
+        ComponentScratch& vs = s.scratch[kVis];
+        ShadowBilateral(s, frame, &vs.b[0], &vs.bVar);
+        clock.Lap(&StageTimings::spatial);
+        // Zeng's temporal step and clean-up for visibility.
+        const MotionField* sm = temporal ? &s.shadow : nullptr;
+        // ReliableTemporal reads validity as variance >= 0: turn the 0/1 validity into 0/-1.
+        ForRows(s.h, [&](int y) {
+            float* v = vs.bVar.Row(y);
+            for (int x = 0; x < s.w; ++x) v[x] = v[x] > 0.0f ? 0.0f : -1.0f;
+        });
+        Plane* vb[3] = {&vs.b[0], &vs.b[1], &vs.b[2]};
+        ReliableTemporal(s, kVis, vb, vs.bVar, sm, temporal ? &s.shadowAlpha : nullptr);
+        clock.Lap(&StageTimings::temporal);
+        Cleanup(s, kVis);
+        clock.Lap(&StageTimings::cleanup);
+    }
+
+    Compose(s, frame, image);
+    s.prevCam = frame.camera;
+    s.cur ^= 1;
+    s.hasPrev = true;
+    ++s.frameIndex;
+    clock.Lap(&StageTimings::compose);
+    clock.Finish();
+}
+
+// ---- Accessors -----------------------------------------------------------------------------
+
+namespace {
+
+template <class T, class Get>
+std::vector<T> Collect(const ScreenSpaceDenoiser::State& s, Get&& get) {
+    std::vector<T> v(size_t(s.w) * size_t(s.h));
+    for (int y = 0; y < s.h; ++y)
+        for (int x = 0; x < s.w; ++x) v[size_t(y) * size_t(s.w) + size_t(x)] = get(x, y);
+    return v;
+}
+
+std::vector<glm::vec3> Remodulated(const ScreenSpaceDenoiser::State& s, int ci) {
+    const ComponentPlanes& cp = s.comp[ci];
+    if (!cp.present || !cp.res[0]) return {};
+    return Collect<glm::vec3>(s, [&](int x, int y) {
+        glm::vec3 c;
+        for (int k = 0; k < 3; ++k) c[k] = cp.remod[k].At(x, y) * cp.res[k]->At(x, y);
+        return c;
+    });
+}
+
+}  // namespace
+
+std::vector<float> ScreenSpaceDenoiser::Visibility() const {
+    const State& s = *s_;
+    if (!s.comp[kVis].res[0]) return {};
+    return Collect<float>(s, [&](int x, int y) { return s.comp[kVis].res[0]->At(x, y); });
+}
+
+std::vector<glm::vec3> ScreenSpaceDenoiser::Glossy() const {
+    return Remodulated(*s_, kGlossy);
+}
+
+std::vector<glm::vec3> ScreenSpaceDenoiser::Indirect() const {
+    return Remodulated(*s_, kIndirect);
+}
+
+std::vector<glm::vec2> ScreenSpaceDenoiser::LastMotion(MotionKind kind) const {
+    const State& s = *s_;
+    const MotionField* m[4] = {&s.trad, &s.shadow, &s.glossy, &s.occl};
+    const bool ok = s.motionValid[int(kind)];
+    const MotionField& f = *m[int(kind)];
+    return Collect<glm::vec2>(s, [&](int x, int y) {
+        if (!ok || !f.taps.At(x, y)) return glm::vec2(kNaN);
+        return glm::vec2(f.x.At(x, y), f.y.At(x, y));
+    });
+}
+
+}  // namespace texcache::screen

@@ -1,0 +1,140 @@
+// SPDX-License-Identifier: Apache-2.0
+// The screen-space stage: per-frame denoisers for the components of FrameBuffers, holding their
+// history across frames (Zeng et al. 2021, "Temporally reliable motion vectors for real-time ray
+// tracing"; Zhuang et al. 2021, "Real-time denoising using BRDF pre-integration factorization";
+// Schied et al. 2017, SVGF).
+//
+// Each component is filtered on its own and the image is recomposed:
+//     emitted + shading * visibility' + glossy' + indirect'
+// The methods differ in how they reuse the previous frame:
+//   SpatialOnly    no history: SVGF's edge-avoiding a-trous (depth, normal, luminance) with a
+//                  spatial variance estimate.
+//   Baseline       SVGF: traditional motion vectors (the primary hit back-projected, eq. 1) with a
+//                  disocclusion test, temporal blend (eq. 2), luminance moments -> variance
+//                  (spatial estimate for histories shorter than 4 frames), a-trous.
+//   BaselineClamp  Baseline with the history clamped to mu +- k sigma of the current 3x3
+//                  neighbourhood (TAA-style, Salvi 2015).
+//   Reliable       Zeng et al.: visibility follows shadow motion vectors (eq. 3, splatted to the
+//                  pixels around shadows, alpha^V of eq. 4), glossy follows stochastic glossy
+//                  motion vectors (eq. 5), diffuse indirect follows dual motion vectors (eq. 6)
+//                  where the traditional ones fail and is reused as incident radiance per cone with
+//                  overlap weights (eqs. 9-11); history clamped to mu +- 3 sigma, clean-up filter
+//                  of std min(w_A + w_C, 5) (eqs. 7-8).
+// Demodulation::On divides glossy by the pre-integrated GGX + Schlick albedo F_beta and diffuse
+// indirect by the albedo before filtering and multiplies them back after (Zhuang et al.).
+//
+// Threading: Denoise() runs its passes on the TBB pool; one denoiser must not be used from two
+// threads at once. Errors: bad frames and settings throw texcache::InputError naming the buffer or
+// setting; nothing else throws.
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "filters/screen_space/frame_buffers.h"
+
+namespace texcache::screen {
+
+class BrdfPreintegration;
+
+enum class Method { SpatialOnly, Baseline, BaselineClamp, Reliable };
+enum class Demodulation { Off, On };
+
+/// Short name of a method ("spatial", "baseline", "baseline+clamp", "reliable").
+const char* MethodName(Method m);
+
+/// Which motion vectors LastMotion() returns.
+enum class MotionKind {
+    Traditional,  ///< the primary hit back-projected (Baseline, and every fallback)
+    Shadow,       ///< visibility (Reliable): eq. 3, splatted around shadows
+    Glossy,       ///< glossy (Reliable): eq. 5, one stochastic sample
+    Occlusion,    ///< diffuse indirect (Reliable): traditional where valid, dual (eq. 6) elsewhere
+};
+
+/// Parameters; defaults follow the papers. Validated by the denoiser (InputError).
+struct DenoiserSettings {
+    float alpha = 0.2f;               ///< weight of the current frame in the temporal blend (eq. 2)
+    float baselineClampK = 1.0f;      ///< BaselineClamp: history in mu +- k sigma (3x3)
+    float reliableClampK = 3.0f;      ///< Reliable: history in mu +- k sigma (3x3; Sec. 5)
+    int atrousLevels = 4;             ///< a-trous iterations, steps 1, 2, 4, 8 (1..5)
+    float sigmaLuminance = 4.0f;      ///< SVGF's sigma_l
+    float sigmaDepth = 1.0f;          ///< SVGF's sigma_z (relative to the local depth slope)
+    float normalPower = 128.0f;       ///< SVGF's sigma_n (weight max(0, n.n')^sigma_n)
+    int shadowRadius = 15;            ///< Reliable: reach of the shadow filter (31x31, 1..16)
+    int shadowSplatRadius = 8;        ///< Reliable: window shadow vectors and sizes splat through
+    float shadowFalloffSigma = 0.1f;  ///< Reliable: eq. 4's sigma (radians)
+    float glossyLobeScale = 1.0f;     ///< Reliable: glossy lobe's angular std = scale * GGX alpha
+    /// Reliable: cap (pixels) on the glossy vector's Gaussian axes. Zeng's Sigma spans the
+    /// lobe's footprint, tens of pixels at 1080p for alpha > 0.2; history that far away is
+    /// another part of the reflection, and in a static scene the jitter is a blur that never
+    /// converges (glossy RMSE after 16 static frames, 96x64 test: 0.025 at 8 px, 0.023 at 4,
+    /// 0.017 without jitter).
+    float maxGlossyJitter = 4.0f;
+    int brdfSamples = 1024;  ///< samples per BRDF-table entry (Zhuang et al.'s count)
+    unsigned seed = 1;       ///< glossy motion-vector sampling
+};
+
+/// Milliseconds of the passes of the last Denoise() (all components together).
+struct StageTimings {
+    double prepare = 0.0;            ///< validation, guide planes, (de)modulation inputs
+    double traditionalMotion = 0.0;  ///< back-projection + disocclusion test
+    double reliableMotion = 0.0;     ///< shadow (+ splat), glossy, dual (+ object motion) vectors
+    double temporal = 0.0;           ///< reprojection, clamping, blending, moments, cones
+    double spatial = 0.0;            ///< a-trous / joint bilateral filters, variance estimates
+    double cleanup = 0.0;            ///< Reliable: the clean-up filter
+    double compose = 0.0;            ///< remodulation and the final sum
+    double total = 0.0;
+};
+
+/// Denoises a sequence of frames, keeping what it needs of the previous one.
+class ScreenSpaceDenoiser {
+public:
+    /// Throws InputError for impossible settings.
+    explicit ScreenSpaceDenoiser(const DenoiserSettings& settings = {});
+    /// Uses `brdf` (shared between denoisers) instead of building a table on first use.
+    ScreenSpaceDenoiser(const DenoiserSettings& settings,
+                        std::shared_ptr<const BrdfPreintegration> brdf);
+    ~ScreenSpaceDenoiser();
+    ScreenSpaceDenoiser(const ScreenSpaceDenoiser&) = delete;
+    ScreenSpaceDenoiser& operator=(const ScreenSpaceDenoiser&) = delete;
+
+    /// Denoises one frame and returns the composed image. The history is dropped (the frame is
+    /// treated as the first) when the size, method or demodulation changes. Throws InputError for
+    /// a frame Validate() rejects or that lacks a buffer the method needs.
+    std::vector<glm::vec3> Denoise(const FrameBuffers& frame, Method method,
+                                   Demodulation demodulation = Demodulation::On);
+    /// The same into `image` (resized), whose allocation is reused from frame to frame: on
+    /// machines where first-touch page faults are slow, a fresh 1080p image costs more than the
+    /// whole stage.
+    void Denoise(const FrameBuffers& frame, Method method, Demodulation demodulation,
+                 std::vector<glm::vec3>* image);
+    /// Forgets the history: the next frame is treated as the first.
+    void Reset();
+
+    /// Pass timings of the last Denoise(), wall clock.
+    const StageTimings& Timings() const;
+    /// The same in process CPU time (all threads): what the passes cost regardless of how much
+    /// of the machine other processes leave us.
+    const StageTimings& CpuTimings() const;
+    /// The denoised visibility of the last frame (0 where the pixel has no usable geometry).
+    std::vector<float> Visibility() const;
+    /// The denoised, remodulated glossy component of the last frame (empty if it had none).
+    std::vector<glm::vec3> Glossy() const;
+    /// The denoised, remodulated indirect component of the last frame (empty if it had none).
+    std::vector<glm::vec3> Indirect() const;
+    /// Previous-frame raster position each pixel of the last frame took history from, for one
+    /// kind of motion vector (NaN where there was none: disoccluded, outside the image, first
+    /// frame, or a kind the method did not compute).
+    std::vector<glm::vec2> LastMotion(MotionKind kind) const;
+    /// The BRDF table (built on first use).
+    const BrdfPreintegration& Brdf();
+
+    struct State;  ///< opaque; defined in screen_denoiser.cpp
+
+private:
+    std::unique_ptr<State> s_;
+};
+
+}  // namespace texcache::screen

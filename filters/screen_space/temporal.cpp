@@ -1,0 +1,482 @@
+// SPDX-License-Identifier: Apache-2.0
+// The temporal passes of the screen-space stage (see denoiser_state.h).
+//
+// Design note. Each pass is one loop over a row that does everything a pixel needs at once (3x3
+// neighbourhood statistics of the current frame, the bilinear history gathered over the taps the
+// motion field allows, clamping, the blend, moments), written without branches (selects and
+// zero weights instead) so that GCC vectorizes it, with AVX2 gathers for the history; whether a
+// history exists at all is a template parameter, not a per-pixel test. The cone pass is the
+// exception: 18 floats per pixel and a 6x6 transfer whose weights depend on the two normals are
+// done per pixel, vectorized across the cones' channels.
+#include <algorithm>
+#include <cmath>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "filters/screen_space/denoiser_state.h"
+
+namespace texcache::screen::detail {
+namespace {
+
+constexpr float kMaxLen = 255.0f;  // history lengths only select alpha and the variance
+constexpr int kConeFloats = 3 * kNumCones;
+
+template <class Body>
+void ForRowBlocks(int h, Body&& body) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4),
+                      [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
+}
+
+// Rows y-1, y, y+1 of a plane, with factor 0 for a row outside the image (then the centre row
+// is read in its place).
+struct Rows3 {
+    int r[3];
+    float f[3];
+    Rows3(int y, int h) {
+        r[0] = y > 0 ? y - 1 : y, r[1] = y, r[2] = y + 1 < h ? y + 1 : y;
+        f[0] = y > 0 ? 1.0f : 0.0f, f[1] = 1.0f, f[2] = y + 1 < h ? 1.0f : 0.0f;
+    }
+};
+
+struct SvgfArgs {
+    int w, h, stride;
+    const float* cur[3][3];  // [channel][row] at x = 0
+    const float* valid[3];   // [row]
+    float rowF[3];
+    const float* mx;
+    const float* my;
+    const uint8_t* mt;
+    const float* hc[3];  // history bases
+    const float* hm1;
+    const float* hm2;
+    const float* hlen;
+    float alpha, clampK;
+    float* out[3];
+    float* outVar;
+    float* m1;
+    float* m2;
+    float* len;
+};
+
+template <int NC, bool Hist, bool Clamp>
+inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
+    // Everything the loop reads is copied to locals and its results go to local arrays: then the
+    // compiler sees no possible aliasing and needs no run-time checks to vectorize.
+    const SvgfArgs a = args;
+    constexpr int kC = 256;
+    alignas(64) float o[3][kC], ovar[kC], om1[kC], om2[kC], olen[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            // 3x3 statistics of the current frame (valid samples only).
+            float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
+#pragma GCC unroll 3
+            for (int r = 0; r < 3; ++r)
+#pragma GCC unroll 3
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const float ok = a.valid[r][x + dx] * a.rowF[r];
+                    float v[3] = {0, 0, 0};
+#pragma GCC unroll 3
+                    for (int c = 0; c < NC; ++c) v[c] = a.cur[c][r][x + dx];
+                    cnt += ok;
+#pragma GCC unroll 3
+                    for (int c = 0; c < NC; ++c) s1[c] += ok * v[c], s2[c] += ok * v[c] * v[c];
+                    if constexpr (NC == 3) {
+                        const float l = Luma(v[0], v[1], v[2]);
+                        sl += ok * l, sl2 += ok * l * l;
+                    }
+                }
+            if constexpr (NC == 1) sl = s1[0], sl2 = s2[0];
+            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+            const float lm = sl * in;
+            const float spVar = std::max(0.0f, sl2 * in - lm * lm);
+
+            // Validity as 0/1 floats and arithmetic blends rather than bools: GCC 12 gives up
+            // on loops mixing boolean widths.
+            const float cv = a.valid[1][x];
+            float v[3] = {0, 0, 0};
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) v[c] = a.cur[c][1][x];
+            const float l = NC == 3 ? Luma(v[0], v[1], v[2]) : v[0];
+
+            float hv[3] = {0, 0, 0}, hm1 = 0.0f, hm2 = 0.0f, hl = 0.0f, hf = 0.0f;
+            if constexpr (Hist) {
+                const Bilinear b = BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+#pragma GCC unroll 3
+                for (int c = 0; c < NC; ++c) hv[c] = Gather(a.hc[c], b);
+                hm1 = Gather(a.hm1, b), hm2 = Gather(a.hm2, b), hl = Gather(a.hlen, b);
+                hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
+                if constexpr (Clamp) {
+#pragma GCC unroll 3
+                    for (int c = 0; c < NC; ++c) {
+                        const float mu = s1[c] * in;
+                        const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                        hv[c] = std::min(std::max(hv[c], mu - a.clampK * sg), mu + a.clampK * sg);
+                    }
+                }
+#pragma GCC unroll 3
+                for (int c = 0; c < NC; ++c) hv[c] *= hf;
+                hm1 *= hf, hm2 *= hf, hl *= hf;
+            }
+            // len: +1 with a new sample; al: max(alpha, 1/len) with history, 1 without, 0
+            // without a new sample.
+            const float len =
+                cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+            const float al = cv * (hf * std::max(a.alpha, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (v[c] - hv[c]);
+            const float m1 = hm1 + al * (l - hm1), m2 = hm2 + al * (l * l - hm2);
+            om1[i] = m1, om2[i] = m2, olen[i] = len;
+            const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
+            ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
+        }
+        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
+        std::copy_n(ovar, n, a.outVar + x0);
+        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
+        std::copy_n(olen, n, a.len + x0);
+    }
+}
+
+#define TEXCACHE_SVGF(name, NC, H, C)                                                        \
+    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
+        const SvgfArgs& a) {                                                                 \
+        SvgfRowImpl<NC, H, C>(a);                                                            \
+    }
+TEXCACHE_SVGF(Svgf1, 1, false, false)
+TEXCACHE_SVGF(Svgf1H, 1, true, false)
+TEXCACHE_SVGF(Svgf1HC, 1, true, true)
+TEXCACHE_SVGF(Svgf3, 3, false, false)
+TEXCACHE_SVGF(Svgf3H, 3, true, false)
+TEXCACHE_SVGF(Svgf3HC, 3, true, true)
+#undef TEXCACHE_SVGF
+
+struct ReliableArgs {
+    int w, h, stride;
+    const float* sp[3][3];  // [channel][row]
+    const float* spVar[3];  // [row]
+    float rowF[3];
+    const float* mx;
+    const float* my;
+    const uint8_t* mt;
+    const float* alphaV;  // null: alpha
+    const float* hc[3];
+    const float* hlen;
+    float alpha, clampK;
+    float* out[3];
+    float* outValid;
+    float* sigma;
+    float* len;
+};
+
+template <int NC, bool Hist, bool AlphaV>
+inline __attribute__((always_inline)) void ReliableRowImpl(const ReliableArgs& args) {
+    const ReliableArgs a = args;  // locals + local results: see SvgfRowImpl
+    constexpr int kC = 256;
+    alignas(64) float o[3][kC], ovalid[kC], osigma[kC], olen[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0};
+#pragma GCC unroll 3
+            for (int r = 0; r < 3; ++r)
+#pragma GCC unroll 3
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const float ok = a.spVar[r][x + dx] >= 0.0f ? a.rowF[r] : 0.0f;
+                    cnt += ok;
+#pragma GCC unroll 3
+                    for (int c = 0; c < NC; ++c) {
+                        const float v = a.sp[c][r][x + dx];
+                        s1[c] += ok * v, s2[c] += ok * v * v;
+                    }
+                }
+            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+            const float cv = a.spVar[1][x] >= 0.0f ? 1.0f : 0.0f;  // 0/1: see SvgfRowImpl
+            const float av = AlphaV ? a.alphaV[x] : a.alpha;
+            float hv[3] = {0, 0, 0}, hl = 0.0f, hf = 0.0f, sigma = 0.0f;
+            if constexpr (Hist) {
+                const Bilinear b = BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+                hl = Gather(a.hlen, b);
+                hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
+                float before = 0.0f, after = 0.0f;
+#pragma GCC unroll 3
+                for (int c = 0; c < NC; ++c) {
+                    const float h = Gather(a.hc[c], b);
+                    const float mu = s1[c] * in;
+                    const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                    hv[c] = std::min(std::max(h, mu - a.clampK * sg), mu + a.clampK * sg);
+                    before += h, after += hv[c];
+                    hv[c] *= hf;
+                }
+                hl *= hf;
+                // eq. 8 on the channel sum, eq. 7, and the clean-up std.
+                const float wc = std::fabs(after - before) / (std::fabs(before) + 1e-3f);
+                const float wa = (av - a.alpha) * (av - a.alpha);
+                sigma = hf * std::min(wa + wc, 5.0f);
+            }
+            const float len =
+                cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+            const float al = cv * (hf * std::max(av, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (a.sp[c][1][x] - hv[c]);
+            ovalid[i] = std::max(cv, hf);
+            osigma[i] = sigma;
+            olen[i] = len;
+        }
+        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
+        std::copy_n(ovalid, n, a.outValid + x0);
+        std::copy_n(osigma, n, a.sigma + x0), std::copy_n(olen, n, a.len + x0);
+    }
+}
+
+#define TEXCACHE_RELIABLE(name, NC, H, AV)                                                   \
+    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
+        const ReliableArgs& a) {                                                             \
+        ReliableRowImpl<NC, H, AV>(a);                                                       \
+    }
+TEXCACHE_RELIABLE(Reliable1, 1, false, false)
+TEXCACHE_RELIABLE(Reliable1H, 1, true, false)
+TEXCACHE_RELIABLE(Reliable1HA, 1, true, true)
+TEXCACHE_RELIABLE(Reliable3, 3, false, false)
+TEXCACHE_RELIABLE(Reliable3H, 3, true, false)
+#undef TEXCACHE_RELIABLE
+
+}  // namespace
+
+void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK) {
+    ComponentPlanes& cp = s.comp[ci];
+    ComponentScratch& sc = s.scratch[ci];
+    History& hc = s.hist[ci][s.cur];
+    const History* hp = mf && s.hist[ci][s.cur ^ 1].valid ? &s.hist[ci][s.cur ^ 1] : nullptr;
+    const int nc = cp.nc;
+    ForRowBlocks(s.h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            const Rows3 r3(y, s.h);
+            SvgfArgs a;
+            a.w = s.w, a.h = s.h, a.stride = int(cp.valid.Stride());
+            for (int r = 0; r < 3; ++r) {
+                for (int c = 0; c < nc; ++c) a.cur[c][r] = cp.v[c].Row(r3.r[r]);
+                a.valid[r] = cp.valid.Row(r3.r[r]);
+                a.rowF[r] = r3.f[r];
+            }
+            if (hp) {
+                a.mx = mf->x.Row(y), a.my = mf->y.Row(y), a.mt = mf->taps.Row(y);
+                for (int c = 0; c < nc; ++c) a.hc[c] = hp->c[c].Base();
+                a.hm1 = hp->m1.Base(), a.hm2 = hp->m2.Base(), a.hlen = hp->len.Base();
+            }
+            a.alpha = s.set.alpha, a.clampK = clampK;
+            for (int c = 0; c < nc; ++c) a.out[c] = sc.t[c].Row(y);
+            a.outVar = sc.tVar.Row(y);
+            a.m1 = hc.m1.Row(y), a.m2 = hc.m2.Row(y), a.len = hc.len.Row(y);
+            if (nc == 3)
+                !hp ? Svgf3(a) : clampK > 0.0f ? Svgf3HC(a) : Svgf3H(a);
+            else
+                !hp ? Svgf1(a) : clampK > 0.0f ? Svgf1HC(a) : Svgf1H(a);
+        }
+    });
+}
+
+void SpatialInput(ScreenSpaceDenoiser::State& s, int ci) {
+    SvgfTemporal(s, ci, nullptr, 0.0f);
+}
+
+void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, const Plane& spVar,
+                      const MotionField* mf, const Plane* alphaV) {
+    ComponentPlanes& cp = s.comp[ci];
+    ComponentScratch& sc = s.scratch[ci];
+    History& hc = s.hist[ci][s.cur];
+    const History* hp = mf && s.hist[ci][s.cur ^ 1].valid ? &s.hist[ci][s.cur ^ 1] : nullptr;
+    const int nc = cp.nc;
+    ForRowBlocks(s.h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            const Rows3 r3(y, s.h);
+            ReliableArgs a;
+            a.w = s.w, a.h = s.h, a.stride = int(spVar.Stride());
+            for (int r = 0; r < 3; ++r) {
+                for (int c = 0; c < nc; ++c) a.sp[c][r] = sp[c]->Row(r3.r[r]);
+                a.spVar[r] = spVar.Row(r3.r[r]);
+                a.rowF[r] = r3.f[r];
+            }
+            a.alphaV = hp && alphaV ? alphaV->Row(y) : nullptr;
+            if (hp) {
+                a.mx = mf->x.Row(y), a.my = mf->y.Row(y), a.mt = mf->taps.Row(y);
+                for (int c = 0; c < nc; ++c) a.hc[c] = hp->c[c].Base();
+                a.hlen = hp->len.Base();
+            }
+            a.alpha = s.set.alpha, a.clampK = s.set.reliableClampK;
+            for (int c = 0; c < nc; ++c) a.out[c] = sc.t[c].Row(y);
+            a.outValid = sc.tVar.Row(y);
+            a.sigma = s.sigma.Row(y);
+            a.len = hc.len.Row(y);
+            if (nc == 3)
+                hp ? Reliable3H(a) : Reliable3(a);
+            else
+                !hp ? Reliable1(a) : a.alphaV ? Reliable1HA(a) : Reliable1H(a);
+        }
+    });
+}
+
+// ---- Cones ---------------------------------------------------------------------------------
+
+namespace {
+
+// Cone axes with the azimuths' sines and cosines as constants (ConeAxes() evaluates them).
+inline void FastConeAxes(glm::vec3 n, glm::vec3* axes) {
+    static constexpr float kC[5] = {1.0f, 0.30901699f, -0.80901699f, -0.80901699f, 0.30901699f};
+    static constexpr float kS[5] = {0.0f, 0.95105652f, 0.58778525f, -0.58778525f, -0.95105652f};
+    glm::vec3 t1, t2;
+    ConeFrame(n, &t1, &t2);
+    axes[0] = n;
+    for (int k = 1; k < kNumCones; ++k)
+        axes[k] = 0.86602540f * (kC[k - 1] * t1 + kS[k - 1] * t2) + 0.5f * n;
+}
+
+// History cones `hp` (recorded in the cone frame of normal np) as seen from the cone frame of n:
+// cone k takes the overlap-weighted mean of the history cones (eqs. 9-10); `cover[k]` is how
+// much of its usual overlap it found (1 for the same frame; less where the hemispheres only
+// partly overlap, so the blend leans on the current frame there).
+inline void TransferCones(const ConeOverlapTable& t, glm::vec3 n, glm::vec3 np, const float* hp,
+                          float* h, float* cover) {
+    if (glm::dot(n, np) > 0.9999f && (n.z >= 0.0f) == (np.z >= 0.0f)) {
+        for (int k = 0; k < kNumCones; ++k) {
+            float acc[3] = {0, 0, 0};
+            for (int j = 0; j < kNumCones; ++j) {
+                const float wkj = t.SameFrame(k, j);
+                for (int c = 0; c < 3; ++c) acc[c] += wkj * hp[3 * j + c];
+            }
+            const float inv = 1.0f / t.SameFrameRowSum(k);
+            for (int c = 0; c < 3; ++c) h[3 * k + c] = acc[c] * inv;
+            cover[k] = 1.0f;
+        }
+        return;
+    }
+    glm::vec3 a[kNumCones], ap[kNumCones];
+    FastConeAxes(n, a);
+    FastConeAxes(np, ap);
+    for (int k = 0; k < kNumCones; ++k) {
+        float acc[3] = {0, 0, 0}, sum = 0.0f;
+        for (int j = 0; j < kNumCones; ++j) {
+            const float wkj = t.Overlap(glm::dot(a[k], ap[j]));
+            sum += wkj;
+            for (int c = 0; c < 3; ++c) acc[c] += wkj * hp[3 * j + c];
+        }
+        const float inv = sum > 0.0f ? 1.0f / sum : 0.0f;
+        for (int c = 0; c < 3; ++c) h[3 * k + c] = acc[c] * inv;
+        cover[k] = std::min(1.0f, sum / t.SameFrameRowSum(k));
+    }
+}
+
+}  // namespace
+
+void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const MotionField* mf) {
+    ComponentPlanes& cp = s.comp[kIndirect];
+    ComponentScratch& sc = s.scratch[kIndirect];
+    History& hc = s.hist[kIndirect][s.cur];
+    const History& prev = s.hist[kIndirect][s.cur ^ 1];
+    const int stride = int(cp.valid.Stride());
+    const size_t nCones = size_t(stride) * size_t(s.h) * kConeFloats;
+    const History* hp = mf && prev.valid && prev.cones.size() == nCones ? &prev : nullptr;
+    if (hc.cones.size() != nCones) hc.cones.Assign(nCones, 0.0f);
+    const float alpha = s.set.alpha, clampK = s.set.reliableClampK;
+    const Guides& g = s.G();
+    const Guides& pg = s.PrevG();
+    const ConeOverlapTable& table = s.coneTable;
+    ForRowBlocks(s.h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            const Rows3 r3(y, s.h);
+            for (int x = 0; x < s.w; ++x) {
+                const int ip = y * stride + kPad + x;
+                float* lo = hc.cones.data() + size_t(ip) * kConeFloats;
+                // 3x3 statistics of the current shading (clamping, short-history variance).
+                float n = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
+                for (int r = 0; r < 3; ++r)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int xx = x + dx, yy = r3.r[r];
+                        const float ok = cp.valid.At(xx, yy) * r3.f[r];
+                        const float v0 = cp.v[0].At(xx, yy), v1 = cp.v[1].At(xx, yy),
+                                    v2 = cp.v[2].At(xx, yy);
+                        const float l = Luma(v0, v1, v2);
+                        n += ok, sl += ok * l, sl2 += ok * l * l;
+                        s1[0] += ok * v0, s1[1] += ok * v1, s1[2] += ok * v2;
+                        s2[0] += ok * v0 * v0, s2[1] += ok * v1 * v1, s2[2] += ok * v2 * v2;
+                    }
+                const float in = n > 0.0f ? 1.0f / n : 0.0f;
+                const float spVar = std::max(0.0f, sl2 * in - sl * in * sl * in);
+                float e[3] = {0, 0, 0}, m1 = 0, m2 = 0, len = 0;
+                bool any = false;
+                if (g.valid.At(x, y)) {
+                    bool hist = false;
+                    float hcones[kConeFloats], cover[kNumCones], hm1 = 0, hm2 = 0, hl = 0;
+                    if (hp) {
+                        const Bilinear b = BilinearTaps(mf->x.At(x, y), mf->y.At(x, y),
+                                                        mf->taps.At(x, y), s.w, s.h, stride);
+                        hl = Gather(hp->len.Base(), b);
+                        hist = b.ok > 0.0f && hl >= 0.5f;
+                        if (hist) {
+                            const int idx[4] = {b.i00, b.i10, b.i01, b.i11};
+                            const float wt[4] = {b.w00, b.w10, b.w01, b.w11};
+                            float hraw[kConeFloats] = {};
+                            int dom = 0;
+                            for (int k = 0; k < 4; ++k) {
+                                const float* src = hp->cones.data() + size_t(idx[k]) * kConeFloats;
+                                for (int c = 0; c < kConeFloats; ++c) hraw[c] += wt[k] * src[c];
+                                if (wt[k] > wt[dom]) dom = k;
+                            }
+                            const glm::vec3 nc(g.nx.At(x, y), g.ny.At(x, y), g.nz.At(x, y));
+                            const glm::vec3 np(pg.nx.Base()[idx[dom]], pg.ny.Base()[idx[dom]],
+                                               pg.nz.Base()[idx[dom]]);
+                            TransferCones(table, nc, np, hraw, hcones, cover);
+                            hm1 = Gather(hp->m1.Base(), b), hm2 = Gather(hp->m2.Base(), b);
+                            // Clamp the history's shading to mu +- k sigma of the current
+                            // shading; the cones are scaled alike.
+                            float sh[3] = {0, 0, 0};
+                            for (int k = 0; k < kNumCones; ++k)
+                                for (int c = 0; c < 3; ++c)
+                                    sh[c] += kConeShadeWeight[k] * hcones[3 * k + c];
+                            for (int c = 0; c < 3; ++c) {
+                                const float mu = s1[c] * in;
+                                const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                                const float cl =
+                                    std::clamp(sh[c], mu - clampK * sg, mu + clampK * sg);
+                                const float fct = sh[c] > 1e-12f ? cl / sh[c] : 1.0f;
+                                for (int k = 0; k < kNumCones; ++k) hcones[3 * k + c] *= fct;
+                            }
+                        }
+                    }
+                    if (cp.valid.At(x, y) > 0.0f) {
+                        const size_t i = size_t(y) * size_t(s.w) + size_t(x);
+                        const glm::vec3* cur = f.cones.data() + i * kNumCones;
+                        const float l = Luma(cp.v[0].At(x, y), cp.v[1].At(x, y), cp.v[2].At(x, y));
+                        len = hist ? std::min(hl + 1.0f, kMaxLen) : 1.0f;
+                        const float a = hist ? std::max(alpha, 1.0f / len) : 1.0f;
+                        for (int k = 0; k < kNumCones; ++k) {
+                            const float ak = hist ? 1.0f - (1.0f - a) * cover[k] : 1.0f;
+                            for (int c = 0; c < 3; ++c) {
+                                const float hv = hist ? hcones[3 * k + c] : 0.0f;
+                                lo[3 * k + c] = hv + ak * (cur[k][c] - hv);
+                            }
+                        }
+                        m1 = hm1 + a * (l - hm1), m2 = hm2 + a * (l * l - hm2);
+                        any = true;
+                    } else if (hist) {
+                        std::copy_n(hcones, kConeFloats, lo);
+                        m1 = hm1, m2 = hm2, len = hl, any = true;
+                    }
+                    if (!any) std::fill_n(lo, kConeFloats, 0.0f);
+                    for (int k = 0; k < kNumCones; ++k)
+                        for (int c = 0; c < 3; ++c) e[c] += kConeShadeWeight[k] * lo[3 * k + c];
+                } else {
+                    std::fill_n(lo, kConeFloats, 0.0f);
+                }
+                for (int c = 0; c < 3; ++c) sc.t[c].At(x, y) = e[c];
+                hc.m1.At(x, y) = m1, hc.m2.At(x, y) = m2, hc.len.At(x, y) = len;
+                sc.tVar.At(x, y) =
+                    any ? (len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar) : -1.0f;
+            }
+        }
+    });
+}
+
+}  // namespace texcache::screen::detail
