@@ -57,6 +57,13 @@ Image ToImage(const std::vector<glm::vec3>& c, int w, int h) {
     return img;
 }
 
+/// `_` escaped for gnuplot's enhanced text (where it would start a subscript).
+std::string Escaped(const std::string& s) {
+    std::string out;
+    for (char c : s) out += c == '_' ? std::string("\\\\_") : std::string(1, c);
+    return out;
+}
+
 std::vector<float> Luminance(const Image& img) {
     std::vector<float> y(img.NumPixels());
     for (size_t p = 0; p < y.size(); ++p) {
@@ -92,6 +99,26 @@ struct Variant {
     std::vector<float> prevY;
     std::vector<double> rmse, ssim, change, ms, cpuMs;  // per frame
 };
+
+/// One row per frame of a series; a NaN or missing value (no change on the first frame, no time
+/// for the reference) is an empty cell.
+void AddRows(Table* t, const std::string& scene, const std::string& method,
+             const std::string& demod, const Variant& v) {
+    const auto cell = [](const std::vector<double>& xs, size_t f) {
+        return f < xs.size() && std::isfinite(xs[f]) ? Format("%.6g", xs[f]) : std::string();
+    };
+    for (size_t f = 0; f < v.rmse.size(); ++f)
+        t->Row()
+            .Add(scene)
+            .Add(method)
+            .Add(demod)
+            .Add(double(f))
+            .Add(v.rmse[f])
+            .Add(v.ssim[f])
+            .Add(cell(v.change, f))
+            .Add(cell(v.ms, f))
+            .Add(cell(v.cpuMs, f));
+}
 
 struct Rect {
     int x = 0, y = 0, w = 0, h = 0;
@@ -175,8 +202,8 @@ int Index(Method m, Demodulation d) {
 int Temporal(const Setup& s) {
     const std::vector<std::string> scenes = SelectedScenes(s);
     // Full size: what renders in a few minutes on 2 cores (the references are most of it).
-    const int W = s.quick ? 96 : 256, H = s.quick ? 54 : 144;
-    const int frames = s.quick ? 8 : 16;
+    const int W = s.quick ? 96 : 320, H = s.quick ? 54 : 180;
+    const int frames = s.quick ? 8 : 24;
     const int refSpp = s.quick ? 32 : 64;
     const int cropScale = s.quick ? 4 : 2;
     const std::string csv = (fs::path(s.outDir) / "temporal.csv").string();
@@ -201,7 +228,8 @@ int Temporal(const Setup& s) {
                     std::make_unique<screen::ScreenSpaceDenoiser>(screen::DenoiserSettings{}, brdf);
             }
         std::vector<float> refPrevY;
-        std::vector<double> refChange, noisyRmse, noisySsim, rawRmse;
+        // The reference, the 1-spp frame and the stage's input, as series without a denoiser.
+        Variant reference, rawInput, input;
         Image lastRef, lastNoisy, lastClamp, lastReliable;
         for (int f = 0; f < frames; ++f) {
             const float t = scene.settings.time + float(f) / kFps;
@@ -233,16 +261,10 @@ int Temporal(const Setup& s) {
             const std::vector<float> refY = Luminance(ref);
             const double rc = f ? MeanAbsChange(refY, refPrevY) : NAN;
             refPrevY = refY;
-            refChange.push_back(rc);
-            table.Row().Add(name).Add("reference").Add("-").Add(f).Add(0.0).Add(1.0);
-            table.Add(f ? Format("%.6g", rc) : "").Add("").Add("");
-            table.Row().Add(name).Add("noisy-raw").Add("-").Add(f).Add(RMSE(raw, ref));
-            table.Add(SSIM(raw, ref)).Add("").Add("").Add("");
-            rawRmse.push_back(RMSE(raw, ref));
-            noisyRmse.push_back(RMSE(noisy, ref));
-            noisySsim.push_back(SSIM(noisy, ref));
-            table.Row().Add(name).Add("noisy").Add("-").Add(f).Add(noisyRmse.back());
-            table.Add(noisySsim.back()).Add("").Add("").Add("");
+            reference.rmse.push_back(0.0), reference.ssim.push_back(1.0);
+            reference.change.push_back(rc);
+            rawInput.rmse.push_back(RMSE(raw, ref)), rawInput.ssim.push_back(SSIM(raw, ref));
+            input.rmse.push_back(RMSE(noisy, ref)), input.ssim.push_back(SSIM(noisy, ref));
 
             for (Variant& v : variants) {
                 v.denoiser->Denoise(fb, v.method, v.demod, &v.image);
@@ -255,14 +277,6 @@ int Temporal(const Setup& s) {
                 v.change.push_back(change);
                 v.ms.push_back(v.denoiser->Timings().total);
                 v.cpuMs.push_back(v.denoiser->CpuTimings().total);
-                table.Row()
-                    .Add(name)
-                    .Add(screen::MethodName(v.method))
-                    .Add(DemodName(v.demod))
-                    .Add(f)
-                    .Add(v.rmse.back())
-                    .Add(v.ssim.back());
-                table.Add(f ? Format("%.6g", change) : "").Add(v.ms.back()).Add(v.cpuMs.back());
                 if (f == frames - 1 && v.demod == Demodulation::On) {
                     if (v.method == Method::BaselineClamp) lastClamp = img;
                     if (v.method == Method::Reliable) lastReliable = img;
@@ -273,8 +287,14 @@ int Temporal(const Setup& s) {
             const Variant& bc = variants[Index(Method::BaselineClamp, Demodulation::On)];
             Say("  frame %2d (t = %.3f): RMSE noisy %.4f, baseline+clamp %.4f, reliable %.4f "
                 "(demod on)",
-                f, t, noisyRmse.back(), bc.rmse.back(), rel.rmse.back());
+                f, t, input.rmse.back(), bc.rmse.back(), rel.rmse.back());
         }
+        // Rows grouped by series (not by frame), so gnuplot's lines through them are unbroken.
+        AddRows(&table, name, "reference", "-", reference);
+        AddRows(&table, name, "noisy-raw", "-", rawInput);
+        AddRows(&table, name, "noisy", "-", input);
+        for (const Variant& v : variants)
+            AddRows(&table, name, screen::MethodName(v.method), DemodName(v.demod), v);
 
         SceneResult sr;
         sr.name = name;
@@ -286,10 +306,10 @@ int Temporal(const Setup& s) {
             sr.ms[i] = Mean(v.ms);
             sr.cpuMs[i] = Mean(v.cpuMs);
         }
-        sr.refChange = Mean(refChange);
-        sr.noisyRmse = Mean(noisyRmse);
-        sr.noisySsim = Mean(noisySsim);
-        sr.rawRmse = Mean(rawRmse);
+        sr.refChange = Mean(reference.change);
+        sr.noisyRmse = Mean(input.rmse);
+        sr.noisySsim = Mean(input.ssim);
+        sr.rawRmse = Mean(rawInput.rmse);
         // Crop of the last frame where baseline + clamping and reliable disagree most.
         sr.crop = MostDifferent(lastClamp, lastReliable, W / 2, H / 2);
         WriteImage(
@@ -308,22 +328,26 @@ int Temporal(const Setup& s) {
             p.png = (fs::path(s.outDir) /
                      Format("temporal_%s_%s.png", change ? "change" : "rmse", r.name.c_str()))
                         .string();
-            p.title = r.name + (change ? ": mean |luminance change| between frames"
-                                       : ": RMSE against the per-frame reference");
+            p.title = Escaped(r.name) +
+                      (change ? ": mean |luminance change| between frames (demodulation on)"
+                              : ": RMSE against the per-frame reference");
             p.xLabel = "frame";
             p.yLabel = change ? "mean |dY|" : "RMSE";
             if (change)
                 p.series.push_back(
                     {"reference", csv, 4, 7,
                      Format("strcol(1) eq '%s' && strcol(2) eq 'reference'", r.name.c_str())});
+            // The change plot shows demodulation on only: the reference plus 8 lines would
+            // repeat the palette's colours.
             for (Method m : kMethods)
                 for (Demodulation d : {Demodulation::Off, Demodulation::On})
-                    p.series.push_back(
-                        {std::string(screen::MethodName(m)) +
-                             (d == Demodulation::On ? " (demod)" : ""),
-                         csv, 4, change ? 7 : 5,
-                         Format("strcol(1) eq '%s' && strcol(2) eq '%s' && strcol(3) eq '%s'",
-                                r.name.c_str(), screen::MethodName(m), DemodName(d))});
+                    if (!change || d == Demodulation::On)
+                        p.series.push_back(
+                            {std::string(screen::MethodName(m)) +
+                                 (d == Demodulation::On ? " (demod)" : ""),
+                             csv, 4, change ? 7 : 5,
+                             Format("strcol(1) eq '%s' && strcol(2) eq '%s' && strcol(3) eq '%s'",
+                                    r.name.c_str(), screen::MethodName(m), DemodName(d))});
             Draw(p);
         }
     }
@@ -352,7 +376,10 @@ int Temporal(const Setup& s) {
         "consecutive frames, over frames 1..N-1. Moving objects, light and camera change the "
         "reference too; a method's **excess change** is its value minus the reference's (a "
         "difference, same units): positive means flicker or lag on top of the real motion, "
-        "negative means the method smooths away real change (e.g. by keeping stale history).\n\n";
+        "negative means the method smooths away real change (e.g. by keeping stale history). The "
+        "reference's change includes its own residual noise (independent per frame), so the "
+        "excess is biased low for every method alike: compare methods with each other, not with "
+        "0.\n\n";
     md +=
         "| scene | method | RMSE (demod off) | RMSE (demod on) | SSIM (off) | SSIM (on) | excess "
         "change (off) | excess change (on) |\n|---|---|---|---|---|---|---|---|\n";
