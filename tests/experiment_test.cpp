@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "cli_run.h"
@@ -86,6 +87,58 @@ INSTANTIATE_TEST_SUITE_P(
             if (c == '-') c = '_';
         return n;
     });
+
+// The temporal experiment (not in the list above: it checks more and runs once): its plots and
+// crops exist, every method and demodulation setting has a finite RMSE in [0, 10) on every frame
+// of every scene, and the summary quotes the paper and decides both goals of the issue.
+TEST(TemporalExperiment, EveryMethodHasFiniteRmseOnEveryScene) {
+    const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_temporal_rmse";
+    fs::remove_all(out);
+    const CliRun r = Texcache("experiment temporal --quick --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    std::ifstream f(out / "temporal.csv");
+    std::string line;
+    std::getline(f, line);
+    ASSERT_EQ(line, "scene,method,demodulation,frame,rmse,ssim,temporal_change,ms,cpu_ms");
+    std::map<std::string, int> rows;  // "scene/method/demodulation" -> frames with a finite RMSE
+    while (std::getline(f, line)) {
+        std::vector<std::string> c;
+        std::stringstream ss(line);
+        std::string cell;
+        while (std::getline(ss, cell, ',')) c.push_back(cell);
+        ASSERT_GE(c.size(), 5u) << line;
+        const double rmse = std::strtod(c[4].c_str(), nullptr);
+        EXPECT_TRUE(std::isfinite(rmse) && rmse >= 0.0 && rmse < 10.0) << line;
+        if (std::isfinite(rmse)) ++rows[c[0] + "/" + c[1] + "/" + c[2]];
+    }
+    for (const char* scene :
+         {"anim_shadow", "anim_light", "anim_glossy", "anim_disocclusion", "anim_flythrough"})
+        for (const char* method : {"spatial", "baseline", "baseline+clamp", "reliable"})
+            for (const char* demod : {"off", "on"}) {
+                const std::string key = std::string(scene) + "/" + method + "/" + demod;
+                EXPECT_EQ(rows[key], 8) << key;
+            }
+    for (const char* png :
+         {"temporal_rmse_anim_shadow.png", "temporal_change_anim_flythrough.png",
+          "temporal_crop_anim_glossy.png", "temporal_crop_anim_disocclusion.png"}) {
+        EXPECT_TRUE(fs::exists(out / png)) << png << "\n" << r.out;
+        EXPECT_GT(fs::file_size(out / png), 1000u) << png;
+    }
+    std::ifstream md(out / "temporal.md");
+    std::stringstream text;
+    text << md.rdbuf();
+    for (const char* needle : {"Paper", "Quick mode", "**Goal 1: ", "**Goal 2: "})
+        EXPECT_NE(text.str().find(needle), std::string::npos) << needle;
+}
+
+TEST(TemporalExperiment, UnknownSceneListsTheValidOnes) {
+    const CliRun r =
+        Texcache("experiment temporal --quick --only anim_shadow,teapot --out " +
+                 (fs::path(::testing::TempDir()) / "texcache_exp_temporal_bad").string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("no animated scene named 'teapot'"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("anim_disocclusion"), std::string::npos) << r.out;
+}
 
 TEST(ExperimentCli, UnknownNameListsTheValidOnes) {
     const CliRun r = Texcache("experiment fastest --quick --out " +

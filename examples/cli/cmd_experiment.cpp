@@ -29,6 +29,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
         {"filter-size", experiments::FilterSize},
         {"threads", experiments::Threads},
         {"lod-bias", experiments::LodBias},
+        {"temporal", experiments::Temporal},
     };
     return m;
 }
@@ -71,7 +72,8 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--quick", args->quick,
                   "Test size: small images and budgets (under a minute); not for conclusions");
     cmd->add_option("--only", args->only,
-                    "speed-vs-error: run only these cases (comma separated, e.g. car-ao,chess-ao)");
+                    "speed-vs-error: run only these cases (comma separated, e.g. car-ao,chess-ao); "
+                    "temporal: only these scenes (e.g. anim_shadow,anim_glossy)");
     cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
         ->capture_default_str();
     cmd->callback([args, &exitCode] { exitCode = RunExperiment(*args); });

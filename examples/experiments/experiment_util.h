@@ -20,7 +20,8 @@ struct Setup {
     std::string outDir;
     std::string scenesDir;
     bool quick = false;  ///< test size: small images, few budgets, under a minute on 2 cores
-    std::string only;    ///< speed-vs-error: comma-separated case labels to run (empty: all)
+    /// Comma-separated subset to run (empty: all): speed-vs-error case labels, temporal scenes.
+    std::string only;
 };
 
 /// A scene file loaded and built once for a given integrator family. Not movable: the
@@ -105,5 +106,6 @@ int CacheSize(const Setup& s);
 int FilterSize(const Setup& s);
 int Threads(const Setup& s);
 int LodBias(const Setup& s);
+int Temporal(const Setup& s);
 
 }  // namespace texcache::experiments
