@@ -89,10 +89,6 @@ namespace detail {
 /// to this frame's history.
 void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK);
 
-/// The 3x3 spatial luminance variance of component `ci`'s input (-1 where unusable) into
-/// scratch[ci].tVar, its input copied to scratch[ci].t: a-trous input without history.
-void SpatialInput(ScreenSpaceDenoiser::State& s, int ci);
-
 /// Zeng's temporal step for component `ci` whose spatially filtered frame is in `sp` / `spVar`
 /// (variance < 0: unusable): history reprojected with `mf`, clamped to mu +- clampK sigma of
 /// sp's 3x3 neighbourhood, blended with alpha or `alphaV` (eq. 4); the clean-up std

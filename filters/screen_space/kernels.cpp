@@ -9,11 +9,12 @@
 //     each component sweeps the chunk with its 9 taps unrolled and its accumulators in registers
 //     (phase 2). Validity travels in the variance (< 0: unusable), not in a plane of its own.
 //   * Weights use max(0, 1 - x/n)^n instead of exp(-x): a multiply-add and log2(n) squarings.
-//   * The separable passes (the joint bilateral and the clean-up) run tap-outer over a chunk with
-//     accumulators in L1; the clean-up skips chunks whose pixels all have std 0 (most of them).
+//   * The separable passes (Zeng's shadow filter and clean-up: joint bilateral Gaussians of
+//     per-pixel std) run tap-outer over a chunk with accumulators in L1, and skip chunks whose
+//     pixels all have std 0 (most of them).
 // Every innermost loop is branch-free over contiguous floats; the functions are compiled for
-// AVX2+FMA and for the x86-64 baseline and the loader picks one (ifunc), like Embree's per-ISA
-// kernels.
+// x86-64-v4 (AVX-512), v3 (AVX2+FMA) and the baseline, and the loader picks one (ifunc), like
+// Embree's per-ISA kernels.
 #include <algorithm>
 #include <cmath>
 
@@ -42,7 +43,7 @@ void ForRowBlocks(int h, Body&& body) {
 
 // ---- Separable passes ------------------------------------------------------------------------
 
-template <int NC, bool Cleanup>
+template <int NC>
 inline __attribute__((always_inline)) void SeparableRow(const PassArgs& a, int y) {
     const Guides& g = *a.g;
     const int w = g.depth.Width(), h = g.depth.Height();
@@ -55,7 +56,7 @@ inline __attribute__((always_inline)) void SeparableRow(const PassArgs& a, int y
 
     for (int x0 = 0; x0 < w; x0 += kChunk) {
         const int n = std::min(kChunk, w - x0);
-        if constexpr (Cleanup) {
+        {
             const float* s = a.sigma->Row(y) + x0;
             float smax = 0.0f;
             for (int i = 0; i < n; ++i) smax = std::max(smax, s[i]);
@@ -90,7 +91,6 @@ inline __attribute__((always_inline)) void SeparableRow(const PassArgs& a, int y
             } else {
                 xs = x0 + off;
             }
-            const float ht = Cleanup ? 1.0f : a.weight[t];
             const float czt = cz[t];
             const float off2 = float(off) * float(off);
             const float* zq = g.depth.Row(yq) + xs;
@@ -104,8 +104,8 @@ inline __attribute__((always_inline)) void SeparableRow(const PassArgs& a, int y
             for (int i = 0; i < n; ++i) {
                 const float dot = nxc[i] * nxq[i] + nyc[i] * nyq[i] + nzc[i] * nzq[i];
                 float e = std::fabs(zq[i] - zc[i]) * idz[i] * czt + kn * (1.0f - dot);
-                if constexpr (Cleanup) e += off2 * sc[i];
-                const float wt = ht * vq[i] * ExpNeg16(e);
+                e += off2 * sc[i];
+                const float wt = vq[i] * ExpNeg16(e);
                 wsum[i] += wt;
                 acc[0][i] += wt * in0[i];
                 if constexpr (NC == 3) {
@@ -125,16 +125,14 @@ inline __attribute__((always_inline)) void SeparableRow(const PassArgs& a, int y
     }
 }
 
-#define TEXCACHE_SEPARABLE(name, NC, CLEANUP)                                                \
-    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
-        const PassArgs& a, int y0, int y1) {                                                 \
-        for (int y = y0; y < y1; ++y) SeparableRow<NC, CLEANUP>(a, y);                       \
-    }
-TEXCACHE_SEPARABLE(Bilateral1, 1, false)
-TEXCACHE_SEPARABLE(Bilateral3, 3, false)
-TEXCACHE_SEPARABLE(Cleanup1, 1, true)
-TEXCACHE_SEPARABLE(Cleanup3, 3, true)
-#undef TEXCACHE_SEPARABLE
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void Gaussian1(
+    const PassArgs& a, int y0, int y1) {
+    for (int y = y0; y < y1; ++y) SeparableRow<1>(a, y);
+}
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void Gaussian3(
+    const PassArgs& a, int y0, int y1) {
+    for (int y = y0; y < y1; ++y) SeparableRow<3>(a, y);
+}
 
 // ---- The fused a-trous level -----------------------------------------------------------------
 
@@ -273,13 +271,8 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
 }  // namespace
 
 void FilterPlanes(const PassArgs& a) {
-    ForRowBlocks(a.g->depth.Height(), [&](int y0, int y1) {
-        const bool three = a.nc == 3;
-        if (a.sigma)
-            three ? Cleanup3(a, y0, y1) : Cleanup1(a, y0, y1);
-        else
-            three ? Bilateral3(a, y0, y1) : Bilateral1(a, y0, y1);
-    });
+    ForRowBlocks(a.g->depth.Height(),
+                 [&](int y0, int y1) { a.nc == 3 ? Gaussian3(a, y0, y1) : Gaussian1(a, y0, y1); });
 }
 
 void AtrousLevel(const AtrousArgs& a) {

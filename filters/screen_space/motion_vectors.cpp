@@ -26,9 +26,6 @@ inline bool Finite(glm::vec3 v) {
 inline glm::vec3 PrevPos(const Guides& g, int x, int y) {
     return glm::vec3(g.px.At(x, y), g.py.At(x, y), g.pz.At(x, y));
 }
-inline glm::vec3 PrevNrm(const Guides& g, int x, int y) {
-    return glm::vec3(g.nx.At(x, y), g.ny.At(x, y), g.nz.At(x, y));
-}
 
 template <class Body>
 void ForRows(int h, Body&& body) {

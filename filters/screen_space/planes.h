@@ -3,8 +3,8 @@
 // vectorized per-row kernels every denoiser is built from.
 //
 // Design note. Every pass is a loop over a row whose innermost loop runs over x with contiguous
-// loads, so GCC vectorizes it; the kernels are compiled twice (AVX2+FMA and the x86-64 baseline)
-// and the right clone is picked once by the loader (ifunc), like Embree's per-ISA kernels. A
+// loads, so GCC vectorizes it; the kernels are compiled for x86-64-v4, v3 and the baseline and
+// the right clone is picked once by the loader (ifunc), like Embree's per-ISA kernels. A
 // plane keeps kPad zero columns left and right of every row: horizontal taps up to kPad away need
 // no bounds test, and the padding's validity is 0, so it never contributes. Rows outside the
 // image are skipped per tap in the vertical passes. Pixels whose guides are unusable (background,
@@ -12,7 +12,6 @@
 // unusable (NaN/Inf in a component) have validity 0 and value 0.
 #pragma once
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -134,9 +133,9 @@ struct Guides {
 
 // ---- Kernels (kernels.cpp) ----------------------------------------------------------------
 
-/// One separable pass of an edge-avoiding filter over `nc` (1 or 3) channels: a joint bilateral
-/// (depth + normal guides) with fixed spatial weights, or with `sigma` a Gaussian of per-pixel
-/// std (Zeng's clean-up and shadow filters).
+/// One separable pass of a joint bilateral filter (depth + normal guides) over `nc` (1 or 3)
+/// channels whose spatial weights are a Gaussian of per-pixel std (Zeng's shadow filter and
+/// clean-up): taps at `offset`, weight exp(-offset^2 / (2 sigma_p^2)) * edge-stopping.
 struct PassArgs {
     int nc = 1;
     bool vertical = false;
@@ -148,7 +147,6 @@ struct PassArgs {
     const Guides* g = nullptr;
     int taps = 0;                ///< number of taps (<= 33)
     int offset[33] = {};         ///< tap offsets in pixels along the pass direction
-    float weight[33] = {};       ///< fixed spatial weights (clean-up: ignored)
     float normalPower = 128.0f;  ///< weight ~ max(0, n.n')^normalPower
     float depthSigma = 1.0f;     ///< depth weight ~ exp(-|dz| invDz / (depthSigma |offset|))
 };
@@ -184,17 +182,6 @@ void FilterPlanes(const PassArgs& a);
 /// Sum over a (2r+1) x (2r+1) box of each of `nc` planes, unweighted, clamped at the borders
 /// (out-of-image taps contribute nothing). `tmp` holds the horizontal sums.
 void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp, int r);
-
-/// Fast 2^t for t <= 0 (clamped at -126): cubic polynomial on the fraction + exponent bits,
-/// relative error < 2e-4. Vectorizes (no floor, no table).
-inline float Exp2Neg(float t) {
-    t = t > -126.0f ? t : -126.0f;
-    const int i = int(t);                 // truncation: ceil for t <= 0, so f in (-1, 0]
-    const float f = t - float(i) + 1.0f;  // in (0, 1]
-    const float p = 1.0f + f * (0.69583356f + f * (0.22606716f + f * 0.078024523f));
-    // 2^(i - 1): the polynomial is 2^(f + 1); i = -126 gives 0 (a flush to zero)
-    return p * std::bit_cast<float>((i + 126) << 23);
-}
 
 /// max(0, 1 - x/16)^16: a cheap, vectorizable stand-in for exp(-x) on x >= 0 (within a few
 /// percent for x < 2; exactly 0 from x = 16 on, where exp(-x) < 1e-7).

@@ -679,7 +679,7 @@ void ShadowBilateral(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, Plane
     const int radius = s.set.shadowRadius;
     PassArgs a = BaseArgs(s, 1);
     a.taps = 2 * radius + 1;
-    for (int k = 0; k < a.taps; ++k) a.offset[k] = k - radius, a.weight[k] = 1.0f;
+    for (int k = 0; k < a.taps; ++k) a.offset[k] = k - radius;
     a.sigma = &s.shadowSigma;
     ComponentScratch& sc = s.scratch[kVis];
     a.in[0] = &cp.v[0], a.out[0] = &sc.a[0];
@@ -699,7 +699,7 @@ void Cleanup(ScreenSpaceDenoiser::State& s, int ci) {
     const int nc = s.comp[ci].nc;
     PassArgs a = BaseArgs(s, nc);
     a.taps = 9;
-    for (int k = 0; k < 9; ++k) a.offset[k] = k - 4, a.weight[k] = 1.0f;
+    for (int k = 0; k < 9; ++k) a.offset[k] = k - 4;
     a.sigma = &s.sigma;
     for (int c = 0; c < nc; ++c) a.in[c] = &sc.t[c], a.out[c] = &sc.a[c];
     a.valid = &sc.tVar, a.outValid = &sc.aVar;

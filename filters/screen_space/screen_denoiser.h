@@ -15,11 +15,14 @@
 //   BaselineClamp  Baseline with the history clamped to mu +- k sigma of the current 3x3
 //                  neighbourhood (TAA-style, Salvi 2015).
 //   Reliable       Zeng et al.: visibility follows shadow motion vectors (eq. 3, splatted to the
-//                  pixels around shadows, alpha^V of eq. 4), glossy follows stochastic glossy
-//                  motion vectors (eq. 5), diffuse indirect follows dual motion vectors (eq. 6)
-//                  where the traditional ones fail and is reused as incident radiance per cone with
-//                  overlap weights (eqs. 9-11); history clamped to mu +- 3 sigma, clean-up filter
-//                  of std min(w_A + w_C, 5) (eqs. 7-8).
+//                  pixels around shadows, alpha^V of eq. 4), is filtered spatially first (a
+//                  separable joint bilateral sized by the penumbra, PCSS-style), its history
+//                  clamped to mu +- 3 sigma and cleaned up with std min(w_A + w_C, 5) (eqs. 7-8);
+//                  glossy follows stochastic glossy motion vectors (eq. 5); diffuse indirect
+//                  follows dual motion vectors (eq. 6) where the traditional ones fail and is
+//                  reused as incident radiance per cone with overlap weights (eqs. 9-11); glossy
+//                  and indirect histories are clamped to mu +- 3 sigma and accumulate before
+//                  their a-trous filter (why: screen_denoiser.cpp).
 // Demodulation::On divides glossy by the pre-integrated GGX + Schlick albedo F_beta and diffuse
 // indirect by the albedo before filtering and multiplies them back after (Zhuang et al.).
 //

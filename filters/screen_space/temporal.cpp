@@ -279,10 +279,6 @@ void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, 
     });
 }
 
-void SpatialInput(ScreenSpaceDenoiser::State& s, int ci) {
-    SvgfTemporal(s, ci, nullptr, 0.0f);
-}
-
 void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, const Plane& spVar,
                       const MotionField* mf, const Plane* alphaV) {
     ComponentPlanes& cp = s.comp[ci];
