@@ -38,12 +38,13 @@
 //   times the diffuse reflectance. GGX materials have a diffuse base too: their indirect is that
 //   of the base, so `albedo` is the diffuse lobe's reflectance ((1 - max F0) * albedo for GGX) and
 //   indirect / albedo is the indirect irradiance / pi for every material.
-// * cones (kNumCones per pixel): the radiance that the diffuse ray brought back along its
-//   direction (light that bounced at least once: the `indirect` path before the reflectance),
-//   recorded in ConeOf(ConeAxes(normal), direction); with spp > 1 the mean of the samples that
-//   fell in a cone. A cone that got no ray is NaN (unknown, not dark), and so are all six where
-//   there is no diffuse ray (background, lights, cached indirect). A ray below the tessellated
-//   surface brings back 0 and still counts. Sampling density is cos/pi about the normal.
+// * cones (kNumCones per pixel): the radiance that the diffuse rays brought back (light that
+//   bounced at least once: the `indirect` path before the reflectance), recorded with
+//   screen::AddConeSample in the cone of each ray's direction and averaged over the spp, so that
+//   indirect = albedo * ShadeCones(cones) and each cone's expectation is the cosine-weighted mean
+//   radiance of its cell; a cone no ray fell in is 0. All six are NaN where there is no diffuse
+//   ray (background, lights, cached indirect). A ray below the tessellated surface brings back 0
+//   and still counts. Sampling density is cos/pi about the normal.
 // * guides: position = primary hit (tessellated surface), normal = limit shading normal facing
 //   the camera, depth = ray distance, roughness = the GGX alpha used (max(r^2, 1e-3); 0 for
 //   diffuse), specular = F0 (0 for diffuse), objectId = scene object. prevPosition / prevNormal:

@@ -1068,7 +1068,7 @@ struct FramePixel {
     glm::vec3 blocker = kNaN3, prevBlocker = kNaN3, light = kNaN3, prevLight = kNaN3;
     glm::vec3 glossyHit = kNaN3, prevGlossyHit = kNaN3;
     std::array<glm::vec3, screen::kNumCones> coneSum{};
-    std::array<int, screen::kNumCones> coneCount{};
+    bool hasCones = false;  ///< a diffuse ray was traced
 };
 
 glm::vec3 FiniteOrZero(glm::vec3 v) {
@@ -1167,9 +1167,9 @@ void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bs
         L = FiniteOrZero(LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false));
     }
     px.diffuseSum += L;
-    const int k = screen::ConeOf(axes, wi);
-    px.coneSum[k] += L;
-    ++px.coneCount[k];
+    // Cosine-sampled: L is this sample's estimate of irradiance / pi (see AddConeSample).
+    screen::AddConeSample(axes, wi, L, px.coneSum.data());
+    px.hasCones = true;
 }
 
 /// All buffers of pixel (x, y).
@@ -1248,9 +1248,9 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
     }
     fb.glossyHit[p] = px.glossyHit;
     fb.prevGlossyHit[p] = px.prevGlossyHit;
-    for (int k = 0; k < screen::kNumCones; ++k)
-        if (px.coneCount[k] > 0)
-            fb.cones[p * screen::kNumCones + k] = px.coneSum[k] / float(px.coneCount[k]);
+    if (px.hasCones)
+        for (int k = 0; k < screen::kNumCones; ++k)
+            fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
 }
 
 }  // namespace
