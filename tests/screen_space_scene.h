@@ -19,6 +19,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "filters/screen_space/frame_buffers.h"
+#include "renderer/sampling.h"
 
 namespace texcache::test {
 
@@ -148,19 +149,7 @@ inline float Lambda(float c, float a) {
     return 0.5f * (std::sqrt(1.0f + a * a * std::max(0.0f, 1.0f - c2) / c2) - 1.0f);
 }
 inline glm::vec3 SampleVndf(glm::vec3 wo, float a, float u1, float u2) {
-    const glm::vec3 vh = glm::normalize(glm::vec3(a * wo.x, a * wo.y, wo.z));
-    const float lensq = vh.x * vh.x + vh.y * vh.y;
-    const glm::vec3 t1 =
-        lensq > 0.0f ? glm::vec3(-vh.y, vh.x, 0.0f) / std::sqrt(lensq) : glm::vec3(1, 0, 0);
-    const glm::vec3 t2 = glm::cross(vh, t1);
-    const float r = std::sqrt(u1), phi = 2.0f * kPi * u2;
-    const float p1 = r * std::cos(phi);
-    float p2 = r * std::sin(phi);
-    const float s = 0.5f * (1.0f + vh.z);
-    p2 = (1.0f - s) * std::sqrt(std::max(0.0f, 1.0f - p1 * p1)) + s * p2;
-    const glm::vec3 nh =
-        p1 * t1 + p2 * t2 + std::sqrt(std::max(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
-    return glm::normalize(glm::vec3(a * nh.x, a * nh.y, std::max(1e-6f, nh.z)));
+    return GgxSampleVisibleNormal(wo, a, glm::vec2(u1, u2));
 }
 
 }  // namespace synth

@@ -31,12 +31,11 @@ void FrameBuffers::Validate(const std::string& where) const {
         if (size == 0 && required)
             throw InputError(where, std::string("buffer '") + name + "' is missing");
         if (size != 0 && size != n * perPixel)
-            throw InputError(where, std::string("buffer '") + name + "' has " +
-                                        std::to_string(size) + " entries, expected " +
-                                        std::to_string(n * perPixel) + " (" +
-                                        std::to_string(width) + "x" + std::to_string(height) +
-                                        (perPixel > 1 ? " x " + std::to_string(perPixel) : "") +
-                                        ")");
+            throw InputError(where,
+                             std::string("buffer '") + name + "' has " + std::to_string(size) +
+                                 " entries, expected " + std::to_string(n * perPixel) + " (" +
+                                 std::to_string(width) + "x" + std::to_string(height) +
+                                 (perPixel > 1 ? " x " + std::to_string(perPixel) : "") + ")");
     };
     check("emitted", emitted.size(), false);
     check("shading", shading.size(), true);

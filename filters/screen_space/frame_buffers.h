@@ -123,20 +123,20 @@ struct FrameBuffers {
     float time = 0.0f;  ///< frame time (seconds)
 
     // The components (linear radiance, RGB).
-    std::vector<glm::vec3> emitted;     ///< light seen directly (environment, emitters)
-    std::vector<glm::vec3> shading;     ///< unshadowed direct light (1 light sample, no ray)
-    std::vector<float> visibility;      ///< shadow-ray visibility of that light sample, 0..1
-    std::vector<glm::vec3> glossy;      ///< glossy (microfacet) reflection, 1 path
-    std::vector<glm::vec3> indirect;    ///< diffuse indirect light, albedo included, 1 path
+    std::vector<glm::vec3> emitted;   ///< light seen directly (environment, emitters)
+    std::vector<glm::vec3> shading;   ///< unshadowed direct light (1 light sample, no ray)
+    std::vector<float> visibility;    ///< shadow-ray visibility of that light sample, 0..1
+    std::vector<glm::vec3> glossy;    ///< glossy (microfacet) reflection, 1 path
+    std::vector<glm::vec3> indirect;  ///< diffuse indirect light, albedo included, 1 path
 
     // Guides.
-    std::vector<glm::vec3> position;    ///< primary hit, world (NaN: background)
-    std::vector<glm::vec3> normal;      ///< shading normal, unit (NaN: background)
-    std::vector<float> depth;           ///< distance from the camera (INF: background)
-    std::vector<float> roughness;       ///< GGX alpha at the hit (0: diffuse)
-    std::vector<glm::vec3> albedo;      ///< diffuse albedo
-    std::vector<glm::vec3> specular;    ///< Schlick F0 of the glossy lobe (0: diffuse)
-    std::vector<int32_t> objectId;      ///< scene object (-1: background)
+    std::vector<glm::vec3> position;  ///< primary hit, world (NaN: background)
+    std::vector<glm::vec3> normal;    ///< shading normal, unit (NaN: background)
+    std::vector<float> depth;         ///< distance from the camera (INF: background)
+    std::vector<float> roughness;     ///< GGX alpha at the hit (0: diffuse)
+    std::vector<glm::vec3> albedo;    ///< diffuse albedo
+    std::vector<glm::vec3> specular;  ///< Schlick F0 of the glossy lobe (0: diffuse)
+    std::vector<int32_t> objectId;    ///< scene object (-1: background)
 
     // Traditional motion (Zeng eq. 1): the primary hit moved to the previous frame by its object.
     std::vector<glm::vec3> prevPosition;  ///< T^-1 s_i, world, previous frame
