@@ -4,6 +4,8 @@
 // an unknown name is a clear error listing the valid ones.
 #include <gtest/gtest.h>
 
+#include <ostream>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -48,6 +50,11 @@ struct Expected {
     int minRows;
     std::vector<std::string> pngs;
 };
+// GoogleTest would print the parameter as a byte dump (heap pointers included), which CTest then
+// takes into the test's name: print the experiment's name.
+void PrintTo(const Expected& e, std::ostream* os) {
+    *os << e.name;
+}
 
 class Experiment : public ::testing::TestWithParam<Expected> {};
 
