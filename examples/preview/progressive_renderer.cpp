@@ -68,40 +68,36 @@ glm::vec3 MipColour(int mip) {
 
 }  // namespace
 
+namespace {
+// Each view's panel name and command-line key (--view), in ViewMode order.
+struct ViewNames {
+    ViewMode mode;
+    const char* name;
+    const char* key;
+};
+constexpr ViewNames kViewNames[] = {
+    {ViewMode::Beauty, "beauty", "beauty"},
+    {ViewMode::FaceId, "face id (ptex)", "faceid"},
+    {ViewMode::TexelMip, "texel mip level", "mip"},
+    {ViewMode::Texels, "cache texels", "texels"},
+    {ViewMode::HitMiss, "cache hit / miss", "hitmiss"},
+    {ViewMode::Overshading, "overshading", "overshading"},
+};
+const ViewNames* FindView(ViewMode m) {
+    for (const ViewNames& v : kViewNames)
+        if (v.mode == m) return &v;
+    return nullptr;
+}
+}  // namespace
+
 const char* ViewModeName(ViewMode m) {
-    switch (m) {
-        case ViewMode::Beauty:
-            return "beauty";
-        case ViewMode::FaceId:
-            return "face id (ptex)";
-        case ViewMode::TexelMip:
-            return "texel mip level";
-        case ViewMode::Texels:
-            return "cache texels";
-        case ViewMode::HitMiss:
-            return "cache hit / miss";
-        case ViewMode::Overshading:
-            return "overshading";
-    }
-    return "?";
+    const ViewNames* v = FindView(m);
+    return v ? v->name : "?";
 }
 
 const char* ViewModeKey(ViewMode m) {
-    switch (m) {
-        case ViewMode::Beauty:
-            return "beauty";
-        case ViewMode::FaceId:
-            return "faceid";
-        case ViewMode::TexelMip:
-            return "mip";
-        case ViewMode::Texels:
-            return "texels";
-        case ViewMode::HitMiss:
-            return "hitmiss";
-        case ViewMode::Overshading:
-            return "overshading";
-    }
-    return "?";
+    const ViewNames* v = FindView(m);
+    return v ? v->key : "?";
 }
 
 ViewMode ParseViewMode(const std::string& key, const std::string& where) {
