@@ -30,6 +30,14 @@ int DefaultFilterRadius(TextureFilterKind kind) {
     return 6;
 }
 
+namespace {
+void CheckOptions(const TextureSpaceOptions& options) {
+    if (options.radius != -1) CheckFilterRadius(options.radius, "filter radius");
+    if (!(options.cosThreshold >= -1.0f && options.cosThreshold <= 1.0f))
+        throw InputError("normal threshold", "must be a cosine in [-1, 1]");
+}
+}  // namespace
+
 bool TextureSpaceCache::Uses(TextureFilterKind kind) const {
     return std::find(filterOf_.begin(), filterOf_.end(), kind) != filterOf_.end();
 }
@@ -41,12 +49,10 @@ void TextureSpaceCache::BeginFrame(uint32_t frame) {
 
 TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options)
     : options_(options), cache_(options.cache) {
-    if (options.radius != -1) CheckFilterRadius(options.radius, "filter radius");
+    CheckOptions(options);
     if (options.temporalAlpha != 0.0f)
         history_ = std::make_unique<TemporalHistory<glm::vec3>>(options.cache.texelCacheBytes,
                                                                 options.temporalAlpha);
-    if (!(options.cosThreshold >= -1.0f && options.cosThreshold <= 1.0f))
-        throw InputError("normal threshold", "must be a cosine in [-1, 1]");
     const Scene& scene = rs.scene();
     for (size_t o = 0; o < scene.objects.size(); ++o) {
         const ControlCage& cage = scene.meshes[scene.objects[o].mesh];
@@ -70,15 +76,40 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
         } else {
             backMeshOf_.push_back(-1);
         }
+    }
+    AssignFilters(scene);
+}
+
+void TextureSpaceCache::AssignFilters(const Scene& scene) {
+    filterOf_.clear();
+    radiusOf_.clear();
+    for (size_t o = 0; o < scene.objects.size(); ++o) {
         const Material& m = scene.materials[scene.objects[o].material];
         const std::string where = scene.path + ": material '" + m.name + "'";
-        filterOf_.push_back(m.cacheFilter.empty() ? options.filter
+        filterOf_.push_back(m.cacheFilter.empty() ? options_.filter
                                                   : ParseTextureFilter(m.cacheFilter, where));
-        radiusOf_.push_back(m.cacheRadius >= 0    ? m.cacheRadius
-                            : options.radius >= 0 ? options.radius
-                                                  : DefaultFilterRadius(filterOf_.back()));
+        radiusOf_.push_back(m.cacheRadius >= 0     ? m.cacheRadius
+                            : options_.radius >= 0 ? options_.radius
+                                                   : DefaultFilterRadius(filterOf_.back()));
         CheckFilterRadius(radiusOf_.back(), where);
     }
+}
+
+bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOptions& options) {
+    const CacheSettings &a = options.cache, &b = options_.cache;
+    const bool sameStorage =
+        a.sampleCacheBytes == b.sampleCacheBytes && a.texelCacheBytes == b.texelCacheBytes &&
+        a.lodBias == b.lodBias && a.referenceMode == b.referenceMode &&
+        a.texelTwoChoices == b.texelTwoChoices && a.sampleTwoChoices == b.sampleTwoChoices &&
+        options.texelFraction == options_.texelFraction && options.temporalAlpha == 0.0f &&
+        options_.temporalAlpha == 0.0f;
+    if (!sameStorage) return false;
+    CheckOptions(options);
+    options_ = options;
+    AssignFilters(rs.scene());
+    frame_ = 0;
+    cache_.InvalidateAll();
+    return true;
 }
 
 }  // namespace texcache

@@ -20,6 +20,7 @@ struct ExperimentArgs {
     std::string scenes = TEXCACHE_SCENES_DIR;
     bool quick = false;
     std::string only;
+    int cameraSpp = 0;
 };
 
 const std::map<std::string, std::function<int(const experiments::Setup&)>>& Experiments() {
@@ -52,7 +53,10 @@ int RunExperiment(const ExperimentArgs& a) {
         throw InputError("--out", "cannot create directory '" + a.out + "'");
     if (!fs::is_directory(a.scenes))
         throw InputError("--scenes", "no scene directory '" + a.scenes + "'");
-    experiments::Setup s{a.out, a.scenes, a.quick, a.only};
+    if (a.cameraSpp < 0 || a.cameraSpp > 1024)
+        throw InputError("--camera-spp",
+                         "must be in 1..1024 (got " + std::to_string(a.cameraSpp) + ")");
+    experiments::Setup s{a.out, a.scenes, a.quick, a.only, a.cameraSpp};
     const double t0 = NowSeconds();
     int code = 0;
     for (const auto& [name, fn] : all)
@@ -74,6 +78,9 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--only", args->only,
                     "speed-vs-error: run only these cases (comma separated, e.g. car-ao,chess-ao); "
                     "temporal: only these scenes (e.g. anim_shadow,anim_glossy)");
+    cmd->add_option("--camera-spp", args->cameraSpp,
+                    "speed-vs-error: camera samples per pixel, the same rays for every render "
+                    "(default 4; Munkberg et al. Fig. 7 use 16)");
     cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
         ->capture_default_str();
     cmd->callback([args, &exitCode] { exitCode = RunExperiment(*args); });

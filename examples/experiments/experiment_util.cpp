@@ -44,11 +44,23 @@ RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int wid
     return o;
 }
 
-Run TimedRender(const RenderScene& rs, const RenderOptions& o, int repeats, bool warmUp) {
-    if (warmUp) Render(rs, o);
+Run TimedRender(LoadedScene& ls, const RenderOptions& o, int repeats, bool warmUp) {
+    const RenderScene& rs = *ls.rs;
+    // Each render gets an empty cache: Reconfigure clears it (a memset of the two tables, timed
+    // with the render), or a new cache is built untimed when the layout changed.
+    auto cache = [&]() -> TextureSpaceCache* {
+        if (!o.texture.enabled) return nullptr;
+        if (!ls.cache || !ls.cache->Reconfigure(rs, o.texture)) {
+            ls.cache.reset();  // free the old tables before mapping new ones
+            ls.cache = std::make_unique<TextureSpaceCache>(rs, o.texture);
+        }
+        return ls.cache.get();
+    };
+    if (warmUp) Render(rs, o, cache());
     Run best;
     for (int i = 0; i < std::max(repeats, 1); ++i) {
-        RenderResult r = Render(rs, o);
+        TextureSpaceCache* c = cache();
+        RenderResult r = Render(rs, o, c);
         // Best of the repeats by CPU time: on a shared machine wall time also counts other
         // processes' work; CPU time counts ours (2 threads: wall ~ CPU / 2 when idle).
         if (i == 0 || r.stats.cpuSeconds < best.cpuSeconds) {

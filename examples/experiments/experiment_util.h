@@ -22,6 +22,8 @@ struct Setup {
     bool quick = false;  ///< test size: small images, few budgets, under a minute on 2 cores
     /// Comma-separated subset to run (empty: all): speed-vs-error case labels, temporal scenes.
     std::string only;
+    /// speed-vs-error: camera samples per pixel (0: the experiment's default, 16).
+    int cameraSpp = 0;
 };
 
 /// A scene file loaded and built once for a given integrator family. Not movable: the
@@ -30,6 +32,8 @@ struct LoadedScene {
     std::string name;  ///< file stem, e.g. "car"
     Scene scene;
     std::unique_ptr<RenderScene> rs;
+    /// The texture-space cache its timed renders share (see TimedRender).
+    std::unique_ptr<TextureSpaceCache> cache;
     LoadedScene() = default;
     LoadedScene(const LoadedScene&) = delete;
     LoadedScene& operator=(const LoadedScene&) = delete;
@@ -48,9 +52,11 @@ struct Run {
     RenderStats stats;
 };
 /// With `warmUp`, one untimed render first: Embree tessellates subdivision patches lazily on
-/// first hit, and the first render of a scene would pay for it.
-Run TimedRender(const RenderScene& rs, const RenderOptions& o, int repeats = 1,
-                bool warmUp = false);
+/// first hit, and the first render of a scene would pay for it. Texture-space renders start
+/// from an empty cache every time, but reuse the scene's cache storage when its layout allows
+/// (TextureSpaceCache::Reconfigure): mapping fresh cache memory is a one-time set-up cost of a
+/// process, like building the BVH, and is not counted.
+Run TimedRender(LoadedScene& ls, const RenderOptions& o, int repeats = 1, bool warmUp = false);
 
 /// A high-sample reference, cached as OUT/ref_<tag>.exr and reused when it exists at this size
 /// (references cost minutes; re-running an experiment should not).

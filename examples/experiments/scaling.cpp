@@ -47,7 +47,7 @@ Image CarAoReference(const Setup& s, const LoadedScene& car, int W, int H) {
 
 int CacheSize(const Setup& s) {
     const auto carp = LoadForExperiment(s, "car.json", false);
-    const LoadedScene& car = *carp;
+    LoadedScene& car = *carp;
     // Quick mode scales pixels and caches down by the same factor (64), so the curves keep their
     // shape at test size.
     const std::vector<int> widths =
@@ -63,13 +63,13 @@ int CacheSize(const Setup& s) {
         o.texture.cache.texelCacheBytes = size_t(64.0 * scale * (1 << 20));
         RenderOptions ref = o;
         ref.texture.cache.referenceMode = true;
-        const Run unbounded = TimedRender(*car.rs, ref);
+        const Run unbounded = TimedRender(car, ref);
         const double n0 = double(unbounded.stats.cache.samplesShaded);
         Say("[cache-size] %dx%d: unbounded cache shades %.0f samples (%.1f s)", W, H, n0,
             unbounded.seconds);
         for (double mb : sizesMb) {
             o.texture.cache.sampleCacheBytes = size_t(mb * scale * (1 << 20));
-            const Run r = TimedRender(*car.rs, o);
+            const Run r = TimedRender(car, o);
             const double n = double(r.stats.cache.samplesShaded);
             const double pct = 100.0 * (n / n0 - 1.0);
             over[wi].push_back(pct);
@@ -149,7 +149,7 @@ int CacheSize(const Setup& s) {
 
 int FilterSize(const Setup& s) {
     const auto carp = LoadForExperiment(s, "car.json", false);
-    const LoadedScene& car = *carp;
+    LoadedScene& car = *carp;
     const int W = s.quick ? 128 : 640, H = W * 9 / 16;
     const int repeats = s.quick ? 1 : 3;
     Table t({"width", "radius", "cpu_seconds", "samples_shaded", "relative_time",
@@ -159,7 +159,7 @@ int FilterSize(const Setup& s) {
     std::vector<double> rel, relShaded;
     for (int radius = 0; radius <= 10; ++radius) {
         const RenderOptions o = CachedAo(car, W, H, 4, 4, radius);
-        const Run r = TimedRender(*car.rs, o, repeats, radius == 0);
+        const Run r = TimedRender(car, o, repeats, radius == 0);
         const double n = double(r.stats.cache.samplesShaded);
         if (radius == 0) t0 = r.cpuSeconds, n0 = n;
         rel.push_back(r.cpuSeconds / t0);
@@ -218,7 +218,7 @@ int FilterSize(const Setup& s) {
 
 int Threads(const Setup& s) {
     const auto carp = LoadForExperiment(s, "car.json", true);
-    const LoadedScene& car = *carp;
+    LoadedScene& car = *carp;
     const int W = s.quick ? 128 : 640, H = W * 9 / 16;
     const int repeats = s.quick ? 1 : 3;
     const int maxThreads = std::max(2, int(std::thread::hardware_concurrency()));
@@ -251,7 +251,7 @@ int Threads(const Setup& s) {
         double t1 = 0.0, tn = 0.0;
         for (int n : {1, maxThreads}) {
             tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(n));
-            const Run r = TimedRender(*car.rs, w.o, repeats);
+            const Run r = TimedRender(car, w.o, repeats);
             if (n == 1)
                 t1 = r.seconds;
             else
@@ -285,7 +285,7 @@ int Threads(const Setup& s) {
 
 int LodBias(const Setup& s) {
     const auto carp = LoadForExperiment(s, "car.json", false);
-    const LoadedScene& car = *carp;
+    LoadedScene& car = *carp;
     const int W = s.quick ? 128 : 640, H = W * 9 / 16;
     const int repeats = s.quick ? 1 : 3;
     const Image ref = CarAoReference(s, car, W, H);
@@ -303,7 +303,7 @@ int LodBias(const Setup& s) {
     for (int bias = 0; bias <= 3; ++bias) {
         RenderOptions o = CachedAo(car, W, H, 4, 8, 6);
         o.texture.cache.lodBias = float(bias);
-        const Run r = TimedRender(*car.rs, o, repeats, bias == 0);
+        const Run r = TimedRender(car, o, repeats, bias == 0);
         if (bias == 0) t0 = r.cpuSeconds;
         const double e = RelMSE(r.image, ref);
         const double n = double(r.stats.cache.samplesShaded);

@@ -23,6 +23,7 @@ struct Method {
     std::string name;
     bool texture;
     TextureFilterKind filter;
+    int radius = -1;  ///< footprint (2r+1)^2; -1: the filter's default
 };
 
 struct Case {
@@ -40,6 +41,9 @@ struct Point {
 const Method kPerHit{"per-hit", false, TextureFilterKind::None};
 const Method kNone{"ts-none", true, TextureFilterKind::None};
 const Method kNormal{"ts-normal", true, TextureFilterKind::Normal};
+// The paper's 13x13 blurs AO detail of the car (a bias floor near 0.007 relMSE); 7x7 trades
+// some of the variance reduction for a quarter of that blur.
+const Method kNormal7{"ts-normal-7x7", true, TextureFilterKind::Normal, 3};
 const Method kGaussian{"ts-gaussian", true, TextureFilterKind::Gaussian};
 const Method kRegression{"ts-regression", true, TextureFilterKind::Regression};
 const Method kSoftShadow{"ts-softshadow", true, TextureFilterKind::SoftShadow};
@@ -49,17 +53,23 @@ const Method kSoftShadow{"ts-softshadow", true, TextureFilterKind::SoftShadow};
 // direct lighting: camera samples per pixel for both (glossy materials and the unshadowed light
 // stay per hit in texture space too), with 2 paths + NEE samples per cached diffuse sample and 4
 // shadow rays per cached visibility sample.
-// Every render of a case traces the same camera rays: kCameraSpp samples per pixel with the same
-// seed (Munkberg et al. Fig. 7 fix the primary positions likewise). Budgets are shading samples:
-// AO rays per hit or per cached sample; for the direct and path integrators, light paths per
-// camera hit (--hit-samples) and per cached sample. The shading reference traces the same camera
-// rays with many shading samples, so its difference to a render is shading error alone; the image
-// reference (many camera samples) also counts the edge noise of kCameraSpp camera samples, which
-// no shading method can remove.
-constexpr int kCameraSpp = 4;
+// Every render of a case traces the same camera rays: CameraSpp() samples per pixel with the
+// same seed (Munkberg et al. Fig. 7 fix 16 primary positions likewise). Budgets are shading
+// samples: AO rays per hit or per cached sample; for the direct and path integrators, light paths
+// per camera hit (--hit-samples) and per cached sample. The shading reference traces the same
+// camera rays with many shading samples, so its difference to a render is shading error alone;
+// the image reference (many camera samples) also counts the edge noise of the camera samples,
+// which no shading method can remove.
+//
+// The camera sample count sets how often a texel is reused: per-hit shading pays for every
+// camera sample, texture space for every texel (eq. 1 picks 1-4 texels per pixel). --camera-spp
+// changes it (default 4).
+int CameraSpp(const Setup& s) {
+    return s.cameraSpp > 0 ? s.cameraSpp : 4;
+}
 
-void ApplyBudget(RenderOptions* o, const Method& m, int budget) {
-    o->spp = kCameraSpp;
+void ApplyBudget(RenderOptions* o, const Method& m, int budget, int cameraSpp) {
+    o->spp = cameraSpp;
     if (o->integrator == IntegratorKind::AO) {
         o->aoSamples = budget;
     } else {
@@ -69,6 +79,7 @@ void ApplyBudget(RenderOptions* o, const Method& m, int budget) {
     }
     o->texture.enabled = m.texture;
     o->texture.filter = m.filter;
+    o->texture.radius = m.radius;
 }
 
 std::vector<int> Budgets(const Setup& s, bool texture) {
@@ -104,7 +115,7 @@ int SpeedVsError(const Setup& s) {
         {"car.json",
          IntegratorKind::AO,
          "car-ao",
-         {kPerHit, kNone, kNormal, kGaussian, kRegression}},
+         {kPerHit, kNone, kNormal, kNormal7, kGaussian, kRegression}},
         {"chess.json",
          IntegratorKind::AO,
          "chess-ao",
@@ -150,7 +161,7 @@ int SpeedVsError(const Setup& s) {
         "the same for every method. Time is the render's CPU time (all threads; best of %d, "
         "2 threads, same process): the machine is shared, and CPU time counts only our work "
         "(on an idle machine wall time is about half of it). %s\n\n",
-        kCameraSpp, kCameraSpp, repeats,
+        CameraSpp(s), CameraSpp(s), repeats,
         s.quick ? "**Quick mode: test-size images, two budgets; not for conclusions.**" : "");
     md +=
         "| case | method | equal-time relMSE ratio (per-hit / method) | at CPU seconds | method "
@@ -173,20 +184,21 @@ int SpeedVsError(const Setup& s) {
         const bool lights = c.integrator != IntegratorKind::AO;
         const std::string key = c.scene + (lights ? "+lights" : "");
         if (!scenes.count(key)) scenes.emplace(key, LoadForExperiment(s, c.scene, lights));
-        const LoadedScene& ls = *scenes.at(key);
+        LoadedScene& ls = *scenes.at(key);
         const bool chess = c.scene == "chess.json";  // 4:3; the others are 16:9
         const int W = s.quick ? 96 : 480, H = s.quick ? (chess ? 72 : 54) : (chess ? 360 : 270);
         RenderOptions base = BaseOptions(ls.scene, c.integrator, W, H);
         // Image reference: many camera samples. Shading reference: the renders' camera rays.
         RenderOptions imageOpt = base, shadingOpt = base;
-        shadingOpt.spp = kCameraSpp;
+        shadingOpt.spp = CameraSpp(s);
         if (c.integrator == IntegratorKind::AO) {
             imageOpt.spp = s.quick ? 16 : 64;
             imageOpt.aoSamples = s.quick ? 16 : 64;
-            shadingOpt.aoSamples = s.quick ? 256 : 2048;
+            // The same shading rays per pixel at any camera sample count (8192 at full size).
+            shadingOpt.aoSamples = std::max(1, (s.quick ? 1024 : 8192) / CameraSpp(s));
         } else {
             imageOpt.spp = s.quick ? 64 : 1024;
-            shadingOpt.hitSamples = s.quick ? 32 : 512;
+            shadingOpt.hitSamples = std::max(1, (s.quick ? 128 : 2048) / CameraSpp(s));
         }
         Say("[speed-vs-error] %s (%dx%d)", c.label.c_str(), W, H);
         // One pair of references per scene and integrator (car-diffuse shares car-indirect's).
@@ -195,7 +207,8 @@ int SpeedVsError(const Setup& s) {
                                                                         : "softshadow";
         const std::string refTag = c.label.substr(0, c.label.find('-')) + "-" + kind;
         const Image ref =
-            Reference(s, Format("%s-shading_%dx%d", refTag.c_str(), W, H), *ls.rs, shadingOpt);
+            Reference(s, Format("%s-shading_%dx%d_%dspp", refTag.c_str(), W, H, CameraSpp(s)),
+                      *ls.rs, shadingOpt);
         const Image refImage =
             Reference(s, Format("%s_%dx%d", refTag.c_str(), W, H), *ls.rs, imageOpt);
 
@@ -204,9 +217,9 @@ int SpeedVsError(const Setup& s) {
             const std::vector<int> budgets = Budgets(s, m.texture);
             for (int b : budgets) {
                 RenderOptions o = base;
-                ApplyBudget(&o, m, b);
+                ApplyBudget(&o, m, b, CameraSpp(s));
                 o.texture.cacheDirect = c.cacheDirect;
-                const Run r = TimedRender(*ls.rs, o, repeats, b == budgets.front());
+                const Run r = TimedRender(ls, o, repeats, b == budgets.front());
                 const double e = RelMSE(r.image, ref), eImage = RelMSE(r.image, refImage);
                 const double rays = double(r.stats.TotalRays());
                 curves[m.name].push_back({r.cpuSeconds, rays, e, eImage});
