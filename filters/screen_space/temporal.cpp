@@ -338,13 +338,9 @@ inline V8 Load8(const float* p) {
 inline void Store8(float* p, V8 v) {
     std::memcpy(p, &v, sizeof v);
 }
-// Lanes 6, 7 of every cone vector are 0 (see the layout), so the sum of all 8 is the sum of
-// the 6 cones; summed as a tree (3 dependent adds instead of 5 with their lane extractions).
-typedef float V4 __attribute__((vector_size(16)));
 inline float Sum6(V8 v, V8 w) {
     const V8 m = v * w;
-    const V4 s = V4{m[0], m[1], m[2], m[3]} + V4{m[4], m[5], m[6], m[7]};
-    return (s[0] + s[2]) + (s[1] + s[3]);
+    return m[0] + m[1] + m[2] + m[3] + m[4] + m[5];
 }
 
 // Cone axes with the azimuths' sines and cosines as constants (ConeAxes() evaluates them).
@@ -531,9 +527,6 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
             // A cone only partly covered by the history's cones leans on the current frame.
             const V8 ak = 1.0f - (1.0f - al) * cover;
             const float* cur = a.curCones + size_t(x) * kConeFloats;
-            // The frame's cones stream from memory once (72 bytes a pixel, 150 MB at 1080p) and
-            // were the pass's hottest loads: fetch a few pixels ahead.
-            __builtin_prefetch(cur + 8 * kConeFloats);
             for (int c = 0; c < 3; ++c) {
                 V8 cu = {};
                 if (cv > 0.0f)
