@@ -705,5 +705,97 @@ TEST(ScreenSpaceDemodulation, BrdfDemodulationKeepsARoughnessTexture) {
     }
 }
 
+// ---- Kernels against scalar references ------------------------------------------------------
+
+// The vectorized final sum equals the per-pixel formula emitted + shading * visibility' +
+// glossy' + indirect' (non-finite emitted / shading skipped as a whole), on random buffers with
+// NaN/Inf in 5% of the pixels, a width crossing the kernels' 256-pixel chunks and every border.
+// Tolerance 1e-5 relative: the same sum, up to the compiler contracting it into FMAs.
+TEST(ScreenSpaceKernels, ComposeMatchesScalarSum) {
+    SynthScene sc = FullScene(300, 40);
+    FrameBuffers f = SynthRender(sc, 0, 1);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(0.0f, 2.0f);
+    const float bad[3] = {std::numeric_limits<float>::quiet_NaN(),
+                          std::numeric_limits<float>::infinity(),
+                          -std::numeric_limits<float>::infinity()};
+    f.emitted.assign(f.NumPixels(), glm::vec3(0.0f));
+    for (size_t i = 0; i < f.NumPixels(); ++i) {
+        f.emitted[i] = glm::vec3(u(rng), u(rng), u(rng));
+        f.shading[i] = glm::vec3(u(rng), u(rng), u(rng));
+        if (rng() % 20 == 0) f.emitted[i][rng() % 3] = bad[rng() % 3];
+        if (rng() % 20 == 0) f.shading[i][rng() % 3] = bad[rng() % 3];
+    }
+    for (Method m : {Method::SpatialOnly, Method::Reliable}) {
+        ScreenSpaceDenoiser dn(DenoiserSettings{}, SharedBrdf());
+        const std::vector<glm::vec3> img = dn.Denoise(f, m, Demodulation::On);
+        const std::vector<float> vis = dn.Visibility();
+        const std::vector<glm::vec3> gl = dn.Glossy(), ind = dn.Indirect();
+        ASSERT_EQ(img.size(), f.NumPixels());
+        auto finite = [](glm::vec3 v) {
+            return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+        };
+        int bad_pixels = 0;
+        for (size_t i = 0; i < img.size(); ++i) {
+            glm::vec3 e(0.0f);
+            if (finite(f.emitted[i])) e += f.emitted[i];
+            if (finite(f.shading[i])) e += f.shading[i] * vis[i];
+            if (!gl.empty()) e += gl[i];
+            if (!ind.empty()) e += ind[i];
+            for (int c = 0; c < 3; ++c)
+                if (!(std::fabs(img[i][c] - e[c]) <= 1e-5f * (1.0f + std::fabs(e[c]))))
+                    ++bad_pixels;
+        }
+        EXPECT_EQ(bad_pixels, 0) << MethodName(m);
+    }
+}
+
+// The cones' diffuse shading (the preparation kernel, and the cone pass's per-cone sums) equals
+// albedo * ShadeCones() per pixel: first frame of Reliable (no history: the pass passes the
+// cones through), luminance stopping so tight that the a-trous keeps each pixel's own value
+// (every pixel gets its own luminance). NaN cones in 2% of the pixels (skipped there, and they
+// must not leak). Tolerance 1e-4 relative: sums of 6 products in another order.
+TEST(ScreenSpaceKernels, ConeShadingMatchesShadeCones) {
+    SynthScene sc = FullScene(300, 40);
+    FrameBuffers f = SynthRender(sc, 0, 1);
+    ASSERT_EQ(f.cones.size(), f.NumPixels() * kNumCones);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> u(0.0f, 1e-4f);
+    std::vector<char> poisoned(f.NumPixels(), 0);
+    for (size_t i = 0; i < f.NumPixels(); ++i) {
+        // A per-pixel base 1e-3 i apart keeps every pixel's luminance distinct from its
+        // neighbours' by far more than the random part (< 1e-4), which varies cones and channels.
+        const float base = 1e-3f * float(i);
+        for (int k = 0; k < kNumCones; ++k)
+            f.cones[i * kNumCones + size_t(k)] =
+                glm::vec3(base + u(rng), base + u(rng), base + u(rng));
+        if (rng() % 50 == 0) {
+            f.cones[i * kNumCones + rng() % kNumCones][rng() % 3] =
+                std::numeric_limits<float>::quiet_NaN();
+            poisoned[i] = 1;
+        }
+    }
+    DenoiserSettings set;
+    set.sigmaLuminance = 1e-7f;
+    ScreenSpaceDenoiser dn(set, SharedBrdf());
+    dn.Denoise(f, Method::Reliable, Demodulation::On);
+    const std::vector<glm::vec3> ind = dn.Indirect();
+    ASSERT_EQ(ind.size(), f.NumPixels());
+    int checked = 0, bad = 0;
+    for (size_t i = 0; i < ind.size(); ++i) {
+        for (int c = 0; c < 3; ++c) EXPECT_TRUE(std::isfinite(ind[i][c])) << i;
+        const bool usable = f.depth[i] > 0.0f && std::isfinite(f.depth[i]) &&
+                            std::isfinite(f.albedo[i].x) && !poisoned[i];
+        if (!usable) continue;
+        const glm::vec3 e = f.albedo[i] * ShadeCones(&f.cones[i * kNumCones]);
+        ++checked;
+        for (int c = 0; c < 3; ++c)
+            if (!(std::fabs(ind[i][c] - e[c]) <= 1e-4f * (1e-3f + std::fabs(e[c]))))
+                ++bad;
+    }
+    EXPECT_GT(checked, int(f.NumPixels() / 2));
+    EXPECT_EQ(bad, 0) << "of " << checked;
+}
+
 }  // namespace
 }  // namespace texcache::screen

@@ -386,35 +386,20 @@ struct IndirectRow {
 };
 enum class IndMode { Colour, ColourDemod, Cones };
 
-typedef float V8 __attribute__((vector_size(32)));
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wpsabi"  // inlined into each ISA clone; no ABI boundary
 // The shading of one pixel's cones (kConeShadeWeight per cone, per channel) and whether all 18
-// floats are finite (1 / 0).
+// floats are finite (1 / 0). Plain scalar multiply-adds: GCC vectorizes them across pixels
+// (strided loads); the former 8-wide-per-pixel form spent most of its time in horizontal sums.
 inline __attribute__((always_inline)) void ConeShade(const float* q, float* c0, float* c1,
                                                      float* c2, float* finite) {
-    V8 v[3] = {};
-    std::memcpy(&v[0], q, 32), std::memcpy(&v[1], q + 8, 32);
-    v[2] = V8{q[16], q[17], 0, 0, 0, 0, 0, 0};
-    float out[3];
-    for (int c = 0; c < 3; ++c) {
-        V8 acc = {};
-        for (int b = 0; b < 3; ++b) {
-            V8 wv = {};
-            for (int l = 0; l < 8; ++l) {
-                const int j = 8 * b + l;  // float j of the pixel: cone j / 3, channel j % 3
-                wv[l] = j < 18 && j % 3 == c ? kConeShadeWeight[j / 3] : 0.0f;
-            }
-            acc += v[b] * wv;
-        }
-        out[c] = acc[0] + acc[1] + acc[2] + acc[3] + acc[4] + acc[5] + acc[6] + acc[7];
+    float o[3] = {0.0f, 0.0f, 0.0f}, sum = 0.0f;
+#pragma GCC unroll 6
+    for (int k = 0; k < kNumCones; ++k) {
+#pragma GCC unroll 3
+        for (int c = 0; c < 3; ++c) o[c] += kConeShadeWeight[k] * q[3 * k + c], sum += q[3 * k + c];
     }
-    const V8 s = v[0] + v[1] + v[2];
-    const float sum = s[0] + s[1] + s[2] + s[3] + s[4] + s[5] + s[6] + s[7];
-    *c0 = out[0], *c1 = out[1], *c2 = out[2];
+    *c0 = o[0], *c1 = o[1], *c2 = o[2];
     *finite = Fin(sum);
 }
-#pragma GCC diagnostic pop
 template <IndMode M>
 inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& args) {
     const IndirectRow a = args;
@@ -712,24 +697,80 @@ void Cleanup(ScreenSpaceDenoiser::State& s, int ci) {
     hc.valid = true;
 }
 
+// The final sum of one row, written like the preparation kernels (plain pointers, local result
+// arrays, 0/1 floats) so that it vectorizes: the per-pixel glm version with its Finite() tests
+// and plane accessors cost ~12 ms a frame at 1080p, several times this.
+struct ComposeRowArgs {
+    int w;
+    const float* emitted;  // xyz interleaved, or null
+    const float* shading;  // xyz interleaved
+    const float* vis;      // denoised visibility (plane row)
+    const float* rm[2][3];  // glossy / indirect remodulation factors (null: component absent)
+    const float* res[2][3];
+    float* out;  // xyz interleaved
+};
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ComposeRow(
+    const ComposeRowArgs& args) {
+    const ComposeRowArgs a = args;
+    constexpr int kC = kPrepChunk;
+    alignas(64) float o[3][kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float s0 = a.shading[3 * x], s1 = a.shading[3 * x + 1],
+                        s2 = a.shading[3 * x + 2];
+            // 0 when any channel is NaN/Inf (as Finite(vec3)).
+            const float sf = (std::fabs(s0) < 3.0e38f ? 1.0f : 0.0f) *
+                             (std::fabs(s1) < 3.0e38f ? 1.0f : 0.0f) *
+                             (std::fabs(s2) < 3.0e38f ? 1.0f : 0.0f);
+            const float v = a.vis[x];
+            float c0 = sf > 0.0f ? s0 * v : 0.0f, c1 = sf > 0.0f ? s1 * v : 0.0f,
+                  c2 = sf > 0.0f ? s2 * v : 0.0f;
+            if (a.emitted) {
+                const float e0 = a.emitted[3 * x], e1 = a.emitted[3 * x + 1],
+                            e2 = a.emitted[3 * x + 2];
+                const float ef = (std::fabs(e0) < 3.0e38f ? 1.0f : 0.0f) *
+                                 (std::fabs(e1) < 3.0e38f ? 1.0f : 0.0f) *
+                                 (std::fabs(e2) < 3.0e38f ? 1.0f : 0.0f);
+                // Emitted first, as the reference order: (e + s v) + ...
+                c0 = ef > 0.0f ? e0 + c0 : c0, c1 = ef > 0.0f ? e1 + c1 : c1;
+                c2 = ef > 0.0f ? e2 + c2 : c2;
+            }
+            o[0][i] = c0, o[1][i] = c1, o[2][i] = c2;
+        }
+        for (int k = 0; k < 2; ++k) {
+            if (!a.rm[k][0]) continue;
+            for (int c = 0; c < 3; ++c) {
+                const float* rm = a.rm[k][c] + x0;
+                const float* rs = a.res[k][c] + x0;
+                for (int i = 0; i < n; ++i) o[c][i] += rm[i] * rs[i];
+            }
+        }
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            a.out[3 * x] = o[0][i], a.out[3 * x + 1] = o[1][i], a.out[3 * x + 2] = o[2][i];
+        }
+    }
+}
+
 void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<glm::vec3>* out) {
     out->resize(size_t(s.w) * size_t(s.h));
-    const ComponentPlanes& vis = s.comp[kVis];
-    const ComponentPlanes& gl = s.comp[kGlossy];
-    const ComponentPlanes& ind = s.comp[kIndirect];
+    const ComponentPlanes* parts[2] = {&s.comp[kGlossy], &s.comp[kIndirect]};
     ForRows(s.h, [&](int y) {
-        const float* vr = vis.res[0]->Row(y);
-        for (int x = 0; x < s.w; ++x) {
-            const size_t i = size_t(y) * size_t(s.w) + size_t(x);
-            glm::vec3 c(0.0f);
-            if (!f.emitted.empty() && Finite(f.emitted[i])) c += f.emitted[i];
-            if (Finite(f.shading[i])) c += f.shading[i] * vr[x];
-            for (const ComponentPlanes* cp : {&gl, &ind}) {
-                if (!cp->present) continue;
-                for (int k = 0; k < 3; ++k) c[k] += cp->remod[k].At(x, y) * cp->res[k]->At(x, y);
+        const size_t row = size_t(y) * size_t(s.w);
+        ComposeRowArgs a;
+        a.w = s.w;
+        a.emitted = f.emitted.empty() ? nullptr : &f.emitted[row].x;
+        a.shading = &f.shading[row].x;
+        a.vis = s.comp[kVis].res[0]->Row(y);
+        for (int k = 0; k < 2; ++k)
+            for (int c = 0; c < 3; ++c) {
+                a.rm[k][c] = parts[k]->present ? parts[k]->remod[c].Row(y) : nullptr;
+                a.res[k][c] = parts[k]->present ? parts[k]->res[c]->Row(y) : nullptr;
             }
-            (*out)[i] = c;
-        }
+        a.out = &(*out)[row].x;
+        ComposeRow(a);
     });
 }
 
