@@ -15,9 +15,10 @@
 //   BaselineClamp  Baseline with the history clamped to mu +- k sigma of the current 3x3
 //                  neighbourhood (TAA-style, Salvi 2015).
 //   Reliable       Zeng et al.: visibility follows shadow motion vectors (eq. 3, splatted to the
-//                  pixels around shadows, alpha^V of eq. 4), is filtered spatially first (a
-//                  separable joint bilateral sized by the penumbra, PCSS-style), its history
-//                  clamped to mu +- 3 sigma and cleaned up with std min(w_A + w_C, 5) (eqs. 7-8);
+//                  pixels around shadows, alpha^V of eq. 4), is filtered spatially first (the
+//                  SpatialOnly a-trous, so that without history it equals the other methods),
+//                  its history clamped to mu +- 3 sigma and cleaned up with std min(w_A + w_C, 5)
+//                  (eqs. 7-8);
 //                  glossy follows stochastic glossy motion vectors (eq. 5); diffuse indirect
 //                  follows dual motion vectors (eq. 6) where the traditional ones fail and is
 //                  reused as incident radiance per cone with overlap weights (eqs. 9-11); glossy
@@ -65,7 +66,6 @@ struct DenoiserSettings {
     float sigmaLuminance = 4.0f;      ///< SVGF's sigma_l
     float sigmaDepth = 1.0f;          ///< SVGF's sigma_z (relative to the local depth slope)
     float normalPower = 128.0f;       ///< SVGF's sigma_n (weight max(0, n.n')^sigma_n)
-    int shadowRadius = 15;            ///< Reliable: reach of the shadow filter (31x31, 1..16)
     int shadowSplatRadius = 8;        ///< Reliable: window shadow vectors and sizes splat through
     float shadowFalloffSigma = 0.1f;  ///< Reliable: eq. 4's sigma (radians)
     float glossyLobeScale = 1.0f;     ///< Reliable: glossy lobe's angular std = scale * GGX alpha
