@@ -438,7 +438,9 @@ inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& a
                 cg *= good;
                 const float a0 = a.albedo[3 * x], a1 = a.albedo[3 * x + 1],
                             a2 = a.albedo[3 * x + 2];
-                const float af = Fin(a0 + a1 + a2);
+                // No cones (no diffuse ray: the shading normal faces away, where the BSDF is 0):
+                // the pixel's indirect light is 0, not its neighbours' radiance times the albedo.
+                const float af = Fin(a0 + a1 + a2) * cg;
                 r0 = af > 0.0f ? a0 : 0.0f, r1 = af > 0.0f ? a1 : 0.0f, r2 = af > 0.0f ? a2 : 0.0f;
             } else {
                 c0 = a.c[3 * x], c1 = a.c[3 * x + 1], c2 = a.c[3 * x + 2];
