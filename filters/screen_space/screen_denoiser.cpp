@@ -769,7 +769,8 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         ComponentScratch& vs = s.scratch[kVis];
         const MotionField* sm = temporal ? &s.shadow : nullptr;
         Plane* vb[3] = {&vs.out[0], &vs.out[1], &vs.out[2]};
-        ReliableTemporal(s, kVis, vb, vs.outVar, sm, temporal ? &s.shadowAlpha : nullptr);
+        ReliableTemporal(s, kVis, vb, vs.outVar, sm,
+                         temporal && s.set.shadowFalloff ? &s.shadowAlpha : nullptr);
         clock.Lap(&StageTimings::temporal);
         Cleanup(s, kVis);
         clock.Lap(&StageTimings::cleanup);
