@@ -7,7 +7,7 @@
 // * Samples. One camera ray per pixel through the pixel centre (no jitter, no lens, no motion
 //   blur: the guides are exact and noise-free, and projecting `position` with `camera` lands on
 //   the centre). Each of the `spp` samples (default 1: the papers' real-time setting) traces from
-//   that primary hit one light sample + its shadow ray, one specular-lobe ray (GGX materials) and
+//   that primary hit 32 light samples without rays + one shadow ray, one specular-lobe ray (GGX materials) and
 //   one diffuse-lobe ray, each continued by the path tracer below (NEE + MIS, max_depth).
 // * The split is unbiased: emitted + shading * visibility + glossy + indirect has the path
 //   tracer's expectation (at 1 spp exactly; with spp > 1 see `visibility`). Direct light is
@@ -15,10 +15,17 @@
 //   (power heuristic) between the light sample (in `shading`) and the specular ray hitting the
 //   light (in `glossy`, where a highlight moves like a reflection); the diffuse ray and the paths
 //   below the first bounce do not count light they hit directly at their first hit.
-// * shading: (f_diffuse + w_mis f_specular) Le cos / pdf of the light sample, no shadow ray, mean
-//   over spp. 0 where no light was sampled (no lights, one-sided quad seen from behind) or the
-//   sample lies below the surface.
-// * visibility: the shadow ray's 0/1. A sample with zero shading traces no shadow ray and counts
+// * shading: the unshadowed direct light (f_diffuse + w_mis f_specular) Le cos / pdf, estimated
+//   per sample from 32 light samples without shadow rays (BSDF and light evaluations only): the
+//   light pick stratified (a distant light's term is exact) and the point on an area light or the
+//   environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
+//   noise-free; its relative per-pixel error at 1 spp is ~5% RMS (FrameBuffers.ShadingIsLowNoise;
+//   one light sample would be about sqrt(32) times noisier). 0 where no light was sampled (no lights, one-sided quad
+//   seen from behind) or every sample lies below the surface.
+// * visibility: the 0/1 of one shadow ray, to one of those light samples picked with probability
+//   proportional to its shading's luminance (resampling), so that shading * visibility keeps the
+//   path tracer's expectation (exactly for white light, consistent for coloured: the sample
+//   colours' chromaticities differ). A sample with zero shading traces no shadow ray and counts
 //   as visible (1): its product is 0 anyway, and a 1 keeps the attached shadows of a surface
 //   turning away from the light from bleeding into lit pixels when the stage filters visibility.
 //   With spp > 1 it is the mean of the samples weighted by the luminance of their shading (the

@@ -1011,6 +1011,9 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+// Unshadowed light samples per frame-buffer sample for `shading` (no rays: BSDF and light
+// evaluations only). Measured noise: frame_buffers_render.h.
+constexpr int kShadingCandidates = 32;
 const glm::vec3 kNaN3(kNaN);
 
 /// Where everything that moves was at the previous frame: world at the frame time -> world at
@@ -1075,26 +1078,57 @@ glm::vec3 FiniteOrZero(glm::vec3 v) {
     return std::isfinite(v.x + v.y + v.z) ? v : glm::vec3(0.0f);
 }
 
-/// The light sample of one frame-buffer sample: unshadowed shading into `px`, and its shadow ray
-/// with the blocker and light point when blocked (see frame_buffers_render.h).
+/// The light sample of one frame-buffer sample: unshadowed shading into `px` from
+/// kShadingCandidates light samples, and one shadow ray to a candidate resampled in proportion to
+/// its shading's luminance, with the blocker and light point when blocked (see
+/// frame_buffers_render.h).
 void FrameDirectSample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
                        const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
-    LightSample ls;
-    const float uPick = rng.Next1D();
-    const glm::vec2 u = rng.Next2D();
-    if (!c.SampleLight(si.P, uPick, u, &ls)) return;
-    glm::vec3 fd, fs;
-    bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
-    // The specular ray may find this light too (in `glossy`): MIS between the two for that lobe.
-    const float wSpec = ls.delta || !bsdf.HasSpecular()
-                            ? 1.0f
-                            : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
-    const float cosi = std::abs(glm::dot(ls.wi, si.N));
-    const glm::vec3 S = FiniteOrZero((fd + wSpec * fs) * ls.Li * (ls.delta ? cosi : cosi / ls.pdf));
-    if (S == glm::vec3(0.0f)) return;  // no shadow ray: counts as visible (see the header)
-    px.shadingSum += S;
-    const float w = Luminance(glm::abs(S));
+    // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
+    // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
+    // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
+    constexpr int kN = kShadingCandidates;
+    constexpr float kG1 = 0.75487766f, kG2 = 0.56984029f;  // 1/phi_2, 1/phi_2^2
+    const float pickShift = rng.Next1D();
+    const glm::vec2 shift = rng.Next2D();
+    const float uResample = rng.Next1D();
+    LightSample cand[kN];
+    glm::vec3 S[kN];
+    float lum[kN];
+    glm::vec3 sum(0.0f);
+    float lumSum = 0.0f;
+    for (int k = 0; k < kN; ++k) {
+        lum[k] = 0.0f, S[k] = glm::vec3(0.0f);
+        const float uPick = (float(k) + pickShift) / float(kN);
+        const glm::vec2 u(std::fmod(shift.x + kG1 * float(k), 1.0f),
+                          std::fmod(shift.y + kG2 * float(k), 1.0f));
+        LightSample& ls = cand[k];
+        if (!c.SampleLight(si.P, std::min(uPick, kOneMinusEpsilon),
+                           glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
+            continue;
+        glm::vec3 fd, fs;
+        bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
+        // The specular ray may find this light too (in `glossy`): MIS between the two for that
+        // lobe.
+        const float wSpec = ls.delta || !bsdf.HasSpecular()
+                                ? 1.0f
+                                : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
+        const float cosi = std::abs(glm::dot(ls.wi, si.N));
+        S[k] = FiniteOrZero((fd + wSpec * fs) * ls.Li * (ls.delta ? cosi : cosi / ls.pdf));
+        lum[k] = Luminance(glm::abs(S[k]));
+        sum += S[k], lumSum += lum[k];
+    }
+    if (!(lumSum > 0.0f)) return;  // no shadow ray: counts as visible (see the header)
+    const glm::vec3 Sbar = sum / float(kN);
+    px.shadingSum += Sbar;
+    const float w = Luminance(glm::abs(Sbar));
     px.weightSum += w;
+    // The shadow ray's candidate: index j with probability lum_j / sum lum.
+    int j = 0;
+    float acc = lum[0], target = uResample * lumSum;
+    while (j + 1 < kN && (acc <= target || lum[j] <= 0.0f)) acc += lum[++j];
+    while (lum[j] <= 0.0f) --j;  // rounding ran past the last candidate with shading
+    const LightSample& ls = cand[j];
     const Ray shadow = ShadowRay(si, ls, 0.0f);
     Hit bh;
     ++rays.shadow;

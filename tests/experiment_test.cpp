@@ -106,7 +106,9 @@ TEST(TemporalExperiment, EveryMethodHasFiniteRmseOnEveryScene) {
     std::ifstream f(out / "temporal.csv");
     std::string line;
     std::getline(f, line);
-    ASSERT_EQ(line, "scene,method,demodulation,frame,rmse,ssim,temporal_change,ms,cpu_ms");
+    ASSERT_EQ(line,
+              "scene,method,demodulation,frame,rmse,ssim,temporal_change,ms,cpu_ms,rmse_direct,"
+              "rmse_glossy,rmse_indirect");
     std::map<std::string, int> rows;  // "scene/method/demodulation" -> frames with a finite RMSE
     while (std::getline(f, line)) {
         std::vector<std::string> c;

@@ -666,7 +666,6 @@ TEST(ScreenSpaceRobustness, BadInputThrowsNamingTheBuffer) {
     badSettings([](DenoiserSettings& s) { s.alpha = 0.0f; }, "alpha");
     badSettings([](DenoiserSettings& s) { s.alpha = std::nanf(""); }, "alpha");
     badSettings([](DenoiserSettings& s) { s.atrousLevels = 9; }, "atrousLevels");
-    badSettings([](DenoiserSettings& s) { s.shadowRadius = 40; }, "shadowRadius");
     badSettings([](DenoiserSettings& s) { s.brdfSamples = 0; }, "brdfSamples");
 }
 

@@ -13,6 +13,7 @@
 
 #include "cli_util.h"
 #include "commands.h"
+#include "filters/screen_space/screen_denoiser.h"
 #include "renderer/frame_buffers_render.h"
 #include "renderer/integrator.h"
 #include "renderer/scene_loader.h"
@@ -63,6 +64,9 @@ struct RenderArgs {
     std::string statsFile;
     // Screen-space frame buffers: one multi-layer EXR per frame in this directory.
     std::string frameBuffers;
+    // Screen-space stage on the frame buffers, written as images.
+    std::string denoise;
+    bool demodulate = false;
     bool outputGiven = false;
 };
 
@@ -214,29 +218,39 @@ struct AnimationFrame {
     }
 };
 
-int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool sppGiven,
-                    int first, int last, float fps) {
-    const char* opt_ = "--frame-buffers";
+/// The checks shared by the outputs of the path tracer's decomposition (--frame-buffers,
+/// --denoise): options that make no sense for it are errors naming `opt`.
+void CheckDecompositionOptions(const RenderArgs& a, const char* opt, const char* aovReason) {
     if (!a.integrator.empty() && a.integrator != "path")
         throw InputError(
-            opt_, "renders the path tracer's decomposition: drop --integrator " + a.integrator);
-    if (!std::isnan(a.seconds)) throw InputError(opt_, "renders --spp samples: drop --seconds");
-    if (!a.aovs.empty()) throw InputError(opt_, "writes every buffer already: drop --aov");
-    if (a.overshading) throw InputError(opt_, "cannot be combined with --overshading");
-    if (!a.statsFile.empty()) throw InputError(opt_, "cannot be combined with --stats");
-    if (a.outputGiven) throw InputError(opt_, "names the output directory: drop -o/--output");
-    if (!sppGiven) opt.spp = 1;  // the real-time setting the buffers are for
-    namespace fs = std::filesystem;
-    std::error_code ec;
-    fs::create_directories(a.frameBuffers, ec);
-    if (!fs::is_directory(a.frameBuffers))
-        throw InputError(opt_, "cannot create directory '" + a.frameBuffers + "'" +
-                                   (ec ? ": " + ec.message() : ""));
+            opt, "renders the path tracer's decomposition: drop --integrator " + a.integrator);
+    if (!std::isnan(a.seconds)) throw InputError(opt, "renders --spp samples: drop --seconds");
+    if (!a.aovs.empty()) throw InputError(opt, std::string(aovReason) + ": drop --aov");
+    if (a.overshading) throw InputError(opt, "cannot be combined with --overshading");
+    if (!a.statsFile.empty()) throw InputError(opt, "cannot be combined with --stats");
+}
 
-    std::unique_ptr<tbb::global_control> limit;
-    if (a.threads > 0)
-        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                      a.threads);
+/// TBB's thread limit for --threads N (none for 0).
+std::unique_ptr<tbb::global_control> ThreadLimit(int threads) {
+    if (threads <= 0) return nullptr;
+    return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                 threads);
+}
+
+/// Colours as a 3-channel image.
+Image ToImage(const std::vector<glm::vec3>& c, int w, int h) {
+    Image img(w, h, 3);
+    for (size_t p = 0; p < c.size(); ++p)
+        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = c[p][k];
+    return img;
+}
+
+/// Renders the frame buffers of frames first..last (the texture-space cache, if any, kept across
+/// them) and hands each to `body(f, options, stats, buffers)`; returns the seconds spent.
+template <class Body>
+double ForEachFrameBuffers(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
+                           int first, int last, float fps, Body&& body) {
+    const std::unique_ptr<tbb::global_control> limit = ThreadLimit(a.threads);
     RenderSceneOptions ro;
     ro.threads = a.threads;
     std::unique_ptr<TextureSpaceCache> cache;
@@ -249,29 +263,108 @@ int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, 
         const RenderOptions& fo = frame.options;
         const RenderStats st =
             RenderFrameBuffers(*frame.rs, fo, fo.frameTime - 1.0f / fps, &fb, cache.get());
-        char name[32];
-        std::snprintf(name, sizeof name, "frame_%04d", f);
-        const std::string exr = (fs::path(a.frameBuffers) / (std::string(name) + ".exr")).string();
-        WriteFrameBuffers(exr, fb);
-        if (!a.noPng) {
-            const std::vector<glm::vec3> c = fb.Compose();
-            Image img(fb.width, fb.height, 3);
-            for (size_t p = 0; p < c.size(); ++p)
-                for (int k = 0; k < 3; ++k) img.data[3 * p + k] = c[p][k];
-            WriteImage((fs::path(a.frameBuffers) / (std::string(name) + ".png")).string(), img, {},
-                       a.exposure);
-        }
+        body(f, fo, st, fb, tf);
         total += NowSeconds() - tf;
-        std::printf(
-            "frame %d (%d of %d, t = %.3f): %.3f s render (%.2f Mrays/s), %.3f s total -> %s\n", f,
-            f - first + 1, last - first + 1, fo.frameTime, st.seconds,
-            double(st.TotalRays()) / std::max(st.seconds, 1e-9) * 1e-6, NowSeconds() - tf,
-            exr.c_str());
-        std::fflush(stdout);
     }
+    return total;
+}
+
+int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool sppGiven,
+                    int first, int last, float fps) {
+    const char* opt_ = "--frame-buffers";
+    CheckDecompositionOptions(a, opt_, "writes every buffer already");
+    if (a.outputGiven) throw InputError(opt_, "names the output directory: drop -o/--output");
+    if (!sppGiven) opt.spp = 1;  // the real-time setting the buffers are for
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::create_directories(a.frameBuffers, ec);
+    if (!fs::is_directory(a.frameBuffers))
+        throw InputError(opt_, "cannot create directory '" + a.frameBuffers + "'" +
+                                   (ec ? ": " + ec.message() : ""));
+
+    const double total = ForEachFrameBuffers(
+        a, scene, opt, first, last, fps,
+        [&](int f, const RenderOptions& fo, const RenderStats& st, const screen::FrameBuffers& fb,
+            double tf) {
+            char name[32];
+            std::snprintf(name, sizeof name, "frame_%04d", f);
+            const std::string exr =
+                (fs::path(a.frameBuffers) / (std::string(name) + ".exr")).string();
+            WriteFrameBuffers(exr, fb);
+            if (!a.noPng) {
+                WriteImage((fs::path(a.frameBuffers) / (std::string(name) + ".png")).string(),
+                           ToImage(fb.Compose(), fb.width, fb.height), {}, a.exposure);
+            }
+            std::printf(
+                "frame %d (%d of %d, t = %.3f): %.3f s render (%.2f Mrays/s), %.3f s total -> %s\n",
+                f, f - first + 1, last - first + 1, fo.frameTime, st.seconds,
+                double(st.TotalRays()) / std::max(st.seconds, 1e-9) * 1e-6, NowSeconds() - tf,
+                exr.c_str());
+            std::fflush(stdout);
+        });
     std::printf("wrote frame buffers of %d frames of %s in %.2f s (%dx%d, %d spp) to %s\n",
                 last - first + 1, scene.path.c_str(), total, opt.width, opt.height, opt.spp,
                 a.frameBuffers.c_str());
+    return 0;
+}
+
+/// --denoise NAME: the screen-space method (the names the CLI accepts, as MethodName() spells
+/// them where they differ).
+screen::Method ParseDenoise(const std::string& name) {
+    static const struct {
+        const char* name;
+        screen::Method method;
+    } kMethods[] = {{"spatial", screen::Method::SpatialOnly},
+                    {"baseline", screen::Method::Baseline},
+                    {"clamp", screen::Method::BaselineClamp},
+                    {"reliable", screen::Method::Reliable}};
+    std::string valid;
+    for (const auto& m : kMethods) {
+        if (name == m.name) return m.method;
+        valid += std::string(valid.empty() ? "" : ", ") + m.name;
+    }
+    throw InputError("--denoise", "unknown method '" + name + "' (valid: " + valid + ")");
+}
+
+/// --denoise: each frame's buffers rendered in memory (RenderFrameBuffers, 1 spp unless --spp),
+/// denoised by one ScreenSpaceDenoiser that keeps its history across the frames, and written as
+/// images (numbered with --frames, like a plain animation; temporary file + rename).
+int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool sppGiven,
+                bool animated, int first, int last, float fps) {
+    const char* opt_ = "--denoise";
+    const screen::Method method = ParseDenoise(a.denoise);
+    CheckDecompositionOptions(a, opt_, "writes the denoised image only");
+    if (!a.frameBuffers.empty()) throw InputError(opt_, "cannot be combined with --frame-buffers");
+    if (!animated && method != screen::Method::SpatialOnly)
+        throw InputError(opt_, "method '" + a.denoise +
+                                   "' reuses the previous frame: give --frames A:B (or use "
+                                   "--denoise spatial for a single frame)");
+    if (!sppGiven) opt.spp = 1;  // the real-time setting the stage is for
+    // Plan every frame's outputs first: a bad name fails before anything renders.
+    std::vector<OutputPaths> outs;
+    for (int f = first; f <= last; ++f)
+        outs.push_back(PlanOutputs(animated ? FramePath(a.output, f) : a.output, !a.noPng));
+
+    const screen::Demodulation demod =
+        a.demodulate ? screen::Demodulation::On : screen::Demodulation::Off;
+    screen::ScreenSpaceDenoiser denoiser;
+    std::vector<glm::vec3> denoised;
+    const double total = ForEachFrameBuffers(
+        a, scene, opt, first, last, fps,
+        [&](int f, const RenderOptions& fo, const RenderStats& st, const screen::FrameBuffers& fb,
+            double) {
+            denoiser.Denoise(fb, method, demod, &denoised);
+            OutputPaths& out = outs[size_t(f - first)];
+            WriteOutputs(out, ToImage(denoised, fb.width, fb.height), {}, a.exposure);
+            std::printf("frame %d (%d of %d, t = %.3f): %.3f s render, %.1f ms %s%s -> %s\n", f,
+                        f - first + 1, last - first + 1, fo.frameTime, st.seconds,
+                        denoiser.Timings().total, screen::MethodName(method),
+                        a.demodulate ? " (demodulated)" : "", out.written.front().c_str());
+            std::fflush(stdout);
+        });
+    std::printf("denoised %d frame%s of %s in %.2f s (%dx%d, %d spp, %s%s)\n", last - first + 1,
+                last > first ? "s" : "", scene.path.c_str(), total, opt.width, opt.height, opt.spp,
+                screen::MethodName(method), a.demodulate ? ", demodulated" : "");
     return 0;
 }
 
@@ -299,7 +392,9 @@ int RunRender(const RenderArgs& a) {
     if (!std::isnan(a.time)) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     CheckRange("--threads", a.threads, 0, 4096);
 
-    if (!a.frameBuffers.empty()) {
+    if (a.demodulate && a.denoise.empty())
+        throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    if (!a.frameBuffers.empty() || !a.denoise.empty()) {
         // Frame buffers are always the path tracer's split, whatever the scene's integrator.
         RenderOptions fbo;
         fbo.width = s.width;
@@ -313,6 +408,8 @@ int RunRender(const RenderArgs& a) {
         int first = 0, last = 0;
         if (!a.frames.empty()) ParseFrames(a.frames, &first, &last);
         const float fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
+        if (!a.denoise.empty())
+            return RunDenoised(a, scene, fbo, a.spp != kUnset, !a.frames.empty(), first, last, fps);
         return RunFrameBuffers(a, scene, fbo, a.spp != kUnset, first, last, fps);
     }
     RenderOptions opt;
@@ -341,10 +438,7 @@ int RunRender(const RenderArgs& a) {
     }
     OutputPaths out = a.frames.empty() ? PlanOutputs(a.output, !a.noPng) : OutputPaths{};
 
-    std::unique_ptr<tbb::global_control> limit;
-    if (a.threads > 0)
-        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
-                                                      a.threads);
+    const std::unique_ptr<tbb::global_control> limit = ThreadLimit(a.threads);
 
     const double t0 = NowSeconds();
     RenderSceneOptions ro;
@@ -509,6 +603,15 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     ".png) instead of an image; 1 spp unless --spp; with --frames/--fps, 'prev' "
                     "buffers are at t - 1/fps")
         ->type_name("DIR");
+    cmd->add_option("--denoise", args->denoise,
+                    "Render each frame's buffers in memory (1 spp unless --spp) and write the "
+                    "screen-space stage's denoised image instead: spatial (no history; a single "
+                    "frame is fine), baseline (SVGF), clamp (SVGF + neighbourhood clamping) or "
+                    "reliable (Zeng et al. 2021); the last three need --frames")
+        ->type_name("METHOD");
+    cmd->add_flag("--demodulate", args->demodulate,
+                  "With --denoise: filter glossy and diffuse indirect light divided by their "
+                  "pre-integrated BRDF / albedo (Zhuang et al. 2021)");
     cmd->callback([args, output, &exitCode] {
         args->outputGiven = output->count() > 0;
         exitCode = RunRender(*args);

@@ -98,7 +98,28 @@ struct Variant {
     std::vector<glm::vec3> image;  // reused allocation
     std::vector<float> prevY;
     std::vector<double> rmse, ssim, change, ms, cpuMs;  // per frame
+    std::array<std::vector<double>, 3> part;            // per frame: RMSE of each component
 };
+
+// The components whose errors are reported separately: shading * visibility, glossy, indirect.
+const char* const kParts[3] = {"direct", "glossy", "indirect"};
+
+/// A component as an image, 0 where it is not finite or missing (so that every component's
+/// RMSE is over all pixels and their squares add up to about the image's).
+Image PartImage(const std::vector<glm::vec3>& c, int w, int h) {
+    Image img(w, h, 3, 0.0f);
+    for (size_t p = 0; p < c.size(); ++p)
+        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = std::isfinite(c[p][k]) ? c[p][k] : 0.0f;
+    return img;
+}
+
+/// shading * visibility per pixel.
+std::vector<glm::vec3> Shadowed(const std::vector<glm::vec3>& shading,
+                                const std::vector<float>& vis) {
+    std::vector<glm::vec3> out(shading.size(), glm::vec3(0.0f));
+    for (size_t p = 0; p < out.size() && p < vis.size(); ++p) out[p] = shading[p] * vis[p];
+    return out;
+}
 
 /// One row per frame of a series; a NaN or missing value (no change on the first frame, no time
 /// for the reference) is an empty cell.
@@ -117,7 +138,10 @@ void AddRows(Table* t, const std::string& scene, const std::string& method,
             .Add(v.ssim[f])
             .Add(cell(v.change, f))
             .Add(cell(v.ms, f))
-            .Add(cell(v.cpuMs, f));
+            .Add(cell(v.cpuMs, f))
+            .Add(cell(v.part[0], f))
+            .Add(cell(v.part[1], f))
+            .Add(cell(v.part[2], f));
 }
 
 struct Rect {
@@ -190,7 +214,9 @@ struct SceneResult {
     std::string name;
     std::array<double, 8> rmse{}, ssim{}, change{}, ms{}, cpuMs{};
     std::array<double, 8> firstRmse{};  ///< frame 0: no history yet, every method filters alone
-    double refChange = 0.0, noisyRmse = 0.0, noisySsim = 0.0, rawRmse = 0.0;
+    std::array<std::array<double, 3>, 8> part{}, firstPart{};  ///< per component (kParts)
+    double refChange = 0.0, noisyRmse = 0.0, noisySsim = 0.0;
+    double shadingRmse = 0.0, shadingRms = 0.0;  ///< the input's `shading` against the reference's
     Rect crop;
 };
 
@@ -209,7 +235,7 @@ int Temporal(const Setup& s) {
     const int cropScale = s.quick ? 4 : 2;
     const std::string csv = (fs::path(s.outDir) / "temporal.csv").string();
     Table table({"scene", "method", "demodulation", "frame", "rmse", "ssim", "temporal_change",
-                 "ms", "cpu_ms"});
+                 "ms", "cpu_ms", "rmse_direct", "rmse_glossy", "rmse_indirect"});
     // One BRDF table for all 8 denoisers (it is a few hundred ms to build).
     const auto brdf = std::make_shared<const screen::BrdfPreintegration>();
     std::vector<SceneResult> results;
@@ -230,7 +256,8 @@ int Temporal(const Setup& s) {
             }
         std::vector<float> refPrevY;
         // The reference, the 1-spp frame and the stage's input, as series without a denoiser.
-        Variant reference, rawInput, input;
+        Variant reference, input;
+        std::vector<double> shadingRmse, shadingRms;
         Image lastRef, lastNoisy, lastClamp, lastReliable;
         for (int f = 0; f < frames; ++f) {
             const float t = scene.settings.time + float(f) / kFps;
@@ -248,15 +275,15 @@ int Temporal(const Setup& s) {
             r.seed = o.seed ^ 0x5851F42D4C957F2Dull;  // independent of the input's noise
             RenderFrameBuffers(rs, r, t - 1.0f / kFps, &refFb);
             const Image ref = ToImage(refFb.Compose(), W, H);
-            const Image raw = ToImage(fb.Compose(), W, H);
-            // The stage takes `shading` as noise-free (Zeng et al. evaluate the unshadowed direct
-            // light analytically) and passes it through unfiltered, but RenderFrameBuffers
-            // estimates it with one light sample, whose noise then dominates every method's error
-            // (anim_shadow, 96x54: 1-spp RMSE 0.122, 0.019 with the reference's shading). The
-            // reference's shading stands in for the analytic term; its own noise cancels in the
-            // error, equally for every method.
-            fb.shading = refFb.shading;
+            // `shading` is the unshadowed direct light from many light samples (no rays): its
+            // residual noise against the reference's.
+            const Image refShading = PartImage(refFb.shading, W, H);
+            shadingRmse.push_back(RMSE(PartImage(fb.shading, W, H), refShading));
+            shadingRms.push_back(RMSE(Image(W, H, 3, 0.0f), refShading));
             const Image noisy = ToImage(fb.Compose(), W, H);
+            const Image refPart[3] = {PartImage(Shadowed(refFb.shading, refFb.visibility), W, H),
+                                      PartImage(refFb.glossy, W, H),
+                                      PartImage(refFb.indirect, W, H)};
 
             // The reference's own frame-to-frame change: what the motion itself accounts for.
             const std::vector<float> refY = Luminance(ref);
@@ -264,7 +291,6 @@ int Temporal(const Setup& s) {
             refPrevY = refY;
             reference.rmse.push_back(0.0), reference.ssim.push_back(1.0);
             reference.change.push_back(rc);
-            rawInput.rmse.push_back(RMSE(raw, ref)), rawInput.ssim.push_back(SSIM(raw, ref));
             input.rmse.push_back(RMSE(noisy, ref)), input.ssim.push_back(SSIM(noisy, ref));
 
             for (Variant& v : variants) {
@@ -278,6 +304,11 @@ int Temporal(const Setup& s) {
                 v.change.push_back(change);
                 v.ms.push_back(v.denoiser->Timings().total);
                 v.cpuMs.push_back(v.denoiser->CpuTimings().total);
+                const std::vector<glm::vec3> parts[3] = {
+                    Shadowed(fb.shading, v.denoiser->Visibility()), v.denoiser->Glossy(),
+                    v.denoiser->Indirect()};
+                for (int c = 0; c < 3; ++c)
+                    v.part[c].push_back(RMSE(PartImage(parts[c], W, H), refPart[c]));
                 if (f == frames - 1 && v.demod == Demodulation::On) {
                     if (v.method == Method::BaselineClamp) lastClamp = img;
                     if (v.method == Method::Reliable) lastReliable = img;
@@ -292,7 +323,6 @@ int Temporal(const Setup& s) {
         }
         // Rows grouped by series (not by frame), so gnuplot's lines through them are unbroken.
         AddRows(&table, name, "reference", "-", reference);
-        AddRows(&table, name, "noisy-raw", "-", rawInput);
         AddRows(&table, name, "noisy", "-", input);
         for (const Variant& v : variants)
             AddRows(&table, name, screen::MethodName(v.method), DemodName(v.demod), v);
@@ -303,6 +333,8 @@ int Temporal(const Setup& s) {
             const int i = Index(v.method, v.demod);
             sr.rmse[i] = Mean(v.rmse);
             sr.firstRmse[i] = v.rmse.front();
+            for (int c = 0; c < 3; ++c)
+                sr.part[i][c] = Mean(v.part[c]), sr.firstPart[i][c] = v.part[c].front();
             sr.ssim[i] = Mean(v.ssim);
             sr.change[i] = Mean(v.change);
             sr.ms[i] = Mean(v.ms);
@@ -311,7 +343,7 @@ int Temporal(const Setup& s) {
         sr.refChange = Mean(reference.change);
         sr.noisyRmse = Mean(input.rmse);
         sr.noisySsim = Mean(input.ssim);
-        sr.rawRmse = Mean(rawInput.rmse);
+        sr.shadingRmse = Mean(shadingRmse), sr.shadingRms = Mean(shadingRms);
         // Crop of the last frame where baseline + clamping and reliable disagree most.
         sr.crop = MostDifferent(lastClamp, lastReliable, W / 2, H / 2);
         WriteImage(
@@ -364,15 +396,12 @@ int Temporal(const Setup& s) {
         "are shading noise and temporal artefacts only. Means are over all frames, the first "
         "included (there every method is spatial only). %s\n\n"
         "**Unshadowed direct light.** The stage takes `shading` as noise-free (Zeng et al. "
-        "evaluate it analytically) and passes it through unfiltered, but `RenderFrameBuffers` "
-        "estimates it with one light sample per pixel, and that noise alone dominated every "
-        "method's error (see *1-spp input* below: no method can lower it). So the stage gets the "
-        "1-spp frame with the reference's `shading` (%d spp) standing in for the analytic term "
-        "(*stage input* below); the reference's own shading noise then cancels in the error, "
-        "equally for every method.\n\n",
+        "evaluate it analytically) and passes it through unfiltered; `RenderFrameBuffers` "
+        "estimates it from 32 light samples without shadow rays per pixel (its shadow ray goes "
+        "to one of them, resampled by contribution), and the stage gets the frame as rendered. "
+        "The input's `shading` error against the reference's is in the last table.\n\n",
         frames, kFps, W, H, refSpp,
-        s.quick ? "**Quick mode: test-size images and few frames; not for conclusions.**" : "",
-        refSpp);
+        s.quick ? "**Quick mode: test-size images and few frames; not for conclusions.**" : "");
     md +=
         "**Temporal change** is the mean absolute change of linear luminance (Rec. 709) between "
         "consecutive frames, over frames 1..N-1. Moving objects, light and camera change the "
@@ -386,8 +415,7 @@ int Temporal(const Setup& s) {
         "| scene | method | RMSE (demod off) | RMSE (demod on) | SSIM (off) | SSIM (on) | excess "
         "change (off) | excess change (on) |\n|---|---|---|---|---|---|---|---|\n";
     for (const SceneResult& r : results) {
-        md += Format("| %s | 1-spp input | %.4f | | | | | |\n", r.name.c_str(), r.rawRmse);
-        md += Format("| %s | stage input | %.4f | | %.4f | | | |\n", r.name.c_str(), r.noisyRmse,
+        md += Format("| %s | 1-spp input | %.4f | | %.4f | | | |\n", r.name.c_str(), r.noisyRmse,
                      r.noisySsim);
         for (Method m : kMethods) {
             const int off = Index(m, Demodulation::Off), on = Index(m, Demodulation::On);
@@ -400,6 +428,32 @@ int Temporal(const Setup& s) {
                      r.refChange);
     }
 
+    // Per component: where a method's error comes from, on the first frame (spatial filters
+    // only) and over the sequence.
+    md +=
+        "\n**Per component.** RMSE of each denoised component against the reference's (direct = "
+        "shading * visibility), over all pixels; frame 0 alone (no history: the spatial filters) "
+        "and the mean over the sequence.\n\n| scene | method | demod | direct (frame 0) | glossy "
+        "(frame 0) | indirect (frame 0) | direct (mean) | glossy (mean) | indirect (mean) |\n"
+        "|---|---|---|---|---|---|---|---|---|\n";
+    for (const SceneResult& r : results)
+        for (Method m : kMethods)
+            for (Demodulation d : {Demodulation::Off, Demodulation::On}) {
+                const int i = Index(m, d);
+                md += Format("| %s | %s | %s | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f |\n",
+                             r.name.c_str(), screen::MethodName(m), DemodName(d), r.firstPart[i][0],
+                             r.firstPart[i][1], r.firstPart[i][2], r.part[i][0], r.part[i][1],
+                             r.part[i][2]);
+            }
+
+    md +=
+        "\n**Unshadowed direct light of the input** (`shading`, 1 spp = 32 light samples "
+        "without shadow rays) against the reference's, mean over frames: RMSE, and relative to "
+        "the reference's RMS.\n\n| scene | shading RMSE | relative |\n|---|---|---|\n";
+    for (const SceneResult& r : results)
+        md += Format("| %s | %.4f | %.2f%% |\n", r.name.c_str(), r.shadingRmse,
+                     100.0 * r.shadingRmse / r.shadingRms);
+    md += "\n";
     // Goal 1: reliable below baseline + clamping on every ghosting scene (each demodulation).
     md +=
         "\n## Goals of issue 5\n\n"
@@ -480,7 +534,7 @@ int Temporal(const Setup& s) {
 
     md += "\n## Plots and crops\n\n";
     md += Format(
-        "Crops of the last frame (frame %d), magnified %dx, from left to right: **stage input | "
+        "Crops of the last frame (frame %d), magnified %dx, from left to right: **1-spp input | "
         "reference | baseline+clamp | reliable** (both with demodulation). The crop is the "
         "half-width, half-height window where baseline+clamp and reliable differ most.\n\n",
         frames - 1, cropScale);

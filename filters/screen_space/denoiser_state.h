@@ -68,7 +68,7 @@ struct ScreenSpaceDenoiser::State {
     bool conesPath = false, prevConesPath = false;
     detail::MotionField trad, shadow, glossy, occl;
     bool motionValid[4] = {false, false, false, false};
-    detail::Plane shadowAlpha, sigma, shadowSigma;
+    detail::Plane shadowAlpha, sigma;
     detail::IntPlane occluder;
     detail::Plane splat[8];
     std::vector<uint8_t> zeroRow;  // validity flags of a row outside the image

@@ -124,7 +124,7 @@ struct FrameBuffers {
 
     // The components (linear radiance, RGB).
     std::vector<glm::vec3> emitted;   ///< light seen directly (environment, emitters)
-    std::vector<glm::vec3> shading;   ///< unshadowed direct light (1 light sample, no ray)
+    std::vector<glm::vec3> shading;   ///< unshadowed direct light (low noise: no ray)
     std::vector<float> visibility;    ///< shadow-ray visibility of that light sample, 0..1
     std::vector<glm::vec3> glossy;    ///< glossy (microfacet) reflection, 1 path
     std::vector<glm::vec3> indirect;  ///< diffuse indirect light, albedo included, 1 path

@@ -11,9 +11,16 @@
 //     the output of the first iteration is the next history (for the Reliable indirect the
 //     history is the cones).
 //   Zeng order (Reliable visibility): the current frame is filtered spatially first (c~_i, the
-//     separable joint bilateral sized by the penumbra), the history fetched with the shadow
+//     a-trous with a spatial variance, as SpatialOnly), the history fetched with the shadow
 //     vector is clamped to mu +- 3 sigma of c~_i and blended (eq. 2 with alpha^V), then the
 //     clean-up runs with std min(w_A + w_C, 5) (eqs. 7-8); its output is the next history.
+//     Zeng et al. use a 31x31 joint bilateral sized by the penumbra (after Liu et al.) for
+//     c~_i; ours (geometry guides only, std w/4 from the blocker-light spread) was worse than the
+//     variance-guided a-trous with no history at all (direct-light RMSE on frame 0, 96x54:
+//     anim_light 0.0116 vs 0.0072, anim_disocclusion 0.0240 vs 0.0172, where an environment
+//     light's visibility is noisy everywhere, not only in penumbrae), so Reliable was worse than
+//     the baseline before any history existed. The paper's point is the motion vectors, and its
+//     Sec. 7 names the spatial filter as orthogonal.
 // Why not Zeng's order for glossy too: a spatial filter that only ever sees 1 spp keeps its bias
 // however many frames are averaged (on a static glossy sphere the glossy RMSE after 16 frames
 // was 0.026, against 0.017 accumulating first, which lets the a-trous sharpen as the temporal
@@ -135,7 +142,7 @@ void ScreenSpaceDenoiser::State::Resize(int width, int height) {
         sc.tVar.Resize(w, h), sc.aVar.Resize(w, h), sc.bVar.Resize(w, h), sc.outVar.Resize(w, h);
     }
     for (MotionField* m : {&trad, &shadow, &glossy, &occl}) m->Resize(w, h);
-    shadowAlpha.Resize(w, h), sigma.Resize(w, h), shadowSigma.Resize(w, h);
+    shadowAlpha.Resize(w, h), sigma.Resize(w, h);
     occluder.Resize(w, h, -1);
     for (Plane& p : splat) p.Resize(w, h);
     zeroRow.assign(size_t(w) + 2 * kPad, 0);
@@ -158,8 +165,6 @@ void CheckSettings(const DenoiserSettings& s) {
              std::to_string(s.atrousLevels));
     if (!(s.sigmaLuminance > 0.0f) || !(s.sigmaDepth > 0.0f) || !(s.normalPower >= 0.0f))
         fail("sigmaLuminance and sigmaDepth must be positive, normalPower non-negative");
-    if (s.shadowRadius < 1 || s.shadowRadius > 16)
-        fail("shadowRadius must be in 1..16, got " + std::to_string(s.shadowRadius));
     if (s.shadowSplatRadius < 0 || s.shadowSplatRadius > 64)
         fail("shadowSplatRadius must be in 0..64, got " + std::to_string(s.shadowSplatRadius));
     if (!(s.shadowFalloffSigma > 0.0f)) fail("shadowFalloffSigma must be positive");
@@ -418,7 +423,9 @@ inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& a
                 cg *= good;
                 const float a0 = a.albedo[3 * x], a1 = a.albedo[3 * x + 1],
                             a2 = a.albedo[3 * x + 2];
-                const float af = Fin(a0 + a1 + a2);
+                // No cones (no diffuse ray: the shading normal faces away, where the BSDF is 0):
+                // the pixel's indirect light is 0, not its neighbours' radiance times the albedo.
+                const float af = Fin(a0 + a1 + a2) * cg;
                 r0 = af > 0.0f ? a0 : 0.0f, r1 = af > 0.0f ? a1 : 0.0f, r2 = af > 0.0f ? a2 : 0.0f;
             } else {
                 c0 = a.c[3 * x], c1 = a.c[3 * x + 1], c2 = a.c[3 * x + 2];
@@ -592,88 +599,6 @@ void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) 
                 });
         for (int k = 0; k < 3; ++k) s.comp[jobs[j].ci].res[k] = &sc.out[k];
     }
-}
-
-// The shadow filter's per-pixel size (Zeng Sec. 4.1 takes it from Liu et al. [HA19]: the
-// penumbra width, PCSS-style): for an in-shadow pixel the penumbra is
-//     w = 2 r_light (d_receiver - d_blocker) / d_blocker
-// wide (distances from the light), r_light being the light's extent, estimated as the RMS spread
-// of the light samples of the in-shadow pixels in the 5x5 neighbourhood (a point light: 0, a
-// sphere of radius r sampled uniformly: r). In pixels, w / (world size of a pixel at the
-// receiver); std w / 4, at most shadowRadius / 2. Splatted like the shadow vectors: every pixel
-// within the splat window of in-shadow pixels takes their mean, so the lit side of a penumbra is
-// filtered too; elsewhere 0 (the pass copies those pixels).
-void ShadowFilterSize(ScreenSpaceDenoiser::State& s, const FrameBuffers& f) {
-    const int w = s.w, h = s.h;
-    const Guides& g = s.G();
-    // Pixels per world unit at distance 1: half the height times the y row's scale of the
-    // projection (|row| = 1 / tan(fov_y / 2) for a perspective camera times a rotation).
-    const glm::mat4& m = f.camera.worldToClip;
-    const float fpx = 0.5f * float(h) * glm::length(glm::vec3(m[0][1], m[1][1], m[2][1]));
-    const float maxSigma = 0.5f * float(s.set.shadowRadius);
-    Plane& mask = s.splat[0];
-    Plane& msig = s.splat[1];
-    ForRows(h, [&](int y) {
-        for (int x = 0; x < w; ++x) {
-            mask.At(x, y) = 0.0f, msig.At(x, y) = 0.0f;
-            if (!g.valid.At(x, y) || f.lightSample.empty() || f.blocker.empty()) continue;
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
-            const glm::vec3 b = f.blocker[i];
-            if (!Finite(b) || !Finite(f.lightSample[i])) continue;
-            glm::vec3 sum(0.0f), sum2(0.0f);
-            int n = 0;
-            for (int dy = -2; dy <= 2; ++dy)
-                for (int dx = -2; dx <= 2; ++dx) {
-                    const int xx = x + dx, yy = y + dy;
-                    if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-                    const size_t j = size_t(yy) * size_t(w) + size_t(xx);
-                    const glm::vec3 l = f.lightSample[j];
-                    if (!Finite(l) || !Finite(f.blocker[j])) continue;
-                    sum += l, sum2 += l * l, ++n;
-                }
-            const glm::vec3 lc = sum / float(n);
-            const glm::vec3 var = glm::max(sum2 / float(n) - lc * lc, glm::vec3(0.0f));
-            const float rl = n >= 3 ? std::sqrt(var.x + var.y + var.z) : 0.0f;
-            const glm::vec3 p(g.px.At(x, y), g.py.At(x, y), g.pz.At(x, y));
-            const float dr = glm::length(p - lc), db = glm::length(b - lc);
-            if (!(db > 0.0f)) continue;
-            const float wWorld = 2.0f * rl * std::max(0.0f, dr - db) / db;
-            const float wPx = wWorld * fpx / std::max(g.depth.At(x, y), 1e-6f);
-            mask.At(x, y) = 1.0f;
-            msig.At(x, y) = std::min(0.25f * wPx, maxSigma);
-        }
-    });
-    const Plane* in[2] = {&s.splat[0], &s.splat[1]};
-    Plane* sums[2] = {&s.splat[0], &s.splat[1]};
-    Plane* tmp[2] = {&s.splat[2], &s.splat[3]};
-    BoxSum(2, in, sums, tmp, s.set.shadowSplatRadius);
-    ForRows(h, [&](int y) {
-        const float* cnt = s.splat[0].Row(y);
-        const float* sg = s.splat[1].Row(y);
-        float* o = s.shadowSigma.Row(y);
-        for (int x = 0; x < w; ++x) o[x] = cnt[x] > 0.5f ? sg[x] / cnt[x] : 0.0f;
-    });
-}
-
-// Zeng's shadow filter: a separable joint bilateral (depth + normal guides) of the per-pixel
-// std ShadowFilterSize() found, over at most +-shadowRadius pixels.
-void ShadowBilateral(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, Plane* out,
-                     Plane* outValid) {
-    ShadowFilterSize(s, f);
-    ComponentPlanes& cp = s.comp[kVis];
-    const int radius = s.set.shadowRadius;
-    PassArgs a = BaseArgs(s, 1);
-    a.taps = 2 * radius + 1;
-    for (int k = 0; k < a.taps; ++k) a.offset[k] = k - radius;
-    a.sigma = &s.shadowSigma;
-    ComponentScratch& sc = s.scratch[kVis];
-    a.in[0] = &cp.v[0], a.out[0] = &sc.a[0];
-    a.valid = &cp.valid, a.outValid = &sc.aVar;
-    FilterPlanes(a);
-    a.vertical = true;
-    a.in[0] = &sc.a[0], a.out[0] = out;
-    a.valid = &sc.aVar, a.outValid = outValid;
-    FilterPlanes(a);
 }
 
 // Zeng's clean-up: separable joint bilateral 9x9 with the per-pixel std in s.sigma, from
@@ -875,21 +800,18 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
             jobs[njobs++].ci = kGlossy;
             s.hist[kGlossy][s.cur].valid = true;
         }
+        // Visibility: c~_i is the a-trous of this frame alone (spatial variance).
+        SvgfTemporal(s, kVis, nullptr, 0.0f);
+        jobs[njobs++].ci = kVis;
         clock.Lap(&StageTimings::temporal);
-        if (njobs) RunAtrous(s, jobs, njobs);
-        // Visibility: the shadow filter into scratch.b (validity in bVar).
-        ComponentScratch& vs = s.scratch[kVis];
-        ShadowBilateral(s, frame, &vs.b[0], &vs.bVar);
+        RunAtrous(s, jobs, njobs);
         clock.Lap(&StageTimings::spatial);
         // Zeng's temporal step and clean-up for visibility.
+        ComponentScratch& vs = s.scratch[kVis];
         const MotionField* sm = temporal ? &s.shadow : nullptr;
-        // ReliableTemporal reads validity as variance >= 0: turn the 0/1 validity into 0/-1.
-        ForRows(s.h, [&](int y) {
-            float* v = vs.bVar.Row(y);
-            for (int x = 0; x < s.w; ++x) v[x] = v[x] > 0.0f ? 0.0f : -1.0f;
-        });
-        Plane* vb[3] = {&vs.b[0], &vs.b[1], &vs.b[2]};
-        ReliableTemporal(s, kVis, vb, vs.bVar, sm, temporal ? &s.shadowAlpha : nullptr);
+        Plane* vb[3] = {&vs.out[0], &vs.out[1], &vs.out[2]};
+        ReliableTemporal(s, kVis, vb, vs.outVar, sm,
+                         temporal && s.set.shadowFalloff ? &s.shadowAlpha : nullptr);
         clock.Lap(&StageTimings::temporal);
         Cleanup(s, kVis);
         clock.Lap(&StageTimings::cleanup);

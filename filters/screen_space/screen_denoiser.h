@@ -15,14 +15,14 @@
 //   BaselineClamp  Baseline with the history clamped to mu +- k sigma of the current 3x3
 //                  neighbourhood (TAA-style, Salvi 2015).
 //   Reliable       Zeng et al.: visibility follows shadow motion vectors (eq. 3, splatted to the
-//                  pixels around shadows, alpha^V of eq. 4), is filtered spatially first (a
-//                  separable joint bilateral sized by the penumbra, PCSS-style), its history
-//                  clamped to mu +- 3 sigma and cleaned up with std min(w_A + w_C, 5) (eqs. 7-8);
-//                  glossy follows stochastic glossy motion vectors (eq. 5); diffuse indirect
-//                  follows dual motion vectors (eq. 6) where the traditional ones fail and is
-//                  reused as incident radiance per cone with overlap weights (eqs. 9-11); glossy
-//                  and indirect histories are clamped to mu +- 3 sigma and accumulate before
-//                  their a-trous filter (why: screen_denoiser.cpp).
+//                  pixels around shadows; eq. 4's alpha^V only with shadowFalloff), is filtered
+//                  spatially first (the SpatialOnly a-trous, so that without history it equals the
+//                  other methods), its history clamped to mu +- 3 sigma and cleaned up with std
+//                  min(w_A + w_C, 5) (eqs. 7-8); glossy follows stochastic glossy motion vectors
+//                  (eq. 5); diffuse indirect follows dual motion vectors (eq. 6) where the
+//                  traditional ones fail and is reused as incident radiance per cone with overlap
+//                  weights (eqs. 9-11); glossy and indirect histories are clamped to mu +- 3 sigma
+//                  and accumulate before their a-trous filter (why: screen_denoiser.cpp).
 // Demodulation::On divides glossy by the pre-integrated GGX + Schlick albedo F_beta and diffuse
 // indirect by the albedo before filtering and multiplies them back after (Zhuang et al.).
 //
@@ -58,15 +58,20 @@ enum class MotionKind {
 
 /// Parameters; defaults follow the papers. Validated by the denoiser (InputError).
 struct DenoiserSettings {
-    float alpha = 0.2f;               ///< weight of the current frame in the temporal blend (eq. 2)
-    float baselineClampK = 1.0f;      ///< BaselineClamp: history in mu +- k sigma (3x3)
-    float reliableClampK = 3.0f;      ///< Reliable: history in mu +- k sigma (3x3; Sec. 5)
-    int atrousLevels = 4;             ///< a-trous iterations, steps 1, 2, 4, 8 (1..5)
-    float sigmaLuminance = 4.0f;      ///< SVGF's sigma_l
-    float sigmaDepth = 1.0f;          ///< SVGF's sigma_z (relative to the local depth slope)
-    float normalPower = 128.0f;       ///< SVGF's sigma_n (weight max(0, n.n')^sigma_n)
-    int shadowRadius = 15;            ///< Reliable: reach of the shadow filter (31x31, 1..16)
-    int shadowSplatRadius = 8;        ///< Reliable: window shadow vectors and sizes splat through
+    float alpha = 0.2f;           ///< weight of the current frame in the temporal blend (eq. 2)
+    float baselineClampK = 1.0f;  ///< BaselineClamp: history in mu +- k sigma (3x3)
+    float reliableClampK = 3.0f;  ///< Reliable: history in mu +- k sigma (3x3; Sec. 5)
+    int atrousLevels = 4;         ///< a-trous iterations, steps 1, 2, 4, 8 (1..5)
+    float sigmaLuminance = 4.0f;  ///< SVGF's sigma_l
+    float sigmaDepth = 1.0f;      ///< SVGF's sigma_z (relative to the local depth slope)
+    float normalPower = 128.0f;   ///< SVGF's sigma_n (weight max(0, n.n')^sigma_n)
+    int shadowSplatRadius = 8;    ///< Reliable: window shadow vectors and sizes splat through
+    /// Reliable: eq. 4's non-planarity falloff (alpha^V) on the visibility blend. Off by default:
+    /// it raised the direct-light RMSE on every ghosting scene (temporal experiment, 96x54, 8
+    /// frames, mean direct RMSE with / without: anim_glossy 0.0382 / 0.0334, anim_light 0.0053 /
+    /// 0.0052, anim_shadow 0.0098 / 0.0096, anim_disocclusion 0.0185 / 0.0180), i.e. it sends
+    /// pixels back to the spatial filter where the shadow vectors were usable.
+    bool shadowFalloff = false;
     float shadowFalloffSigma = 0.1f;  ///< Reliable: eq. 4's sigma (radians)
     float glossyLobeScale = 1.0f;     ///< Reliable: glossy lobe's angular std = scale * GGX alpha
     /// Reliable: cap (pixels) on the glossy vector's Gaussian axes. Zeng's Sigma spans the
