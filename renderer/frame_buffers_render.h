@@ -7,8 +7,9 @@
 // * Samples. One camera ray per pixel through the pixel centre (no jitter, no lens, no motion
 //   blur: the guides are exact and noise-free, and projecting `position` with `camera` lands on
 //   the centre). Each of the `spp` samples (default 1: the papers' real-time setting) traces from
-//   that primary hit 32 light samples without rays + one shadow ray, one specular-lobe ray (GGX materials) and
-//   one diffuse-lobe ray, each continued by the path tracer below (NEE + MIS, max_depth).
+//   that primary hit 32 light samples without rays + one shadow ray, one specular-lobe ray (GGX
+//   materials) and one diffuse-lobe ray, each continued by the path tracer below (NEE + MIS,
+//   max_depth).
 // * The split is unbiased: emitted + shading * visibility + glossy + indirect has the path
 //   tracer's expectation (at 1 spp exactly; with spp > 1 see `visibility`). Direct light is
 //   counted once: by the light sample, except that the specular lobe's share is MIS-weighted
@@ -20,8 +21,8 @@
 //   light pick stratified (a distant light's term is exact) and the point on an area light or the
 //   environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
 //   noise-free; its relative per-pixel error at 1 spp is ~5% RMS (FrameBuffers.ShadingIsLowNoise;
-//   one light sample would be about sqrt(32) times noisier). 0 where no light was sampled (no lights, one-sided quad
-//   seen from behind) or every sample lies below the surface.
+//   one light sample would be about sqrt(32) times noisier). 0 where no light was sampled (no
+//   lights, one-sided quad seen from behind) or every sample lies below the surface.
 // * visibility: the 0/1 of one shadow ray, to one of those light samples picked with probability
 //   proportional to its shading's luminance (resampling), so that shading * visibility keeps the
 //   path tracer's expectation (exactly for white light, consistent for coloured: the sample

@@ -789,8 +789,7 @@ TEST(ScreenSpaceKernels, ConeShadingMatchesShadeCones) {
         const glm::vec3 e = f.albedo[i] * ShadeCones(&f.cones[i * kNumCones]);
         ++checked;
         for (int c = 0; c < 3; ++c)
-            if (!(std::fabs(ind[i][c] - e[c]) <= 1e-4f * (1e-3f + std::fabs(e[c]))))
-                ++bad;
+            if (!(std::fabs(ind[i][c] - e[c]) <= 1e-4f * (1e-3f + std::fabs(e[c])))) ++bad;
     }
     EXPECT_GT(checked, int(f.NumPixels() / 2));
     EXPECT_EQ(bad, 0) << "of " << checked;

@@ -627,9 +627,9 @@ void Cleanup(ScreenSpaceDenoiser::State& s, int ci) {
 // and plane accessors cost ~12 ms a frame at 1080p, several times this.
 struct ComposeRowArgs {
     int w;
-    const float* emitted;  // xyz interleaved, or null
-    const float* shading;  // xyz interleaved
-    const float* vis;      // denoised visibility (plane row)
+    const float* emitted;   // xyz interleaved, or null
+    const float* shading;   // xyz interleaved
+    const float* vis;       // denoised visibility (plane row)
     const float* rm[2][3];  // glossy / indirect remodulation factors (null: component absent)
     const float* res[2][3];
     float* out;  // xyz interleaved
@@ -643,8 +643,7 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
         const int n = std::min(kC, a.w - x0);
         for (int i = 0; i < n; ++i) {
             const int x = x0 + i;
-            const float s0 = a.shading[3 * x], s1 = a.shading[3 * x + 1],
-                        s2 = a.shading[3 * x + 2];
+            const float s0 = a.shading[3 * x], s1 = a.shading[3 * x + 1], s2 = a.shading[3 * x + 2];
             // 0 when any channel is NaN/Inf (as Finite(vec3)).
             const float sf = (std::fabs(s0) < 3.0e38f ? 1.0f : 0.0f) *
                              (std::fabs(s1) < 3.0e38f ? 1.0f : 0.0f) *
