@@ -394,15 +394,17 @@ int RunRender(const RenderArgs& a) {
 
     if (a.demodulate && a.denoise.empty())
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    // What every kind of render takes from the settings.
+    RenderOptions common;
+    common.width = s.width;
+    common.height = s.height;
+    common.spp = s.spp;
+    common.seed = s.seed;
+    common.maxDepth = s.maxDepth;
+    common.frameTime = s.time;
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
         // Frame buffers are always the path tracer's split, whatever the scene's integrator.
-        RenderOptions fbo;
-        fbo.width = s.width;
-        fbo.height = s.height;
-        fbo.spp = s.spp;
-        fbo.seed = s.seed;
-        fbo.maxDepth = s.maxDepth;
-        fbo.frameTime = s.time;
+        RenderOptions fbo = common;
         fbo.texture = ParseTextureOptions(a);
         fbo.progress = false;
         int first = 0, last = 0;
@@ -412,20 +414,14 @@ int RunRender(const RenderArgs& a) {
             return RunDenoised(a, scene, fbo, a.spp != kUnset, !a.frames.empty(), first, last, fps);
         return RunFrameBuffers(a, scene, fbo, a.spp != kUnset, first, last, fps);
     }
-    RenderOptions opt;
+    RenderOptions opt = common;
     opt.integrator = ParseIntegrator(s.integrator, a.integrator.empty()
                                                        ? scene.path + ": key 'render.integrator'"
                                                        : "--integrator");
-    opt.width = s.width;
-    opt.height = s.height;
-    opt.spp = s.spp;
     opt.seconds = s.seconds;
-    opt.seed = s.seed;
-    opt.maxDepth = s.maxDepth;
     opt.aoSamples = s.aoSamples;
     opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
     opt.aoDistance = s.aoDistance;
-    opt.frameTime = s.time;
     opt.aovs = ParseAovs(a.aovs);
     opt.texture = ParseTextureOptions(a);
     opt.progress = !a.quiet;
