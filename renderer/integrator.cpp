@@ -626,19 +626,15 @@ glm::vec3 SplitAtHit(const Context& c, int x, int y, int s, Rng& rng, LiFn&& li)
     return sum / float(n);
 }
 
-glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCounts& rays) {
-    Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
-    glm::vec2 jitter = rng.Next2D();
+/// The camera ray of pixel sample (x, y, s); `rng` continues the sample's random stream after it.
+/// Every pass that traces a sample (the visibility prepass, the shading pass) gets the same ray.
+Ray CameraRay(const Context& c, int x, int y, int s, Rng* rng, RayDifferentials* diff) {
+    *rng = Rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
+    glm::vec2 jitter = rng->Next2D();
     if (c.opt.pixelCentre) jitter = glm::vec2(0.5f);  // drawn anyway: same streams either way
-    const glm::vec2 lens = rng.Next2D();
-    const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
-    // Differentials feed the cache's mip selection and the debug views; skip them otherwise.
-    const bool needDiff = c.tsc != nullptr || c.opt.integrator == IntegratorKind::Normal ||
-                          c.opt.integrator == IntegratorKind::Ptex ||
-                          c.opt.integrator == IntegratorKind::Uv;
-    RayDifferentials diff;
-    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens,
-                                needDiff ? &diff : nullptr);
+    const glm::vec2 lens = rng->Next2D();
+    const float time = c.shutterLength > 0.0f ? rng->Next1D() : 0.0f;
+    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, diff);
     if (c.cameraMoves) {
         // Camera motion blur: blend the rays of the open and close poses (rigid, short shutter).
         const Ray r1 =
@@ -647,6 +643,17 @@ glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCount
         ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
     }
     ray.time = time;
+    return ray;
+}
+
+glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCounts& rays) {
+    // Differentials feed the cache's mip selection and the debug views; skip them otherwise.
+    const bool needDiff = c.tsc != nullptr || c.opt.integrator == IntegratorKind::Normal ||
+                          c.opt.integrator == IntegratorKind::Ptex ||
+                          c.opt.integrator == IntegratorKind::Uv;
+    RayDifferentials diff;
+    Rng rng(0, 0);
+    const Ray ray = CameraRay(c, x, y, s, &rng, needDiff ? &diff : nullptr);
     ++rays.camera;
     Hit hit;
     const bool found = c.rs.Intersect(ray, &hit);
@@ -725,24 +732,10 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x)
             for (int s = s0; s < s1; ++s) {
-                Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
-                glm::vec2 jitter = rng.Next2D();
-                if (c.opt.pixelCentre) jitter = glm::vec2(0.5f);
-                const glm::vec2 lens = rng.Next2D();
-                const float time = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
-                Pending p{Ray{}, Hit{}, rng, y * c.opt.width + x, false, {}};
-                Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens,
-                                            c.tsc ? &p.diff : nullptr);
-                if (c.cameraMoves) {
-                    const Ray r1 = c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y,
-                                                           lens, nullptr);
-                    ray.org = glm::mix(ray.org, r1.org, time);
-                    ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
-                }
-                ray.time = time;
+                Pending p{Ray{}, Hit{}, Rng(0, 0), y * c.opt.width + x, false, {}};
+                p.ray = CameraRay(c, x, y, s, &p.rng, c.tsc ? &p.diff : nullptr);
                 ++rays.camera;
-                p.ray = ray;
-                p.found = c.rs.Intersect(ray, &p.hit);
+                p.found = c.rs.Intersect(p.ray, &p.hit);
                 queue.push_back(p);
             }
     auto add = [&](const Pending& p, glm::vec3 L) {
@@ -791,6 +784,39 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         add(p, L);
     }
 }
+
+/// The visibility prepass of a tile (see texcache/visible_texels.h): marks the texel each camera
+/// sample lands on, with the rays, differentials and texel selection of the shading pass.
+void MarkVisibleTexels(const Context& c, VisibleTexels& visible, int y0, int y1, int x0, int x1,
+                       int s0, int s1, RayCounts& rays) {
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x)
+            for (int s = s0; s < s1; ++s) {
+                Rng rng(0, 0);
+                RayDifferentials diff;
+                const Ray ray = CameraRay(c, x, y, s, &rng, &diff);
+                ++rays.camera;
+                Hit hit;
+                if (!c.rs.Intersect(ray, &hit) || hit.object < 0) continue;
+                visible.Mark(TexelOf(c, c.rs.Interact(ray, hit, &diff)).key);
+            }
+}
+
+/// Restricts a cache's footprints for the duration of a render (whatever way it ends).
+class FootprintRestriction {
+public:
+    FootprintRestriction(RenderShadingCache* cache, const VisibleTexels* visible) : cache_(cache) {
+        if (cache_) cache_->RestrictFootprints(visible);
+    }
+    ~FootprintRestriction() {
+        if (cache_) cache_->RestrictFootprints(nullptr);
+    }
+    FootprintRestriction(const FootprintRestriction&) = delete;
+    FootprintRestriction& operator=(const FootprintRestriction&) = delete;
+
+private:
+    RenderShadingCache* cache_;
+};
 
 /// Prints a progress bar on stderr once a render has run for a second.
 class Progress {
@@ -882,6 +908,12 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         ctx.cacheStats = &cacheStats;
     }
     const int W = opt.width, H = opt.height;
+    // Footprints of visible texels only: the prepass of each pass below marks them.
+    VisibleTexels* visible = ctx.tsc && opt.texture.visibleFootprints &&
+                                     opt.texture.constantTerm < 0.0f && ctx.tsc->AnyFootprint()
+                                 ? &ctx.tsc->Visibility(W, H)
+                                 : nullptr;
+    const FootprintRestriction restriction(visible ? &ctx.tsc->cache() : nullptr, visible);
     const size_t numPixels = size_t(W) * H;
     if (opt.pixelCache) {
         opt.pixelCache->assign(numPixels, PixelCacheCounts{});
@@ -911,6 +943,15 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         while (done < sppCap) {
             const int s0 = done, s1 = std::min(sppCap, done + passSpp);
             const auto passStart = Clock::now();
+            if (visible)
+                tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
+                                  [&](const tbb::blocked_range2d<int>& r) {
+                                      _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                                      _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                                      MarkVisibleTexels(ctx, *visible, r.rows().begin(),
+                                                        r.rows().end(), r.cols().begin(),
+                                                        r.cols().end(), s0, s1, counts.local());
+                                  });
             tbb::parallel_for(
                 tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
                 [&](const tbb::blocked_range2d<int>& r) {

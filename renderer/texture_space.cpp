@@ -2,6 +2,7 @@
 #include "renderer/texture_space.h"
 
 #include <algorithm>
+#include <bit>
 #include <string>
 
 #include "texcache/error.h"
@@ -40,6 +41,22 @@ void CheckOptions(const TextureSpaceOptions& options) {
 
 bool TextureSpaceCache::Uses(TextureFilterKind kind) const {
     return std::find(filterOf_.begin(), filterOf_.end(), kind) != filterOf_.end();
+}
+
+bool TextureSpaceCache::AnyFootprint() const {
+    for (size_t o = 0; o < filterOf_.size(); ++o)
+        if (filterOf_[o] != TextureFilterKind::None && radiusOf_[o] > 0) return true;
+    return false;
+}
+
+VisibleTexels& TextureSpaceCache::Visibility(int width, int height) {
+    const size_t words = std::clamp<size_t>(std::bit_ceil(size_t(width) * size_t(height) / 4),
+                                            size_t(1) << 12, size_t(1) << 21);
+    if (!visible_ || visible_->Bytes() != words * sizeof(uint64_t))
+        visible_ = std::make_unique<VisibleTexels>(words * sizeof(uint64_t));
+    else
+        visible_->Clear();
+    return *visible_;
 }
 
 void TextureSpaceCache::BeginFrame(uint32_t frame) {

@@ -11,6 +11,7 @@
 #include "renderer/render_scene.h"
 #include "texcache/shading_cache.h"
 #include "texcache/temporal_history.h"
+#include "texcache/visible_texels.h"
 
 namespace texcache {
 
@@ -28,6 +29,10 @@ struct TextureSpaceOptions {
     /// for soft lighting (environment, large area lights) and off by default.
     bool cacheDirect = false;
     int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
+    /// Footprints keep only the texels the render's camera rays land on (a prepass traces the
+    /// camera rays and marks them: see texcache/visible_texels.h) instead of every texel of the
+    /// window, so a wide filter shades no more samples than no filter. --footprint visible|all.
+    bool visibleFootprints = true;
     /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
     /// keep a history table the size of the texel cache.
     float temporalAlpha = 0.0f;
@@ -71,6 +76,12 @@ public:
     int RadiusOf(int object) const { return radiusOf_[object]; }
     /// Whether any object uses a filter (e.g. to skip what only that filter needs).
     bool Uses(TextureFilterKind kind) const;
+    /// Whether any object's filter reads more than its centre texel.
+    bool AnyFootprint() const;
+    /// The visibility set for a render of width x height pixels, empty: about a quarter of a
+    /// word per pixel (see visible_texels.h), between 32 KB and 16 MB; kept from render to
+    /// render and only reallocated when the size changes.
+    VisibleTexels& Visibility(int width, int height);
 
     /// Takes new options and starts empty, keeping the cache storage when its layout is the same
     /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
@@ -88,8 +99,11 @@ public:
     glm::vec3 Accumulate(const TexelKey& key, glm::vec3 value) {
         return history_ ? history_->Blend(key, frame_, value) : value;
     }
-    /// Bytes of all cache storage (sample and texel caches, temporal history).
-    size_t BytesUsed() const { return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0); }
+    /// Bytes of all cache storage (sample and texel caches, temporal history, visibility set).
+    size_t BytesUsed() const {
+        return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0) +
+               (visible_ ? visible_->Bytes() : 0);
+    }
 
 private:
     void AssignFilters(const Scene& scene);
@@ -102,6 +116,7 @@ private:
     std::vector<TextureFilterKind> filterOf_;
     std::vector<int> radiusOf_;
     std::unique_ptr<TemporalHistory<glm::vec3>> history_;
+    std::unique_ptr<VisibleTexels> visible_;
     uint32_t frame_ = 0;
 };
 

@@ -244,10 +244,12 @@ TEST(Preview, OvershadingViewShowsWhereFootprintsShadeSamples) {
     ASSERT_EQ(Shell("command -v xvfb-run").exitCode, 0) << "xvfb-run is not installed";
     const fs::path dir = TempDir("overshading");
     const fs::path shot = dir / "shot.png";
-    // A 5x5 normal-filter footprint on a cold cache: misses shade up to 25 samples each.
+    // A 5x5 normal-filter footprint on a cold cache, every texel of the window (the paper's
+    // footprint): misses shade up to 25 samples each.
     const ShellResult r = Headless(kScene,
                                    "--view overshading --filter normal --filter-radius 2 "
-                                   "--frames 1 --resolution 128x128 --screenshot " +
+                                   "--footprint all --frames 1 --resolution 128x128 "
+                                   "--screenshot " +
                                        shot.string());
     ASSERT_EQ(r.exitCode, 0) << r.output;
     const std::string key = "overshading scale: 0 to ";
@@ -275,6 +277,16 @@ TEST(Preview, OvershadingViewShowsWhereFootprintsShadeSamples) {
     EXPECT_GT(double(geometry), 0.4 * n) << r.output;
     EXPECT_GT(double(cold), 0.05 * n) << r.output;
     EXPECT_GT(double(hot), 0.05 * n) << r.output;
+    // Footprints of visible texels only (the default) shade at most as much per pixel.
+    const ShellResult rv = Headless(kScene,
+                                    "--view overshading --filter normal --filter-radius 2 "
+                                    "--footprint visible --frames 1 --resolution 128x128 "
+                                    "--screenshot " +
+                                        (dir / "visible.png").string());
+    ASSERT_EQ(rv.exitCode, 0) << rv.output;
+    const size_t atVisible = rv.output.find(key);
+    ASSERT_NE(atVisible, std::string::npos) << rv.output;
+    EXPECT_LE(std::atof(rv.output.c_str() + atVisible + key.size()), top) << rv.output;
     fs::remove_all(dir);
 }
 

@@ -26,6 +26,27 @@ Scene TorusOnPlane() {
     return s;
 }
 
+RenderOptions AoOptions(int spp, int aoSamples);
+
+// AO cached in texture space with filter f.
+RenderOptions CachedAo(int spp, int aoSamples, TextureFilterKind f) {
+    RenderOptions o = AoOptions(spp, aoSamples);
+    o.texture.enabled = true;
+    o.texture.filter = f;
+    return o;
+}
+
+// TorusOnPlane() ready for AO (no lights), built once for the tests that only render it.
+const RenderScene& TorusAo() {
+    static const Scene scene = TorusOnPlane();
+    static const RenderScene rs(scene, [] {
+        RenderSceneOptions ro;
+        ro.needLights = false;
+        return ro;
+    }());
+    return rs;
+}
+
 RenderOptions AoOptions(int spp, int aoSamples) {
     RenderOptions o;
     o.integrator = IntegratorKind::AO;
@@ -43,14 +64,9 @@ RenderOptions AoOptions(int spp, int aoSamples) {
 // noise at silhouettes cancels) and 64 rays per cached sample converges to it up to the
 // quantization of shading to texel centres: relMSE below 0.006 (measured 0.0029).
 TEST(TextureSpace, OneByOneFilterConvergesToPerHitShading) {
-    const Scene s = TorusOnPlane();
-    RenderSceneOptions ro;
-    ro.needLights = false;
-    const RenderScene rs(s, ro);
+    const RenderScene& rs = TorusAo();
     const Image ref = Render(rs, AoOptions(64, 16)).beauty;
-    RenderOptions o = AoOptions(64, 64);
-    o.texture.enabled = true;
-    o.texture.filter = TextureFilterKind::None;
+    RenderOptions o = CachedAo(64, 64, TextureFilterKind::None);
     const RenderResult cached = Render(rs, o);
     const double e = RelMSE(cached.beauty, ref);
     RecordProperty("relMSE", std::to_string(e));
@@ -66,14 +82,9 @@ TEST(TextureSpace, OneByOneFilterConvergesToPerHitShading) {
 // cache: the normal-weighted 13x13 and 21x21 Gaussian average ~100 samples per texel on smooth
 // regions, the regression up to 17x17 where its error estimate allows (at least 2x lower relMSE).
 TEST(TextureSpace, FiltersLowerErrorAtEqualSamples) {
-    const Scene s = TorusOnPlane();
-    RenderSceneOptions ro;
-    ro.needLights = false;
-    const RenderScene rs(s, ro);
+    const RenderScene& rs = TorusAo();
     const Image ref = Render(rs, AoOptions(256, 8)).beauty;
-    RenderOptions o = AoOptions(4, 2);
-    o.texture.enabled = true;
-    o.texture.filter = TextureFilterKind::None;
+    RenderOptions o = CachedAo(4, 2, TextureFilterKind::None);
     const double none = RelMSE(Render(rs, o).beauty, ref);
     for (TextureFilterKind f :
          {TextureFilterKind::Normal, TextureFilterKind::Gaussian, TextureFilterKind::Regression}) {
@@ -83,13 +94,45 @@ TEST(TextureSpace, FiltersLowerErrorAtEqualSamples) {
     }
 }
 
+// Footprints of visible texels only (texcache/visible_texels.h): the 13x13 normal filter then
+// shades little more than the 1x1 render (the texels the camera rays reach), not every texel of
+// each window, at an error close to the full window's.
+TEST(TextureSpace, VisibleFootprintsShadeWhatTheCameraSees) {
+    const RenderScene& rs = TorusAo();
+    const Image ref = Render(rs, AoOptions(256, 8)).beauty;
+    RenderOptions o = CachedAo(4, 4, TextureFilterKind::None);
+    const RenderResult none = Render(rs, o);
+    o.texture.filter = TextureFilterKind::Normal;
+    o.texture.visibleFootprints = false;
+    const RenderResult all = Render(rs, o);
+    o.texture.visibleFootprints = true;
+    const RenderResult visible = Render(rs, o);
+    const double eNone = RelMSE(none.beauty, ref), eAll = RelMSE(all.beauty, ref),
+                 eVisible = RelMSE(visible.beauty, ref);
+    const double nNone = double(none.stats.cache.samplesShaded),
+                 nAll = double(all.stats.cache.samplesShaded),
+                 nVisible = double(visible.stats.cache.samplesShaded);
+    RecordProperty("samples", std::to_string(nNone) + " / " + std::to_string(nAll) + " / " +
+                                  std::to_string(nVisible));
+    RecordProperty("relMSE", std::to_string(eNone) + " / " + std::to_string(eAll) + " / " +
+                                 std::to_string(eVisible));
+    EXPECT_EQ(none.stats.cache.tapsUnseen, 0u);  // no footprint, no prepass
+    EXPECT_EQ(all.stats.cache.tapsUnseen, 0u);
+    EXPECT_GT(visible.stats.cache.tapsUnseen, 0u);
+    // Measured: samples 6416 / 21147 / 6813 (1x1 / all / visible), relMSE 0.079 / 0.0336 /
+    // 0.0354.
+    EXPECT_LT(nVisible, 0.5 * nAll) << nNone << " " << nAll << " " << nVisible;
+    EXPECT_LT(nVisible, 1.25 * nNone) << nNone << " " << nAll << " " << nVisible;
+    EXPECT_LT(eVisible, 0.5 * eNone) << eNone << " " << eAll << " " << eVisible;
+    EXPECT_LT(eVisible, 1.2 * eAll) << eNone << " " << eAll << " " << eVisible;
+    // The prepass traces each camera sample once more.
+    EXPECT_EQ(visible.stats.cameraRays, 2 * all.stats.cameraRays);
+}
+
 // Samples are shaded with a random stream derived from their key, so the image is the same
 // whichever thread shades what (bit-exact), even with a cache small enough to evict.
 TEST(TextureSpace, DeterministicAcrossThreadCounts) {
-    const Scene s = TorusOnPlane();
-    RenderSceneOptions ro;
-    ro.needLights = false;
-    const RenderScene rs(s, ro);
+    const RenderScene& rs = TorusAo();
     RenderOptions o = AoOptions(4, 4);
     o.texture.enabled = true;
     o.texture.cache.sampleCacheBytes = 256 * 1024;
@@ -109,10 +152,7 @@ TEST(TextureSpace, DeterministicAcrossThreadCounts) {
 // few that share a slot with another visible texel (direct mapping: ~n^2/2m pairs for n texels
 // in m slots, here ~7 of 2600).
 TEST(TextureSpace, WarmCacheHitsEveryTexelOnTheSecondFrame) {
-    const Scene s = TorusOnPlane();
-    RenderSceneOptions ro;
-    ro.needLights = false;
-    const RenderScene rs(s, ro);
+    const RenderScene& rs = TorusAo();
     RenderOptions o = AoOptions(1, 4);
     o.texture.enabled = true;
     TextureSpaceCache cache(rs, o.texture);
@@ -130,10 +170,7 @@ TEST(TextureSpace, WarmCacheHitsEveryTexelOnTheSecondFrame) {
 // equals a render with a freshly built cache (bit-exact: samples draw from per-key streams), for
 // a change of filter and radius. A different layout (cache size) is refused and changes nothing.
 TEST(TextureSpace, ReconfiguredCacheRendersLikeANewOne) {
-    const Scene s = TorusOnPlane();
-    RenderSceneOptions ro;
-    ro.needLights = false;
-    const RenderScene rs(s, ro);
+    const RenderScene& rs = TorusAo();
     RenderOptions o = AoOptions(2, 4);
     o.texture.enabled = true;
     o.texture.cache.sampleCacheBytes = o.texture.cache.texelCacheBytes = size_t(1) << 20;
@@ -267,14 +304,9 @@ TEST(TextureSpace, VeryLargeCoordinatesStayFinite) {
 // by 2x from seed to seed. (alpha = 0.7 averages ~(1 + a) / (1 - a) = 5.7 frames in steady
 // state; the bound asks for a 2x lower MSE.)
 TEST(TextureSpace, TemporalAccumulationLowersErrorOnAStaticScene) {
-    const Scene s = TorusOnPlane();
-    RenderSceneOptions ro;
-    ro.needLights = false;
-    const RenderScene rs(s, ro);
+    const RenderScene& rs = TorusAo();
     const Image ref = Render(rs, AoOptions(256, 8)).beauty;
-    RenderOptions o = AoOptions(4, 1);
-    o.texture.enabled = true;
-    o.texture.filter = TextureFilterKind::None;
+    RenderOptions o = CachedAo(4, 1, TextureFilterKind::None);
     const double single = RMSE(Render(rs, o).beauty, ref);
     o.texture.temporalAlpha = 0.7f;
     TextureSpaceCache cache(rs, o.texture);

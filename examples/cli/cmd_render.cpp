@@ -48,6 +48,7 @@ struct RenderArgs {
     std::string shading = "hit";
     std::string filter = "normal";
     int filterRadius = -1;  // -1: the filter's own default (DefaultFilterRadius)
+    std::string footprint = "visible";
     int shadowSamples = 4;
     float temporalAlpha = 0.0f;
     // Animation: frames "A:B" (inclusive) or "N" (frames 0..N-1) at fps.
@@ -78,6 +79,10 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     t.filter = ParseTextureFilter(a.filter, "--filter");
     if (a.filterRadius != -1) CheckFilterRadius(a.filterRadius, "--filter-radius");
     t.radius = a.filterRadius;
+    if (a.footprint != "visible" && a.footprint != "all")
+        throw InputError("--footprint",
+                         "unknown value '" + a.footprint + "' (valid: visible, all)");
+    t.visibleFootprints = a.footprint == "visible";
     t.shadowSamples = CheckRange("--shadow-samples", a.shadowSamples, 1, 1 << 16);
     if (a.temporalAlpha != 0.0f) {
         if (!(a.temporalAlpha > 0.0f && a.temporalAlpha < 1.0f))
@@ -132,6 +137,7 @@ void WriteStatsJson(const std::string& path, const RenderStats& s, const Texture
     add("sample_evictions", double(c.sampleEvictions));
     add("samples_uncached", double(c.samplesUncached));
     add("sample_memo_hits", double(c.sampleMemoHits));
+    add("taps_unseen", double(c.tapsUnseen));
     add("deferrals", double(c.deferrals));
     add("waits", double(c.waits));
     add("reference_mode", opt.texture.cache.referenceMode ? 1.0 : 0.0);
@@ -555,6 +561,10 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--filter-radius", args->filterRadius,
                     "Footprint radius r: (2r+1)^2 samples (default: the paper's for the filter: "
                     "none 0, normal 6, gaussian 10, regression 8, softshadow 8)");
+    cmd->add_option("--footprint", args->footprint,
+                    "Filter footprints: visible (only texels the camera rays reach, marked by a "
+                    "prepass) or all (every texel of the window, as the paper)")
+        ->capture_default_str();
     cmd->add_option("--shadow-samples", args->shadowSamples,
                     "Shadow rays per cached visibility sample (--filter softshadow)")
         ->capture_default_str();

@@ -433,6 +433,11 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         if (NameCombo("default filter", ui.filters, &filter))
             s.filter = ParseTextureFilter(ui.filters[filter], "filter");
         ImGui::SliderInt("radius", &s.radius, 0, 32);
+        ImGui::Checkbox("visible footprints only", &s.visibleFootprints);
+        if (ImGui::IsItemHovered())
+            ImGui::SetTooltip(
+                "Footprints shade only texels this frame's camera rays reach "
+                "(a prepass marks them); off: every texel of the window");
         ImGui::SliderFloat("LOD bias", &s.lodBias, -4.0f, 8.0f, "%.2f");
         ImGui::SliderFloat("sample cache MiB", &s.sampleCacheMb, 1.0f, 1024.0f, "%.0f",
                            ImGuiSliderFlags_Logarithmic);

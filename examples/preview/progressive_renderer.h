@@ -48,6 +48,7 @@ struct PreviewSettings {
     bool textureSpace = true;
     TextureFilterKind filter = TextureFilterKind::None;
     int radius = 0;
+    bool visibleFootprints = true;  ///< footprints of texels the frame's camera rays reach only
     std::vector<std::string> materialFilter;  ///< per material; "" = the default filter
     std::vector<int> materialRadius;          ///< per material; -1 = the default radius
     float sampleCacheMb = 64.0f, texelCacheMb = 64.0f;

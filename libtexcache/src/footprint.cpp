@@ -2,6 +2,7 @@
 #include "texcache/footprint.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <string>
 
@@ -145,8 +146,8 @@ void RemoveDuplicateTexels(std::vector<FootprintSample>* out) {
 
 }  // namespace
 
-void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
-                     std::vector<FootprintSample>* out) {
+int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
+                    std::vector<FootprintSample>* out, const VisibleTexels* visible) {
     out->clear();
     mip = g.ClampMip(face, mip);
     const int res = g.Res(face, mip);
@@ -160,19 +161,50 @@ void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int 
         out->resize(size_t(side) * size_t(side));
         FootprintSample* o = out->data();
         const float inv = 1.0f / float(res);  // exact: res is a power of two
+        if (!visible) {
+            for (int dy = -radius; dy <= radius; ++dy) {
+                const float v = (float(iv + dy) + 0.5f) * inv;
+                for (int dx = -radius; dx <= radius; ++dx, ++o) {
+                    o->key = {gface, uint8_t(mip), uint16_t(iu + dx), uint16_t(iv + dy)};
+                    o->dx = int16_t(dx), o->dy = int16_t(dy);
+                    o->u = (float(iu + dx) + 0.5f) * inv;
+                    o->v = v;
+                }
+            }
+            return 0;
+        }
+        // Visible taps only: per row, the marks of each 8x8 block it crosses, then one tap per
+        // set bit (the work follows the visible taps, with no unpredictable branch per tap).
+        const int x0 = iu - radius, x1 = iu + radius;
         for (int dy = -radius; dy <= radius; ++dy) {
-            const float v = (float(iv + dy) + 0.5f) * inv;
-            for (int dx = -radius; dx <= radius; ++dx, ++o) {
-                o->key = {gface, uint8_t(mip), uint16_t(iu + dx), uint16_t(iv + dy)};
-                o->dx = int16_t(dx), o->dy = int16_t(dy);
-                o->u = (float(iu + dx) + 0.5f) * inv;
-                o->v = v;
+            const int y = iv + dy;
+            const float v = (float(y) + 0.5f) * inv;
+            TexelKey k{gface, uint8_t(mip), 0, uint16_t(y)};
+            for (int b = x0 >> 3; b <= x1 >> 3; ++b) {
+                k.iu = uint16_t(b << 3);
+                uint32_t m = uint32_t(visible->BlockBits(k) >> ((y & 7) * 8)) & 0xFFu;
+                const int lo = std::max(x0 - (b << 3), 0), hi = std::min(x1 - (b << 3), 7);
+                m &= (0xFFu << lo) & (0xFFu >> (7 - hi));
+                if (dy == 0 && b == iu >> 3) m |= 1u << (iu & 7);  // the centre, always
+                for (; m; m &= m - 1) {
+                    const int x = (b << 3) + std::countr_zero(m);
+                    o->key = {gface, uint8_t(mip), uint16_t(x), uint16_t(y)};
+                    o->dx = int16_t(x - iu), o->dy = int16_t(dy);
+                    o->u = (float(x) + 0.5f) * inv;
+                    o->v = v;
+                    ++o;
+                }
             }
         }
-        return;
+        const size_t kept = size_t(o - out->data());
+        out->resize(kept);
+        return side * side - int(kept);
     }
-    // Walk: u first (a row of walkers, one per dx), then v from each of them.
+    // Walk: u first (a row of walkers, one per dx), then v from each of them. Unseen taps are
+    // dropped as they are reached (a texel is seen or not whichever walk reaches it, so this
+    // commutes with removing duplicates).
     const Walker centre{face, mip, res, float(iu) + 0.5f, float(iv) + 0.5f, {{1, 0}, {0, 1}}};
+    int unseen = 0;
     for (int sign : {-1, 1}) {
         Walker row = centre;
         for (int dx = (sign < 0 ? 0 : 1); dx <= radius; ++dx) {
@@ -181,7 +213,12 @@ void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int 
                 Walker col = row;
                 for (int dy = (vs < 0 ? 0 : 1); dy <= radius; ++dy) {
                     if (dy > 0 && !Step(g, mip, &col, 1, vs)) break;
-                    out->push_back(Emit(g, col, sign * dx, vs * dy));
+                    const FootprintSample t = Emit(g, col, sign * dx, vs * dy);
+                    if (visible && (dx | dy) != 0 && !visible->Contains(t.key)) {
+                        ++unseen;
+                        continue;
+                    }
+                    out->push_back(t);
                 }
             }
         }
@@ -189,6 +226,7 @@ void GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int 
     // Around extraordinary vertices two walks can end in the same texel: keep the one with the
     // smallest offset.
     RemoveDuplicateTexels(out);
+    return unseen;
 }
 
 }  // namespace texcache

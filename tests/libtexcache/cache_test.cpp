@@ -4,12 +4,14 @@
 // ShadingCache (reference mode shades each sample once).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
 #include <mutex>
 #include <new>
+#include <random>
 #include <set>
 #include <thread>
 #include <unordered_map>
@@ -20,6 +22,7 @@
 #include "texcache/shading_cache.h"
 #include "texcache/texel_key.h"
 #include "texcache/topology.h"
+#include "texcache/visible_texels.h"
 
 // Counts heap allocations in this test binary (for the no-allocation-per-lookup test). GCC warns
 // that free() does not match new: it does here, this is the replacement of both.
@@ -303,6 +306,99 @@ TEST(Footprint, AroundExtraordinaryVerticesEachSampleOnce) {
         for (int r : {1, 4, 8}) ExpectWellFormedFootprint(pent, f, 0, 0, 0, r);
 }
 
+// ---- Visible texels (visible_texels.h) ----
+
+TEST(VisibleTexels, NeverMissesAMarkAndRarelyInventsOne) {
+    // 20000 random texels in a 64 KB table (8192 words): a marked texel is always found; an
+    // unmarked one only where its 8x8 block shares a word with a marked block.
+    VisibleTexels vis(64 << 10);
+    EXPECT_EQ(vis.Bytes(), size_t(64) << 10);
+    std::mt19937 rng(7);
+    auto randomKey = [&] {
+        return TexelKey{uint32_t(rng() % 5000), uint8_t(rng() % 8), uint16_t(rng() % 4096),
+                        uint16_t(rng() % 4096)};
+    };
+    std::set<uint64_t> marked;
+    for (int i = 0; i < 20000; ++i) {
+        const TexelKey k = randomKey();
+        vis.Mark(k);
+        marked.insert(k.Pack());
+    }
+    for (uint64_t k : marked) ASSERT_TRUE(vis.Contains(TexelKey::Unpack(k)));
+    int falsePositives = 0, tested = 0;
+    for (int i = 0; i < 20000; ++i) {
+        const TexelKey k = randomKey();
+        if (marked.count(k.Pack())) continue;
+        ++tested, falsePositives += vis.Contains(k);
+    }
+    // ~20000 of 8192 words hold a mark (most words): a random texel of an unmarked block hits a
+    // set bit with probability about 1 - exp(-20000 / 8192 / 64) = 3.7%.
+    EXPECT_LT(double(falsePositives) / tested, 0.08);
+    vis.Clear();
+    for (uint64_t k : marked) ASSERT_FALSE(vis.Contains(TexelKey::Unpack(k)));
+}
+
+TEST(VisibleTexels, ConcurrentMarksAreAllKept) {
+    // Four threads mark interleaved texels of the same blocks (the same words): fetch_or keeps
+    // every bit. Run under ThreadSanitizer by scripts/test.sh (label `cache`).
+    VisibleTexels vis(4096);
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+        threads.emplace_back([&, t] {
+            for (int i = t; i < 64 * 64; i += 4)
+                vis.Mark({3, 2, uint16_t(i % 64), uint16_t(i / 64)});
+        });
+    for (auto& th : threads) th.join();
+    for (int i = 0; i < 64 * 64; ++i)
+        ASSERT_TRUE(vis.Contains({3, 2, uint16_t(i % 64), uint16_t(i / 64)})) << i;
+}
+
+// A restricted footprint is the unrestricted one filtered by the set (plus the centre), in the
+// same order, inside a face, across edges and around extraordinary vertices; the return value
+// counts what was left out.
+TEST(VisibleTexels, RestrictedFootprintIsTheVisibleSubset) {
+    for (int valence : {3, 4, 5, 8}) {
+        const ControlCage c = valence == 3   ? test::CubeCage()
+                              : valence == 4 ? test::GridCage(4)
+                                             : test::FanCage(valence);
+        const MeshGrids g(c, 0.02f, 10);
+        VisibleTexels vis(1 << 16);
+        std::mt19937 rng(valence);
+        std::vector<FootprintSample> all, seen;
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            const int mip = 0, res = g.Res(f, mip);
+            // Mark a random half of the face's texels (and none of some faces).
+            if (f % 3 != 2)
+                for (int v = 0; v < res; ++v)
+                    for (int u = 0; u < res; ++u)
+                        if (rng() & 1)
+                            vis.Mark({g.FaceOffset() + uint32_t(f), 0, uint16_t(u), uint16_t(v)});
+        }
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            const int res = g.Res(f, 0);
+            for (int r : {0, 2, 10})
+                for (auto [iu, iv] : {std::pair{0, 0}, {res / 2, res / 2}, {res - 1, 3}}) {
+                    GatherFootprint(g, f, 0, iu, iv, r, &all);
+                    const int unseen = GatherFootprint(g, f, 0, iu, iv, r, &seen, &vis);
+                    std::vector<FootprintSample> expect;
+                    for (const FootprintSample& t : all)
+                        if ((t.dx == 0 && t.dy == 0) || vis.Contains(t.key)) expect.push_back(t);
+                    ASSERT_EQ(seen.size(), expect.size()) << "face " << f << " r " << r;
+                    for (size_t i = 0; i < seen.size(); ++i) {
+                        EXPECT_EQ(seen[i].key, expect[i].key);
+                        EXPECT_EQ(seen[i].dx, expect[i].dx);
+                        EXPECT_EQ(seen[i].dy, expect[i].dy);
+                        EXPECT_EQ(seen[i].u, expect[i].u);
+                    }
+                    // Walks that reach a texel twice are counted twice when it is unseen.
+                    EXPECT_GE(unseen, int(all.size() - seen.size()));
+                    EXPECT_TRUE(std::any_of(seen.begin(), seen.end(),
+                                            [](auto& t) { return t.dx == 0 && t.dy == 0; }));
+                }
+        }
+    }
+}
+
 TEST(MeshGrids, ResolutionFollowsAreaAndRejectsKeyOverflow) {
     const MeshGrids g(test::GridCage(2), 1.0f / 32.0f, 0);  // unit faces, 1/32 texels -> 32 = 2^5
     for (int f = 0; f < g.NumFaces(); ++f) EXPECT_EQ(g.Log2Res(f), 5);
@@ -317,6 +413,41 @@ struct AoSample {
     float value;
     float n[3];
 };
+
+TEST(ShadingCache, RestrictedFootprintsShadeOnlyVisibleSamples) {
+    ShadingCache<AoSample, float> cache(CacheSettings{});
+    const int mesh = cache.AddMesh(test::GridCage(4), 1.0f / 16.0f);
+    VisibleTexels vis(1 << 12);
+    // Visible: a 3x3 block around texel (8, 8) of face 5 and the far texel (3, 14).
+    const uint32_t face = cache.Mesh(mesh).FaceOffset() + 5;
+    for (int dv = -1; dv <= 1; ++dv)
+        for (int du = -1; du <= 1; ++du) vis.Mark({face, 0, uint16_t(8 + du), uint16_t(8 + dv)});
+    vis.Mark({face, 0, 3, 14});
+    std::set<uint64_t> shaded;
+    auto shade = [&](const SampleRequest& r) {
+        shaded.insert(r.key.Pack());
+        return AoSample{1.0f, {0, 0, 1}};
+    };
+    size_t taps = 0;
+    auto filter = [&](const FilterInput<AoSample>& in) {
+        taps = in.samples.size();
+        return in.samples[in.centre].value;
+    };
+    cache.RestrictFootprints(&vis);
+    CacheStats st;
+    const SampleRequest centre{mesh, 5, 0, (8.5f) / 16.0f, 8.5f / 16.0f, {face, 0, 8, 8}};
+    cache.LookupTexel(centre, 6, shade, filter, st);
+    EXPECT_EQ(taps, 10u);  // the 3x3 block and (3, 14): both within the 13x13 window
+    EXPECT_EQ(shaded.size(), 10u);
+    EXPECT_EQ(st.tapsUnseen, 169u - 10u);
+    // Without the restriction the same window shades all of it.
+    cache.RestrictFootprints(nullptr);
+    cache.InvalidateAll();
+    shaded.clear();
+    cache.LookupTexel(centre, 6, shade, filter, st);
+    EXPECT_EQ(taps, 169u);
+    EXPECT_EQ(shaded.size(), 169u);
+}
 
 TEST(ShadingCache, RejectsImpossibleSettings) {
     CacheSettings s;

@@ -8,6 +8,7 @@
 
 #include "texcache/texel_key.h"
 #include "texcache/topology.h"
+#include "texcache/visible_texels.h"
 
 namespace texcache {
 
@@ -52,8 +53,9 @@ struct FootprintSample {
 /// the first texel row of the neighbour, whose frame is turned to continue the same direction.
 /// Boundary and non-manifold edges end the walk (that sample is left out). Around extraordinary
 /// vertices two walks can reach the same texel; each sample is returned once (the walk with the
-/// smallest |dx| + |dy|).
-void GatherFootprint(const MeshGrids& grids, int face, int mip, int iu, int iv, int radius,
-                     std::vector<FootprintSample>* out);
+/// smallest |dx| + |dy|). With `visible`, only the samples it contains are returned (and the
+/// centre, always): the return value is how many it left out.
+int GatherFootprint(const MeshGrids& grids, int face, int mip, int iu, int iv, int radius,
+                    std::vector<FootprintSample>* out, const VisibleTexels* visible = nullptr);
 
 }  // namespace texcache

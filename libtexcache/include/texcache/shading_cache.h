@@ -23,6 +23,7 @@
 #include "texcache/direct_mapped_cache.h"
 #include "texcache/error.h"
 #include "texcache/footprint.h"
+#include "texcache/visible_texels.h"
 
 namespace texcache {
 
@@ -65,6 +66,7 @@ struct CacheStats {
     uint64_t sampleLookups = 0, sampleHits = 0, samplesShaded = 0, sampleEvictions = 0;
     uint64_t deferrals = 0, waits = 0, samplesUncached = 0;
     uint64_t sampleMemoHits = 0;  ///< sample hits served by the thread's tap memo (see Filter)
+    uint64_t tapsUnseen = 0;      ///< footprint taps left out as not visible (RestrictFootprints)
 
     void Merge(const CacheStats& o) {
         lookups += o.lookups, texelHits += o.texelHits, texelMisses += o.texelMisses;
@@ -72,7 +74,7 @@ struct CacheStats {
         sampleLookups += o.sampleLookups, sampleHits += o.sampleHits;
         samplesShaded += o.samplesShaded, sampleEvictions += o.sampleEvictions;
         deferrals += o.deferrals, waits += o.waits, samplesUncached += o.samplesUncached;
-        sampleMemoHits += o.sampleMemoHits;
+        sampleMemoHits += o.sampleMemoHits, tapsUnseen += o.tapsUnseen;
     }
     double TexelHitRate() const { return lookups ? double(texelHits) / double(lookups) : 0.0; }
 };
@@ -302,6 +304,12 @@ public:
         return texel;
     }
 
+    /// Footprints keep only the taps `visible` contains (and their centre), or every tap when
+    /// null: see visible_texels.h. Set it between renders, never while lookups run; the set must
+    /// outlive its use. Texels already in the texel cache keep the value they were filtered with.
+    void RestrictFootprints(const VisibleTexels* visible) { visible_ = visible; }
+    const VisibleTexels* FootprintRestriction() const { return visible_; }
+
     /// Evicts everything (the scene changed).
     void InvalidateAll() {
         epoch_.fetch_add(1, std::memory_order_relaxed);
@@ -379,7 +387,8 @@ private:
         if (memo.owner != id_ || memo.epoch != epoch) memo.Reset(id_, epoch);
 
         const MeshGrids& g = *meshes_[centre.mesh];
-        GatherFootprint(g, centre.face, centre.mip, centre.key.iu, centre.key.iv, radius, &taps);
+        st.tapsUnseen += uint64_t(GatherFootprint(g, centre.face, centre.mip, centre.key.iu,
+                                                  centre.key.iv, radius, &taps, visible_));
         values.resize(taps.size());
         missing.clear();
         deferred.clear();
@@ -503,8 +512,9 @@ private:
     }
 
     CacheSettings settings_;
-    uint64_t id_;                     ///< tags the tap memos (see Filter)
-    std::atomic<uint64_t> epoch_{0};  ///< bumped by every invalidation (see Filter)
+    uint64_t id_;                             ///< tags the tap memos (see Filter)
+    std::atomic<uint64_t> epoch_{0};          ///< bumped by every invalidation (see Filter)
+    const VisibleTexels* visible_ = nullptr;  ///< see RestrictFootprints
     std::vector<std::unique_ptr<MeshGrids>> meshes_;
     uint32_t nextFace_ = 0;
     std::unique_ptr<DirectMappedCache<Stored>> samples_;

@@ -1,0 +1,72 @@
+// SPDX-License-Identifier: Apache-2.0
+// The texels a frame's camera rays land on, so that filter footprints shade only what is seen.
+//
+// Why. A texel-cache miss shades every sample of its (2r+1)^2 footprint (Munkberg et al. 2016,
+// Sec. 4). Many of those texels are never seen: they lie behind an occluder, face away, or fall
+// between the sparse texels a few camera samples per pixel reach (eq. 1 puts 1-4 texels under a
+// pixel). The paper measures the cost (Fig. 14: 21x21 doubles the render) and leaves reducing it
+// to future work. A prepass that traces the camera rays and marks their texels lets the filter
+// keep only visible taps: a footprint then shades no more samples than the unfiltered render,
+// and averages the visible ones it would have averaged anyway.
+//
+// Design note (concurrency and memory). A fixed table of 64-bit words; a word holds the 8x8
+// block of texels (face, mip, iu/8, iv/8) hashes to, one bit per texel. Marking is an atomic
+// fetch_or, testing a relaxed load: lock-free and wait-free. The marking pass finishes before
+// the lookups start (the renderer joins its threads in between), which orders every mark before
+// every test, so relaxed atomics are enough. Blocks that hash to the same word share it: a test
+// may then answer "visible" for a texel that is not (a false positive: that tap is shaded, as
+// without the set), never the reverse. So the table's size is a memory bound, not a correctness
+// one: at 1/4 word per pixel (the renderer's sizing) a word is shared by ~1 in 10 blocks at most.
+// A footprint's taps fall in a handful of blocks, so a test touches few cache lines.
+#pragma once
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <cstdint>
+#include <memory>
+
+#include "texcache/texel_key.h"
+
+namespace texcache {
+
+class VisibleTexels {
+public:
+    /// A table of `bytes` rounded down to a power of two words (at least 8: one cache line).
+    explicit VisibleTexels(size_t bytes)
+        : words_(std::bit_floor(std::max<size_t>(bytes / sizeof(uint64_t), 8))),
+          bits_(std::make_unique<std::atomic<uint64_t>[]>(words_)) {
+        Clear();
+    }
+
+    /// Forgets every mark (not concurrently with Mark or Contains).
+    void Clear() {
+        for (size_t i = 0; i < words_; ++i) bits_[i].store(0, std::memory_order_relaxed);
+    }
+    /// Marks a texel as seen (thread-safe).
+    void Mark(const TexelKey& k) { bits_[Word(k)].fetch_or(Bit(k), std::memory_order_relaxed); }
+    /// Whether a texel was marked (or shares its word with a marked texel of another block).
+    bool Contains(const TexelKey& k) const { return (BlockBits(k) & Bit(k)) != 0; }
+    /// The marks of the 8x8 block holding texel k (bit Bit(k) is k's): a caller testing the
+    /// texels of a window loads each block once.
+    uint64_t BlockBits(const TexelKey& k) const {
+        return bits_[Word(k)].load(std::memory_order_relaxed);
+    }
+    static uint64_t Bit(const TexelKey& k) { return uint64_t(1) << ((k.iv & 7) * 8 + (k.iu & 7)); }
+    size_t Bytes() const { return words_ * sizeof(uint64_t); }
+
+private:
+    // The 8 blocks of a 64-texel run along u share a cache line (8 words); runs are scattered.
+    // A footprint row then reads one or two lines, and the rows of a block row the same ones.
+    size_t Word(const TexelKey& k) const {
+        uint64_t x = (uint64_t(k.face) << 4 | k.mip) * 0x9E3779B97F4A7C15ull;
+        x ^= (uint64_t(k.iv >> 3) << 32 | uint64_t(k.iu >> 6)) * 0xC2B2AE3D27D4EB4Full;
+        x ^= x >> 29;
+        const uint64_t line = x * 0xBF58476D1CE4E5B9ull >> 20;
+        return size_t(line << 3 | uint64_t((k.iu >> 3) & 7)) & (words_ - 1);
+    }
+
+    size_t words_;
+    std::unique_ptr<std::atomic<uint64_t>[]> bits_;
+};
+
+}  // namespace texcache
