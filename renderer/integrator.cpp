@@ -507,13 +507,14 @@ glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&&
     TextureSpaceCache& tsc = *c.tsc;
     // One branch per lookup picks the material's filter; the filters themselves are inlined. The
     // temporal blend runs once per reconstructed texel, not per lookup.
-    auto lookup = [&](int radius, const auto& filter) {
+    auto lookup = [&](int radius, const auto& filter,
+                      FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
         return tsc.cache().LookupTexel(
             h, radius, shade,
             [&](const FilterInput<ShadedSample>& in) {
                 return tsc.Accumulate(in.request.key, filter(in));
             },
-            st);
+            st, taps);
     };
     const int radius = tsc.RadiusOf(si.object);
     switch (tsc.FilterOf(si.object)) {
@@ -523,7 +524,8 @@ glm::vec3 CachedLookup(const Context& c, const SurfaceInteraction& si, ShadeFn&&
             // The paper's 20x20 Gaussian: sigma half the radius, same normal test.
             return lookup(radius, NormalWeightedFilter{t.cosThreshold, 0.5f * float(radius)});
         case TextureFilterKind::Regression:
-            return lookup(radius, RegressionFilter{raysPerSample, false});
+            // A linear model fits the gradient a one-sided window sees: no symmetry needed.
+            return lookup(radius, RegressionFilter{raysPerSample, false}, FootprintTaps::Visible);
         case TextureFilterKind::SoftShadow:
             return lookup(radius, SoftShadowFilter{t.cosThreshold});
         case TextureFilterKind::Normal:

@@ -85,7 +85,10 @@ INSTANTIATE_TEST_SUITE_P(
                  {"speed_vs_error_car-ao_seconds.png", "speed_vs_error_chess-softshadow_rays.png",
                   "sve_car-ao_ts-regression.png"}},
         Expected{"cache-size", "cache_size", 15, {"cache_size.png"}},
-        Expected{"filter-size", "filter_size", 11, {"filter_size.png", "filter_size_21.png"}},
+        Expected{"filter-size",
+                 "filter_size",
+                 2 * 11,
+                 {"filter_size.png", "filter_size_all21.png", "filter_size_visible21.png"}},
         Expected{"threads", "threads", 6, {"threads.png"}},
         Expected{"lod-bias", "lod_bias", 4, {"lod_bias.png", "lod_bias_3.png"}}),
     [](const ::testing::TestParamInfo<Expected>& i) {

@@ -144,10 +144,38 @@ void RemoveDuplicateTexels(std::vector<FootprintSample>* out) {
     out->resize(w);
 }
 
+// Keeps the taps whose mirror offset (-dx, -dy) is also in the footprint; returns how many it
+// dropped. Why: the taps a camera sees are one-sided where a surface disappears behind another
+// (the ground under a car body) or where eq. 1 switches mip level, and a one-sided average of a
+// shading gradient is biased by the gradient times the taps' mean offset (car AO, 13x13:
+// relMSE 0.024 one-sided against 0.014 for the full window). A point-symmetric set has its mean
+// offset at the centre, so linear gradients average out as in the full window.
+int KeepSymmetric(std::vector<FootprintSample>* out, int radius) {
+    const int side = 2 * radius + 1;
+    thread_local std::vector<uint8_t> present;
+    present.assign(size_t(side) * size_t(side), 0);
+    auto at = [&](int dx, int dy) -> uint8_t& {
+        return present[size_t(dy + radius) * size_t(side) + size_t(dx + radius)];
+    };
+    for (const FootprintSample& t : *out) at(t.dx, t.dy) = 1;
+    // Copied always, kept by advancing (which taps have a mirror follows no learnable pattern).
+    size_t kept = 0;
+    FootprintSample* o = out->data();
+    for (size_t i = 0, n = out->size(); i < n; ++i) {
+        const FootprintSample t = o[i];
+        o[kept] = t;
+        kept += at(-t.dx, -t.dy);
+    }
+    const int dropped = int(out->size() - kept);
+    out->resize(kept);
+    return dropped;
+}
+
 }  // namespace
 
 int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
-                    std::vector<FootprintSample>* out, const VisibleTexels* visible) {
+                    std::vector<FootprintSample>* out, const VisibleTexels* visible,
+                    bool symmetric) {
     out->clear();
     mip = g.ClampMip(face, mip);
     const int res = g.Res(face, mip);
@@ -196,9 +224,8 @@ int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int r
                 }
             }
         }
-        const size_t kept = size_t(o - out->data());
-        out->resize(kept);
-        return side * side - int(kept);
+        out->resize(size_t(o - out->data()));
+        return side * side - int(out->size()) + (symmetric ? KeepSymmetric(out, radius) : 0);
     }
     // Walk: u first (a row of walkers, one per dx), then v from each of them. Unseen taps are
     // dropped as they are reached (a texel is seen or not whichever walk reaches it, so this
@@ -226,7 +253,7 @@ int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int r
     // Around extraordinary vertices two walks can end in the same texel: keep the one with the
     // smallest offset.
     RemoveDuplicateTexels(out);
-    return unseen;
+    return visible ? unseen + (symmetric ? KeepSymmetric(out, radius) : 0) : 0;
 }
 
 }  // namespace texcache

@@ -353,9 +353,9 @@ TEST(VisibleTexels, ConcurrentMarksAreAllKept) {
         ASSERT_TRUE(vis.Contains({3, 2, uint16_t(i % 64), uint16_t(i / 64)})) << i;
 }
 
-// A restricted footprint is the unrestricted one filtered by the set (plus the centre), in the
-// same order, inside a face, across edges and around extraordinary vertices; the return value
-// counts what was left out.
+// A restricted footprint is the unrestricted one filtered by the set (plus the centre) and
+// made point-symmetric, in the same order, inside a face, across edges and around extraordinary
+// vertices; the return value counts what was left out.
 TEST(VisibleTexels, RestrictedFootprintIsTheVisibleSubset) {
     for (int valence : {3, 4, 5, 8}) {
         const ControlCage c = valence == 3   ? test::CubeCage()
@@ -380,9 +380,15 @@ TEST(VisibleTexels, RestrictedFootprintIsTheVisibleSubset) {
                 for (auto [iu, iv] : {std::pair{0, 0}, {res / 2, res / 2}, {res - 1, 3}}) {
                     GatherFootprint(g, f, 0, iu, iv, r, &all);
                     const int unseen = GatherFootprint(g, f, 0, iu, iv, r, &seen, &vis);
+                    // Seen (or the centre), and so is the tap at the mirrored offset.
+                    std::set<std::pair<int, int>> seenOffsets;
+                    for (const FootprintSample& t : all)
+                        if ((t.dx == 0 && t.dy == 0) || vis.Contains(t.key))
+                            seenOffsets.insert({t.dx, t.dy});
                     std::vector<FootprintSample> expect;
                     for (const FootprintSample& t : all)
-                        if ((t.dx == 0 && t.dy == 0) || vis.Contains(t.key)) expect.push_back(t);
+                        if (seenOffsets.count({t.dx, t.dy}) && seenOffsets.count({-t.dx, -t.dy}))
+                            expect.push_back(t);
                     ASSERT_EQ(seen.size(), expect.size()) << "face " << f << " r " << r;
                     for (size_t i = 0; i < seen.size(); ++i) {
                         EXPECT_EQ(seen[i].key, expect[i].key);
@@ -418,11 +424,14 @@ TEST(ShadingCache, RestrictedFootprintsShadeOnlyVisibleSamples) {
     ShadingCache<AoSample, float> cache(CacheSettings{});
     const int mesh = cache.AddMesh(test::GridCage(4), 1.0f / 16.0f);
     VisibleTexels vis(1 << 12);
-    // Visible: a 3x3 block around texel (8, 8) of face 5 and the far texel (3, 14).
+    // Visible: a 3x3 block around texel (8, 8) of face 5, a pair of texels mirrored about it,
+    // (3, 14) and (13, 2), and a texel whose mirror is not seen, (10, 4).
     const uint32_t face = cache.Mesh(mesh).FaceOffset() + 5;
     for (int dv = -1; dv <= 1; ++dv)
         for (int du = -1; du <= 1; ++du) vis.Mark({face, 0, uint16_t(8 + du), uint16_t(8 + dv)});
     vis.Mark({face, 0, 3, 14});
+    vis.Mark({face, 0, 13, 2});
+    vis.Mark({face, 0, 10, 4});
     std::set<uint64_t> shaded;
     auto shade = [&](const SampleRequest& r) {
         shaded.insert(r.key.Pack());
@@ -437,9 +446,9 @@ TEST(ShadingCache, RestrictedFootprintsShadeOnlyVisibleSamples) {
     CacheStats st;
     const SampleRequest centre{mesh, 5, 0, (8.5f) / 16.0f, 8.5f / 16.0f, {face, 0, 8, 8}};
     cache.LookupTexel(centre, 6, shade, filter, st);
-    EXPECT_EQ(taps, 10u);  // the 3x3 block and (3, 14): both within the 13x13 window
-    EXPECT_EQ(shaded.size(), 10u);
-    EXPECT_EQ(st.tapsUnseen, 169u - 10u);
+    EXPECT_EQ(taps, 11u);  // the 3x3 block and the pair, all within the 13x13 window
+    EXPECT_EQ(shaded.size(), 11u);
+    EXPECT_EQ(st.tapsUnseen, 169u - 11u);
     // Without the restriction the same window shades all of it.
     cache.RestrictFootprints(nullptr);
     cache.InvalidateAll();

@@ -40,6 +40,14 @@ private:
 
 /// One sample of a footprint: its key, where it sits in its face, and its offset from the
 /// footprint's centre texel in centre-texel units.
+/// Which taps of a footprint a lookup keeps when the cache has a visibility set
+/// (ShadingCache::RestrictFootprints; without one every tap is kept).
+enum class FootprintTaps {
+    All,               ///< every texel of the window (the paper's footprint)
+    Visible,           ///< the visible ones: for filters that model gradients (regression)
+    VisibleSymmetric,  ///< the visible ones whose mirror is visible: for averaging filters
+};
+
 struct FootprintSample {
     TexelKey key;
     int16_t dx, dy;
@@ -54,8 +62,10 @@ struct FootprintSample {
 /// Boundary and non-manifold edges end the walk (that sample is left out). Around extraordinary
 /// vertices two walks can reach the same texel; each sample is returned once (the walk with the
 /// smallest |dx| + |dy|). With `visible`, only the samples it contains are returned (and the
-/// centre, always): the return value is how many it left out.
+/// centre, always), and with `symmetric` only those whose mirrored offset (-dx, -dy) is returned
+/// too (see visible_texels.h): the return value is how many it left out.
 int GatherFootprint(const MeshGrids& grids, int face, int mip, int iu, int iv, int radius,
-                    std::vector<FootprintSample>* out, const VisibleTexels* visible = nullptr);
+                    std::vector<FootprintSample>* out, const VisibleTexels* visible = nullptr,
+                    bool symmetric = true);
 
 }  // namespace texcache

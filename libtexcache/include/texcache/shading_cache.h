@@ -268,15 +268,15 @@ public:
 
     /// The filtered value at a hit: texel cache hit, or gather + shade missing samples + filter.
     template <typename ShadeFn, typename FilterFn>
-    Texel Lookup(const CacheHit& h, int radius, ShadeFn&& shade, FilterFn&& filter,
-                 CacheStats& st) {
-        return LookupTexel(TexelAt(h), radius, shade, filter, st);
+    Texel Lookup(const CacheHit& h, int radius, ShadeFn&& shade, FilterFn&& filter, CacheStats& st,
+                 FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
+        return LookupTexel(TexelAt(h), radius, shade, filter, st, taps);
     }
 
     /// Lookup() for a texel already addressed with TexelAt().
     template <typename ShadeFn, typename FilterFn>
     Texel LookupTexel(const SampleRequest& centre, int radius, ShadeFn&& shade, FilterFn&& filter,
-                      CacheStats& st) {
+                      CacheStats& st, FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
         ++st.lookups;
         const uint64_t key = centre.key.Pack();
         const uint64_t hash = Hash(centre.key);
@@ -293,10 +293,10 @@ public:
             // Another thread is filtering this texel, or the slot is busy with another key: filter
             // without storing rather than wait (rare; the samples are shared through the cache).
             ++st.texelUncached;
-            return Filter(centre, radius, shade, filter, st);
+            return Filter(centre, radius, shade, filter, st, taps);
         }
         if (ticket.evicted) ++st.texelEvictions;
-        texel = Filter(centre, radius, shade, filter, st);
+        texel = Filter(centre, radius, shade, filter, st, taps);
         if (refTexels_)
             refTexels_->Publish(key, texel);
         else
@@ -304,9 +304,10 @@ public:
         return texel;
     }
 
-    /// Footprints keep only the taps `visible` contains (and their centre), or every tap when
-    /// null: see visible_texels.h. Set it between renders, never while lookups run; the set must
-    /// outlive its use. Texels already in the texel cache keep the value they were filtered with.
+    /// Footprints keep only the taps `visible` contains (and their centre), as each lookup's
+    /// FootprintTaps says, or every tap when null: see visible_texels.h. Set it between renders,
+    /// never while lookups run; the set must outlive its use. Texels already in the texel cache
+    /// keep the value they were filtered with.
     void RestrictFootprints(const VisibleTexels* visible) { visible_ = visible; }
     const VisibleTexels* FootprintRestriction() const { return visible_; }
 
@@ -378,7 +379,7 @@ private:
     // epoch), so it is exactly what the shared cache could have returned.
     template <typename ShadeFn, typename FilterFn>
     Texel Filter(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter,
-                 CacheStats& st) {
+                 CacheStats& st, FootprintTaps keep) {
         thread_local std::vector<FootprintSample> taps;
         thread_local std::vector<Sample> values;
         thread_local std::vector<int> missing, deferred;
@@ -387,8 +388,10 @@ private:
         if (memo.owner != id_ || memo.epoch != epoch) memo.Reset(id_, epoch);
 
         const MeshGrids& g = *meshes_[centre.mesh];
-        st.tapsUnseen += uint64_t(GatherFootprint(g, centre.face, centre.mip, centre.key.iu,
-                                                  centre.key.iv, radius, &taps, visible_));
+        st.tapsUnseen +=
+            uint64_t(GatherFootprint(g, centre.face, centre.mip, centre.key.iu, centre.key.iv,
+                                     radius, &taps, keep == FootprintTaps::All ? nullptr : visible_,
+                                     keep == FootprintTaps::VisibleSymmetric));
         values.resize(taps.size());
         missing.clear();
         deferred.clear();
