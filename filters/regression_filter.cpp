@@ -51,12 +51,8 @@ namespace texcache {
 namespace {
 
 constexpr int kMaxFeatures = 6;
-constexpr int kMaxParams = kMaxFeatures + 1;
 using FeatureVec = Eigen::Matrix<double, kMaxFeatures, 1>;
 using FeatureMat = Eigen::Matrix<double, kMaxFeatures, kMaxFeatures>;
-using ParamVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxParams, 1>;
-using ParamMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxParams, kMaxParams>;
-using Coefs = Eigen::Matrix<double, Eigen::Dynamic, 3, 0, kMaxParams, 3>;
 using Basis = Eigen::Matrix<double, kMaxFeatures, Eigen::Dynamic, 0, kMaxFeatures, kMaxFeatures>;
 
 constexpr double kRelativeSingular = 1e-2;
@@ -85,6 +81,72 @@ glm::vec3 FallbackMean(const FilterInput<ShadedSample>& in, const std::vector<in
     }
     return n ? glm::max(glm::vec3(sum / double(n)), glm::vec3(0.0f)) : glm::vec3(0.0f);
 }
+
+// The recursive least squares over rings 1..R (see the top of the file) for p = 1 + rank
+// parameters; Feature and Noise are the callables Reconstruct builds.
+template <class Feature, class Noise>
+struct RlsRings {
+    const FilterInput<ShadedSample>& in;
+    const std::vector<int>& sorted;
+    const std::vector<int>& ringStart;
+    int R, rank;
+    const Basis& U;
+    const Noise& noise;
+    const Feature& feature;
+
+    template <int P>
+    void Run(double* bestError, glm::vec3* best, int* bestRing) const {
+        using Vec = Eigen::Matrix<double, P, 1>;
+        using Mat = Eigen::Matrix<double, P, P>;
+        using Theta = Eigen::Matrix<double, P, 3>;
+        const auto& S = in.samples;
+        Mat Pm = Mat::Identity() / kRidge;
+        Theta theta = Theta::Zero();
+        Vec a;
+        double sumBias = 0.0, sumNoise = 0.0;
+        int informative = 0, seen = 0;
+        glm::vec3 lo(INFINITY), hi(-INFINITY);  // range of the values fitted so far
+        for (int k = 0; k <= R; ++k) {
+            for (int q = ringStart[k]; q < ringStart[k + 1]; ++q) {
+                const int i = sorted[q];
+                a(0) = 1.0;
+                if constexpr (P > 1) {
+                    const FeatureVec x = feature(i);
+                    for (int j = 0; j < P - 1; ++j) a(j + 1) = U.col(j).dot(x);
+                }
+                const glm::vec3& y = S[i].value;
+                lo = glm::min(lo, y), hi = glm::max(hi, y);
+                const Eigen::RowVector3d e =
+                    Eigen::RowVector3d(y.x, y.y, y.z) - a.transpose() * theta;
+                const Vec Pa = Pm * a;
+                const double h = a.dot(Pa);
+                const double s2 = noise(i);
+                sumNoise += s2;
+                ++seen;
+                if (k >= 1 && h <= 1.0) {
+                    const double el = Lum(e(0), e(1), e(2));
+                    sumBias += el * el - s2 * (1.0 + h);
+                    ++informative;
+                }
+                const Vec g = Pa / (1.0 + h);
+                theta.noalias() += g * e;
+                Pm.noalias() -= g * Pa.transpose();
+            }
+            if (k == 0 || informative == 0) continue;
+            const double bias2 = std::max(0.0, sumBias / informative);
+            const double error = bias2 + sumNoise / seen * std::max(Pm(0, 0), 0.0);
+            // A linear model can overshoot at its centre (extrapolating a curved signal): it is
+            // held to the range of the values it was fitted on.
+            const glm::vec3 pred = glm::clamp(
+                glm::vec3(float(theta(0, 0)), float(theta(0, 1)), float(theta(0, 2))), lo, hi);
+            if (error < *bestError && Finite(pred)) {
+                *bestError = error;
+                *best = pred;
+                *bestRing = k;
+            }
+        }
+    }
+};
 
 }  // namespace
 
@@ -208,47 +270,31 @@ glm::vec3 RegressionFilter::Reconstruct(const FilterInput<ShadedSample>& in,
     double bestError = var0 / (1.0 + ring1 * beta);
     glm::vec3 best = c.value;
 
-    // Rings 1..R by recursive least squares.
-    ParamMat P = ParamMat::Identity(p, p) / kRidge;
-    Coefs theta = Coefs::Zero(p, 3);
-    ParamVec a(p), Pa(p);
-    double sumBias = 0.0, sumNoise = 0.0;
-    int informative = 0, seen = 0;
-    glm::vec3 lo(INFINITY), hi(-INFINITY);  // range of the values fitted so far
-    for (int k = 0; k <= R; ++k) {
-        for (int q = ringStart[k]; q < ringStart[k + 1]; ++q) {
-            const int i = sorted[q];
-            a(0) = 1.0;
-            if (rank > 0) a.tail(rank).noalias() = U.transpose() * feature(i);
-            const glm::vec3& y = S[i].value;
-            lo = glm::min(lo, y), hi = glm::max(hi, y);
-            const Eigen::RowVector3d e = Eigen::RowVector3d(y.x, y.y, y.z) - a.transpose() * theta;
-            Pa.noalias() = P * a;
-            const double h = a.dot(Pa);
-            const double s2 = noise(i);
-            sumNoise += s2;
-            ++seen;
-            if (k >= 1 && h <= 1.0) {
-                const double el = Lum(e(0), e(1), e(2));
-                sumBias += el * el - s2 * (1.0 + h);
-                ++informative;
-            }
-            const ParamVec g = Pa / (1.0 + h);
-            theta.noalias() += g * e;
-            P.noalias() -= g * Pa.transpose();
-        }
-        if (k == 0 || informative == 0) continue;
-        const double bias2 = std::max(0.0, sumBias / informative);
-        const double error = bias2 + sumNoise / seen * std::max(P(0, 0), 0.0);
-        // A linear model can overshoot at its centre (extrapolating a curved signal): it is
-        // held to the range of the values it was fitted on.
-        const glm::vec3 pred = glm::clamp(
-            glm::vec3(float(theta(0, 0)), float(theta(0, 1)), float(theta(0, 2))), lo, hi);
-        if (error < bestError && Finite(pred)) {
-            bestError = error;
-            best = pred;
-            inf.ring = k;
-        }
+    // Rings 1..R by recursive least squares, at the model's size known at compile time (p is
+    // 1..7: with dynamic sizes Eigen loops over every product, and this loop runs for every tap).
+    RlsRings rings{in, sorted, ringStart, R, rank, U, noise, feature};
+    switch (p) {
+        case 1:
+            rings.Run<1>(&bestError, &best, &inf.ring);
+            break;
+        case 2:
+            rings.Run<2>(&bestError, &best, &inf.ring);
+            break;
+        case 3:
+            rings.Run<3>(&bestError, &best, &inf.ring);
+            break;
+        case 4:
+            rings.Run<4>(&bestError, &best, &inf.ring);
+            break;
+        case 5:
+            rings.Run<5>(&bestError, &best, &inf.ring);
+            break;
+        case 6:
+            rings.Run<6>(&bestError, &best, &inf.ring);
+            break;
+        default:
+            rings.Run<7>(&bestError, &best, &inf.ring);
+            break;
     }
     if (!Finite(best)) best = c.value;
     return glm::max(best, glm::vec3(0.0f));
