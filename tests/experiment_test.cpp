@@ -98,6 +98,44 @@ INSTANTIATE_TEST_SUITE_P(
         return n;
     });
 
+// A run of some cases keeps the other cases of an earlier run in the same directory (nothing a
+// user measured is lost to a rerun of one case); a CSV it cannot read is a clear error naming the
+// file and line, and is left as it was.
+TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
+    const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_sve_merge";
+    fs::remove_all(out);
+    CliRun r =
+        Texcache("experiment speed-vs-error --quick --only chess-softshadow --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    r = Texcache("experiment speed-vs-error --quick --only car-ao --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    std::map<std::string, int> rowsPerCase;
+    std::ifstream f(out / "speed_vs_error.csv");
+    std::string line;
+    std::getline(f, line);
+    while (std::getline(f, line)) ++rowsPerCase[line.substr(0, line.find(','))];
+    EXPECT_EQ(rowsPerCase["chess-softshadow"], 2 * 2);  // per-hit + softshadow, 2 budgets
+    EXPECT_EQ(rowsPerCase["car-ao"], 6 * 2);
+    std::ifstream md(out / "speed_vs_error.md");
+    std::stringstream text;
+    text << md.rdbuf();
+    EXPECT_NE(text.str().find("- chess-softshadow: best"), std::string::npos);
+    EXPECT_NE(text.str().find("- car-ao: best"), std::string::npos);
+
+    // A damaged CSV: the run stops before rendering and the file is kept.
+    {
+        std::ofstream bad(out / "speed_vs_error.csv", std::ios::app);
+        bad << "car-ao,ts-none,1\n";
+    }
+    const auto size = fs::file_size(out / "speed_vs_error.csv");
+    r = Texcache("experiment speed-vs-error --quick --only chess-ao --out " + out.string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("speed_vs_error.csv:18"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("3 values, expected 11"), std::string::npos) << r.out;
+    EXPECT_EQ(fs::file_size(out / "speed_vs_error.csv"), size);
+    fs::remove_all(out);
+}
+
 // The temporal experiment (not in the list above: it checks more and runs once): its plots and
 // crops exist, every method and demodulation setting has a finite RMSE in [0, 10) on every frame
 // of every scene, and the summary quotes the paper and decides both goals of the issue.

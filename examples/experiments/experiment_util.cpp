@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "renderer/scene_loader.h"
 #include "texcache/error.h"
@@ -118,6 +119,35 @@ void Table::Write(const std::string& path) const {
         text += "\n";
     }
     WriteText(path, text);
+}
+
+Table Table::Read(const std::string& path, std::vector<std::string> columns) {
+    std::ifstream in(path);
+    if (!in) throw InputError(path, "cannot be read");
+    Table t(std::move(columns));
+    std::string header;
+    for (size_t i = 0; i < t.columns_.size(); ++i) header += (i ? "," : "") + t.columns_[i];
+    std::string line;
+    int number = 0;
+    while (std::getline(in, line)) {
+        ++number;
+        if (number == 1) {
+            if (line != header)
+                throw InputError(path + ":1", "header is '" + line + "', expected '" + header +
+                                                  "' (written by another version?)");
+            continue;
+        }
+        if (line.empty()) continue;
+        t.Row();
+        std::stringstream fields(line);
+        std::string v;
+        while (std::getline(fields, v, ',')) t.Add(v);
+        if (t.rows_.back().size() != t.columns_.size())
+            throw InputError(path + ":" + std::to_string(number),
+                             std::to_string(t.rows_.back().size()) + " values, expected " +
+                                 std::to_string(t.columns_.size()));
+    }
+    return t;
 }
 
 void WriteText(const std::string& path, const std::string& text) {

@@ -72,6 +72,10 @@ public:
     Table& Add(double v);
     void Write(const std::string& path) const;
     size_t NumRows() const { return rows_.size(); }
+    const std::vector<std::string>& RowAt(size_t i) const { return rows_[i]; }
+    /// Reads a CSV that Write() made with these columns; throws InputError naming the file and
+    /// line when the header differs or a row has the wrong number of values.
+    static Table Read(const std::string& path, std::vector<std::string> columns);
 
 private:
     std::vector<std::string> columns_;

@@ -148,38 +148,50 @@ int SpeedVsError(const Setup& s) {
         {"chess.json", IntegratorKind::Direct, "chess-softshadow", {kPerHit, kSoftShadow}},
     };
     const int repeats = s.quick ? 1 : 2;
-    Table table({"case", "method", "budget", "spp", "rays_per_point", "seconds", "rays", "relmse",
-                 "samples_shaded", "relmse_image", "cpu_seconds"});
-    std::string md = "# Speed vs error\n\n";
-    md += Format(
-        "Every render of a case traces the same camera rays (%d samples per pixel, same seed, as "
-        "Munkberg et al. fix the primary positions in Fig. 7); the budget is shading samples: AO "
-        "rays per hit or per cached sample, or light paths per camera hit (`--hit-samples`) and "
-        "per cached sample. **relMSE** (eps = 0.001) is against a reference with the same camera "
-        "rays and many shading samples: shading error alone. **image relMSE** is against a "
-        "converged image (many camera samples): it adds the edge noise of %d camera samples, "
-        "the same for every method. Time is the render's CPU time (all threads; best of %d, "
-        "2 threads, same process): the machine is shared, and CPU time counts only our work "
-        "(on an idle machine wall time is about half of it). %s\n\n",
-        CameraSpp(s), CameraSpp(s), repeats,
-        s.quick ? "**Quick mode: test-size images, two budgets; not for conclusions.**" : "");
-    md +=
-        "| case | method | equal-time relMSE ratio (per-hit / method) | at CPU seconds | method "
-        "relMSE | per-hit relMSE (interpolated) | equal-time image relMSE ratio |\n"
-        "|---|---|---|---|---|---|---|\n";
-    std::string images;
-    std::map<std::string, double> bestRatio, bestImageRatio;  // case -> best over texture methods
+    const std::vector<std::string> columns = {
+        "case", "method", "budget",         "spp",          "rays_per_point", "seconds",
+        "rays", "relmse", "samples_shaded", "relmse_image", "cpu_seconds"};
+    Table table(columns);
+    // Curves per case and method, in the order they were measured.
+    std::map<std::string, std::map<std::string, std::vector<Point>>> curves;
+    std::map<std::string, std::vector<std::string>> methodOrder;
+    auto addPoint = [&](const std::string& label, const std::string& method, const Point& p) {
+        auto& m = curves[label];
+        if (!m.count(method)) methodOrder[label].push_back(method);
+        m[method].push_back(p);
+    };
 
-    std::map<std::string, std::unique_ptr<LoadedScene>> scenes;
     std::vector<Case> selected;
+    auto isSelected = [&](const std::string& label) {
+        return s.only.empty() || ("," + s.only + ",").find("," + label + ",") != std::string::npos;
+    };
     for (const Case& c : cases)
-        if (s.only.empty() || ("," + s.only + ",").find("," + c.label + ",") != std::string::npos)
-            selected.push_back(c);
+        if (isSelected(c.label)) selected.push_back(c);
     if (selected.empty()) {
         std::string valid;
         for (const Case& c : cases) valid += (valid.empty() ? "" : ", ") + c.label;
         throw InputError("--only", "no case named '" + s.only + "' (valid: " + valid + ")");
     }
+    // A run of some cases keeps the other cases' rows of an earlier run in the same directory:
+    // the CSV and summary then cover every case measured so far.
+    const std::string csv = (fs::path(s.outDir) / "speed_vs_error.csv").string();
+    if (!s.only.empty() && fs::exists(csv)) {
+        const Table old = Table::Read(csv, columns);
+        size_t kept = 0;
+        for (size_t i = 0; i < old.NumRows(); ++i) {
+            const std::vector<std::string>& r = old.RowAt(i);
+            if (isSelected(r[0])) continue;
+            table.Row();
+            for (const std::string& v : r) table.Add(v);
+            addPoint(r[0], r[1],
+                     {std::stod(r[10]), std::stod(r[6]), std::stod(r[7]), std::stod(r[9])});
+            ++kept;
+        }
+        if (kept)
+            Say("[speed-vs-error] keeping %zu rows of other cases from %s", kept, csv.c_str());
+    }
+
+    std::map<std::string, std::unique_ptr<LoadedScene>> scenes;
     for (const Case& c : selected) {
         const bool lights = c.integrator != IntegratorKind::AO;
         const std::string key = c.scene + (lights ? "+lights" : "");
@@ -212,7 +224,6 @@ int SpeedVsError(const Setup& s) {
         const Image refImage =
             Reference(s, Format("%s_%dx%d", refTag.c_str(), W, H), *ls.rs, imageOpt);
 
-        std::map<std::string, std::vector<Point>> curves;
         for (const Method& m : c.methods) {
             const std::vector<int> budgets = Budgets(s, m.texture);
             for (int b : budgets) {
@@ -222,7 +233,7 @@ int SpeedVsError(const Setup& s) {
                 const Run r = TimedRender(ls, o, repeats, b == budgets.front());
                 const double e = RelMSE(r.image, ref), eImage = RelMSE(r.image, refImage);
                 const double rays = double(r.stats.TotalRays());
-                curves[m.name].push_back({r.cpuSeconds, rays, e, eImage});
+                addPoint(c.label, m.name, {r.cpuSeconds, rays, e, eImage});
                 table.Row()
                     .Add(c.label)
                     .Add(m.name)
@@ -237,57 +248,86 @@ int SpeedVsError(const Setup& s) {
                     .Add(r.cpuSeconds);
                 Say("  %-14s budget %3d: %7.3f s CPU, %6.1f Mrays, relMSE %.5f (image %.5f)",
                     m.name.c_str(), b, r.cpuSeconds, rays * 1e-6, e, eImage);
-                if (b == budgets.back()) {
-                    const std::string png =
-                        Format("sve_%s_%s.png", c.label.c_str(), m.name.c_str());
-                    WriteImage((fs::path(s.outDir) / png).string(), r.image);
-                    images += Format("| %s | %s | ![](%s) |\n", c.label.c_str(), m.name.c_str(),
-                                     png.c_str());
-                }
+                if (b == budgets.back())
+                    WriteImage((fs::path(s.outDir) /
+                                Format("sve_%s_%s.png", c.label.c_str(), m.name.c_str()))
+                                   .string(),
+                               r.image);
             }
         }
-        // Equal-time ratios against the per-hit curve.
-        for (const Method& m : c.methods) {
-            if (!m.texture) continue;
-            const Ratio r = EqualTimeRatio(curves["per-hit"], curves[m.name], false);
-            const Ratio ri = EqualTimeRatio(curves["per-hit"], curves[m.name], true);
-            bestRatio[c.label] = std::max(bestRatio[c.label], r.best);
-            bestImageRatio[c.label] = std::max(bestImageRatio[c.label], ri.best);
-            md += Format("| %s | %s | **%.2fx** | %.3f | %.5f | %.5f%s | %.2fx |\n",
-                         c.label.c_str(), m.name.c_str(), r.best, r.at, r.method, r.perHit,
+    }
+    table.Write(csv);
+
+    std::string md = "# Speed vs error\n\n";
+    md += Format(
+        "Every render of a case traces the same camera rays (%d samples per pixel, same seed, as "
+        "Munkberg et al. fix the primary positions in Fig. 7); the budget is shading samples: AO "
+        "rays per hit or per cached sample, or light paths per camera hit (`--hit-samples`) and "
+        "per cached sample. **relMSE** (eps = 0.001) is against a reference with the same camera "
+        "rays and many shading samples: shading error alone. **image relMSE** is against a "
+        "converged image (many camera samples): it adds the edge noise of %d camera samples, "
+        "the same for every method. Time is the render's CPU time (all threads; best of %d, "
+        "2 threads, same process): the machine is shared, and CPU time counts only our work "
+        "(on an idle machine wall time is about half of it). Texture-space footprints keep the "
+        "texels the camera rays reach (the renderer's default, `--footprint visible`). %s\n\n",
+        CameraSpp(s), CameraSpp(s), repeats,
+        s.quick ? "**Quick mode: test-size images, two budgets; not for conclusions.**" : "");
+    md +=
+        "| case | method | equal-time relMSE ratio (per-hit / method) | at CPU seconds | method "
+        "relMSE | per-hit relMSE (interpolated) | equal-time image relMSE ratio |\n"
+        "|---|---|---|---|---|---|---|\n";
+    // Equal-time ratios against each case's per-hit curve, cases in the list's order.
+    std::vector<std::string> labels;
+    for (const Case& c : cases)
+        if (curves.count(c.label) && curves[c.label].count("per-hit")) labels.push_back(c.label);
+    std::map<std::string, double> bestRatio, bestImageRatio;  // case -> best over texture methods
+    for (const std::string& label : labels) {
+        auto& cc = curves[label];
+        for (const std::string& m : methodOrder[label]) {
+            if (m == "per-hit") continue;
+            const Ratio r = EqualTimeRatio(cc["per-hit"], cc[m], false);
+            const Ratio ri = EqualTimeRatio(cc["per-hit"], cc[m], true);
+            bestRatio[label] = std::max(bestRatio[label], r.best);
+            bestImageRatio[label] = std::max(bestImageRatio[label], ri.best);
+            md += Format("| %s | %s | **%.2fx** | %.3f | %.5f | %.5f%s | %.2fx |\n", label.c_str(),
+                         m.c_str(), r.best, r.at, r.method, r.perHit,
                          r.extrapolated ? " (extrapolated)" : "", ri.best);
         }
     }
-    const std::string csv = (fs::path(s.outDir) / "speed_vs_error.csv").string();
-    table.Write(csv);
     md +=
         "\nGoal (issue): at equal wall-clock time the best texture-space filter reaches at least "
         "10x lower relMSE than per-hit shading on the AO and diffuse-indirect scenes.\n\n";
-    for (const auto& [label, r] : bestRatio)
+    for (const std::string& label : labels)
         md += Format("- %s: best shading-error ratio %.2fx — %s (image error: %.2fx)\n",
-                     label.c_str(), r, r >= 10.0 ? "goal met" : "goal NOT met",
-                     bestImageRatio[label]);
+                     label.c_str(), bestRatio[label],
+                     bestRatio[label] >= 10.0 ? "goal met" : "goal NOT met", bestImageRatio[label]);
     md +=
         "\nPaper (Munkberg et al. 2016): Fig. 5, the trivial 13x13 normal filter beats ARLP and "
         "adaptive manifolds at equal time on motion-blurred AO; Fig. 7, texture-space linear "
         "regression \"drastically\" lowers error against path tracing at equal rays.\n\n";
-    for (const Case& c : selected) {
+    std::string images;
+    for (const std::string& label : labels) {
         for (const char* axis : {"seconds", "rays"}) {
             Plot p;
-            p.png = (fs::path(s.outDir) / Format("speed_vs_error_%s_%s.png", c.label.c_str(), axis))
+            p.png = (fs::path(s.outDir) / Format("speed_vs_error_%s_%s.png", label.c_str(), axis))
                         .string();
-            p.title = c.label + ": relMSE vs " + axis;
+            p.title = label + ": relMSE vs " + axis;
             p.xLabel = std::string(axis == std::string("seconds") ? "render CPU time (s)" : "rays");
             p.yLabel = "relMSE";
             p.logX = p.logY = true;
-            for (const Method& m : c.methods)
-                p.series.push_back({m.name, csv, axis == std::string("seconds") ? 11 : 7, 8,
-                                    Format("strcol(1) eq '%s' && strcol(2) eq '%s'",
-                                           c.label.c_str(), m.name.c_str())});
+            for (const std::string& m : methodOrder[label])
+                p.series.push_back(
+                    {m, csv, axis == std::string("seconds") ? 11 : 7, 8,
+                     Format("strcol(1) eq '%s' && strcol(2) eq '%s'", label.c_str(), m.c_str())});
             Draw(p);
             md += Format("![%s](%s)\n", p.title.c_str(), fs::path(p.png).filename().c_str());
         }
         md += "\n";
+        for (const std::string& m : methodOrder[label]) {
+            const std::string png = Format("sve_%s_%s.png", label.c_str(), m.c_str());
+            if (fs::exists(fs::path(s.outDir) / png))
+                images += Format("| %s | %s | ![](%s) |\n", label.c_str(), m.c_str(), png.c_str());
+        }
     }
     md +=
         "\n## Images at the largest budget\n\n| case | method | image |\n|---|---|---|\n" + images;
