@@ -911,10 +911,13 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     }
     const int W = opt.width, H = opt.height;
     // Footprints of visible texels only: the prepass of each pass below marks them.
-    VisibleTexels* visible = ctx.tsc && opt.texture.visibleFootprints &&
-                                     opt.texture.constantTerm < 0.0f && ctx.tsc->AnyFootprint()
-                                 ? &ctx.tsc->Visibility(W, H)
-                                 : nullptr;
+    const FootprintMode fm = opt.texture.footprint;
+    const bool visibleOnly = fm == FootprintMode::Visible ||
+                             (fm == FootprintMode::Auto && opt.integrator == IntegratorKind::AO);
+    VisibleTexels* visible =
+        ctx.tsc && visibleOnly && opt.texture.constantTerm < 0.0f && ctx.tsc->AnyFootprint()
+            ? &ctx.tsc->Visibility(W, H)
+            : nullptr;
     const FootprintRestriction restriction(visible ? &ctx.tsc->cache() : nullptr, visible);
     const size_t numPixels = size_t(W) * H;
     if (opt.pixelCache) {

@@ -9,6 +9,13 @@
 
 namespace texcache {
 
+FootprintMode ParseFootprintMode(const std::string& name, const std::string& where) {
+    if (name == "auto") return FootprintMode::Auto;
+    if (name == "visible") return FootprintMode::Visible;
+    if (name == "all") return FootprintMode::All;
+    throw InputError(where, "unknown footprint '" + name + "' (valid: auto, visible, all)");
+}
+
 void CheckFilterRadius(int radius, const std::string& where) {
     // 2r+1 = 65 texels a side is far past any useful kernel (the paper uses up to 21).
     if (radius < 0 || radius > 32)

@@ -15,6 +15,21 @@
 
 namespace texcache {
 
+/// Which texels of a filter footprint a render shades and averages.
+///   Visible  only those the render's camera rays reach (a prepass traces the camera rays and
+///            marks them: texcache/visible_texels.h), point-symmetric for the averaging filters.
+///            A 21x21 window then shades 1.3x the samples of no filter instead of 5.2x (car AO,
+///            640x360, 4 spp) at lower error: AO has sharp detail (contact shadows), and the
+///            hidden texels a full window averages in are biased, not just costly.
+///   All      every texel of the window (the paper's footprint). Smooth, noisy signals gain from
+///            the unseen texels: they are still samples of nearly the same shading (path-traced
+///            indirect light on sunlit.json, 480x270, 4 spp, one path per sample: relMSE 0.0068
+///            with full windows, 0.0212 visible, at about the same render time).
+///   Auto     Visible for ambient occlusion, All for the direct and path integrators.
+enum class FootprintMode { Auto, Visible, All };
+/// "auto", "visible" or "all"; throws InputError naming `where` and the valid names otherwise.
+FootprintMode ParseFootprintMode(const std::string& name, const std::string& where);
+
 /// Texture-space shading settings of a render (command line / scene file).
 struct TextureSpaceOptions {
     bool enabled = false;  ///< --shading texture
@@ -29,10 +44,8 @@ struct TextureSpaceOptions {
     /// for soft lighting (environment, large area lights) and off by default.
     bool cacheDirect = false;
     int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
-    /// Footprints keep only the texels the render's camera rays land on (a prepass traces the
-    /// camera rays and marks them: see texcache/visible_texels.h) instead of every texel of the
-    /// window, so a wide filter shades no more samples than no filter. --footprint visible|all.
-    bool visibleFootprints = true;
+    /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.
+    FootprintMode footprint = FootprintMode::Auto;
     /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
     /// keep a history table the size of the texel cache.
     float temporalAlpha = 0.0f;

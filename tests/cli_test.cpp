@@ -82,6 +82,8 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
           Case{"render " + cube + " -o out.tiff", "--output"},
           Case{"render " + cube + " --shading texture --filter fancy",
                "valid: none, normal, gaussian, regression, softshadow"},
+          Case{"render " + cube + " --shading texture --footprint seen",
+               "--footprint: unknown footprint 'seen' (valid: auto, visible, all)"},
           Case{"render " + cube + " --shading texture --filter-radius -2", "--filter-radius"},
           Case{"render " + cube + " --shading texture --filter-radius 33", "--filter-radius"},
           Case{"render " + cube + " --shading texture --shadow-samples 0", "--shadow-samples"},

@@ -105,9 +105,9 @@ TEST(TextureSpace, VisibleFootprintsShadeWhatTheCameraSees) {
     RenderOptions o = CachedAo(4, 4, TextureFilterKind::None);
     const RenderResult none = Render(rs, o);
     o.texture.filter = TextureFilterKind::Normal;
-    o.texture.visibleFootprints = false;
+    o.texture.footprint = FootprintMode::All;
     const RenderResult all = Render(rs, o);
-    o.texture.visibleFootprints = true;
+    o.texture.footprint = FootprintMode::Visible;
     const RenderResult visible = Render(rs, o);
     const double eNone = RelMSE(none.beauty, ref), eAll = RelMSE(all.beauty, ref),
                  eVisible = RelMSE(visible.beauty, ref);

@@ -48,7 +48,7 @@ struct RenderArgs {
     std::string shading = "hit";
     std::string filter = "normal";
     int filterRadius = -1;  // -1: the filter's own default (DefaultFilterRadius)
-    std::string footprint = "visible";
+    std::string footprint = "auto";
     int shadowSamples = 4;
     float temporalAlpha = 0.0f;
     // Animation: frames "A:B" (inclusive) or "N" (frames 0..N-1) at fps.
@@ -79,10 +79,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     t.filter = ParseTextureFilter(a.filter, "--filter");
     if (a.filterRadius != -1) CheckFilterRadius(a.filterRadius, "--filter-radius");
     t.radius = a.filterRadius;
-    if (a.footprint != "visible" && a.footprint != "all")
-        throw InputError("--footprint",
-                         "unknown value '" + a.footprint + "' (valid: visible, all)");
-    t.visibleFootprints = a.footprint == "visible";
+    t.footprint = ParseFootprintMode(a.footprint, "--footprint");
     t.shadowSamples = CheckRange("--shadow-samples", a.shadowSamples, 1, 1 << 16);
     if (a.temporalAlpha != 0.0f) {
         if (!(a.temporalAlpha > 0.0f && a.temporalAlpha < 1.0f))
@@ -563,7 +560,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "none 0, normal 6, gaussian 10, regression 8, softshadow 8)");
     cmd->add_option("--footprint", args->footprint,
                     "Filter footprints: visible (only texels the camera rays reach, marked by a "
-                    "prepass) or all (every texel of the window, as the paper)")
+                    "prepass), all (every texel of the window, as the paper) or auto (visible "
+                    "for AO, all for direct and path)")
         ->capture_default_str();
     cmd->add_option("--shadow-samples", args->shadowSamples,
                     "Shadow rays per cached visibility sample (--filter softshadow)")

@@ -35,7 +35,7 @@ RenderOptions CachedAo(const LoadedScene& car, int w, int h, int spp, int aoRays
     o.texture.enabled = true;
     o.texture.filter = radius > 0 ? TextureFilterKind::Normal : TextureFilterKind::None;
     o.texture.radius = radius;
-    o.texture.visibleFootprints = visible;
+    o.texture.footprint = visible ? FootprintMode::Visible : FootprintMode::All;
     return o;
 }
 

@@ -268,8 +268,9 @@ int SpeedVsError(const Setup& s) {
         "converged image (many camera samples): it adds the edge noise of %d camera samples, "
         "the same for every method. Time is the render's CPU time (all threads; best of %d, "
         "2 threads, same process): the machine is shared, and CPU time counts only our work "
-        "(on an idle machine wall time is about half of it). Texture-space footprints keep the "
-        "texels the camera rays reach (the renderer's default, `--footprint visible`). %s\n\n",
+        "(on an idle machine wall time is about half of it). Footprints are the renderer's default "
+        "(`--footprint auto`): the texels the camera rays reach for AO, every texel of the window "
+        "for the direct and path integrators. %s\n\n",
         CameraSpp(s), CameraSpp(s), repeats,
         s.quick ? "**Quick mode: test-size images, two budgets; not for conclusions.**" : "");
     md +=

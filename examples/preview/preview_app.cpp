@@ -433,11 +433,16 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         if (NameCombo("default filter", ui.filters, &filter))
             s.filter = ParseTextureFilter(ui.filters[filter], "filter");
         ImGui::SliderInt("radius", &s.radius, 0, 32);
-        ImGui::Checkbox("visible footprints only", &s.visibleFootprints);
-        if (ImGui::IsItemHovered())
-            ImGui::SetTooltip(
-                "Footprints shade only texels this frame's camera rays reach "
-                "(a prepass marks them); off: every texel of the window");
+        {
+            static const std::vector<std::string> kModes = {"auto", "visible", "all"};
+            int mode = int(s.footprint);  // the enum's order is kModes'
+            if (NameCombo("footprint", kModes, &mode)) s.footprint = FootprintMode(mode);
+            if (ImGui::IsItemHovered())
+                ImGui::SetTooltip(
+                    "visible: footprints shade only texels this frame's camera rays "
+                    "reach (a prepass marks them); all: every texel of the window; "
+                    "auto: visible for AO, all for direct and path");
+        }
         ImGui::SliderFloat("LOD bias", &s.lodBias, -4.0f, 8.0f, "%.2f");
         ImGui::SliderFloat("sample cache MiB", &s.sampleCacheMb, 1.0f, 1024.0f, "%.0f",
                            ImGuiSliderFlags_Logarithmic);

@@ -101,7 +101,7 @@ int RunPreviewBench(const Scene& sceneIn, const PreviewSettings& s, const Previe
     texOpt.texture.enabled = true;
     texOpt.texture.filter = s.filter;
     texOpt.texture.radius = s.radius;
-    texOpt.texture.visibleFootprints = s.visibleFootprints;
+    texOpt.texture.footprint = s.footprint;
     texOpt.texture.cache.sampleCacheBytes = size_t(double(s.sampleCacheMb) * (1 << 20));
     texOpt.texture.cache.texelCacheBytes = size_t(double(s.texelCacheMb) * (1 << 20));
     texOpt.texture.cache.lodBias = s.lodBias;

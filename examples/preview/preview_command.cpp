@@ -25,7 +25,7 @@ struct PreviewCliArgs {
     std::string shading = "texture";
     std::string filter = "none";
     int filterRadius = 0;
-    std::string footprint = "visible";
+    std::string footprint = "auto";
     int aoSamples = 32;
     int spp = 1;
     float lodBias = 1.0f;  // half the shading rate (Sec. 6.2): ~1 texel per pixel, high reuse
@@ -56,10 +56,7 @@ int RunPreview(const PreviewCliArgs& a) {
     s.filter = ParseTextureFilter(a.filter, "--filter");
     CheckFilterRadius(a.filterRadius, "--filter-radius");
     s.radius = a.filterRadius;
-    if (a.footprint != "visible" && a.footprint != "all")
-        throw InputError("--footprint",
-                         "unknown value '" + a.footprint + "' (valid: visible, all)");
-    s.visibleFootprints = a.footprint == "visible";
+    s.footprint = ParseFootprintMode(a.footprint, "--footprint");
     s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 4096);
     s.sppPerFrame = CheckRange("--spp", a.spp, 1, 4096);
     s.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
@@ -132,7 +129,8 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--filter-radius", a->filterRadius, "Footprint radius r: (2r+1)^2 samples")
         ->capture_default_str();
     cmd->add_option("--footprint", a->footprint,
-                    "Filter footprints: visible (texels the frame's camera rays reach) or all")
+                    "Filter footprints: visible (texels the frame's camera rays reach), all, or "
+                    "auto (visible for AO, all for direct and path)")
         ->capture_default_str();
     cmd->add_option("--ao-samples", a->aoSamples, "AO rays per hit / per cached sample")
         ->capture_default_str();

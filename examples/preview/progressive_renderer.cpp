@@ -44,7 +44,7 @@ TextureSpaceOptions TextureOptions(const PreviewSettings& s) {
     t.enabled = s.textureSpace;
     t.filter = s.filter;
     t.radius = s.radius;
-    t.visibleFootprints = s.visibleFootprints;
+    t.footprint = s.footprint;
     t.cache.sampleCacheBytes = size_t(double(s.sampleCacheMb) * (1 << 20));
     t.cache.texelCacheBytes = size_t(double(s.texelCacheMb) * (1 << 20));
     t.cache.lodBias = s.lodBias;

@@ -48,9 +48,9 @@ struct PreviewSettings {
     bool textureSpace = true;
     TextureFilterKind filter = TextureFilterKind::None;
     int radius = 0;
-    bool visibleFootprints = true;  ///< footprints of texels the frame's camera rays reach only
-    std::vector<std::string> materialFilter;  ///< per material; "" = the default filter
-    std::vector<int> materialRadius;          ///< per material; -1 = the default radius
+    FootprintMode footprint = FootprintMode::Auto;  ///< see texture_space.h
+    std::vector<std::string> materialFilter;        ///< per material; "" = the default filter
+    std::vector<int> materialRadius;                ///< per material; -1 = the default radius
     float sampleCacheMb = 64.0f, texelCacheMb = 64.0f;
     float lodBias = 1.0f;
     int sppPerFrame = 1;
