@@ -309,7 +309,6 @@ public:
     /// never while lookups run; the set must outlive its use. Texels already in the texel cache
     /// keep the value they were filtered with.
     void RestrictFootprints(const VisibleTexels* visible) { visible_ = visible; }
-    const VisibleTexels* FootprintRestriction() const { return visible_; }
 
     /// Evicts everything (the scene changed).
     void InvalidateAll() {
