@@ -336,8 +336,8 @@ TEST(ScreenSpaceTemporal, StaticNoisySceneConverges) {
 // light at 64 spp (nearly noise-free), so the exact frame is known.
 struct JumpScene {
     SynthScene before, after;
-    JumpScene() {
-        before = WallScene(128, 80);
+    explicit JumpScene(int width = 128, int height = 80) {
+        before = WallScene(width, height);
         before.light = before.eye, before.lightIntensity = glm::vec3(60.0f);
         before.objects[0].albedo = glm::vec3(0.2f);
         before.indirect = true, before.cones = true;
@@ -352,12 +352,15 @@ struct JumpScene {
     }
 };
 
-TEST(ScreenSpaceTemporal, DisoccludedPixelsTakeNoHistoryFromTheOccluder) {
+class Disocclusion : public ::testing::TestWithParam<int> {};
+
+TEST_P(Disocclusion, RevealedPixelsTakeNoHistoryFromTheOccluder) {
     // After the jump, wall pixels the box covered in the previous frame must look like the
     // wall: their red excess (r - g) stays within 0.1 of the exact frame's (the box's own is
     // ~0.3; one frame of box history at alpha 0.2 would add ~0.25), for every temporal method
-    // and with / without demodulation.
-    const JumpScene js;
+    // and with / without demodulation. At 128x80 the box's motion is fitted to all its pixels,
+    // at 256x160 to a subsample of them (OcclusionMotion's kFitStep).
+    const JumpScene js(128 * GetParam(), 80 * GetParam());
     const FrameBuffers prev = SynthRender(js.before, 5, 1, 64);  // == still[5]
     const FrameBuffers cur = SynthRender(js.after, 6, 1, 64);
     const auto exact = cur.Compose();
@@ -393,6 +396,7 @@ TEST(ScreenSpaceTemporal, DisoccludedPixelsTakeNoHistoryFromTheOccluder) {
             }
         }
 }
+INSTANTIATE_TEST_SUITE_P(ScreenSpaceTemporal, Disocclusion, ::testing::Values(1, 2));
 
 // A ground plane lit by a point light straight above, a small box floating between them and
 // moving along x: a hard shadow moving over a static receiver (the traditional vectors say

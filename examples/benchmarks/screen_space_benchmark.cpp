@@ -3,15 +3,16 @@
 // with a roughness checkerboard, a diffuse back wall, a moving box, a sphere, a moving soft light,
 // a panning camera; every component and motion-vector input filled, cones included) is denoised
 // frame 0 -> frame 1 per method, and the time of the frame-1 step is reported with its per-pass
-// breakdown (wall ms, as counters), its process CPU time (all threads; on a shared machine the
-// wall time depends on what the other processes leave us, the CPU time much less) and the share
-// of the new motion vectors in both.
+// breakdown (wall ms, as counters; cpu_* the same in process CPU time, all threads: on a shared
+// machine the wall time depends on what the other processes leave us, the CPU time much less) and
+// the share of the new motion vectors in both.
 //
 //     build/bin/screen_space_benchmark [--benchmark_filter=reliable]
 #include <benchmark/benchmark.h>
 
 #include <cstdio>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "filters/screen_space/brdf_table.h"
@@ -67,6 +68,31 @@ const Frames& Shared() {
     return f;
 }
 
+void Add(StageTimings* sum, const StageTimings& t) {
+    sum->prepare += t.prepare, sum->traditionalMotion += t.traditionalMotion;
+    sum->reliableMotion += t.reliableMotion, sum->temporal += t.temporal;
+    sum->spatial += t.spatial, sum->cleanup += t.cleanup, sum->compose += t.compose;
+    sum->total += t.total;
+}
+
+// Per-iteration means of every pass (ms) and the new motion vectors' share of the total.
+void Report(benchmark::State& state, const std::string& prefix, const StageTimings& sum) {
+    using C = benchmark::Counter;
+    auto set = [&](const char* name, double v) {
+        state.counters[prefix + name] = C(v, C::kAvgIterations);
+    };
+    set("prepare_ms", sum.prepare);
+    set("tradMV_ms", sum.traditionalMotion);
+    set("newMV_ms", sum.reliableMotion);
+    set("temporal_ms", sum.temporal);
+    set("spatial_ms", sum.spatial);
+    set("cleanup_ms", sum.cleanup);
+    set("compose_ms", sum.compose);
+    set("total_ms", sum.total);
+    state.counters[prefix + "newMV_share_%"] =
+        sum.total > 0.0 ? 100.0 * sum.reliableMotion / sum.total : 0.0;
+}
+
 void BM_Stage(benchmark::State& state, Method method, Demodulation demod) {
     const Frames& fr = Shared();
     ScreenSpaceDenoiser dn(DenoiserSettings{}, fr.brdf);
@@ -79,30 +105,12 @@ void BM_Stage(benchmark::State& state, Method method, Demodulation demod) {
         dn.Denoise(fr.f0, method, demod, &img);
         dn.Denoise(fr.f1, method, demod, &img);
         benchmark::DoNotOptimize(img.data());
-        const StageTimings& t = dn.Timings();
-        state.SetIterationTime(t.total * 1e-3);
-        sum.prepare += t.prepare, sum.traditionalMotion += t.traditionalMotion;
-        sum.reliableMotion += t.reliableMotion, sum.temporal += t.temporal;
-        sum.spatial += t.spatial, sum.cleanup += t.cleanup, sum.compose += t.compose;
-        sum.total += t.total;
-        const StageTimings& c = dn.CpuTimings();
-        cpu.reliableMotion += c.reliableMotion, cpu.total += c.total;
+        state.SetIterationTime(dn.Timings().total * 1e-3);
+        Add(&sum, dn.Timings());
+        Add(&cpu, dn.CpuTimings());
     }
-    using C = benchmark::Counter;
-    auto avg = [&](double v) { return C(v, C::kAvgIterations); };
-    state.counters["prepare_ms"] = avg(sum.prepare);
-    state.counters["tradMV_ms"] = avg(sum.traditionalMotion);
-    state.counters["newMV_ms"] = avg(sum.reliableMotion);
-    state.counters["temporal_ms"] = avg(sum.temporal);
-    state.counters["spatial_ms"] = avg(sum.spatial);
-    state.counters["cleanup_ms"] = avg(sum.cleanup);
-    state.counters["compose_ms"] = avg(sum.compose);
-    state.counters["total_ms"] = avg(sum.total);
-    state.counters["newMV_share_%"] =
-        sum.total > 0.0 ? 100.0 * sum.reliableMotion / sum.total : 0.0;
-    state.counters["cpu_total_ms"] = avg(cpu.total);
-    state.counters["cpu_newMV_share_%"] =
-        cpu.total > 0.0 ? 100.0 * cpu.reliableMotion / cpu.total : 0.0;
+    Report(state, "", sum);
+    Report(state, "cpu_", cpu);
 }
 
 void Register() {

@@ -714,31 +714,52 @@ void OcclusionMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& 
 
     // 2. Their motion, fitted to the current frame's own pixels of those objects. Positions are
     // taken relative to the camera so the sums stay well conditioned far from the origin.
+    // An affine motion is fixed by a handful of points, so the fit samples every kFitStep-th
+    // pixel of every kFitStep-th row (an occluder often covers half the image, and the full sum
+    // in double precision was a fifth of the new motion vectors' time); objects that sampling
+    // leaves with fewer than kMinFit points are summed again over all their pixels.
+    constexpr int kFitStep = 4;
+    constexpr double kMinFit = 64.0;
     const glm::dvec3 origin(f.camera.position);
-    tbb::combinable<std::vector<MotionFit>> fitTls(
-        [&] { return std::vector<MotionFit>(ids.size()); });
-    ForRows(h, [&](int y) {
-        std::vector<MotionFit>& fits = fitTls.local();
-        int lastId = -3, slot = -1;
-        for (int x = 0; x < w; ++x) {
-            if (!cur.valid.At(x, y)) continue;
-            const int id = cur.objectId.At(x, y);
-            if (id != lastId) {
-                lastId = id;
-                const auto it = std::lower_bound(ids.begin(), ids.end(), id);
-                slot = it != ids.end() && *it == id ? int(it - ids.begin()) : -1;
+    auto fitPass = [&](int step, const std::vector<char>& want) {
+        tbb::combinable<std::vector<MotionFit>> fitTls(
+            [&] { return std::vector<MotionFit>(ids.size()); });
+        ForRows((h + step - 1) / step, [&](int ys) {
+            const int y = ys * step;
+            std::vector<MotionFit>& fits = fitTls.local();
+            int lastId = -3, slot = -1;
+            for (int x = 0; x < w; x += step) {
+                if (!cur.valid.At(x, y)) continue;
+                const int id = cur.objectId.At(x, y);
+                if (id != lastId) {
+                    lastId = id;
+                    const auto it = std::lower_bound(ids.begin(), ids.end(), id);
+                    slot = it != ids.end() && *it == id && want[size_t(it - ids.begin())]
+                               ? int(it - ids.begin())
+                               : -1;
+                }
+                if (slot < 0) continue;
+                const size_t i = size_t(y) * size_t(w) + size_t(x);
+                const glm::vec3 p = f.prevPosition[i], c = f.position[i];
+                if (!Finite(p) || !Finite(c)) continue;
+                fits[size_t(slot)].Add(glm::dvec3(p) - origin, glm::dvec3(c) - origin);
             }
-            if (slot < 0) continue;
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
-            const glm::vec3 p = f.prevPosition[i], c = f.position[i];
-            if (!Finite(p) || !Finite(c)) continue;
-            fits[size_t(slot)].Add(glm::dvec3(p) - origin, glm::dvec3(c) - origin);
-        }
-    });
-    std::vector<MotionFit> fits(ids.size());
-    fitTls.combine_each([&](const std::vector<MotionFit>& v) {
-        for (size_t k = 0; k < v.size(); ++k) fits[k].Merge(v[k]);
-    });
+        });
+        std::vector<MotionFit> fits(ids.size());
+        fitTls.combine_each([&](const std::vector<MotionFit>& v) {
+            for (size_t k = 0; k < v.size(); ++k) fits[k].Merge(v[k]);
+        });
+        return fits;
+    };
+    std::vector<char> few(ids.size(), 1);
+    std::vector<MotionFit> fits = fitPass(kFitStep, few);
+    bool anyFew = false;
+    for (size_t k = 0; k < ids.size(); ++k) few[k] = fits[k].n < kMinFit, anyFew |= few[k] != 0;
+    if (anyFew) {
+        const std::vector<MotionFit> all = fitPass(1, few);
+        for (size_t k = 0; k < ids.size(); ++k)
+            if (few[k]) fits[k] = all[k];
+    }
     std::vector<glm::mat3> lin(ids.size());
     std::vector<glm::vec3> trans(ids.size());
     std::vector<char> known(ids.size(), 0);

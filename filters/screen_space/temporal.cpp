@@ -40,6 +40,48 @@ struct Rows3 {
     }
 };
 
+// Sums over the usable samples of a 3x3 neighbourhood: count, per channel and of the
+// luminance (the channel itself for NC = 1), and of their squares.
+struct Stats3x3 {
+    float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
+};
+template <int NC>
+inline __attribute__((always_inline)) Stats3x3 Neighbourhood(const float* const (&cur)[3][3],
+                                                             const float* const (&valid)[3],
+                                                             const float (&rowF)[3], int x) {
+    Stats3x3 st;
+#pragma GCC unroll 3
+    for (int r = 0; r < 3; ++r)
+#pragma GCC unroll 3
+        for (int dx = -1; dx <= 1; ++dx) {
+            const float ok = valid[r][x + dx] * rowF[r];
+            float v[3] = {0, 0, 0};
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) v[c] = cur[c][r][x + dx];
+            st.cnt += ok;
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) st.s1[c] += ok * v[c], st.s2[c] += ok * v[c] * v[c];
+            if constexpr (NC == 3) {
+                const float l = Luma(v[0], v[1], v[2]);
+                st.sl += ok * l, st.sl2 += ok * l * l;
+            }
+        }
+    if constexpr (NC == 1) st.sl = st.s1[0], st.sl2 = st.s2[0];
+    return st;
+}
+
+// A chunk's pixels [x0, x0 + n) through pixels(uniform, i0, i1, run): in runs of one history
+// tap offset (ForTapRuns) when there is a history, else in one go.
+template <bool Hist, class Args, class Pixels>
+inline __attribute__((always_inline)) void RunPixels(const Args& a, int x0, int n,
+                                                     Pixels&& pixels) {
+    if constexpr (Hist)
+        ForTapRuns(a.mx, a.my, a.mt, x0, n, a.w, a.h, a.stride, size_t(a.stride) * size_t(a.h),
+                   pixels);
+    else
+        pixels(std::false_type{}, 0, n, TapRun{});
+}
+
 struct SvgfArgs {
     int w, h, stride;
     const float* cur[3][3];  // [channel][row] at x = 0
@@ -69,70 +111,66 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     alignas(64) float o[3][kC], ovar[kC], om1[kC], om2[kC], olen[kC];
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
-        for (int i = 0; i < n; ++i) {
-            const int x = x0 + i;
-            // 3x3 statistics of the current frame (valid samples only).
-            float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
-#pragma GCC unroll 3
-            for (int r = 0; r < 3; ++r)
-#pragma GCC unroll 3
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const float ok = a.valid[r][x + dx] * a.rowF[r];
-                    float v[3] = {0, 0, 0};
-#pragma GCC unroll 3
-                    for (int c = 0; c < NC; ++c) v[c] = a.cur[c][r][x + dx];
-                    cnt += ok;
-#pragma GCC unroll 3
-                    for (int c = 0; c < NC; ++c) s1[c] += ok * v[c], s2[c] += ok * v[c] * v[c];
-                    if constexpr (NC == 3) {
-                        const float l = Luma(v[0], v[1], v[2]);
-                        sl += ok * l, sl2 += ok * l * l;
-                    }
-                }
-            if constexpr (NC == 1) sl = s1[0], sl2 = s2[0];
-            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
-            const float lm = sl * in;
-            const float spVar = std::max(0.0f, sl2 * in - lm * lm);
+        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
+            __attribute__((always_inline)) {
+            constexpr bool kUniform = decltype(uniform)::value;
+            for (int i = i0; i < i1; ++i) {
+                const int x = x0 + i;
+                // 3x3 statistics of the current frame (valid samples only).
+                const Stats3x3 st = Neighbourhood<NC>(a.cur, a.valid, a.rowF, x);
+                const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
+                const float* s1 = st.s1;
+                const float* s2 = st.s2;
+                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+                const float lm = sl * in;
+                const float spVar = std::max(0.0f, sl2 * in - lm * lm);
 
-            // Validity as 0/1 floats and arithmetic blends rather than bools: GCC 12 gives up
-            // on loops mixing boolean widths.
-            const float cv = a.valid[1][x];
-            float v[3] = {0, 0, 0};
+                // Validity as 0/1 floats and arithmetic blends rather than bools: GCC 12 gives up
+                // on loops mixing boolean widths.
+                const float cv = a.valid[1][x];
+                float v[3] = {0, 0, 0};
 #pragma GCC unroll 3
-            for (int c = 0; c < NC; ++c) v[c] = a.cur[c][1][x];
-            const float l = NC == 3 ? Luma(v[0], v[1], v[2]) : v[0];
+                for (int c = 0; c < NC; ++c) v[c] = a.cur[c][1][x];
+                const float l = NC == 3 ? Luma(v[0], v[1], v[2]) : v[0];
 
-            float hv[3] = {0, 0, 0}, hm1 = 0.0f, hm2 = 0.0f, hl = 0.0f, hf = 0.0f;
-            if constexpr (Hist) {
-                const Bilinear b = BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+                float hv[3] = {0, 0, 0}, hm1 = 0.0f, hm2 = 0.0f, hl = 0.0f, hf = 0.0f;
+                if constexpr (Hist) {
+                    const Bilinear b =
+                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
 #pragma GCC unroll 3
-                for (int c = 0; c < NC; ++c) hv[c] = Gather(a.hc[c], b);
-                hm1 = Gather(a.hm1, b), hm2 = Gather(a.hm2, b), hl = Gather(a.hlen, b);
-                hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
-                if constexpr (Clamp) {
+                    for (int c = 0; c < NC; ++c) hv[c] = RunGather<kUniform>(a.hc[c], b, run, x);
+                    hm1 = RunGather<kUniform>(a.hm1, b, run, x);
+                    hm2 = RunGather<kUniform>(a.hm2, b, run, x);
+                    hl = RunGather<kUniform>(a.hlen, b, run, x);
+                    hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
+                    if constexpr (Clamp) {
 #pragma GCC unroll 3
-                    for (int c = 0; c < NC; ++c) {
-                        const float mu = s1[c] * in;
-                        const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
-                        hv[c] = std::min(std::max(hv[c], mu - a.clampK * sg), mu + a.clampK * sg);
+                        for (int c = 0; c < NC; ++c) {
+                            const float mu = s1[c] * in;
+                            const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                            hv[c] =
+                                std::min(std::max(hv[c], mu - a.clampK * sg), mu + a.clampK * sg);
+                        }
                     }
-                }
 #pragma GCC unroll 3
-                for (int c = 0; c < NC; ++c) hv[c] *= hf;
-                hm1 *= hf, hm2 *= hf, hl *= hf;
+                    for (int c = 0; c < NC; ++c) hv[c] *= hf;
+                    hm1 *= hf, hm2 *= hf, hl *= hf;
+                }
+                // len: +1 with a new sample; al: max(alpha, 1/len) with history, 1 without, 0
+                // without a new sample.
+                const float len =
+                    cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+                const float al =
+                    cv * (hf * std::max(a.alpha, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+#pragma GCC unroll 3
+                for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (v[c] - hv[c]);
+                const float m1 = hm1 + al * (l - hm1), m2 = hm2 + al * (l * l - hm2);
+                om1[i] = m1, om2[i] = m2, olen[i] = len;
+                const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
+                ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
             }
-            // len: +1 with a new sample; al: max(alpha, 1/len) with history, 1 without, 0
-            // without a new sample.
-            const float len =
-                cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
-            const float al = cv * (hf * std::max(a.alpha, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
-#pragma GCC unroll 3
-            for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (v[c] - hv[c]);
-            const float m1 = hm1 + al * (l - hm1), m2 = hm2 + al * (l * l - hm2);
-            om1[i] = m1, om2[i] = m2, olen[i] = len;
-            const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
-            ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
-        }
+        };
+        RunPixels<Hist>(a, x0, n, pixels);
         for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
         std::copy_n(ovar, n, a.outVar + x0);
         std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
@@ -178,54 +216,60 @@ inline __attribute__((always_inline)) void ReliableRowImpl(const ReliableArgs& a
     alignas(64) float o[3][kC], ovalid[kC], osigma[kC], olen[kC];
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
-        for (int i = 0; i < n; ++i) {
-            const int x = x0 + i;
-            float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0};
+        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
+            __attribute__((always_inline)) {
+            constexpr bool kUniform = decltype(uniform)::value;
+            for (int i = i0; i < i1; ++i) {
+                const int x = x0 + i;
+                float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0};
 #pragma GCC unroll 3
-            for (int r = 0; r < 3; ++r)
+                for (int r = 0; r < 3; ++r)
 #pragma GCC unroll 3
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const float ok = a.spVar[r][x + dx] >= 0.0f ? a.rowF[r] : 0.0f;
-                    cnt += ok;
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const float ok = a.spVar[r][x + dx] >= 0.0f ? a.rowF[r] : 0.0f;
+                        cnt += ok;
+#pragma GCC unroll 3
+                        for (int c = 0; c < NC; ++c) {
+                            const float v = a.sp[c][r][x + dx];
+                            s1[c] += ok * v, s2[c] += ok * v * v;
+                        }
+                    }
+                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+                const float cv = a.spVar[1][x] >= 0.0f ? 1.0f : 0.0f;  // 0/1: see SvgfRowImpl
+                const float av = AlphaV ? a.alphaV[x] : a.alpha;
+                float hv[3] = {0, 0, 0}, hl = 0.0f, hf = 0.0f, sigma = 0.0f;
+                if constexpr (Hist) {
+                    const Bilinear b =
+                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+                    hl = RunGather<kUniform>(a.hlen, b, run, x);
+                    hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
+                    float before = 0.0f, after = 0.0f;
 #pragma GCC unroll 3
                     for (int c = 0; c < NC; ++c) {
-                        const float v = a.sp[c][r][x + dx];
-                        s1[c] += ok * v, s2[c] += ok * v * v;
+                        const float h = RunGather<kUniform>(a.hc[c], b, run, x);
+                        const float mu = s1[c] * in;
+                        const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                        hv[c] = std::min(std::max(h, mu - a.clampK * sg), mu + a.clampK * sg);
+                        before += h, after += hv[c];
+                        hv[c] *= hf;
                     }
+                    hl *= hf;
+                    // eq. 8 on the channel sum, eq. 7, and the clean-up std.
+                    const float wc = std::fabs(after - before) / (std::fabs(before) + 1e-3f);
+                    const float wa = (av - a.alpha) * (av - a.alpha);
+                    sigma = hf * std::min(wa + wc, 5.0f);
                 }
-            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
-            const float cv = a.spVar[1][x] >= 0.0f ? 1.0f : 0.0f;  // 0/1: see SvgfRowImpl
-            const float av = AlphaV ? a.alphaV[x] : a.alpha;
-            float hv[3] = {0, 0, 0}, hl = 0.0f, hf = 0.0f, sigma = 0.0f;
-            if constexpr (Hist) {
-                const Bilinear b = BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
-                hl = Gather(a.hlen, b);
-                hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
-                float before = 0.0f, after = 0.0f;
+                const float len =
+                    cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+                const float al = cv * (hf * std::max(av, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
 #pragma GCC unroll 3
-                for (int c = 0; c < NC; ++c) {
-                    const float h = Gather(a.hc[c], b);
-                    const float mu = s1[c] * in;
-                    const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
-                    hv[c] = std::min(std::max(h, mu - a.clampK * sg), mu + a.clampK * sg);
-                    before += h, after += hv[c];
-                    hv[c] *= hf;
-                }
-                hl *= hf;
-                // eq. 8 on the channel sum, eq. 7, and the clean-up std.
-                const float wc = std::fabs(after - before) / (std::fabs(before) + 1e-3f);
-                const float wa = (av - a.alpha) * (av - a.alpha);
-                sigma = hf * std::min(wa + wc, 5.0f);
+                for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (a.sp[c][1][x] - hv[c]);
+                ovalid[i] = std::max(cv, hf);
+                osigma[i] = sigma;
+                olen[i] = len;
             }
-            const float len =
-                cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
-            const float al = cv * (hf * std::max(av, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
-#pragma GCC unroll 3
-            for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (a.sp[c][1][x] - hv[c]);
-            ovalid[i] = std::max(cv, hf);
-            osigma[i] = sigma;
-            olen[i] = len;
-        }
+        };
+        RunPixels<Hist>(a, x0, n, pixels);
         for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
         std::copy_n(ovalid, n, a.outValid + x0);
         std::copy_n(osigma, n, a.sigma + x0), std::copy_n(olen, n, a.len + x0);
@@ -443,40 +487,38 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
         const int n = std::min(kC, a.w - x0);
         // Pass 1 (vectorized across pixels): 3x3 statistics of the current shading, the history
         // footprints and moments.
-        for (int i = 0; i < n; ++i) {
-            const int x = x0 + i;
-            float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
+        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
+            __attribute__((always_inline)) {
+            constexpr bool kUniform = decltype(uniform)::value;
+            for (int i = i0; i < i1; ++i) {
+                const int x = x0 + i;
+                const Stats3x3 st = Neighbourhood<3>(a.ec, a.valid, a.rowF, x);
+                const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
+                const float* s1 = st.s1;
+                const float* s2 = st.s2;
+                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
 #pragma GCC unroll 3
-            for (int r = 0; r < 3; ++r)
-#pragma GCC unroll 3
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const float ok = a.valid[r][x + dx] * a.rowF[r];
-                    const float v0 = a.ec[0][r][x + dx], v1 = a.ec[1][r][x + dx],
-                                v2 = a.ec[2][r][x + dx];
-                    const float l = Luma(v0, v1, v2);
-                    cnt += ok, sl += ok * l, sl2 += ok * l * l;
-                    s1[0] += ok * v0, s1[1] += ok * v1, s1[2] += ok * v2;
-                    s2[0] += ok * v0 * v0, s2[1] += ok * v1 * v1, s2[2] += ok * v2 * v2;
+                for (int c = 0; c < 3; ++c) {
+                    mu[c][i] = s1[c] * in;
+                    sg[c][i] = std::sqrt(std::max(0.0f, s2[c] * in - mu[c][i] * mu[c][i]));
                 }
-            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
-#pragma GCC unroll 3
-            for (int c = 0; c < 3; ++c) {
-                mu[c][i] = s1[c] * in;
-                sg[c][i] = std::sqrt(std::max(0.0f, s2[c] * in - mu[c][i] * mu[c][i]));
+                spv[i] = std::max(0.0f, sl2 * in - sl * in * sl * in);
+                if constexpr (Hist) {
+                    const Bilinear b =
+                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+                    idx[0][i] = b.i00, idx[1][i] = b.i10, idx[2][i] = b.i01, idx[3][i] = b.i11;
+                    wt[0][i] = b.w00, wt[1][i] = b.w10, wt[2][i] = b.w01, wt[3][i] = b.w11;
+                    const float l = RunGather<kUniform>(a.hlen, b, run, x);
+                    hf[i] = b.ok * (l >= 0.5f ? 1.0f : 0.0f);
+                    hm1[i] = hf[i] * RunGather<kUniform>(a.hm1, b, run, x);
+                    hm2[i] = hf[i] * RunGather<kUniform>(a.hm2, b, run, x);
+                    hl[i] = hf[i] * l;
+                } else {
+                    hf[i] = hm1[i] = hm2[i] = hl[i] = 0.0f;
+                }
             }
-            spv[i] = std::max(0.0f, sl2 * in - sl * in * sl * in);
-            if constexpr (Hist) {
-                const Bilinear b = BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
-                idx[0][i] = b.i00, idx[1][i] = b.i10, idx[2][i] = b.i01, idx[3][i] = b.i11;
-                wt[0][i] = b.w00, wt[1][i] = b.w10, wt[2][i] = b.w01, wt[3][i] = b.w11;
-                const float l = Gather(a.hlen, b);
-                hf[i] = b.ok * (l >= 0.5f ? 1.0f : 0.0f);
-                hm1[i] = hf[i] * Gather(a.hm1, b), hm2[i] = hf[i] * Gather(a.hm2, b);
-                hl[i] = hf[i] * l;
-            } else {
-                hf[i] = hm1[i] = hm2[i] = hl[i] = 0.0f;
-            }
-        }
+        };
+        RunPixels<Hist>(a, x0, n, pixels);
         // Pass 2: the cones, pixel by pixel, 8-wide across the cones of a channel.
         for (int i = 0; i < n; ++i) {
             const int x = x0 + i;
