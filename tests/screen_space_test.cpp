@@ -13,6 +13,7 @@
 
 #include "filters/screen_space/brdf_table.h"
 #include "filters/screen_space/cone_overlap.h"
+#include "filters/screen_space/planes.h"
 #include "filters/screen_space/screen_denoiser.h"
 #include "screen_space_scene.h"
 #include "texcache/error.h"
@@ -709,6 +710,53 @@ TEST(ScreenSpaceDemodulation, BrdfDemodulationKeepsARoughnessTexture) {
 }
 
 // ---- Kernels against scalar references ------------------------------------------------------
+
+// The box sum (the shadow splat's window) equals the brute-force sum of the in-image taps, on
+// planes with mostly all-zero rows (skipped), rows of mixed 0/1 and pixel-offset values, widths
+// crossing the kernels' chunks, radii within the padding (doubling) and beyond it (running sum),
+// and boxes wider than the image. Tolerance 1e-5 of the sum of |v| over the box: float sums of up
+// to 81x81 terms in another order; counts of a 0/1 mask stay exact.
+TEST(ScreenSpaceKernels, BoxSumMatchesBruteForce) {
+    using detail::Plane;
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> u(-4.0f, 4.0f);
+    for (int w : {1, 7, 300}) {
+        for (int h : {1, 5, 70}) {
+            for (int r : {0, 1, 8, 20, 40}) {
+                Plane in[2], out[2], tmp[2];
+                for (int c = 0; c < 2; ++c)
+                    in[c].Resize(w, h), out[c].Resize(w, h), tmp[c].Resize(w, h);
+                for (int y = 0; y < h; ++y) {
+                    if (rng() % 3 != 0) continue;  // two thirds of the rows stay zero
+                    for (int x = 0; x < w; ++x) {
+                        const bool on = rng() % 4 == 0;
+                        in[0].At(x, y) = on ? 1.0f : 0.0f;
+                        in[1].At(x, y) = on ? u(rng) : 0.0f;
+                    }
+                }
+                const Plane* ins[2] = {&in[0], &in[1]};
+                Plane* outs[2] = {&out[0], &out[1]};
+                Plane* tmps[2] = {&tmp[0], &tmp[1]};
+                detail::BoxSum(2, ins, outs, tmps, r);
+                int bad = 0;
+                for (int c = 0; c < 2; ++c)
+                    for (int y = 0; y < h; ++y)
+                        for (int x = 0; x < w; ++x) {
+                            double e = 0.0, mag = 0.0;
+                            for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r); ++yy)
+                                for (int xx = std::max(0, x - r); xx <= std::min(w - 1, x + r);
+                                     ++xx)
+                                    e += in[c].At(xx, yy), mag += std::fabs(in[c].At(xx, yy));
+                            const float got = out[c].At(x, y);
+                            if (c == 0 ? got != float(e)
+                                       : !(std::fabs(got - e) <= 1e-5 * (1.0 + mag)))
+                                ++bad;
+                        }
+                EXPECT_EQ(bad, 0) << w << "x" << h << " r=" << r;
+            }
+        }
+    }
+}
 
 // The vectorized final sum equals the per-pixel formula emitted + shading * visibility' +
 // glossy' + indirect' (non-finite emitted / shading skipped as a whole), on random buffers with

@@ -17,6 +17,8 @@
 // Embree's per-ISA kernels.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <vector>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -281,15 +283,47 @@ void AtrousLevel(const AtrousArgs& a) {
 
 namespace {
 
-// Horizontal box sum of one row: a direct sum of the 2r+1 taps (the zero padding covers the
-// image border for r <= kPad), vectorized across x.
+// Horizontal box sum of one row by doubling: A_1 is the row from x - r on (the zero padding
+// covers the border for r <= kPad), A_2k[i] = A_k[i] + A_k[i + k], and the window's L = 2r + 1
+// taps are the A_k of L's set bits laid end to end. That is log2(L) + popcount(L) vectorized
+// passes instead of the direct sum's 2r (r = 8, the shadow splat: 5 instead of 16). `a`, `b`:
+// scratch of w + 2r floats each.
 __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void BoxRowH(
-    const float* s, float* d, int w, int r) {
-    for (int x = 0; x < w; ++x) d[x] = s[x];
-    for (int k = 1; k <= r; ++k)
-        for (int x = 0; x < w; ++x) d[x] += s[x - k] + s[x + k];
+    const float* s, float* __restrict d, int w, int r, float* __restrict a, float* __restrict b) {
+    const int taps = 2 * r + 1;
+    const float* cur = s - r;
+    int len = w + 2 * r;  // entries of the current level that hold a full sum
+    int offset = 0;
+    float* next = a;
+    for (int k = 1;; k *= 2) {
+        if (taps & k) {
+            const float* src = cur + offset;
+            if (offset == 0)  // k = 1: the lowest bit of an odd count
+                for (int x = 0; x < w; ++x) d[x] = src[x];
+            else
+                for (int x = 0; x < w; ++x) d[x] += src[x];
+            offset += k;
+        }
+        if (2 * k > taps) break;
+        len -= k;
+        for (int i = 0; i < len; ++i) next[i] = cur[i] + cur[i + k];
+        cur = next;
+        next = next == a ? b : a;
+    }
 }
-// d += a - b over a row.
+// True when a row holds only zeros (+0 or -0): such rows (most of a sparse mask's) add nothing.
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) bool ZeroRow(
+    const float* s, int w) {
+    constexpr int kC = 64;
+    for (int x0 = 0; x0 < w; x0 += kC) {
+        const int n = std::min(kC, w - x0);
+        int nonzero = 0;
+        for (int i = 0; i < n; ++i) nonzero |= s[x0 + i] != 0.0f;
+        if (nonzero) return false;
+    }
+    return true;
+}
+// d += a - b over a row (a or b null: zero).
 __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void AddSubRow(
     float* d, const float* a, const float* b, int w) {
     for (int x = 0; x < w; ++x) d[x] += (a ? a[x] : 0.0f) - (b ? b[x] : 0.0f);
@@ -299,16 +333,24 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
 
 void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp, int r) {
     const int w = in[0]->Width(), h = in[0]->Height();
+    // zero[c * h + y]: the horizontal sums of row y of plane c are all zero. They are skipped
+    // (scanned, not summed) and the vertical pass neither adds nor subtracts them.
+    std::vector<uint8_t> zero(size_t(nc) * size_t(h), 0);
     ForRowBlocks(h, [&](int y0, int y1) {
+        std::vector<float> scratch(r <= kPad ? 2 * (size_t(w) + 2 * size_t(r)) : 0);
         for (int y = y0; y < y1; ++y)
             for (int c = 0; c < nc; ++c) {
+                const float* s = in[c]->Row(y);
+                float* d = tmp[c]->Row(y);
+                if (ZeroRow(s, w)) {
+                    zero[size_t(c) * size_t(h) + size_t(y)] = 1;
+                    continue;
+                }
                 if (r <= kPad) {
-                    BoxRowH(in[c]->Row(y), tmp[c]->Row(y), w, r);
+                    BoxRowH(s, d, w, r, scratch.data(), scratch.data() + w + 2 * r);
                     continue;
                 }
                 // Wider than the padding: running sum (rare; not a hot path).
-                const float* s = in[c]->Row(y);
-                float* d = tmp[c]->Row(y);
                 double run = 0.0;
                 for (int x = 0; x <= std::min(r, w - 1); ++x) run += s[x];
                 for (int x = 0; x < w; ++x) {
@@ -323,16 +365,19 @@ void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp
     // are 0/1 masks and pixel offsets.
     tbb::parallel_for(tbb::blocked_range<int>(0, h, 32), [&](const tbb::blocked_range<int>& rr) {
         for (int c = 0; c < nc; ++c) {
+            const uint8_t* zc = zero.data() + size_t(c) * size_t(h);
+            auto row = [&](int yy) -> const float* {
+                return yy >= 0 && yy < h && !zc[yy] ? tmp[c]->Row(yy) : nullptr;
+            };
             float* first = out[c]->Row(rr.begin());
             std::fill_n(first, w, 0.0f);
-            for (int yy = std::max(0, rr.begin() - r); yy <= std::min(h - 1, rr.begin() + r); ++yy)
-                AddSubRow(first, tmp[c]->Row(yy), nullptr, w);
+            for (int yy = rr.begin() - r; yy <= rr.begin() + r; ++yy)
+                if (const float* t = row(yy)) AddSubRow(first, t, nullptr, w);
             for (int y = rr.begin() + 1; y < rr.end(); ++y) {
                 float* d = out[c]->Row(y);
                 std::copy_n(out[c]->Row(y - 1), w, d);
-                const int add = y + r, sub = y - r - 1;
-                AddSubRow(d, add < h ? tmp[c]->Row(add) : nullptr,
-                          sub >= 0 ? tmp[c]->Row(sub) : nullptr, w);
+                const float *add = row(y + r), *sub = row(y - r - 1);
+                if (add || sub) AddSubRow(d, add, sub, w);
             }
         }
     });
