@@ -538,6 +538,11 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
     const GlossyRowArgs& args) {
     const GlossyRowArgs a = args;
     constexpr int kC = 256;
+    // Two loops per chunk (eq. 5's vectors, then the lobe's jitter and the taps): one loop holds
+    // more live values than there are vector registers, and its spills cost more than these
+    // arrays' round trip through L1.
+    alignas(64) float oks[kC], vxs[kC], vys[kC], vzs[kC], nxs[kC], nys[kC], nzs[kC], pxs[kC],
+        pys[kC], pzs[kC], muxs[kC], muys[kC];
     alignas(64) float ox[kC], oy[kC];
     alignas(64) int om[kC];
     const float hw = 0.5f * float(a.w), hh = 0.5f * float(a.h);
@@ -584,6 +589,16 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
             const float ipw = okf > 0.0f ? 1.0f / pcw : 0.0f, icw = okf > 0.0f ? 1.0f / ccw : 0.0f;
             const float mux = (pcx * ipw - ccx * icw) * hw + float(x) + 0.5f;
             const float muy = (ccy * icw - pcy * ipw) * hh + float(a.y) + 0.5f;
+            oks[i] = okf, vxs[i] = vx, vys[i] = vy, vzs[i] = vz;
+            nxs[i] = nx, nys[i] = ny, nzs[i] = nz, pxs[i] = px, pys[i] = py, pzs[i] = pz;
+            muxs[i] = mux, muys[i] = muy;
+        }
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const float vx = vxs[i], vy = vys[i], vz = vzs[i];
+            const float nx = nxs[i], ny = nys[i], nz = nzs[i];
+            const float px = pxs[i], py = pys[i], pz = pzs[i];
+            const float mux = muxs[i], muy = muys[i], okf = oks[i];
             // s^C: where the camera ray to the virtual image crosses the plane.
             const float ex = vx - a.cam[0], ey = vy - a.cam[1], ez = vz - a.cam[2];
             const float den = ex * nx + ey * ny + ez * nz;
