@@ -7,21 +7,26 @@
 
 #include <glm/gtc/packing.hpp>
 
-#include "texcache/error.h"
+#include "texcache/enum_names.h"
 
 namespace texcache {
 
+namespace {
+constexpr EnumName<TextureFilterKind> kFilterNames[] = {
+    {"none", TextureFilterKind::None},
+    {"normal", TextureFilterKind::Normal},
+    {"gaussian", TextureFilterKind::Gaussian},
+    {"regression", TextureFilterKind::Regression},
+    {"softshadow", TextureFilterKind::SoftShadow},
+};
+}  // namespace
+
 TextureFilterKind ParseTextureFilter(const std::string& name, const std::string& where) {
-    if (name == "none") return TextureFilterKind::None;
-    if (name == "normal") return TextureFilterKind::Normal;
-    if (name == "gaussian") return TextureFilterKind::Gaussian;
-    if (name == "regression") return TextureFilterKind::Regression;
-    if (name == "softshadow") return TextureFilterKind::SoftShadow;
-    throw InputError(where, "unknown filter '" + name + "' (valid: " + TextureFilterNames() + ")");
+    return ParseEnum(kFilterNames, name, where, "filter");
 }
 
-const char* TextureFilterNames() {
-    return "none, normal, gaussian, regression, softshadow";
+std::string TextureFilterNames() {
+    return EnumNames(kFilterNames);
 }
 
 namespace {

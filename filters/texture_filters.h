@@ -77,8 +77,8 @@ enum class TextureFilterKind { None, Normal, Gaussian, Regression, SoftShadow };
 
 /// Parses a filter name; throws InputError listing the valid names.
 TextureFilterKind ParseTextureFilter(const std::string& name, const std::string& where);
-/// Valid filter names for help texts and errors.
-const char* TextureFilterNames();
+/// Valid filter names for help texts and errors ("none, normal, ...").
+std::string TextureFilterNames();
 
 /// The paper's trivial filter: a box (or Gaussian) window averaging samples whose normals are
 /// within the threshold of the centre sample's normal (cos > 0.9 in the paper). Non-finite

@@ -1,26 +1,30 @@
 // SPDX-License-Identifier: Apache-2.0
-// The frame camera and the frame buffers' EXR files (the integrator is in integrator.cpp, beside
-// the path tracer it shares its light sampling and paths with).
+// The screen-space stage's frame buffers rendered with the path tracer's light sampling and paths
+// (path_tracer.h); what each buffer holds is stated in frame_buffers_render.h.
 #include "renderer/frame_buffers_render.h"
 
-#include <unistd.h>
+#include <pmmintrin.h>
+#include <xmmintrin.h>
 
+#include <array>
+#include <chrono>
 #include <cmath>
-#include <filesystem>
-#include <functional>
 #include <limits>
-#include <map>
-#include <type_traits>
+#include <memory>
 
-#include <OpenImageIO/imageio.h>
+#include <tbb/blocked_range2d.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "renderer/cached_shading.h"
+#include "renderer/path_tracer.h"
+#include "renderer/render.h"
 #include "texcache/error.h"
 
 namespace texcache {
 
-namespace fs = std::filesystem;
-OIIO_NAMESPACE_USING
+using namespace internal;
 
 screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, int height) {
     screen::FrameCamera fc;
@@ -38,205 +42,350 @@ screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, in
 
 namespace {
 
-/// One EXR layer of a buffer: its channel names and where its floats live.
-template <typename Float>
-struct Layer {
-    std::string name;
-    std::vector<std::string> channels;
-    Float* data;                  // channels.size() floats per pixel, `stride` floats apart
-    size_t stride;                // floats from one pixel's entry to the next
-    size_t count;                 // entries in the buffer (0: empty, not written)
-    std::function<void()> clear;  // empties the buffer (reading: the layer is missing)
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+// Unshadowed light samples per frame-buffer sample for `shading` (no rays: BSDF and light
+// evaluations only). Measured noise: frame_buffers_render.h.
+constexpr int kShadingCandidates = 32;
+const glm::vec3 kNaN3(kNaN);
+
+/// Where everything that moves was at the previous frame: world at the frame time -> world at
+/// prevTime, per object and per quad light (T^-1 of Zeng eq. 1/3/5), and distant lights'
+/// direction rotations.
+struct FrameMotion {
+    std::vector<glm::mat4> object, light;
+    std::vector<glm::mat3> objectN, lightN;  // their normal matrices
+    std::vector<glm::mat3> distant;
+    float infinity = 1e4f;  // distance at which points of lights at infinity are put
+
+    FrameMotion(const RenderScene& rs, const RenderOptions& opt, float prevTime) {
+        const Scene& scene = rs.scene();
+        auto normalMatrix = [](const glm::mat4& m) {
+            return glm::transpose(glm::inverse(glm::mat3(m)));
+        };
+        float extent = glm::length(glm::vec3(scene.camera.pose.Eval(opt.frameTime)[3]));
+        for (size_t o = 0; o < scene.objects.size(); ++o) {
+            // The frame's pose is the render scene's (shutter time 0), so moved points start
+            // exactly where the rays found them.
+            const glm::mat4 now = rs.ObjectToWorld(int(o), 0.0f);
+            object.push_back(scene.objects[o].transform.Eval(prevTime) * glm::inverse(now));
+            objectN.push_back(normalMatrix(object.back()));
+            for (const auto& p : scene.meshes[scene.objects[o].mesh].positions)
+                extent = std::max(extent,
+                                  glm::length(glm::vec3(now * glm::vec4(p[0], p[1], p[2], 1.0f))));
+        }
+        for (const QuadLight& q : scene.quadLights) {
+            light.push_back(q.transform.Eval(prevTime) *
+                            glm::inverse(q.transform.Eval(opt.frameTime)));
+            lightN.push_back(normalMatrix(light.back()));
+        }
+        for (const DistantLight& d : scene.distantLights)
+            distant.push_back(glm::mat3(d.transform.Eval(prevTime)) *
+                              glm::inverse(glm::mat3(d.transform.Eval(opt.frameTime))));
+        // Far enough that the line from a blocker to it has the light's direction to ~1e-4.
+        infinity = 1e4f * std::max(extent, 1e-3f);
+    }
+
+    /// A point on what a ray hit, moved to the previous frame.
+    glm::vec3 Point(const Hit& h, glm::vec3 p) const {
+        const glm::mat4& m = h.object >= 0 ? object[h.object] : light[h.light];
+        return glm::vec3(m * glm::vec4(p, 1.0f));
+    }
+    glm::vec3 Normal(const Hit& h, glm::vec3 n) const {
+        return glm::normalize((h.object >= 0 ? objectN[h.object] : lightN[h.light]) * n);
+    }
 };
 
-const char* const kRgb[] = {"R", "G", "B"};
-const char* const kXyz[] = {"X", "Y", "Z"};
+/// One pixel's buffers while its samples are taken.
+struct FramePixel {
+    glm::vec3 shadingSum{0.0f}, glossySum{0.0f}, diffuseSum{0.0f};
+    float weightSum = 0.0f, visibleWeightSum = 0.0f;
+    float blockerWeight = -1.0f;  // shading luminance of the recorded blocked sample
+    glm::vec3 blocker = kNaN3, prevBlocker = kNaN3, light = kNaN3, prevLight = kNaN3;
+    glm::vec3 glossyHit = kNaN3, prevGlossyHit = kNaN3;
+    std::array<glm::vec3, screen::kNumCones> coneSum{};
+    bool hasCones = false;  ///< a diffuse ray was traced
+};
 
-/// The layers of `fb` in file order (FB is FrameBuffers or const FrameBuffers); object ids go
-/// through `ids` as floats (exact up to 2^24). With `resize` (reading) every buffer is first
-/// sized for the frame.
-template <typename FB>
-auto Layers(FB& fb, bool resize, std::vector<float>* ids) {
-    using Float = std::conditional_t<std::is_const_v<FB>, const float, float>;
-    const size_t n = fb.NumPixels();
-    std::vector<Layer<Float>> layers;
-    // Reading empties the buffer of a missing layer; writing never clears.
-    auto clearer = [](auto& v) -> std::function<void()> {
-        if constexpr (std::is_const_v<FB>)
-            return [] {};
-        else
-            return [&v] { v.clear(); };
-    };
-    auto vec3 = [&](const char* name, auto& v, const char* const* ch) {
-        if constexpr (!std::is_const_v<FB>)
-            if (resize) v.assign(n, glm::vec3(0.0f));
-        layers.push_back({name, {ch[0], ch[1], ch[2]}, &v.data()->x, 3, v.size(), clearer(v)});
-    };
-    auto scalar = [&](const char* name, auto& v, const char* ch) {
-        if constexpr (!std::is_const_v<FB>)
-            if (resize) v.assign(n, 0.0f);
-        layers.push_back({name, {ch}, v.data(), 1, v.size(), clearer(v)});
-    };
-    vec3("emitted", fb.emitted, kRgb);
-    vec3("shading", fb.shading, kRgb);
-    scalar("visibility", fb.visibility, "Y");
-    vec3("glossy", fb.glossy, kRgb);
-    vec3("indirect", fb.indirect, kRgb);
-    vec3("position", fb.position, kXyz);
-    vec3("normal", fb.normal, kXyz);
-    scalar("depth", fb.depth, "Z");
-    scalar("roughness", fb.roughness, "Y");
-    vec3("albedo", fb.albedo, kRgb);
-    vec3("specular", fb.specular, kRgb);
-    ids->assign(resize ? n : fb.objectId.size(), 0.0f);
-    for (size_t i = 0; i < ids->size() && !resize; ++i) (*ids)[i] = float(fb.objectId[i]);
-    scalar("objectId", *ids, "Y");
-    vec3("prevPosition", fb.prevPosition, kXyz);
-    vec3("prevNormal", fb.prevNormal, kXyz);
-    vec3("blocker", fb.blocker, kXyz);
-    vec3("prevBlocker", fb.prevBlocker, kXyz);
-    vec3("lightSample", fb.lightSample, kXyz);
-    vec3("prevLightSample", fb.prevLightSample, kXyz);
-    vec3("glossyHit", fb.glossyHit, kXyz);
-    vec3("prevGlossyHit", fb.prevGlossyHit, kXyz);
-    if constexpr (!std::is_const_v<FB>)
-        if (resize) fb.cones.assign(n * screen::kNumCones, glm::vec3(0.0f));
-    // Cone k of pixel p is cones[p * kNumCones + k]: one strided layer per cone.
-    for (int k = 0; k < screen::kNumCones; ++k)
-        layers.push_back({"cone" + std::to_string(k),
-                          {"R", "G", "B"},
-                          fb.cones.empty() ? nullptr : &fb.cones[size_t(k)].x,
-                          size_t(3 * screen::kNumCones),
-                          fb.cones.size() / screen::kNumCones,
-                          clearer(fb.cones)});
-    return layers;
+glm::vec3 FiniteOrZero(glm::vec3 v) {
+    return std::isfinite(v.x + v.y + v.z) ? v : glm::vec3(0.0f);
+}
+
+/// The light sample of one frame-buffer sample: unshadowed shading into `px` from
+/// kShadingCandidates light samples, and one shadow ray to a candidate resampled in proportion to
+/// its shading's luminance, with the blocker and light point when blocked (see
+/// frame_buffers_render.h).
+void FrameDirectSample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
+                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+    // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
+    // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
+    // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
+    constexpr int kN = kShadingCandidates;
+    constexpr float kG1 = 0.75487766f, kG2 = 0.56984029f;  // 1/phi_2, 1/phi_2^2
+    const float pickShift = rng.Next1D();
+    const glm::vec2 shift = rng.Next2D();
+    const float uResample = rng.Next1D();
+    LightSample cand[kN];
+    glm::vec3 S[kN];
+    float lum[kN];
+    glm::vec3 sum(0.0f);
+    float lumSum = 0.0f;
+    for (int k = 0; k < kN; ++k) {
+        lum[k] = 0.0f, S[k] = glm::vec3(0.0f);
+        const float uPick = (float(k) + pickShift) / float(kN);
+        const glm::vec2 u(std::fmod(shift.x + kG1 * float(k), 1.0f),
+                          std::fmod(shift.y + kG2 * float(k), 1.0f));
+        LightSample& ls = cand[k];
+        if (!c.SampleLight(si.P, std::min(uPick, kOneMinusEpsilon),
+                           glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
+            continue;
+        glm::vec3 fd, fs;
+        bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
+        // The specular ray may find this light too (in `glossy`): MIS between the two for that
+        // lobe.
+        const float wSpec = ls.delta || !bsdf.HasSpecular()
+                                ? 1.0f
+                                : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
+        const float cosi = std::abs(glm::dot(ls.wi, si.N));
+        S[k] = FiniteOrZero((fd + wSpec * fs) * ls.Li * (ls.delta ? cosi : cosi / ls.pdf));
+        lum[k] = Luminance(glm::abs(S[k]));
+        sum += S[k], lumSum += lum[k];
+    }
+    if (!(lumSum > 0.0f)) return;  // no shadow ray: counts as visible (see the header)
+    const glm::vec3 Sbar = sum / float(kN);
+    px.shadingSum += Sbar;
+    const float w = Luminance(glm::abs(Sbar));
+    px.weightSum += w;
+    // The shadow ray's candidate: index j with probability lum_j / sum lum.
+    int j = 0;
+    float acc = lum[0], target = uResample * lumSum;
+    while (j + 1 < kN && (acc <= target || lum[j] <= 0.0f)) acc += lum[++j];
+    while (lum[j] <= 0.0f) --j;  // rounding ran past the last candidate with shading
+    const LightSample& ls = cand[j];
+    const Ray shadow = ShadowRay(si, ls, 0.0f);
+    Hit bh;
+    ++rays.shadow;
+    if (!c.rs.Intersect(shadow, &bh)) {
+        px.visibleWeightSum += w;
+        return;
+    }
+    if (w <= px.blockerWeight) return;
+    px.blockerWeight = w;
+    px.blocker = shadow.org + bh.t * shadow.dir;
+    px.prevBlocker = motion.Point(bh, px.blocker);
+    if (ls.quad >= 0) {
+        px.light = si.P + ls.dist * ls.wi;  // the sampled point of the quad
+        px.prevLight = glm::vec3(motion.light[ls.quad] * glm::vec4(px.light, 1.0f));
+    } else {
+        // At infinity: a far point along the light direction from the blocker, so the line from
+        // the light point through the blocker has the light's direction in both frames.
+        const glm::vec3 prevDir =
+            ls.distant >= 0 ? glm::normalize(motion.distant[ls.distant] * ls.wi) : ls.wi;
+        px.light = px.blocker + motion.infinity * ls.wi;
+        px.prevLight = px.prevBlocker + motion.infinity * prevDir;
+    }
+}
+
+/// The specular lobe's path of one sample into px.glossySum (and its first hit).
+void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
+                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+    glm::vec3 wi, weight;
+    float pdf;
+    if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
+    Ray ray;
+    ray.org = OffsetOrigin(si.P, si.Ng, wi);
+    ray.dir = wi;
+    Hit hit;
+    ++rays.bounce;
+    const bool found = c.rs.Intersect(ray, &hit);
+    glm::vec3 L(0.0f);
+    if (!found) {
+        // Direct light from the environment: the light sample's MIS partner.
+        if (c.env) L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(wi) * c.PickPdf());
+    } else if (hit.light >= 0) {
+        L = c.QuadEmission(hit.light, wi) *
+            PowerHeuristic(1, pdf, 1, c.QuadPdf(hit.light, wi, hit.t));
+    } else {
+        // Light found at the hit (NEE) and beyond; emission at this hit was handled above.
+        L = LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+    }
+    px.glossySum += FiniteOrZero(weight * L);
+    if (found && !std::isfinite(px.glossyHit.x)) {
+        px.glossyHit = ray.org + hit.t * ray.dir;
+        px.prevGlossyHit = motion.Point(hit, px.glossyHit);
+    }
+}
+
+/// The diffuse lobe's path of one sample: incident indirect radiance into px.diffuseSum and its
+/// cone.
+void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
+                        glm::vec3 wo, const std::array<glm::vec3, screen::kNumCones>& axes,
+                        Rng& rng, FramePixel& px, RayCounts& rays) {
+    glm::vec3 wi;
+    glm::vec3 L(0.0f);
+    if (bsdf.SampleDiffuse(wo, rng.Next2D(), &wi)) {
+        Ray ray;
+        ray.org = OffsetOrigin(si.P, si.Ng, wi);
+        ray.dir = wi;
+        Hit hit;
+        ++rays.bounce;
+        const bool found = c.rs.Intersect(ray, &hit);
+        // Light hit directly is the light sample's: emitFirst = false.
+        L = FiniteOrZero(LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false));
+    }
+    px.diffuseSum += L;
+    // Cosine-sampled: L is this sample's estimate of irradiance / pi (see AddConeSample).
+    screen::AddConeSample(axes, wi, L, px.coneSum.data());
+    px.hasCones = true;
+}
+
+/// All buffers of pixel (x, y).
+void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y,
+                       screen::FrameBuffers& fb, RayCounts& rays) {
+    const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
+    RayDifferentials diff;
+    // Pixel centre, lens centre, shutter open: exact guides (see the header).
+    Ray ray = c.camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f),
+                                c.tsc ? &diff : nullptr);
+    ray.time = 0.0f;
+    ++rays.camera;
+    Hit hit;
+    if (!c.rs.Intersect(ray, &hit)) {
+        if (c.env) fb.emitted[p] = c.env->Eval(ray.dir);
+        return;
+    }
+    if (hit.light >= 0) {
+        fb.emitted[p] = c.QuadEmission(hit.light, ray.dir);
+        const glm::vec3 P = ray.org + hit.t * ray.dir;
+        glm::vec3 n = c.quads[hit.light].n;
+        if (glm::dot(n, ray.dir) > 0.0f) n = -n;
+        fb.position[p] = P;
+        fb.normal[p] = n;
+        fb.depth[p] = hit.t;
+        fb.prevPosition[p] = motion.Point(hit, P);
+        fb.prevNormal[p] = motion.Normal(hit, n);
+        return;
+    }
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, c.tsc ? &diff : nullptr);
+    const Bsdf bsdf = MakeBsdf(c, si);
+    const Material& m = c.scene.materials[si.material];
+    fb.position[p] = si.P;
+    fb.normal[p] = si.N;
+    fb.depth[p] = hit.t;
+    fb.roughness[p] = bsdf.Alpha();
+    fb.albedo[p] = bsdf.DiffuseReflectance();
+    fb.specular[p] = bsdf.HasSpecular() ? m.specular : glm::vec3(0.0f);
+    fb.objectId[p] = si.object;
+    fb.prevPosition[p] = motion.Point(hit, si.P);
+    fb.prevNormal[p] = motion.Normal(hit, si.N);
+    if (c.opt.maxDepth < 1) return;  // the path tracer sees emission only
+
+    const glm::vec3 wo = -ray.dir;
+    // The shading normal can face away from the camera where the tessellation does not: the
+    // BSDF is 0 there, and there is no diffuse ray (nor cone sample).
+    const bool diffuse = bsdf.DiffuseReflectance() != glm::vec3(0.0f) && c.opt.maxDepth >= 2 &&
+                         glm::dot(wo, si.N) > 0.0f;
+    // Diffuse materials take indirect light from the texture-space cache, as Render() does.
+    const bool cachedIndirect = diffuse && c.tsc && m.type == Material::Type::Diffuse;
+    if (cachedIndirect) {
+        const glm::vec3 E = CachedLookup(
+            c, si, [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, false, rays); },
+            c.opt.texture.indirectSamples);
+        fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
+    }
+    const std::array<glm::vec3, screen::kNumCones> axes = screen::ConeAxes(si.N);
+    FramePixel px;
+    const int spp = std::max(c.opt.spp, 1);
+    for (int s = 0; s < spp; ++s) {
+        Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
+        FrameDirectSample(c, motion, si, bsdf, wo, rng, px, rays);
+        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
+        if (diffuse && !cachedIndirect) FrameDiffuseSample(c, si, bsdf, wo, axes, rng, px, rays);
+    }
+    const float inv = 1.0f / float(spp);
+    fb.shading[p] = px.shadingSum * inv;
+    fb.visibility[p] = px.weightSum > 0.0f ? px.visibleWeightSum / px.weightSum : 1.0f;
+    fb.glossy[p] = px.glossySum * inv;
+    if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
+    if (fb.visibility[p] < 1.0f) {
+        fb.blocker[p] = px.blocker;
+        fb.prevBlocker[p] = px.prevBlocker;
+        fb.lightSample[p] = px.light;
+        fb.prevLightSample[p] = px.prevLight;
+    }
+    fb.glossyHit[p] = px.glossyHit;
+    fb.prevGlossyHit[p] = px.prevGlossyHit;
+    if (px.hasCones)
+        for (int k = 0; k < screen::kNumCones; ++k)
+            fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
 }
 
 }  // namespace
 
-void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn) {
-    fbIn.Validate(path);
-    const fs::path dir = fs::path(path).parent_path();
-    if (!dir.empty() && !fs::is_directory(dir))
-        throw InputError(
-            path, "cannot write frame buffers: directory '" + dir.string() + "' does not exist");
-    const screen::FrameBuffers& fb = fbIn;
-    std::vector<float> ids;
-    const auto layers = Layers(fb, false, &ids);
-    const std::vector<glm::vec3> beauty = fb.Compose();
+RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& options, float prevTime,
+                               screen::FrameBuffers* out, TextureSpaceCache* cache) {
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    if (options.width <= 0 || options.height <= 0)
+        throw InputError("frame buffers", "frame size must be positive, got " +
+                                              std::to_string(options.width) + "x" +
+                                              std::to_string(options.height));
+    if (!std::isfinite(prevTime))
+        throw InputError("frame buffers", "the previous frame's time is not finite");
+    RenderOptions opt = options;
+    opt.integrator = IntegratorKind::Path;  // the Context builds the lights for it
+    Context ctx(rs, opt);
+    FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::None);
+    const FrameMotion motion(rs, opt, prevTime);
+
+    screen::FrameBuffers& fb = *out;
+    const int W = opt.width, H = opt.height;
+    fb.width = W;
+    fb.height = H;
+    fb.time = opt.frameTime;
+    fb.camera = MakeFrameCamera(rs.scene().camera, opt.frameTime, W, H);
     const size_t n = fb.NumPixels();
+    // assign() keeps the capacity of a FrameBuffers reused across frames.
+    const glm::vec3 zero(0.0f);
+    fb.emitted.assign(n, zero);
+    fb.shading.assign(n, zero);
+    fb.visibility.assign(n, 1.0f);
+    fb.glossy.assign(n, zero);
+    fb.indirect.assign(n, zero);
+    fb.position.assign(n, kNaN3);
+    fb.normal.assign(n, kNaN3);
+    fb.depth.assign(n, INFINITY);
+    fb.roughness.assign(n, 0.0f);
+    fb.albedo.assign(n, zero);
+    fb.specular.assign(n, zero);
+    fb.objectId.assign(n, -1);
+    fb.prevPosition.assign(n, kNaN3);
+    fb.prevNormal.assign(n, kNaN3);
+    for (auto* v : {&fb.blocker, &fb.prevBlocker, &fb.lightSample, &fb.prevLightSample,
+                    &fb.glossyHit, &fb.prevGlossyHit})
+        v->assign(n, kNaN3);
+    fb.cones.assign(n * screen::kNumCones, kNaN3);
 
-    ImageSpec spec(fb.width, fb.height, 0, TypeDesc::FLOAT);
-    spec.channelnames = {"R", "G", "B"};
-    for (const auto& l : layers)
-        if (l.count > 0)
-            for (const std::string& ch : l.channels) spec.channelnames.push_back(l.name + "." + ch);
-    spec.nchannels = int(spec.channelnames.size());
-    spec.alpha_channel = -1;
-    spec.attribute("compression", "zip");
-    spec.attribute("texcache:worldToClip", TypeMatrix44, &fb.camera.worldToClip[0][0]);
-    spec.attribute("texcache:cameraPosition", TypeVector, &fb.camera.position.x);
-    spec.attribute("texcache:time", fb.time);
+    tbb::enumerable_thread_specific<RayCounts> counts;
+    tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
+                      [&](const tbb::blocked_range2d<int>& r) {
+                          _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                          _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                          RayCounts& rc = counts.local();
+                          for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+                              for (int x = r.cols().begin(); x < r.cols().end(); ++x)
+                                  FramePixelBuffers(ctx, motion, x, y, fb, rc);
+                      });
 
-    const size_t total = size_t(spec.nchannels);
-    std::vector<float> px(n * total);
-    for (size_t p = 0; p < n; ++p) {
-        float* o = &px[p * total];
-        for (int k = 0; k < 3; ++k) *o++ = beauty[p][k];
-        for (const auto& l : layers) {
-            if (l.count == 0) continue;
-            const float* src = l.data + p * l.stride;
-            for (size_t k = 0; k < l.channels.size(); ++k) *o++ = src[k];
-        }
+    RenderStats stats;
+    for (const RayCounts& rc : counts) {
+        stats.cameraRays += rc.camera;
+        stats.shadowRays += rc.shadow;
+        stats.bounceRays += rc.bounce;
     }
-
-    // Temporary file + rename, as WriteImage: readers never see a partial file.
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
-    auto out = ImageOutput::create("openexr");
-    if (!out) throw InputError(path, "cannot write frame buffers: " + OIIO::geterror());
-    const bool ok =
-        out->open(tmp, spec) && out->write_image(TypeDesc::FLOAT, px.data()) && out->close();
-    std::error_code ec;
-    if (!ok) {
-        const std::string err = out->geterror();
-        out.reset();
-        fs::remove(tmp, ec);
-        throw InputError(path,
-                         "cannot write frame buffers: " + (err.empty() ? "write failed" : err));
-    }
-    out.reset();
-    fs::rename(tmp, path, ec);
-    if (ec) {
-        std::error_code ignored;
-        fs::remove(tmp, ignored);
-        throw InputError(path, "cannot write frame buffers: " + ec.message());
-    }
-}
-
-screen::FrameBuffers ReadFrameBuffers(const std::string& path) {
-    std::error_code ec;
-    if (!fs::is_regular_file(path, ec))
-        throw InputError(path, "cannot read frame buffers: no such file");
-    auto in = ImageInput::open(path);
-    if (!in) throw InputError(path, "cannot read frame buffers: " + OIIO::geterror());
-    const ImageSpec spec = in->spec();
-    screen::FrameBuffers fb;
-    fb.width = spec.width;
-    fb.height = spec.height;
-    if (fb.width <= 0 || fb.height <= 0 || double(fb.width) * fb.height * spec.nchannels > 1e10)
-        throw InputError(path, "cannot read frame buffers: bad image size");
-    glm::mat4 m(1.0f);
-    glm::vec3 cam(0.0f);
-    float time = 0.0f;
-    if (!spec.getattribute("texcache:worldToClip", TypeMatrix44, &m[0][0]) ||
-        !spec.getattribute("texcache:cameraPosition", TypeVector, &cam.x) ||
-        !spec.getattribute("texcache:time", TypeFloat, &time))
-        throw InputError(path,
-                         "cannot read frame buffers: no texcache camera attributes (not "
-                         "written by WriteFrameBuffers?)");
-    fb.camera.worldToClip = m;
-    fb.camera.position = cam;
-    fb.camera.width = fb.width;
-    fb.camera.height = fb.height;
-    fb.time = time;
-
-    std::vector<float> px(fb.NumPixels() * size_t(spec.nchannels));
-    if (!in->read_image(0, 0, 0, spec.nchannels, TypeDesc::FLOAT, px.data()))
-        throw InputError(path, "cannot read frame buffers: " + in->geterror());
-    std::map<std::string, int> index;
-    for (int c = 0; c < spec.nchannels; ++c) index[spec.channelnames[c]] = c;
-
-    std::vector<float> ids;
-    const auto layers = Layers(fb, true, &ids);
-    const size_t n = fb.NumPixels(), total = size_t(spec.nchannels);
-    // All columns first: a missing layer's buffer is emptied only after every copy (the cone
-    // layers share one buffer).
-    std::vector<std::vector<int>> cols(layers.size());
-    for (size_t li = 0; li < layers.size(); ++li)
-        for (const std::string& ch : layers[li].channels) {
-            auto it = index.find(layers[li].name + "." + ch);
-            if (it == index.end()) break;
-            cols[li].push_back(it->second);
-        }
-    bool idsPresent = true;
-    for (size_t li = 0; li < layers.size(); ++li) {
-        const auto& l = layers[li];
-        if (cols[li].size() != l.channels.size()) continue;
-        for (size_t p = 0; p < n; ++p)
-            for (size_t k = 0; k < cols[li].size(); ++k)
-                l.data[p * l.stride + k] = px[p * total + size_t(cols[li][k])];
-    }
-    // Missing layers are empty buffers, as the stage expects of optional inputs.
-    for (size_t li = 0; li < layers.size(); ++li)
-        if (cols[li].size() != layers[li].channels.size()) {
-            if (layers[li].name == "objectId") idsPresent = false;
-            layers[li].clear();
-        }
-    if (idsPresent) {
-        fb.objectId.resize(n);
-        for (size_t i = 0; i < n; ++i) fb.objectId[i] = int32_t(std::lround(ids[i]));
-    }
-    return fb;
+    for (const CacheStats& cs : frameCache.Stats()) stats.cache.Merge(cs);
+    stats.sppDone = std::max(opt.spp, 1);
+    stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return stats;
 }
 
 }  // namespace texcache

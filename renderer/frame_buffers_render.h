@@ -68,7 +68,7 @@
 #include <string>
 
 #include "filters/screen_space/frame_buffers.h"
-#include "renderer/integrator.h"
+#include "renderer/render.h"
 #include "renderer/scene.h"
 
 namespace texcache {

@@ -9,6 +9,7 @@
 #include <glm/glm.hpp>
 #include <glm/gtc/quaternion.hpp>
 
+#include "renderer/integrator_kind.h"
 #include "texcache/cage.h"
 
 namespace texcache {
@@ -107,7 +108,7 @@ struct RenderSettings {
     int width = 640, height = 360;
     int spp = 16;
     float seconds = 0.0f;  ///< > 0: time budget, spp becomes a cap
-    std::string integrator = "path";
+    IntegratorKind integrator = IntegratorKind::Path;
     int maxDepth = 5;
     uint64_t seed = 0;
     float tessellationRate = 2.0f;

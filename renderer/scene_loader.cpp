@@ -4,6 +4,7 @@
 // unknown and duplicate keys are errors because a typo would otherwise silently use a default.
 #include "renderer/scene_loader.h"
 
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -24,7 +25,6 @@ using json = nlohmann::json;
 
 namespace {
 
-constexpr const char* kIntegrators[] = {"normal", "ptex", "uv", "eyelight", "ao", "direct", "path"};
 constexpr float kBig = 1e30f;  // finite values beyond this are almost certainly typos
 
 std::string TypeName(const json& j) {
@@ -361,12 +361,12 @@ void ParseRender(const Node& n, RenderSettings* s) {
     if (n.Has("spp")) s->spp = int(n["spp"].Int(1, 1 << 20));
     if (n.Has("seconds")) s->seconds = n["seconds"].Number(0.0f, 1e6f);
     if (n.Has("integrator")) {
-        s->integrator = n["integrator"].String();
-        bool ok = false;
-        for (const char* i : kIntegrators) ok |= s->integrator == i;
-        if (!ok)
-            n["integrator"].Fail("unknown integrator '" + s->integrator +
-                                 "' (valid: normal, ptex, uv, eyelight, ao, direct, path)");
+        const Node i = n["integrator"];
+        try {
+            s->integrator = ParseIntegrator(i.String(), "");
+        } catch (const InputError& e) {
+            i.Fail(e.what());
+        }
     }
     if (n.Has("max_depth")) s->maxDepth = int(n["max_depth"].Int(0, 1000));
     if (n.Has("seed")) s->seed = uint64_t(n["seed"].Int(0, INT64_MAX));
@@ -575,9 +575,9 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
     }
     const bool lit =
         !scene.environments.empty() || !scene.quadLights.empty() || !scene.distantLights.empty();
-    if (!lit && warnings &&
-        (scene.settings.integrator == "direct" || scene.settings.integrator == "path"))
-        warnings->push_back(path + ": no lights: the '" + scene.settings.integrator +
+    if (!lit && warnings && IntegratorUsesLights(scene.settings.integrator))
+        warnings->push_back(path + ": no lights: the '" +
+                            std::string(IntegratorName(scene.settings.integrator)) +
                             "' integrator will render black");
     if (!root.Has("camera")) {
         glm::vec3 lo, hi;
@@ -587,6 +587,16 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
                         float(scene.settings.width) / float(scene.settings.height)));
     }
     return scene;
+}
+
+Scene LoadSceneFile(const std::string& path, const std::string& defaultEnvPath,
+                    std::vector<std::string>* warnings) {
+    if (!fs::exists(path)) throw InputError(path, "no such file");
+    std::string ext = fs::path(path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext == ".obj") return SceneFromObj(path, defaultEnvPath, warnings);
+    if (ext == ".json") return LoadScene(path, warnings);
+    throw InputError(path, "unknown scene type '" + ext + "' (expected .json or .obj)");
 }
 
 Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath,

@@ -9,35 +9,6 @@
 
 namespace texcache {
 
-FootprintMode ParseFootprintMode(const std::string& name, const std::string& where) {
-    if (name == "auto") return FootprintMode::Auto;
-    if (name == "visible") return FootprintMode::Visible;
-    if (name == "all") return FootprintMode::All;
-    throw InputError(where, "unknown footprint '" + name + "' (valid: auto, visible, all)");
-}
-
-void CheckFilterRadius(int radius, const std::string& where) {
-    // 2r+1 = 65 texels a side is far past any useful kernel (the paper uses up to 21).
-    if (radius < 0 || radius > 32)
-        throw InputError(
-            where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
-}
-
-int DefaultFilterRadius(TextureFilterKind kind) {
-    switch (kind) {
-        case TextureFilterKind::None:
-            return 0;
-        case TextureFilterKind::Normal:
-            return 6;
-        case TextureFilterKind::Gaussian:
-            return 10;
-        case TextureFilterKind::Regression:
-        case TextureFilterKind::SoftShadow:
-            return 8;
-    }
-    return 6;
-}
-
 namespace {
 void CheckOptions(const TextureSpaceOptions& options) {
     if (options.radius != -1) CheckFilterRadius(options.radius, "filter radius");

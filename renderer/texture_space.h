@@ -7,7 +7,10 @@
 
 #include <glm/glm.hpp>
 
+#include "filters/regression_filter.h"
+#include "filters/soft_shadow_filter.h"
 #include "filters/texture_filters.h"
+#include "renderer/render_options.h"
 #include "renderer/render_scene.h"
 #include "texcache/shading_cache.h"
 #include "texcache/temporal_history.h"
@@ -15,69 +18,43 @@
 
 namespace texcache {
 
-/// Which texels of a filter footprint a render shades and averages.
-///   Visible  only those the render's camera rays reach (a prepass traces the camera rays and
-///            marks them: texcache/visible_texels.h), point-symmetric for the averaging filters.
-///            A 21x21 window then shades 1.3x the samples of no filter instead of 5.2x (car AO,
-///            640x360, 4 spp) at lower error: AO has sharp detail (contact shadows), and the
-///            hidden texels a full window averages in are biased, not just costly.
-///   All      every texel of the window (the paper's footprint). Smooth, noisy signals gain from
-///            the unseen texels: they are still samples of nearly the same shading (path-traced
-///            indirect light on sunlit.json, 480x270, 4 spp, one path per sample: relMSE 0.0068
-///            in 0.74 s with full windows, 0.0212 in 0.56 s visible).
-///   Auto     Visible for ambient occlusion, All for the direct and path integrators: the
-///            paper's footprint where the evidence is mixed (speed-vs-error's best equal-time
-///            ratios, visible / all: sunlit-indirect 2.69x / 4.00x, but car-diffuse 2.54x /
-///            2.07x and chess-diffuse 1.58x / 1.34x).
-enum class FootprintMode { Auto, Visible, All };
-/// "auto", "visible" or "all"; throws InputError naming `where` and the valid names otherwise.
-FootprintMode ParseFootprintMode(const std::string& name, const std::string& where);
-
-/// Texture-space shading settings of a render (command line / scene file).
-struct TextureSpaceOptions {
-    bool enabled = false;  ///< --shading texture
-    TextureFilterKind filter = TextureFilterKind::Normal;
-    int radius = -1;            ///< footprint (2r+1)^2; -1: the filter's default (see below)
-    float cosThreshold = 0.9f;  ///< normal filter: keep taps with cos > threshold
-    int indirectSamples = 1;    ///< paths per cached indirect sample
-    /// Path integrator: diffuse materials cache their direct light too (one NEE sample per
-    /// cached path), not just indirect. Both are view-independent for a diffuse surface, but
-    /// direct light has the sharp shadows: filtering them blurs hard shadow edges (measured on
-    /// sunlit.json: relMSE 0.40 with the 13x13 normal filter against 0.16 unfiltered), so this is
-    /// for soft lighting (environment, large area lights) and off by default.
-    bool cacheDirect = false;
-    int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
-    /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.
-    FootprintMode footprint = FootprintMode::Auto;
-    /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
-    /// keep a history table the size of the texel cache.
-    float temporalAlpha = 0.0f;
-    CacheSettings cache;
-    /// Mip-0 texel size as a fraction of each object's bounding-box diagonal; eq. 1 then picks
-    /// the level whose texels are about a pixel.
-    float texelFraction = 1.0f / 4096.0f;
-    /// Benchmark baseline: the cached term is replaced by this constant (no lookup at all) when
-    /// >= 0, so a frame measures primary visibility and the uncached terms alone.
-    float constantTerm = -1.0f;
-};
-
-/// Throws InputError when a filter radius is negative or larger than the footprint allows.
-void CheckFilterRadius(int radius, const std::string& where);
-/// The paper's footprint for each filter: 13x13 normal-weighted (Sec. 6.1), 21x21 Gaussian (its
-/// "20x20" centred on the texel), 17x17 regression, 17x17 soft shadows; 1x1 without a filter.
-int DefaultFilterRadius(TextureFilterKind kind);
-
 using RenderShadingCache = ShadingCache<ShadedSample, glm::vec3>;
 
-/// A shading cache for a scene: lives as long as its owner wants (e.g. across frames).
+/// A shading cache for a scene: lives as long as its owner wants (e.g. across frames). The one
+/// door between the renderer and libtexcache: it picks each hit's texel and each object's
+/// filter, and blends texels over frames; nothing else touches the ShadingCache inside.
 class TextureSpaceCache {
 public:
     /// Registers every object of the scene; throws InputError on impossible settings.
     TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options);
 
-    RenderShadingCache& cache() { return cache_; }
-    const RenderShadingCache& cache() const { return cache_; }
     const TextureSpaceOptions& options() const { return options_; }
+
+    /// The texel a shading point maps to (eq. 1 and 2) in its object's front or back grids.
+    SampleRequest TexelOf(const SurfaceInteraction& si) const {
+        return cache_.TexelAt({MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
+                               si.dudx, si.dvdx, si.dudy, si.dvdy});
+    }
+    /// Starts fetching a texel's slot into the CPU cache (see ShadingCache::Prefetch): for a
+    /// batch of texels before their lookups.
+    void Prefetch(const SampleRequest& texel) const { cache_.Prefetch(texel); }
+
+    /// The cached term of scene object `object` at `texel` (from TexelOf): a texel-cache hit,
+    /// or on a miss the object's filter over its footprint, with the missing samples shaded by
+    /// `shade(const SampleRequest&) -> ShadedSample` and the result blended into the texel's
+    /// temporal history. `raysPerSample` is the number of rays behind each sample (the
+    /// regression's n). Inlined: no virtual call or allocation per lookup.
+    template <typename ShadeFn>
+    glm::vec3 Lookup(const SampleRequest& texel, int object, ShadeFn&& shade, int raysPerSample,
+                     CacheStats& stats);
+
+    /// Texels a side of a sample's face grid at its level.
+    int Resolution(const SampleRequest& r) const { return cache_.Mesh(r.mesh).Res(r.face, r.mip); }
+    /// Footprints keep only the texels of `visible` until the next call (null: every texel);
+    /// see ShadingCache::RestrictFootprints. Never while lookups run.
+    void RestrictFootprints(const VisibleTexels* visible) { cache_.RestrictFootprints(visible); }
+    /// Evicts every sample and texel (not the temporal history): the next lookups shade anew.
+    void Invalidate() { cache_.InvalidateAll(); }
     /// Cache mesh id of a scene object's front side, or of its back side (open surfaces are
     /// seen from both sides and shade differently on each; closed ones have no back mesh).
     int MeshOf(int object, bool backFacing = false) const {
@@ -120,6 +97,8 @@ public:
         return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0) +
                (visible_ ? visible_->Bytes() : 0);
     }
+    size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
+    size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
 
 private:
     void AssignFilters(const Scene& scene);
@@ -135,5 +114,38 @@ private:
     std::unique_ptr<VisibleTexels> visible_;
     uint32_t frame_ = 0;
 };
+
+template <typename ShadeFn>
+glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, ShadeFn&& shade,
+                                    int raysPerSample, CacheStats& stats) {
+    // One branch per lookup picks the material's filter; the filters themselves are inlined. The
+    // temporal blend runs once per reconstructed texel, not per lookup.
+    auto lookup = [&](int radius, const auto& filter,
+                      FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
+        return cache_.LookupTexel(
+            texel, radius, shade,
+            [&](const FilterInput<ShadedSample>& in) {
+                return Accumulate(in.request.key, filter(in));
+            },
+            stats, taps);
+    };
+    const float cosThreshold = options_.cosThreshold;
+    const int radius = radiusOf_[object];
+    switch (filterOf_[object]) {
+        case TextureFilterKind::None:
+            return lookup(0, CentreFilter{});
+        case TextureFilterKind::Gaussian:
+            // The paper's 20x20 Gaussian: sigma half the radius, same normal test.
+            return lookup(radius, NormalWeightedFilter{cosThreshold, 0.5f * float(radius)});
+        case TextureFilterKind::Regression:
+            // A linear model fits the gradient a one-sided window sees: no symmetry needed.
+            return lookup(radius, RegressionFilter{raysPerSample, false}, FootprintTaps::Visible);
+        case TextureFilterKind::SoftShadow:
+            return lookup(radius, SoftShadowFilter{cosThreshold});
+        case TextureFilterKind::Normal:
+            break;
+    }
+    return lookup(radius, NormalWeightedFilter{cosThreshold, 0.0f});
+}
 
 }  // namespace texcache

@@ -16,7 +16,7 @@
 #include <gtest/gtest.h>
 
 #include "renderer/image.h"
-#include "renderer/integrator.h"
+#include "renderer/render.h"
 #include "renderer/render_scene.h"
 #include "renderer/scene_loader.h"
 #include "renderer/texture_space.h"

@@ -6,8 +6,8 @@
 #include <tbb/global_control.h>
 
 #include "renderer/camera.h"
-#include "renderer/integrator.h"
 #include "renderer/metrics.h"
+#include "renderer/render.h"
 #include "test_util.h"
 
 namespace texcache {

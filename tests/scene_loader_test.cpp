@@ -103,7 +103,7 @@ TEST(SceneLoader, ValidSceneRoundTrips) {
     EXPECT_EQ(s.settings.width, 320);
     EXPECT_EQ(s.settings.height, 200);
     EXPECT_EQ(s.settings.spp, 8);
-    EXPECT_EQ(s.settings.integrator, "ao");
+    EXPECT_EQ(s.settings.integrator, IntegratorKind::AO);
     EXPECT_EQ(s.settings.seed, 3u);
     EXPECT_EQ(s.settings.maxDepth, 3);
     EXPECT_EQ(s.settings.aoSamples, 2);

@@ -6,8 +6,8 @@
 
 #include <tbb/global_control.h>
 
-#include "renderer/integrator.h"
 #include "renderer/metrics.h"
+#include "renderer/render.h"
 #include "test_util.h"
 
 namespace texcache {
@@ -164,7 +164,7 @@ TEST(TextureSpace, WarmCacheHitsEveryTexelOnTheSecondFrame) {
     EXPECT_GE(double(c.texelHits), 0.99 * double(c.lookups));
     EXPECT_EQ(c.texelMisses, c.texelEvictions + c.texelUncached);  // every miss is a slot conflict
     EXPECT_LT(c.samplesShaded, c.lookups / 20);
-    EXPECT_LE(cache.cache().BytesUsed(),
+    EXPECT_LE(cache.SampleCacheBytes() + cache.TexelCacheBytes(),
               o.texture.cache.sampleCacheBytes + o.texture.cache.texelCacheBytes);
 }
 
@@ -197,7 +197,7 @@ TEST(TextureSpace, ReconfiguredCacheRendersLikeANewOne) {
     bigger.texture.cache.sampleCacheBytes *= 2;
     EXPECT_FALSE(cache.Reconfigure(rs, bigger.texture));
     EXPECT_EQ(cache.RadiusOf(0), 4);
-    EXPECT_EQ(cache.cache().SampleCacheBytes(), size_t(1) << 20);
+    EXPECT_EQ(cache.SampleCacheBytes(), size_t(1) << 20);
 }
 // Texture-space diffuse light (path integrator; direct + indirect, or indirect only): finite, and
 // close to per-hit path tracing in the mean (same estimator up to texel quantization and

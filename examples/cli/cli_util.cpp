@@ -31,13 +31,7 @@ static std::string Extension(const std::string& path) {
 }
 
 Scene LoadSceneOrObj(const std::string& path, std::vector<std::string>* warnings) {
-    if (!fs::exists(path)) throw InputError(path, "no such file");
-    const std::string ext = Extension(path);
-    if (ext == ".obj")
-        return SceneFromObj(path, std::string(TEXCACHE_SCENES_DIR) + "/envmaps/studio.exr",
-                            warnings);
-    if (ext == ".json") return LoadScene(path, warnings);
-    throw InputError(path, "unknown scene type '" + ext + "' (expected .json or .obj)");
+    return LoadSceneFile(path, std::string(TEXCACHE_SCENES_DIR) + "/envmaps/studio.exr", warnings);
 }
 
 OutputPaths PlanOutputs(const std::string& output, bool pngBesideExr) {

@@ -23,7 +23,7 @@ T CheckRange(const char* option, T v, T lo, T hi) {
 /// Parses "WxH" (1..16384 each).
 void ParseResolution(const std::string& s, int* width, int* height);
 
-/// A .json scene, or a bare .obj framed by the default camera and lit by the default environment.
+/// LoadSceneFile with the bundled studio environment for bare .obj cages.
 Scene LoadSceneOrObj(const std::string& path, std::vector<std::string>* warnings);
 
 struct OutputPaths {

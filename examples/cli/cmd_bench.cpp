@@ -18,8 +18,8 @@
 #include "cli_util.h"
 #include "commands.h"
 #include "renderer/camera.h"
-#include "renderer/integrator.h"
 #include "renderer/metrics.h"
+#include "renderer/render.h"
 #include "renderer/sampling.h"
 #include "renderer/scene_loader.h"
 

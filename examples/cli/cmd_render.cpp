@@ -15,9 +15,10 @@
 #include "commands.h"
 #include "filters/screen_space/screen_denoiser.h"
 #include "renderer/frame_buffers_render.h"
-#include "renderer/integrator.h"
+#include "renderer/render.h"
 #include "renderer/scene_loader.h"
 #include "renderer/texture_space.h"
+#include "texcache/enum_names.h"
 #include "texcache/error.h"
 
 namespace texcache::cli {
@@ -139,8 +140,8 @@ void WriteStatsJson(const std::string& path, const RenderStats& s, const Texture
     add("waits", double(c.waits));
     add("reference_mode", opt.texture.cache.referenceMode ? 1.0 : 0.0);
     if (overshading >= 0.0) add("overshading", overshading);
-    add("sample_cache_bytes", cache ? double(cache->cache().SampleCacheBytes()) : 0.0);
-    add("texel_cache_bytes", cache ? double(cache->cache().TexelCacheBytes()) : 0.0);
+    add("sample_cache_bytes", cache ? double(cache->SampleCacheBytes()) : 0.0);
+    add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
     add("bytes_used", cache ? double(cache->BytesUsed()) : 0.0, true);
     json += "}\n";
     WriteTextAtomic(path, json);
@@ -314,19 +315,12 @@ int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, 
 /// --denoise NAME: the screen-space method (the names the CLI accepts, as MethodName() spells
 /// them where they differ).
 screen::Method ParseDenoise(const std::string& name) {
-    static const struct {
-        const char* name;
-        screen::Method method;
-    } kMethods[] = {{"spatial", screen::Method::SpatialOnly},
-                    {"baseline", screen::Method::Baseline},
-                    {"clamp", screen::Method::BaselineClamp},
-                    {"reliable", screen::Method::Reliable}};
-    std::string valid;
-    for (const auto& m : kMethods) {
-        if (name == m.name) return m.method;
-        valid += std::string(valid.empty() ? "" : ", ") + m.name;
-    }
-    throw InputError("--denoise", "unknown method '" + name + "' (valid: " + valid + ")");
+    static constexpr EnumName<screen::Method> kMethods[] = {
+        {"spatial", screen::Method::SpatialOnly},
+        {"baseline", screen::Method::Baseline},
+        {"clamp", screen::Method::BaselineClamp},
+        {"reliable", screen::Method::Reliable}};
+    return ParseEnum(kMethods, name, "--denoise", "method");
 }
 
 /// --denoise: each frame's buffers rendered in memory (RenderFrameBuffers, 1 spp unless --spp),
@@ -385,7 +379,7 @@ int RunRender(const RenderArgs& a) {
     if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
     if (a.seed != std::numeric_limits<long long>::min())
         s.seed = uint64_t(CheckRange("--seed", a.seed, 0LL, std::numeric_limits<long long>::max()));
-    if (!a.integrator.empty()) s.integrator = a.integrator;
+    if (!a.integrator.empty()) s.integrator = ParseIntegrator(a.integrator, "--integrator");
     if (a.maxDepth != kUnset) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
     if (a.aoSamples != kUnset) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
     if (!std::isnan(a.aoDistance))
@@ -397,17 +391,13 @@ int RunRender(const RenderArgs& a) {
 
     if (a.demodulate && a.denoise.empty())
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
-    // What every kind of render takes from the settings.
-    RenderOptions common;
-    common.width = s.width;
-    common.height = s.height;
-    common.spp = s.spp;
-    common.seed = s.seed;
-    common.maxDepth = s.maxDepth;
-    common.frameTime = s.time;
+    const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
-        // Frame buffers are always the path tracer's split, whatever the scene's integrator.
+        // Frame buffers are always the path tracer's split, whatever the scene's integrator, and
+        // exactly spp samples (no time budget).
         RenderOptions fbo = common;
+        fbo.integrator = IntegratorKind::Path;
+        fbo.seconds = 0.0f;
         fbo.texture = ParseTextureOptions(a);
         fbo.progress = false;
         int first = 0, last = 0;
@@ -418,13 +408,7 @@ int RunRender(const RenderArgs& a) {
         return RunFrameBuffers(a, scene, fbo, a.spp != kUnset, first, last, fps);
     }
     RenderOptions opt = common;
-    opt.integrator = ParseIntegrator(s.integrator, a.integrator.empty()
-                                                       ? scene.path + ": key 'render.integrator'"
-                                                       : "--integrator");
-    opt.seconds = s.seconds;
-    opt.aoSamples = s.aoSamples;
     opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
-    opt.aoDistance = s.aoDistance;
     opt.aovs = ParseAovs(a.aovs);
     opt.texture = ParseTextureOptions(a);
     opt.progress = !a.quiet;
@@ -472,7 +456,7 @@ int RunRender(const RenderArgs& a) {
         }
         std::printf("rendered %d frames of %s in %.2f s (%dx%d, %d spp, integrator %s)\n",
                     last - first + 1, scene.path.c_str(), total, opt.width, opt.height, opt.spp,
-                    s.integrator.c_str());
+                    IntegratorName(s.integrator));
         return 0;
     }
     RenderScene rs(scene, ro);
@@ -500,7 +484,7 @@ int RunRender(const RenderArgs& a) {
     }
 
     std::printf("rendered %s: %dx%d, %d spp, integrator %s\n", scene.path.c_str(), opt.width,
-                opt.height, r.stats.sppDone, s.integrator.c_str());
+                opt.height, r.stats.sppDone, IntegratorName(s.integrator));
     std::printf("time: %.3f s render + %.3f s scene build; %.2f Mrays/s (%llu rays)\n",
                 r.stats.seconds, buildSeconds, double(r.stats.TotalRays()) / r.stats.seconds * 1e-6,
                 (unsigned long long)r.stats.TotalRays());

@@ -33,14 +33,11 @@ std::unique_ptr<LoadedScene> LoadForExperiment(const Setup& s, const std::string
 }
 
 RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int width, int height) {
-    RenderOptions o;
+    RenderOptions o = RenderOptionsFrom(scene.settings);
     o.integrator = integrator;
     o.width = width;
     o.height = height;
-    o.seed = scene.settings.seed;
-    o.maxDepth = scene.settings.maxDepth;
-    o.aoDistance = scene.settings.aoDistance;
-    o.frameTime = scene.settings.time;
+    o.seconds = 0.0f;  // experiments time renders of exact sample counts
     o.progress = false;
     return o;
 }

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "renderer/image.h"
-#include "renderer/integrator.h"
+#include "renderer/render.h"
 #include "renderer/render_scene.h"
 #include "renderer/scene.h"
 

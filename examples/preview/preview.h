@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // `texcache preview`: the interactive preview window, its headless test mode and its frame-rate
-// benchmark. The CLI registers the subcommand (AddPreviewCommand in preview_command.cpp).
+// benchmark. The CLI registers the subcommand (examples/cli/cmd_preview.cpp).
 #pragma once
 #include <string>
 

@@ -434,9 +434,12 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
             s.filter = ParseTextureFilter(ui.filters[filter], "filter");
         ImGui::SliderInt("radius", &s.radius, 0, 32);
         {
-            static const std::vector<std::string> kModes = {"auto", "visible", "all"};
-            int mode = int(s.footprint);  // the enum's order is kModes'
-            if (NameCombo("footprint", kModes, &mode)) s.footprint = FootprintMode(mode);
+            static const std::vector<std::string> kModes = SplitNames(FootprintModeNames());
+            int mode = 0;
+            for (int i = 0; i < int(kModes.size()); ++i)
+                if (ParseFootprintMode(kModes[i], "") == s.footprint) mode = i;
+            if (NameCombo("footprint", kModes, &mode))
+                s.footprint = ParseFootprintMode(kModes[mode], "footprint");
             if (ImGui::IsItemHovered())
                 ImGui::SetTooltip(
                     "visible: footprints shade only texels this frame's camera rays "

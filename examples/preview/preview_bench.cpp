@@ -9,8 +9,8 @@
 
 #include "orbit_camera.h"
 #include "preview.h"
-#include "renderer/integrator.h"
 #include "renderer/metrics.h"
+#include "renderer/render.h"
 #include "renderer/render_scene.h"
 #include "renderer/texture_space.h"
 #include "texcache/error.h"

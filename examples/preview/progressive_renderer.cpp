@@ -214,9 +214,7 @@ void RenderCacheView(const RenderScene& rs, const TextureSpaceCache& cache, floa
             glm::vec3 c(0.0f);
             if (rs.Intersect(ray, &hit) && hit.object >= 0) {
                 const SurfaceInteraction si = rs.Interact(ray, hit, &diff);
-                const SampleRequest r = cache.cache().TexelAt(
-                    {cache.MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
-                     si.dudx, si.dvdx, si.dudy, si.dvdy});
+                const SampleRequest r = cache.TexelOf(si);
                 // Shaded by the view angle so the shape stays readable under the false colour.
                 const float shade = 0.35f + 0.65f * std::abs(glm::dot(si.N, ray.dir));
                 c = shade *
@@ -444,7 +442,7 @@ void ProgressiveRenderer::Run() {
                 // cache afterwards would find everything it just stored).
                 opt.pixelCache = heatView ? &pixelCounts : nullptr;
                 if (cur.refineCacheWhenStill && accumulated > 0 && opt.texture.enabled)
-                    cache->cache().InvalidateAll();
+                    cache->Invalidate();
                 const RenderResult r =
                     Render(*rs, opt, opt.texture.enabled ? cache.get() : nullptr);
                 if (heatView) {
@@ -474,7 +472,7 @@ void ProgressiveRenderer::Run() {
             frame.seconds =
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             frame.accumulated = accumulated == INT_MAX ? 1 : accumulated;
-            frame.cacheBytes = cache ? cache->cache().BytesUsed() : 0;
+            frame.cacheBytes = cache ? cache->BytesUsed() : 0;
             frame.time = frameTime;
             frame.cacheFrame = cacheFrame;
             publish(cur, version, &frame);

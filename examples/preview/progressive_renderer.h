@@ -26,7 +26,7 @@
 
 #include "orbit_camera.h"
 #include "renderer/image.h"
-#include "renderer/integrator.h"
+#include "renderer/render.h"
 #include "renderer/scene.h"
 
 namespace texcache::preview {

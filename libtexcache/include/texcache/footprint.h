@@ -38,8 +38,6 @@ private:
     uint32_t faceOffset_;
 };
 
-/// One sample of a footprint: its key, where it sits in its face, and its offset from the
-/// footprint's centre texel in centre-texel units.
 /// Which taps of a footprint a lookup keeps when the cache has a visibility set
 /// (ShadingCache::RestrictFootprints; without one every tap is kept).
 enum class FootprintTaps {
@@ -48,6 +46,8 @@ enum class FootprintTaps {
     VisibleSymmetric,  ///< the visible ones whose mirror is visible: for averaging filters
 };
 
+/// One sample of a footprint: its key, where it sits in its face, and its offset from the
+/// footprint's centre texel in centre-texel units.
 struct FootprintSample {
     TexelKey key;
     int16_t dx, dy;

@@ -4,7 +4,8 @@
 //
 // A renderer calls Lookup() at a ray hit with the hit's Ptex face, (u,v) and ray differentials,
 // a sample shader and a reconstruction filter (any callables; resolved at compile time, so there is
-// no virtual call or allocation per lookup):
+// no virtual call or allocation per lookup), or TexelAt() first and LookupTexel() later, to
+// Prefetch() a batch of texels in between (as texcache's own renderer does):
 //   shade(const SampleRequest&) -> Sample      shades one sample at a texel centre
 //   filter(const FilterInput<Sample>&) -> Texel  reconstructs the centre texel from its footprint
 // See examples/embed_cache for a complete shader in a few dozen lines.

@@ -8,7 +8,8 @@
 #include "cli_util.h"
 #include "commands.h"
 #include "preview.h"
-#include "renderer/integrator.h"
+#include "renderer/render.h"
+#include "renderer/scene_loader.h"
 #include "renderer/texture_space.h"
 
 namespace texcache::cli {
@@ -65,11 +66,13 @@ int RunPreview(const PreviewCliArgs& a) {
     s.exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
     s.view = preview::ParseViewMode(a.view, "--view");
     if (!std::isnan(a.time)) scene.settings.time = CheckRange("--time", a.time, -1e6f, 1e6f);
-    s.time = scene.settings.time;
-    s.aoDistance = scene.settings.aoDistance;
-    s.maxDepth = scene.settings.maxDepth;
+    // The scene's settings that the preview keeps (its size, spp and AO rays are its own).
+    const RenderOptions fromScene = RenderOptionsFrom(scene.settings);
+    s.time = fromScene.frameTime;
+    s.aoDistance = fromScene.aoDistance;
+    s.maxDepth = fromScene.maxDepth;
+    s.seed = fromScene.seed;
     s.tessellationRate = scene.settings.tessellationRate;
-    s.seed = scene.settings.seed;
     // The preview's default is the benchmark's 512x512, not the scene's final-render size.
     s.width = s.height = 512;
     if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);

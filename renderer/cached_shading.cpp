@@ -1,0 +1,217 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/cached_shading.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace texcache::internal {
+
+namespace {
+
+/// Random stream of a cache sample: a function of its key, so the same texel gets the same
+/// shading whichever thread shades it, and a re-shade after eviction reproduces it.
+Rng SampleRng(const Context& c, const SampleRequest& r) {
+    return Rng(MixBits(c.opt.seed ^ (r.key.Pack() * 0x9E3779B97F4A7C15ull)), 0x7ca7);
+}
+
+/// Limit-surface point of a cache sample, and the origin its secondary rays start from. The
+/// rays hit the tessellated surface, which lies up to ~1.4% of an edge off the limit surface:
+/// a short ray along -N against this object alone finds the tessellated surface under the
+/// sample, and rays start just above it. (A fixed lift large enough for curved faces would put
+/// samples on big flat faces above nearby objects, e.g. the ground under a car's sills; and
+/// another object crossing the short ray must not be taken for the surface.)
+bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, glm::vec3* origin,
+                 RayCounts& rays) {
+    const int object = c.tsc->ObjectOfMesh(r.mesh);
+    if (!c.rs.EvalSurface(object, {r.face, r.u, r.v}, 0.0f, ss)) return false;
+    if (c.tsc->IsBackMesh(r.mesh)) ss->N = -ss->N;  // the back side of an open surface
+    if (!std::isfinite(ss->P.x + ss->P.y + ss->P.z + ss->N.x + ss->N.y + ss->N.z)) return false;
+    const float edge = std::max(glm::length(ss->dPdu), glm::length(ss->dPdv));
+    const float scale = std::max({1.0f, std::abs(ss->P.x), std::abs(ss->P.y), std::abs(ss->P.z)});
+    const float eps = 2e-5f * scale;
+    const float lift = 0.03f * edge + eps;
+    Ray snap;
+    snap.org = ss->P + lift * ss->N;
+    snap.dir = -ss->N;
+    snap.tfar = 2.0f * lift;
+    float t;
+    ++rays.bounce;
+    *origin = c.rs.IntersectObject(object, snap, &t) ? snap.org + t * snap.dir + eps * ss->N
+                                                     : ss->P + eps * ss->N;
+    return true;
+}
+
+/// Shades a cache sample with n cosine-distributed rays from its point; `trace(ray, rng, N)` gives
+/// each ray's value. Returns the mean, the sample's normal and the variance of the mean
+/// (luminance). Unreachable samples (holes, NaN surface) come back NaN: filters skip them.
+template <typename TraceFn>
+ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, RayCounts& rays,
+                             TraceFn&& trace) {
+    SurfaceSample ss;
+    glm::vec3 origin;
+    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
+    Rng rng = SampleRng(c, r);
+    const Frame frame = Frame::FromZ(ss.N);
+    glm::vec3 sum(0.0f);
+    float sum2 = 0.0f;
+    for (int i = 0; i < n; ++i) {
+        Ray ray;
+        ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
+        ray.org = origin;
+        const glm::vec3 L = trace(ray, rng, ss.N);
+        sum += L;
+        const float y = Luminance(L);
+        sum2 += y * y;
+    }
+    const glm::vec3 mean = sum / float(n);
+    const float ym = Luminance(mean);
+    return {mean, ss.N, std::max(0.0f, sum2 / float(n) - ym * ym) / float(std::max(n - 1, 1))};
+}
+
+}  // namespace
+
+ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
+    return ShadeCosineRays(c, r, c.opt.aoSamples, rays, [&](Ray& ray, Rng&, glm::vec3) {
+        ray.tfar = c.opt.aoDistance;
+        ++rays.shadow;
+        return glm::vec3(c.rs.Occluded(ray) ? 0.0f : 1.0f);
+    });
+}
+
+/// Diffuse light at a cache sample, as (1/pi) * integral of L cos (the hit multiplies it by its
+/// albedo). Indirect: cosine-sampled paths, whose first ray does not count emission (light
+/// seen directly is NEE's). With `direct`, each of the n iterations also takes one NEE sample
+/// (light sampling, shadow ray): (1/pi) Le V cos / pdf; otherwise direct light stays NEE's job
+/// at the hit.
+ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool direct,
+                                RayCounts& rays) {
+    return ShadeCosineRays(
+        c, r, c.opt.texture.indirectSamples, rays, [&](Ray& ray, Rng& rng, glm::vec3 N) {
+            glm::vec3 Ld(0.0f);
+            LightSample ls;
+            if (direct && c.SampleLight(ray.org, rng.Next1D(), rng.Next2D(), &ls)) {
+                const float cosi = glm::dot(ls.wi, N);
+                if (cosi > 0.0f) {
+                    Ray shadow;
+                    shadow.org = ray.org;
+                    shadow.dir = ls.wi;
+                    shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
+                    ++rays.shadow;
+                    if (!c.rs.Occluded(shadow))
+                        Ld = ls.Li * (ls.delta ? cosi : cosi / ls.pdf) * (1.0f / kPiF);
+                }
+            }
+            ++rays.bounce;
+            Hit hit;
+            const bool found = c.rs.Intersect(ray, &hit);
+            const glm::vec3 L =
+                Ld + LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
+            return std::isfinite(L.x + L.y + L.z) ? L : glm::vec3(0.0f);
+        });
+}
+
+/// Visibility of the scene's area lights from a cache sample (Mehta et al.'s soft-shadow input):
+/// the fraction of shadow rays towards uniform points on the quad lights that reach them, and the
+/// smallest blur std sigma_l * t / (d - t) the blocked rays allow (see soft_shadow_filter.h).
+ShadedSample ShadeShadowSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
+    SurfaceSample ss;
+    glm::vec3 origin;
+    if (c.quads.empty() || !SamplePoint(c, r, &ss, &origin, rays))
+        return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
+    Rng rng = SampleRng(c, r);
+    const int n = c.opt.texture.shadowSamples;
+    int open = 0, counted = 0;
+    float blur = INFINITY;
+    for (int i = 0; i < n; ++i) {
+        const int l = std::min(int(rng.Next1D() * float(c.quads.size())), int(c.quads.size()) - 1);
+        const Context::Quad& q = c.quads[l];
+        const glm::vec2 u = rng.Next2D();
+        const glm::vec3 d = q.corner + u.x * q.e1 + u.y * q.e2 - origin;
+        const float dist = glm::length(d);
+        // Light points below the sample's tangent plane light nothing: not a visibility question.
+        if (!(dist > 0.0f) || glm::dot(d, ss.N) <= 0.0f) continue;
+        ++counted;
+        Ray ray;
+        ray.org = origin;
+        ray.dir = d / dist;
+        ray.tfar = dist * (1.0f - 1e-4f);
+        ++rays.shadow;
+        Hit hit;
+        if (!c.rs.Intersect(ray, &hit) || hit.light >= 0) {
+            ++open;
+            continue;
+        }
+        const float sigmaL = std::sqrt(glm::length(q.e1) * glm::length(q.e2) / 12.0f);
+        blur = std::min(blur, sigmaL * hit.t / std::max(dist - hit.t, 1e-6f * dist));
+    }
+    const float V = counted ? float(open) / float(counted) : 1.0f;
+    const float res = float(c.tsc->Resolution(r));
+    const float texel = std::max(glm::length(ss.dPdu), glm::length(ss.dPdv)) / res;
+    // The blur in texels of this sample's grid; a degenerate texel allows any width.
+    const float blurTexels = texel > 0.0f && std::isfinite(texel) ? blur / texel : INFINITY;
+    return {glm::vec3(V), ss.N, counted ? V * (1.0f - V) / float(counted) : 0.0f, blurTexels};
+}
+
+/// Direct lighting with area-light visibility from the texture-space cache (the soft-shadow
+/// filter). Per hit, each quad light's unshadowed light is estimated from `shadowSamples` points
+/// on it (no rays: the cheap, low-noise part) and multiplied by the texel's filtered visibility;
+/// other lights (environment, distant) get one NEE sample with its shadow ray. No MIS with BSDF
+/// sampling: a BSDF ray that finds the light would bring back unfiltered visibility. Objects whose
+/// material uses another filter get the plain per-hit estimator.
+glm::vec3 LiDirectCachedShadows(const Context& c, const Ray& ray, const Hit& hit, bool found,
+                                Rng& rng, const RayDifferentials& diff, RayCounts& rays) {
+    if (!found) return c.env ? c.env->Eval(ray.dir) : glm::vec3(0.0f);
+    if (hit.light >= 0) return c.QuadEmission(hit.light, ray.dir);
+    if (c.tsc->FilterOf(hit.object) != TextureFilterKind::SoftShadow)
+        return LiPath(c, ray, hit, found, rng, 1, rays);
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, &diff);
+    const Bsdf bsdf = MakeBsdf(c, si);
+    const glm::vec3 wo = -ray.dir;
+    glm::vec3 L(0.0f);
+    // Area lights: unshadowed estimate times cached visibility.
+    const int m = c.opt.texture.shadowSamples;
+    glm::vec3 unshadowed(0.0f);
+    for (size_t l = 0; l < c.quads.size(); ++l) {
+        const Context::Quad& q = c.quads[l];
+        for (int j = 0; j < m; ++j) {
+            const glm::vec2 u = rng.Next2D();
+            const glm::vec3 d = q.corner + u.x * q.e1 + u.y * q.e2 - si.P;
+            const float dist2 = glm::dot(d, d);
+            if (!(dist2 > 0.0f)) continue;
+            const float dist = std::sqrt(dist2);
+            const glm::vec3 wi = d / dist;
+            const float cosl = glm::dot(q.n, -wi);
+            if (!(cosl > 0.0f || q.twoSided)) continue;
+            // Solid-angle pdf of a uniform point on the quad: dist^2 / (area |cos_l|).
+            const float G = std::abs(cosl) * q.area / dist2;
+            unshadowed += bsdf.Eval(wo, wi) * q.L * (std::abs(glm::dot(wi, si.N)) * G);
+        }
+    }
+    if (unshadowed != glm::vec3(0.0f)) {
+        const glm::vec3 V = CachedLookup(
+            c, si, [&](const SampleRequest& r) { return ShadeShadowSample(c, r, rays); },
+            c.opt.texture.shadowSamples);
+        L += unshadowed / float(m) * V.x;
+    }
+    // Other lights: one shadowed NEE sample among them.
+    const int others = c.numLights - int(c.quads.size());
+    if (others > 0) {
+        const int pick =
+            int(c.quads.size()) + std::min(int(rng.Next1D() * float(others)), others - 1);
+        LightSample ls;
+        // SampleLight takes a uniform pick over all lights: map `pick` into its interval.
+        if (c.SampleLight(si.P, (float(pick) + 0.5f) / float(c.numLights), rng.Next2D(), &ls)) {
+            const glm::vec3 f = bsdf.Eval(wo, ls.wi);
+            ++rays.shadow;
+            if (f != glm::vec3(0.0f) && !c.rs.Occluded(ShadowRay(si, ls, ray.time))) {
+                // SampleLight divides by the pick probability over all lights; ours is 1/others.
+                const float pickFix = float(others) / float(c.numLights);
+                const float cosi = std::abs(glm::dot(ls.wi, si.N));
+                L += (ls.delta ? f * ls.Li * cosi : f * ls.Li * (cosi / ls.pdf)) * pickFix;
+            }
+        }
+    }
+    return L;
+}
+
+}  // namespace texcache::internal

@@ -1,0 +1,59 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/path_tracer.h"
+
+namespace texcache::internal {
+
+Context::Context(const RenderScene& r, const RenderOptions& o)
+    : rs(r),
+      scene(r.scene()),
+      opt(o),
+      env(r.environment()),
+      camera(r.scene().camera, o.frameTime, o.width, o.height) {
+    shutterLength = scene.camera.shutterClose - scene.camera.shutterOpen;
+    if (shutterLength > 0.0f) {
+        cameraOpen.emplace(scene.camera, o.frameTime, o.width, o.height);
+        cameraClose.emplace(scene.camera, o.frameTime + shutterLength, o.width, o.height);
+        cameraMoves = scene.camera.pose.IsAnimated();
+    }
+    if (!IntegratorUsesLights(o.integrator)) return;
+    for (const DistantLight& d : scene.distantLights) {
+        const glm::mat3 M(d.transform.Eval(o.frameTime));
+        distantDir.push_back(-glm::normalize(M * d.direction));
+        distantE.push_back(d.irradiance);
+    }
+    for (const QuadLight& q : scene.quadLights) {
+        const glm::mat4 M = q.transform.Eval(o.frameTime);
+        Quad w;
+        w.corner = glm::vec3(M * glm::vec4(q.corner, 1.0f));
+        w.e1 = glm::mat3(M) * q.edge1;
+        w.e2 = glm::mat3(M) * q.edge2;
+        const glm::vec3 c = glm::cross(w.e1, w.e2);
+        w.area = glm::length(c);
+        w.n = c / w.area;
+        w.L = q.radiance;
+        w.twoSided = q.twoSided;
+        quads.push_back(w);
+    }
+    numLights = int(quads.size() + distantDir.size()) + (env ? 1 : 0);
+}
+
+glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
+               RayCounts& rays) {
+    const Frame frame = Frame::FromZ(si.N);
+    int open = 0;
+    for (int i = 0; i < c.opt.aoSamples; ++i) {
+        const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
+        // Directions below the tessellated surface are blocked by it.
+        if (glm::dot(wi, si.Ng) <= 0.0f) continue;
+        Ray r;
+        r.org = OffsetOrigin(si.P, si.Ng, wi);
+        r.dir = wi;
+        r.tfar = c.opt.aoDistance;
+        r.time = ray.time;
+        ++rays.shadow;
+        if (!c.rs.Occluded(r)) ++open;
+    }
+    return glm::vec3(float(open) / float(c.opt.aoSamples));
+}
+
+}  // namespace texcache::internal

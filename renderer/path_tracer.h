@@ -1,0 +1,244 @@
+// SPDX-License-Identifier: Apache-2.0
+// The path tracer's core, shared by the renderers of this directory (render.cpp: images;
+// frame_buffers_render.cpp: the screen-space stage's buffers; cached_shading.cpp: the samples of
+// the texture-space cache): a frame's lights and camera resolved once (Context), next-event
+// estimation with MIS (LiPath) and ambient occlusion (LiAO). Internal to renderer/.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include "renderer/bsdf.h"
+#include "renderer/camera.h"
+#include "renderer/envmap.h"
+#include "renderer/render_options.h"
+#include "renderer/render_scene.h"
+#include "renderer/sampling.h"
+
+namespace texcache {
+
+class TextureSpaceCache;
+
+namespace internal {
+
+struct RayCounts {
+    uint64_t camera = 0, shadow = 0, bounce = 0;
+};
+
+/// Offsets a ray origin off the surface along the geometric normal, scaled to the coordinates'
+/// magnitude so that float rounding of large scenes cannot re-hit the surface.
+inline glm::vec3 OffsetOrigin(glm::vec3 p, glm::vec3 ng, glm::vec3 dir) {
+    const float scale = std::max({1.0f, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+    const float eps = 2e-5f * scale;
+    return p + (glm::dot(dir, ng) >= 0.0f ? eps : -eps) * ng;
+}
+
+struct LightSample {
+    glm::vec3 wi;  // towards the light
+    float dist;    // to the light (inf for env/distant)
+    glm::vec3 Li;  // incident radiance (irradiance for delta lights)
+    float pdf;     // solid angle, includes light selection; 0 for delta lights (no MIS)
+    bool delta;
+    int quad = -1;     // the quad light sampled, -1 for other lights
+    int distant = -1;  // the distant light sampled, -1 for other lights
+};
+
+/// Everything the per-sample code reads, resolved once per frame.
+struct Context {
+    const RenderScene& rs;
+    const Scene& scene;
+    const RenderOptions& opt;
+    const EnvironmentMap* env;
+    CameraModel camera;
+    std::vector<glm::vec3> distantDir;  // towards the light, world space at frame time
+    std::vector<glm::vec3> distantE;
+    struct Quad {
+        glm::vec3 corner, e1, e2, n, L;
+        float area;
+        bool twoSided;
+    };
+    std::vector<Quad> quads;
+    int numLights = 0;
+    float shutterLength;
+    TextureSpaceCache* tsc = nullptr;
+    tbb::enumerable_thread_specific<CacheStats>* cacheStats = nullptr;
+    PixelCacheCounts* pixelCache = nullptr;              // per-pixel cache traffic, when asked for
+    std::optional<CameraModel> cameraOpen, cameraClose;  // for motion vectors
+    bool cameraMoves = false;
+
+    Context(const RenderScene& r, const RenderOptions& o);
+
+    float PickPdf() const { return numLights > 0 ? 1.0f / float(numLights) : 0.0f; }
+
+    // Radiance emitted by quad light `l` towards -dir, seen from a surface.
+    glm::vec3 QuadEmission(int l, glm::vec3 dir) const {
+        const Quad& q = quads[l];
+        const float c = glm::dot(q.n, -dir);
+        return (c > 0.0f || q.twoSided) ? q.L : glm::vec3(0.0f);
+    }
+    float QuadPdf(int l, glm::vec3 dir, float dist) const {
+        const Quad& q = quads[l];
+        const float c = std::abs(glm::dot(q.n, dir));
+        return c > 0.0f ? dist * dist / (q.area * c) * PickPdf() : 0.0f;
+    }
+
+    bool SampleLight(glm::vec3 p, float uPick, glm::vec2 u, LightSample* s) const {
+        if (numLights == 0) return false;
+        int i = std::min(int(uPick * float(numLights)), numLights - 1);
+        if (i < int(quads.size())) {
+            const Quad& q = quads[i];
+            const glm::vec3 x = q.corner + u.x * q.e1 + u.y * q.e2;
+            glm::vec3 d = x - p;
+            const float dist2 = glm::dot(d, d);
+            if (!(dist2 > 0.0f)) return false;
+            s->dist = std::sqrt(dist2);
+            s->wi = d / s->dist;
+            s->Li = QuadEmission(i, s->wi);
+            s->pdf = QuadPdf(i, s->wi, s->dist);
+            s->delta = false;
+            s->quad = i;
+            return s->pdf > 0.0f && s->Li != glm::vec3(0.0f);
+        }
+        i -= int(quads.size());
+        if (i < int(distantDir.size())) {
+            s->wi = distantDir[i];
+            s->dist = INFINITY;
+            s->Li = distantE[i] * float(numLights);  // divided by the pick probability
+            s->pdf = 0.0f;
+            s->delta = true;
+            s->distant = i;
+            return true;
+        }
+        float pdf;
+        s->Li = env->Sample(u, &s->wi, &pdf);
+        s->pdf = pdf * PickPdf();
+        s->dist = INFINITY;
+        s->delta = false;
+        return s->pdf > 0.0f;
+    }
+};
+
+inline Bsdf MakeBsdf(const Context& c, const SurfaceInteraction& si) {
+    const Material& m = c.scene.materials[si.material];
+    const bool ggx = m.type == Material::Type::GGX;
+    return Bsdf(si.N, si.Ng, c.rs.Albedo(si), ggx, ggx ? c.rs.Roughness(si) : 1.0f, m.specular);
+}
+
+/// The shadow ray of a light sample, stopping just short of an area light's surface.
+inline Ray ShadowRay(const SurfaceInteraction& si, const LightSample& ls, float time) {
+    Ray shadow;
+    shadow.org = OffsetOrigin(si.P, si.Ng, ls.wi);
+    shadow.dir = ls.wi;
+    shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
+    shadow.time = time;
+    return shadow;
+}
+
+enum class CachedTerm { None, Indirect, All };
+
+struct NoCachedTerm {
+    CachedTerm operator()(const SurfaceInteraction&, const Ray&, glm::vec3*) const {
+        return CachedTerm::None;
+    }
+};
+
+/// Direct lighting (depth 1) and path tracing: NEE with MIS against BSDF sampling.
+/// `emitFirst` = false drops emission seen by the first ray (a cached indirect sample must not
+/// count what NEE at the camera hit already did). `cached(si, ray, &term)` may replace light at
+/// the first surface: Indirect adds the term and stops the path after the first BSDF ray's direct
+/// hit (NEE and MIS still do direct light); All adds the term (direct + indirect) and stops.
+template <typename CachedIndirect = NoCachedTerm>
+glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, Rng& rng,
+                 int maxDepth, RayCounts& rays, bool emitFirst = true,
+                 const CachedIndirect& cached = CachedIndirect()) {
+    glm::vec3 L(0.0f), beta(1.0f);
+    float prevPdf = 0.0f;  // BSDF pdf of the ray being traced (0: camera ray, no MIS)
+    Hit hit = firstHit;
+    bool found = hitFirst;
+    for (int depth = 0;; ++depth) {
+        if (depth > 0) {
+            ++rays.bounce;
+            found = c.rs.Intersect(ray, &hit);
+        }
+        if (depth == 0 && !emitFirst && (!found || hit.light >= 0)) break;
+        if (!found) {
+            if (c.env) {
+                const glm::vec3 Le = c.env->Eval(ray.dir);
+                float w = 1.0f;
+                if (prevPdf > 0.0f)
+                    w = PowerHeuristic(1, prevPdf, 1, c.env->Pdf(ray.dir) * c.PickPdf());
+                L += beta * Le * w;
+            }
+            break;
+        }
+        if (hit.light >= 0) {
+            const glm::vec3 Le = c.QuadEmission(hit.light, ray.dir);
+            float w = 1.0f;
+            if (prevPdf > 0.0f)
+                w = PowerHeuristic(1, prevPdf, 1, c.QuadPdf(hit.light, ray.dir, hit.t));
+            L += beta * Le * w;
+            break;
+        }
+        if (depth >= maxDepth) break;
+        const SurfaceInteraction si = c.rs.Interact(ray, hit);
+        const Bsdf bsdf = MakeBsdf(c, si);
+        const glm::vec3 wo = -ray.dir;
+        if (depth == 0) {
+            glm::vec3 term;
+            const CachedTerm t = cached(si, ray, &term);
+            if (t == CachedTerm::All) return L + term;
+            if (t == CachedTerm::Indirect) {
+                L += term;
+                maxDepth = 1;  // the BSDF ray below still finds direct light (MIS), then stops
+            }
+        }
+
+        LightSample ls;
+        if (c.SampleLight(si.P, rng.Next1D(), rng.Next2D(), &ls)) {
+            const glm::vec3 f = bsdf.Eval(wo, ls.wi);
+            if (f != glm::vec3(0.0f)) {
+                ++rays.shadow;
+                if (!c.rs.Occluded(ShadowRay(si, ls, ray.time))) {
+                    const float cosi = std::abs(glm::dot(ls.wi, si.N));
+                    if (ls.delta) {
+                        L += beta * f * ls.Li * cosi;
+                    } else {
+                        const float w = PowerHeuristic(1, ls.pdf, 1, bsdf.Pdf(wo, ls.wi));
+                        L += beta * f * ls.Li * (cosi * w / ls.pdf);
+                    }
+                }
+            }
+        }
+
+        glm::vec3 wi, weight;
+        float pdf;
+        const float uChoice = rng.Next1D();
+        if (!bsdf.Sample(wo, uChoice, rng.Next2D(), &wi, &weight, &pdf)) break;
+        beta *= weight;
+        prevPdf = pdf;
+        ray.org = OffsetOrigin(si.P, si.Ng, wi);
+        ray.dir = wi;
+        ray.tnear = 0.0f;
+        ray.tfar = INFINITY;
+        if (depth >= 3) {
+            // Russian roulette once paths are long enough to matter little.
+            const float q = std::max(0.05f, 1.0f - std::max({beta.x, beta.y, beta.z}));
+            if (rng.Next1D() < q) break;
+            beta /= 1.0f - q;
+        }
+        if (!std::isfinite(beta.x + beta.y + beta.z)) break;
+    }
+    return L;
+}
+
+/// Ambient occlusion at a camera hit: the fraction of opt.aoSamples cosine-distributed rays
+/// (up to opt.aoDistance) that escape.
+glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
+               RayCounts& rays);
+
+}  // namespace internal
+}  // namespace texcache

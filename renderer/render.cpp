@@ -1,0 +1,421 @@
+// SPDX-License-Identifier: Apache-2.0
+// The frame loop: camera samples in tiles over TBB threads, passes sized to a time budget,
+// per-pixel sums, AOV layers and statistics. What a sample computes is the path tracer's
+// (path_tracer.h) or, with texture-space shading, the cache's (cached_shading.h).
+#include "renderer/render.h"
+
+#include <pmmintrin.h>
+#include <xmmintrin.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <memory>
+
+#include <tbb/blocked_range2d.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include "renderer/cached_shading.h"
+#include "renderer/path_tracer.h"
+#include "renderer/progress.h"
+
+namespace texcache {
+
+using namespace internal;
+
+namespace {
+
+glm::vec3 HashColor(uint32_t id) {
+    uint64_t h = MixBits(uint64_t(id) + 0x9E3779B97F4A7C15ull);
+    return glm::vec3(float(h & 0xFF), float((h >> 8) & 0xFF), float((h >> 16) & 0xFF)) / 255.0f;
+}
+
+// One light sample for next-event estimation.
+
+struct PixelAovs {
+    glm::vec3 albedo{0.0f}, normal{0.0f}, ptex{0.0f};
+    float depth = 0.0f;
+    glm::vec2 motion{0.0f};
+    int hits = 0;
+};
+
+void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInteraction& si,
+              PixelAovs* aov) {
+    aov->albedo += c.rs.Albedo(si);
+    aov->normal += si.N;
+    aov->depth += hit.t;
+    if (aov->hits++ == 0) aov->ptex = {float(si.ptex.face), si.ptex.u, si.ptex.v};
+    if (c.shutterLength > 0.0f) {
+        // Where this surface point is at shutter open and close, in film pixels.
+        const glm::mat4 M = c.rs.ObjectToWorld(hit.object, ray.time);
+        const glm::vec4 pObj = glm::inverse(M) * glm::vec4(si.P, 1.0f);
+        glm::vec2 f0, f1;
+        if (c.cameraOpen->Project(glm::vec3(c.rs.ObjectToWorld(hit.object, 0.0f) * pObj), &f0) &&
+            c.cameraClose->Project(glm::vec3(c.rs.ObjectToWorld(hit.object, 1.0f) * pObj), &f1))
+            aov->motion += f1 - f0;
+    }
+}
+
+/// The mean of `hitSamples` estimates `li(rng)` from one camera hit: the first continues the
+/// camera sample's own random stream (so hitSamples = 1 is the plain path tracer), the others get
+/// streams of their own.
+template <typename LiFn>
+glm::vec3 SplitAtHit(const Context& c, int x, int y, int s, Rng& rng, LiFn&& li) {
+    const int n = std::max(c.opt.hitSamples, 1);
+    glm::vec3 sum = li(rng);
+    for (int h = 1; h < n; ++h) {
+        Rng split(MixBits(PixelSeed(c.opt.seed, x, y, c.opt.width) ^ (uint64_t(h) << 40)),
+                  uint64_t(s));
+        sum += li(split);
+    }
+    return sum / float(n);
+}
+
+/// The camera ray of pixel sample (x, y, s); `rng` continues the sample's random stream after it.
+/// Every pass that traces a sample (the visibility prepass, the shading pass) gets the same ray.
+Ray CameraRay(const Context& c, int x, int y, int s, Rng* rng, RayDifferentials* diff) {
+    *rng = Rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
+    glm::vec2 jitter = rng->Next2D();
+    if (c.opt.pixelCentre) jitter = glm::vec2(0.5f);  // drawn anyway: same streams either way
+    const glm::vec2 lens = rng->Next2D();
+    const float time = c.shutterLength > 0.0f ? rng->Next1D() : 0.0f;
+    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, diff);
+    if (c.cameraMoves) {
+        // Camera motion blur: blend the rays of the open and close poses (rigid, short shutter).
+        const Ray r1 =
+            c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
+        ray.org = glm::mix(ray.org, r1.org, time);
+        ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
+    }
+    ray.time = time;
+    return ray;
+}
+
+glm::vec3 Sample(const Context& c, int x, int y, int s, PixelAovs* aov, RayCounts& rays) {
+    // Differentials feed the cache's mip selection and the debug views; skip them otherwise.
+    const bool needDiff = c.tsc != nullptr || c.opt.integrator == IntegratorKind::Normal ||
+                          c.opt.integrator == IntegratorKind::Ptex ||
+                          c.opt.integrator == IntegratorKind::Uv;
+    RayDifferentials diff;
+    Rng rng(0, 0);
+    const Ray ray = CameraRay(c, x, y, s, &rng, needDiff ? &diff : nullptr);
+    ++rays.camera;
+    Hit hit;
+    const bool found = c.rs.Intersect(ray, &hit);
+
+    const IntegratorKind k = c.opt.integrator;
+    if (k == IntegratorKind::Direct || k == IntegratorKind::Path) {
+        if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
+        if (c.tsc && k == IntegratorKind::Path) {
+            // Diffuse indirect from the cache; glossy materials stay per hit (view-dependent).
+            // Diffuse light is view-independent: diffuse materials take it from the cache
+            // (direct + indirect, or indirect only); glossy ones stay per hit.
+            auto cached = [&](const SurfaceInteraction& si0, const Ray& r0, glm::vec3* term) {
+                if (c.scene.materials[si0.material].type != Material::Type::Diffuse)
+                    return CachedTerm::None;
+                const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
+                const bool all = c.opt.texture.cacheDirect;
+                const glm::vec3 E = CachedLookup(
+                    c, sd,
+                    [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, all, rays); },
+                    c.opt.texture.indirectSamples);
+                *term = c.rs.Albedo(si0) * E;
+                return all ? CachedTerm::All : CachedTerm::Indirect;
+            };
+            return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+                return LiPath(c, ray, hit, found, r, c.opt.maxDepth, rays, true, cached);
+            });
+        }
+        if (c.tsc && k == IntegratorKind::Direct)
+            return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+                return LiDirectCachedShadows(c, ray, hit, found, r, diff, rays);
+            });
+        return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+            return LiPath(c, ray, hit, found, r, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
+                          rays);
+        });
+    }
+    if (!found) return glm::vec3(0.0f);
+    if (hit.object < 0) return glm::vec3(1.0f);  // a light seen by a debug view: white
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, needDiff ? &diff : nullptr);
+    if (aov) FillAovs(c, ray, hit, si, aov);
+    switch (k) {
+        case IntegratorKind::Normal:
+            return si.N * 0.5f + 0.5f;
+        case IntegratorKind::Ptex:
+            return HashColor(uint32_t(si.ptex.face) * 7919u + uint32_t(si.object));
+        case IntegratorKind::Uv:
+            return glm::vec3(si.ptex.u, si.ptex.v, 0.0f);
+        case IntegratorKind::EyeLight:
+            return c.rs.Albedo(si) * std::abs(glm::dot(si.N, ray.dir));
+        case IntegratorKind::AO:
+            if (c.tsc)
+                return CachedLookup(
+                    c, si, [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
+                    c.opt.aoSamples);
+            return LiAO(c, ray, si, rng, rays);
+        default:
+            return glm::vec3(0.0f);
+    }
+}
+
+/// Per-hit AO for a tile in two phases: all camera rays first, then the AO rays of every hit.
+/// Same samples, same random numbers, same result as Sample(); tracing like rays together keeps
+/// Embree's working set (and the traversal's caches) warm, as a wavefront renderer would.
+void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
+                    std::vector<double>& sum, RayCounts& rays) {
+    struct Pending {
+        Ray ray;
+        Hit hit;
+        Rng rng;
+        int pixel;
+        bool found;
+        RayDifferentials diff;
+    };
+    thread_local std::vector<Pending> queue;
+    queue.clear();
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x)
+            for (int s = s0; s < s1; ++s) {
+                Pending p{Ray{}, Hit{}, Rng(0, 0), y * c.opt.width + x, false, {}};
+                p.ray = CameraRay(c, x, y, s, &p.rng, c.tsc ? &p.diff : nullptr);
+                ++rays.camera;
+                p.found = c.rs.Intersect(p.ray, &p.hit);
+                queue.push_back(p);
+            }
+    auto add = [&](const Pending& p, glm::vec3 L) {
+        double* px = &sum[3 * size_t(p.pixel)];
+        px[0] += L.x, px[1] += L.y, px[2] += L.z;
+    };
+    if (!c.tsc) {
+        for (Pending& p : queue) {
+            glm::vec3 L(0.0f);
+            if (p.found)
+                L = p.hit.object < 0 ? glm::vec3(1.0f)
+                                     : LiAO(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, rays);
+            add(p, L);
+        }
+        return;
+    }
+    // Texture space: all shading points first, prefetching their texel slots, then the lookups,
+    // so the latency of a large texel table overlaps instead of stalling every hit.
+    thread_local std::vector<SurfaceInteraction> points;
+    thread_local std::vector<SampleRequest> texels;
+    points.resize(queue.size());
+    texels.resize(queue.size());
+    const bool lookups = c.opt.texture.constantTerm < 0.0f;
+    for (size_t i = 0; i < queue.size(); ++i) {
+        const Pending& p = queue[i];
+        if (!p.found || p.hit.object < 0) continue;
+        points[i] = c.rs.Interact(p.ray, p.hit, &p.diff);
+        if (lookups) {
+            texels[i] = c.tsc->TexelOf(points[i]);
+            c.tsc->Prefetch(texels[i]);
+        }
+    }
+    CacheStats& stats = c.cacheStats->local();
+    for (size_t i = 0; i < queue.size(); ++i) {
+        const Pending& p = queue[i];
+        const CacheSnapshot before = c.pixelCache ? CacheSnapshot(stats) : CacheSnapshot();
+        glm::vec3 L(0.0f);
+        if (p.found)
+            L = p.hit.object < 0
+                    ? glm::vec3(1.0f)
+                    : CachedLookup(
+                          c, points[i],
+                          [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
+                          c.opt.aoSamples, &stats, lookups ? &texels[i] : nullptr);
+        if (c.pixelCache) AddPixelCounts(&c.pixelCache[p.pixel], before, stats);
+        add(p, L);
+    }
+}
+
+/// The visibility prepass of a tile (see texcache/visible_texels.h): marks the texel each camera
+/// sample lands on, with the rays, differentials and texel selection of the shading pass.
+void MarkVisibleTexels(const Context& c, VisibleTexels& visible, int y0, int y1, int x0, int x1,
+                       int s0, int s1, RayCounts& rays) {
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x)
+            for (int s = s0; s < s1; ++s) {
+                Rng rng(0, 0);
+                RayDifferentials diff;
+                const Ray ray = CameraRay(c, x, y, s, &rng, &diff);
+                ++rays.camera;
+                Hit hit;
+                if (!c.rs.Intersect(ray, &hit) || hit.object < 0) continue;
+                visible.Mark(c.tsc->TexelOf(c.rs.Interact(ray, hit, &diff)).key);
+            }
+}
+
+/// A frame's per-pixel sums while its passes run.
+struct FrameSums {
+    std::vector<double> rgb;      // 3 per pixel
+    std::vector<PixelAovs> aovs;  // empty unless AOVs were asked for
+};
+
+/// Samples [s0, s1) of every pixel of a tile, added to the frame's sums.
+void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+               FrameSums& sums, CacheStats* pixelStats, RayCounts& rays) {
+    const int W = c.opt.width;
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+            const size_t p = size_t(y) * W + x;
+            PixelAovs* aov = sums.aovs.empty() ? nullptr : &sums.aovs[p];
+            const CacheSnapshot before = pixelStats ? CacheSnapshot(*pixelStats) : CacheSnapshot();
+            glm::dvec3 acc(0.0);
+            for (int s = s0; s < s1; ++s) {
+                glm::vec3 L = Sample(c, x, y, s, aov, rays);
+                // A NaN/Inf sample would poison the pixel forever: drop it.
+                if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z))
+                    acc += glm::dvec3(L);
+            }
+            double* px = &sums.rgb[3 * p];
+            px[0] += acc.x, px[1] += acc.y, px[2] += acc.z;
+            if (pixelStats) AddPixelCounts(&c.pixelCache[p], before, *pixelStats);
+        }
+}
+
+/// Renders passes of whole sample indices until opt.spp samples are done or, with a time
+/// budget (counted from `start`), until the next pass would not fit in it; returns the samples per
+/// pixel done. A pixel's result depends only on its sample indices, so the image is the same for
+/// any thread count or pass split.
+int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
+              tbb::enumerable_thread_specific<RayCounts>& counts,
+              std::chrono::steady_clock::time_point start) {
+    using Clock = std::chrono::steady_clock;
+    const RenderOptions& opt = c.opt;
+    const int W = opt.width, H = opt.height;
+    auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
+    // Per-hit AO traces a tile's camera rays first, then its AO rays (see AoTileTwoPhase).
+    const bool twoPhaseAo = opt.integrator == IntegratorKind::AO && sums.aovs.empty();
+    const int sppCap = std::max(opt.spp, 1);
+    std::atomic<uint64_t> pixelSamplesDone{0};
+    const double totalWork = double(W) * double(H) * sppCap;
+    const Progress progress(opt.progress, [&] {
+        if (opt.seconds > 0.0f)
+            return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
+        return double(pixelSamplesDone.load()) / totalWork;
+    });
+    auto forTiles = [&](auto&& tile) {
+        tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
+                          [&](const tbb::blocked_range2d<int>& r) {
+                              // Denormals off in every worker: Embree wants it and it saves
+                              // stalls in shading.
+                              _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                              _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                              tile(r, counts.local());
+                          });
+    };
+    int done = 0;
+    int passSpp = opt.seconds > 0.0f ? 1 : sppCap;
+    while (done < sppCap) {
+        const int s0 = done, s1 = std::min(sppCap, done + passSpp);
+        const auto passStart = Clock::now();
+        if (VisibleTexels* visible = fc.Visible())
+            forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                MarkVisibleTexels(c, *visible, r.rows().begin(), r.rows().end(), r.cols().begin(),
+                                  r.cols().end(), s0, s1, rc);
+            });
+        forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+            if (twoPhaseAo) {
+                AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
+                               r.cols().end(), s0, s1, sums.rgb, rc);
+            } else {
+                // The thread's cache counters, read around each pixel for its heat-map counts.
+                CacheStats* pixelStats = c.pixelCache ? &fc.Stats().local() : nullptr;
+                ShadeTile(c, r, s0, s1, sums, pixelStats, rc);
+            }
+            pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+        });
+        done = s1;
+        if (opt.seconds > 0.0f) {
+            const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();
+            const double left = opt.seconds - elapsed();
+            if (left <= 0.0) break;
+            // Size the next pass to fit the remaining budget (at most doubling).
+            const double perSample = passTime / double(s1 - s0);
+            passSpp = std::clamp(int(left / std::max(perSample, 1e-9)), 0, 2 * (s1 - s0));
+            if (passSpp == 0) break;
+        }
+    }
+    return done;
+}
+
+/// The requested AOV layers: means over the `spp` samples of each pixel.
+std::vector<ImageLayer> AovLayers(const std::vector<PixelAovs>& aovs, const AovFlags& flags, int W,
+                                  int H, int spp) {
+    std::vector<ImageLayer> layers;
+    if (aovs.empty()) return layers;
+    auto layer = [&](const char* name, int ch, std::vector<std::string> names, auto fill) {
+        ImageLayer l{name, Image(W, H, ch), std::move(names)};
+        for (size_t p = 0; p < aovs.size(); ++p) fill(aovs[p], &l.image.data[p * ch]);
+        layers.push_back(std::move(l));
+    };
+    const float inv = 1.0f / float(spp);
+    if (flags.albedo)
+        layer("albedo", 3, {"R", "G", "B"}, [&](const PixelAovs& a, float* o) {
+            for (int k = 0; k < 3; ++k) o[k] = a.albedo[k] * inv;
+        });
+    if (flags.normal)
+        layer("normal", 3, {"X", "Y", "Z"}, [&](const PixelAovs& a, float* o) {
+            const float l = glm::length(a.normal);
+            for (int k = 0; k < 3; ++k) o[k] = l > 0.0f ? a.normal[k] / l : 0.0f;
+        });
+    if (flags.depth)
+        layer("depth", 1, {"Z"}, [&](const PixelAovs& a, float* o) {
+            o[0] = a.hits ? a.depth / float(a.hits) : INFINITY;
+        });
+    if (flags.ptex)
+        layer("ptex", 3, {"face", "u", "v"}, [&](const PixelAovs& a, float* o) {
+            o[0] = a.hits ? a.ptex.x : -1.0f, o[1] = a.ptex.y, o[2] = a.ptex.z;
+        });
+    if (flags.motion)
+        layer("motion", 2, {"X", "Y"}, [&](const PixelAovs& a, float* o) {
+            o[0] = a.hits ? a.motion.x / float(a.hits) : 0.0f;
+            o[1] = a.hits ? a.motion.y / float(a.hits) : 0.0f;
+        });
+    return layers;
+}
+
+}  // namespace
+
+uint64_t PixelSeed(uint64_t seed, int x, int y, int width) {
+    return MixBits(seed * 0x9E3779B97F4A7C15ull + uint64_t(y) * uint64_t(width) + uint64_t(x));
+}
+
+RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpaceCache* cache) {
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    const std::clock_t cpuStart = std::clock();
+    Context ctx(rs, opt);
+    FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::Allowed);
+    const int W = opt.width, H = opt.height;
+    const size_t numPixels = size_t(W) * H;
+    if (opt.pixelCache) {
+        opt.pixelCache->assign(numPixels, PixelCacheCounts{});
+        if (ctx.tsc) ctx.pixelCache = opt.pixelCache->data();
+    }
+    FrameSums sums{std::vector<double>(numPixels * 3, 0.0),
+                   std::vector<PixelAovs>(opt.aovs.Any() ? numPixels : 0)};
+    tbb::enumerable_thread_specific<RayCounts> counts;
+    const int done = RunPasses(ctx, frameCache, sums, counts, start);
+
+    RenderResult result;
+    result.beauty = Image(W, H, 3);
+    for (size_t p = 0; p < numPixels * 3; ++p) result.beauty.data[p] = float(sums.rgb[p] / done);
+    result.aovs = AovLayers(sums.aovs, opt.aovs, W, H, done);
+    for (const RayCounts& rc : counts) {
+        result.stats.cameraRays += rc.camera;
+        result.stats.shadowRays += rc.shadow;
+        result.stats.bounceRays += rc.bounce;
+    }
+    for (const CacheStats& cs : frameCache.Stats()) result.stats.cache.Merge(cs);
+    result.stats.sppDone = done;
+    result.stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
+    return result;
+}
+
+}  // namespace texcache

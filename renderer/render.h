@@ -1,0 +1,31 @@
+// SPDX-License-Identifier: Apache-2.0
+// Image rendering: debug views, ambient occlusion, direct lighting and path tracing over a
+// RenderScene, multithreaded with TBB and deterministic for a seed whatever the thread count.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "renderer/image.h"
+#include "renderer/integrator_kind.h"
+#include "renderer/render_scene.h"
+#include "renderer/texture_space.h"
+
+namespace texcache {
+
+struct RenderResult {
+    Image beauty;                  ///< linear RGB
+    std::vector<ImageLayer> aovs;  ///< only the requested layers
+    RenderStats stats;
+};
+
+/// Renders one frame. Thread count is whatever the caller's TBB arena allows. With
+/// options.texture.enabled, shading goes through `cache` (kept by the caller across frames), or
+/// through a cache made for this frame when `cache` is null.
+RenderResult Render(const RenderScene& scene, const RenderOptions& options,
+                    TextureSpaceCache* cache = nullptr);
+
+/// Seed of the random stream of (pixel, sample): identical for any thread count or pass split.
+uint64_t PixelSeed(uint64_t seed, int x, int y, int width);
+
+}  // namespace texcache

@@ -1,0 +1,59 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/render_options.h"
+
+#include "texcache/enum_names.h"
+
+namespace texcache {
+
+namespace {
+constexpr EnumName<FootprintMode> kFootprintModes[] = {{"auto", FootprintMode::Auto},
+                                                       {"visible", FootprintMode::Visible},
+                                                       {"all", FootprintMode::All}};
+}  // namespace
+
+FootprintMode ParseFootprintMode(const std::string& name, const std::string& where) {
+    return ParseEnum(kFootprintModes, name, where, "footprint");
+}
+
+std::string FootprintModeNames() {
+    return EnumNames(kFootprintModes);
+}
+
+RenderOptions RenderOptionsFrom(const RenderSettings& s) {
+    RenderOptions o;
+    o.integrator = s.integrator;
+    o.width = s.width;
+    o.height = s.height;
+    o.spp = s.spp;
+    o.seconds = s.seconds;
+    o.seed = s.seed;
+    o.maxDepth = s.maxDepth;
+    o.aoSamples = s.aoSamples;
+    o.aoDistance = s.aoDistance;
+    o.frameTime = s.time;
+    return o;
+}
+
+void CheckFilterRadius(int radius, const std::string& where) {
+    // 2r+1 = 65 texels a side is far past any useful kernel (the paper uses up to 21).
+    if (radius < 0 || radius > 32)
+        throw InputError(
+            where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
+}
+
+int DefaultFilterRadius(TextureFilterKind kind) {
+    switch (kind) {
+        case TextureFilterKind::None:
+            return 0;
+        case TextureFilterKind::Normal:
+            return 6;
+        case TextureFilterKind::Gaussian:
+            return 10;
+        case TextureFilterKind::Regression:
+        case TextureFilterKind::SoftShadow:
+            return 8;
+    }
+    return 6;
+}
+
+}  // namespace texcache

@@ -1,0 +1,123 @@
+// SPDX-License-Identifier: Apache-2.0
+// What a render is asked to do (RenderOptions, with its texture-space shading settings) and what
+// it reports (RenderStats). Plain data, below the renderers and the cache adapter, so that the
+// scene loader, the command line and the preview fill one struct.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "filters/texture_filters.h"
+#include "renderer/integrator_kind.h"
+#include "renderer/scene.h"
+#include "texcache/shading_cache.h"
+
+namespace texcache {
+
+/// Which texels of a filter footprint a render shades and averages.
+///   Visible  only those the render's camera rays reach (a prepass traces the camera rays and
+///            marks them: texcache/visible_texels.h), point-symmetric for the averaging filters.
+///            A 21x21 window then shades 1.3x the samples of no filter instead of 5.2x (car AO,
+///            640x360, 4 spp) at lower error: AO has sharp detail (contact shadows), and the
+///            hidden texels a full window averages in are biased, not just costly.
+///   All      every texel of the window (the paper's footprint). Smooth, noisy signals gain from
+///            the unseen texels: they are still samples of nearly the same shading (path-traced
+///            indirect light on sunlit.json, 480x270, 4 spp, one path per sample: relMSE 0.0068
+///            in 0.74 s with full windows, 0.0212 in 0.56 s visible).
+///   Auto     Visible for ambient occlusion, All for the direct and path integrators: the
+///            paper's footprint where the evidence is mixed (speed-vs-error's best equal-time
+///            ratios, visible / all: sunlit-indirect 2.69x / 4.00x, but car-diffuse 2.54x /
+///            2.07x and chess-diffuse 1.58x / 1.34x).
+enum class FootprintMode { Auto, Visible, All };
+/// "auto", "visible" or "all"; throws InputError naming `where` and the valid names otherwise.
+FootprintMode ParseFootprintMode(const std::string& name, const std::string& where);
+/// "auto, visible, all" (for help texts and menus).
+std::string FootprintModeNames();
+
+/// Texture-space shading settings of a render (command line / scene file).
+struct TextureSpaceOptions {
+    bool enabled = false;  ///< --shading texture
+    TextureFilterKind filter = TextureFilterKind::Normal;
+    int radius = -1;            ///< footprint (2r+1)^2; -1: the filter's default (see below)
+    float cosThreshold = 0.9f;  ///< normal filter: keep taps with cos > threshold
+    int indirectSamples = 1;    ///< paths per cached indirect sample
+    /// Path integrator: diffuse materials cache their direct light too (one NEE sample per
+    /// cached path), not just indirect. Both are view-independent for a diffuse surface, but
+    /// direct light has the sharp shadows: filtering them blurs hard shadow edges (measured on
+    /// sunlit.json: relMSE 0.40 with the 13x13 normal filter against 0.16 unfiltered), so this is
+    /// for soft lighting (environment, large area lights) and off by default.
+    bool cacheDirect = false;
+    int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
+    /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.
+    FootprintMode footprint = FootprintMode::Auto;
+    /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
+    /// keep a history table the size of the texel cache.
+    float temporalAlpha = 0.0f;
+    CacheSettings cache;
+    /// Mip-0 texel size as a fraction of each object's bounding-box diagonal; eq. 1 then picks
+    /// the level whose texels are about a pixel.
+    float texelFraction = 1.0f / 4096.0f;
+    /// Benchmark baseline: the cached term is replaced by this constant (no lookup at all) when
+    /// >= 0, so a frame measures primary visibility and the uncached terms alone.
+    float constantTerm = -1.0f;
+};
+
+/// Throws InputError when a filter radius is negative or larger than the footprint allows.
+void CheckFilterRadius(int radius, const std::string& where);
+/// The paper's footprint for each filter: 13x13 normal-weighted (Sec. 6.1), 21x21 Gaussian (its
+/// "20x20" centred on the texel), 17x17 regression, 17x17 soft shadows; 1x1 without a filter.
+int DefaultFilterRadius(TextureFilterKind kind);
+
+/// Extra per-pixel layers written beside the beauty image; none are allocated unless asked for.
+struct AovFlags {
+    bool albedo = false, normal = false, depth = false, ptex = false, motion = false;
+    bool Any() const { return albedo || normal || depth || ptex || motion; }
+};
+
+/// One pixel's texel-cache traffic in a frame (texture-space shading): what its camera samples'
+/// lookups found and how many samples their misses shaded.
+struct PixelCacheCounts {
+    uint32_t lookups = 0, texelHits = 0, samplesShaded = 0;
+};
+
+struct RenderOptions {
+    IntegratorKind integrator = IntegratorKind::Path;
+    int width = 640, height = 360;
+    int spp = 16;          ///< samples per pixel (a cap when seconds > 0)
+    float seconds = 0.0f;  ///< time budget; 0 = render exactly spp
+    uint64_t seed = 0;
+    int maxDepth = 5;
+    int aoSamples = 1;
+    /// Direct and path integrators: light paths continued from each camera hit (splitting). With
+    /// the same spp and seed, renders then share their camera rays and differ in shading only,
+    /// which isolates shading error (Munkberg et al. Fig. 7 fix the primary positions likewise).
+    int hitSamples = 1;
+    float aoDistance = 1e30f;
+    float frameTime = 0.0f;  ///< scene time at shutter open
+    /// Every camera ray through its pixel's centre (no antialiasing), as the screen-space frame
+    /// buffers trace them (frame_buffers_render.h): for comparing the two pixel by pixel.
+    bool pixelCentre = false;
+    AovFlags aovs;
+    TextureSpaceOptions texture;  ///< cached AO / diffuse indirect when texture.enabled
+    bool progress = true;         ///< progress bar on stderr for renders longer than a second
+    /// When set, filled with width x height PixelCacheCounts of this frame's lookups (all zero
+    /// without texture-space shading); null costs one predictable branch per lookup (the
+    /// preview's cache heat maps).
+    std::vector<PixelCacheCounts>* pixelCache = nullptr;
+};
+
+struct RenderStats {
+    double seconds = 0.0;     ///< wall clock
+    double cpuSeconds = 0.0;  ///< process CPU time, all threads: the work, however busy the machine
+    int sppDone = 0;
+    uint64_t cameraRays = 0, shadowRays = 0, bounceRays = 0;
+    uint64_t TotalRays() const { return cameraRays + shadowRays + bounceRays; }
+    CacheStats cache;  ///< texture-space shading only
+};
+
+/// A scene file's render settings as options: size, spp, time budget, integrator, seed, depth,
+/// AO rays and distance, frame time (the tessellation rate is the RenderScene's). Every front end
+/// starts from this and overrides what its own options say.
+RenderOptions RenderOptionsFrom(const RenderSettings& settings);
+
+}  // namespace texcache
