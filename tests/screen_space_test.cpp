@@ -15,7 +15,7 @@
 #include "filters/screen_space/cone_overlap.h"
 #include "filters/screen_space/planes.h"
 #include "filters/screen_space/screen_denoiser.h"
-#include "screen_space_scene.h"
+#include "tests/support/screen_space_scene.h"
 #include "texcache/error.h"
 
 namespace texcache::screen {
