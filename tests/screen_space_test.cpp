@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
-// The screen-space stage on synthetic frames (tests/screen_space_scene.h): reprojection, temporal
-// convergence, disocclusion, moving shadows, NaN/Inf containment, input errors, the cone and BRDF
-// tables, demodulation. Every tolerance is stated where it is checked.
+// The screen-space stage on synthetic frames (tests/support/screen_space_scene.h): reprojection,
+// temporal convergence, disocclusion, moving shadows, NaN/Inf containment, input errors, the cone
+// and BRDF tables, demodulation. Every tolerance is stated where it is checked.
 #include <gtest/gtest.h>
 
 #include <chrono>
