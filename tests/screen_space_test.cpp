@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
-// The screen-space stage on synthetic frames (tests/screen_space_scene.h): reprojection, temporal
-// convergence, disocclusion, moving shadows, NaN/Inf containment, input errors, the cone and BRDF
-// tables, demodulation. Every tolerance is stated where it is checked.
+// The screen-space stage on synthetic frames (tests/support/screen_space_scene.h): reprojection,
+// temporal convergence, disocclusion, moving shadows, NaN/Inf containment, input errors, the cone
+// and BRDF tables, demodulation. Every tolerance is stated where it is checked.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -15,7 +15,7 @@
 #include "filters/screen_space/cone_overlap.h"
 #include "filters/screen_space/planes.h"
 #include "filters/screen_space/screen_denoiser.h"
-#include "screen_space_scene.h"
+#include "tests/support/screen_space_scene.h"
 #include "texcache/error.h"
 
 namespace texcache::screen {
@@ -717,7 +717,7 @@ TEST(ScreenSpaceDemodulation, BrdfDemodulationKeepsARoughnessTexture) {
 // and boxes wider than the image. Tolerance 1e-5 of the sum of |v| over the box: float sums of up
 // to 81x81 terms in another order; counts of a 0/1 mask stay exact.
 TEST(ScreenSpaceKernels, BoxSumMatchesBruteForce) {
-    using detail::Plane;
+    using internal::Plane;
     std::mt19937 rng(5);
     std::uniform_real_distribution<float> u(-4.0f, 4.0f);
     for (int w : {1, 7, 300}) {
@@ -737,7 +737,7 @@ TEST(ScreenSpaceKernels, BoxSumMatchesBruteForce) {
                 const Plane* ins[2] = {&in[0], &in[1]};
                 Plane* outs[2] = {&out[0], &out[1]};
                 Plane* tmps[2] = {&tmp[0], &tmp[1]};
-                detail::BoxSum(2, ins, outs, tmps, r);
+                internal::BoxSum(2, ins, outs, tmps, r);
                 int bad = 0;
                 for (int c = 0; c < 2; ++c)
                     for (int y = 0; y < h; ++y)

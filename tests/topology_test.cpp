@@ -6,8 +6,9 @@
 
 #include <set>
 
-#include "libtexcache/cages.h"
+#include "libtexcache/topology_checks.h"
 #include "test_util.h"
+#include "tests/support/cages.h"
 #include "texcache/footprint.h"
 #include "texcache/topology.h"
 

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <vector>
 
-#include "libtexcache/cages.h"  // the tests' small cages
+#include "tests/support/cages.h"  // the tests' small cages
 #include "texcache/shading_cache.h"
 
 namespace {

@@ -17,7 +17,7 @@
 
 #include "filters/screen_space/brdf_table.h"
 #include "filters/screen_space/screen_denoiser.h"
-#include "screen_space_scene.h"
+#include "tests/support/screen_space_scene.h"
 
 namespace {
 

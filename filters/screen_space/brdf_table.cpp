@@ -15,6 +15,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "filters/screen_space/internal.h"
 #include "texcache/error.h"
 
 namespace texcache::screen {
@@ -37,9 +38,8 @@ struct DiskSet {
 };
 
 // Sum of (A, B) over the disk points for one (cos theta_o, alpha).
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void Accumulate(
-    const float* p1s, const float* p2s, int n, float cosTheta, float alpha, double* outA,
-    double* outB) {
+TEXCACHE_SCREEN_CLONES void Accumulate(const float* p1s, const float* p2s, int n, float cosTheta,
+                                       float alpha, double* outA, double* outB) {
     const float c = std::max(cosTheta, 1e-4f);
     const float a = std::max(alpha, 1e-4f);
     const float sx = std::sqrt(std::max(0.0f, 1.0f - c * c));  // w_o = (sx, 0, c)

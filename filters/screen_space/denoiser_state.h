@@ -16,7 +16,7 @@
 #include "filters/screen_space/screen_denoiser.h"
 
 namespace texcache::screen {
-namespace detail {
+namespace internal {
 
 inline constexpr int kVis = 0, kGlossy = 1, kIndirect = 2;
 
@@ -47,7 +47,7 @@ struct ComponentScratch {
     Plane out[3], outVar;
 };
 
-}  // namespace detail
+}  // namespace internal
 
 struct ScreenSpaceDenoiser::State {
     DenoiserSettings set;
@@ -59,27 +59,27 @@ struct ScreenSpaceDenoiser::State {
     Method method = Method::SpatialOnly;
     Demodulation demod = Demodulation::Off;
     uint32_t frameIndex = 0;
-    detail::Guides guides[2];
+    internal::Guides guides[2];
     int cur = 0;
     FrameCamera prevCam;
-    detail::ComponentPlanes comp[3];
-    detail::History hist[3][2];
-    detail::ComponentScratch scratch[3];
+    internal::ComponentPlanes comp[3];
+    internal::History hist[3][2];
+    internal::ComponentScratch scratch[3];
     bool conesPath = false, prevConesPath = false;
-    detail::MotionField trad, shadow, glossy, occl;
+    internal::MotionField trad, shadow, glossy, occl;
     bool motionValid[4] = {false, false, false, false};
-    detail::Plane shadowAlpha, sigma;
-    detail::IntPlane occluder;
-    detail::Plane splat[8];
+    internal::Plane shadowAlpha, sigma;
+    internal::IntPlane occluder;
+    internal::Plane splat[8];
     std::vector<uint8_t> zeroRow;  // validity flags of a row outside the image
     StageTimings timings, cpuTimings;
 
-    detail::Guides& G() { return guides[cur]; }
-    const detail::Guides& PrevG() const { return guides[cur ^ 1]; }
+    internal::Guides& G() { return guides[cur]; }
+    const internal::Guides& PrevG() const { return guides[cur ^ 1]; }
     void Resize(int width, int height);
 };
 
-namespace detail {
+namespace internal {
 
 /// SVGF's temporal step for component `ci`: the history (if `mf`) reprojected bilinearly over
 /// the usable taps, clamped to mu +- clampK sigma of the current 3x3 neighbourhood when
@@ -102,5 +102,5 @@ void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, c
 /// frame's history.
 void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const MotionField* mf);
 
-}  // namespace detail
+}  // namespace internal
 }  // namespace texcache::screen

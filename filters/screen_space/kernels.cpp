@@ -23,9 +23,10 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "filters/screen_space/internal.h"
 #include "filters/screen_space/planes.h"
 
-namespace texcache::screen::detail {
+namespace texcache::screen::internal {
 
 void Guides::Resize(int w, int h) {
     for (Plane* p : {&px, &py, &pz, &nx, &ny, &nz, &depth, &invDz}) p->Resize(w, h);
@@ -36,12 +37,6 @@ void Guides::Resize(int w, int h) {
 namespace {
 
 constexpr int kChunk = 256;
-
-template <class Body>
-void ForRowBlocks(int h, Body&& body) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4),
-                      [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
-}
 
 // ---- Separable passes ------------------------------------------------------------------------
 
@@ -127,12 +122,10 @@ inline __attribute__((always_inline)) void SeparableRow(const PassArgs& a, int y
     }
 }
 
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void Gaussian1(
-    const PassArgs& a, int y0, int y1) {
+TEXCACHE_SCREEN_CLONES void Gaussian1(const PassArgs& a, int y0, int y1) {
     for (int y = y0; y < y1; ++y) SeparableRow<1>(a, y);
 }
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void Gaussian3(
-    const PassArgs& a, int y0, int y1) {
+TEXCACHE_SCREEN_CLONES void Gaussian3(const PassArgs& a, int y0, int y1) {
     for (int y = y0; y < y1; ++y) SeparableRow<3>(a, y);
 }
 
@@ -265,8 +258,7 @@ inline __attribute__((always_inline)) void AtrousRowImpl(const AtrousArgs& a, in
     }
 }
 
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void AtrousRows(
-    const AtrousArgs& a, int y0, int y1) {
+TEXCACHE_SCREEN_CLONES void AtrousRows(const AtrousArgs& a, int y0, int y1) {
     for (int y = y0; y < y1; ++y) AtrousRowImpl(a, y);
 }
 
@@ -288,8 +280,8 @@ namespace {
 // taps are the A_k of L's set bits laid end to end. That is log2(L) + popcount(L) vectorized
 // passes instead of the direct sum's 2r (r = 8, the shadow splat: 5 instead of 16). `a`, `b`:
 // scratch of w + 2r floats each.
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void BoxRowH(
-    const float* s, float* __restrict d, int w, int r, float* __restrict a, float* __restrict b) {
+TEXCACHE_SCREEN_CLONES void BoxRowH(const float* s, float* __restrict d, int w, int r,
+                                    float* __restrict a, float* __restrict b) {
     const int taps = 2 * r + 1;
     const float* cur = s - r;
     int len = w + 2 * r;  // entries of the current level that hold a full sum
@@ -312,8 +304,7 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) vo
     }
 }
 // True when a row holds only zeros (+0 or -0): such rows (most of a sparse mask's) add nothing.
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) bool ZeroRow(
-    const float* s, int w) {
+TEXCACHE_SCREEN_CLONES bool ZeroRow(const float* s, int w) {
     constexpr int kC = 64;
     for (int x0 = 0; x0 < w; x0 += kC) {
         const int n = std::min(kC, w - x0);
@@ -324,8 +315,7 @@ __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) bo
     return true;
 }
 // d += a - b over a row (a or b null: zero).
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void AddSubRow(
-    float* d, const float* a, const float* b, int w) {
+TEXCACHE_SCREEN_CLONES void AddSubRow(float* d, const float* a, const float* b, int w) {
     for (int x = 0; x < w; ++x) d[x] += (a ? a[x] : 0.0f) - (b ? b[x] : 0.0f);
 }
 
@@ -383,4 +373,4 @@ void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp
     });
 }
 
-}  // namespace texcache::screen::detail
+}  // namespace texcache::screen::internal

@@ -16,23 +16,13 @@
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 
-namespace texcache::screen::detail {
+#include "filters/screen_space/internal.h"
+
+namespace texcache::screen::internal {
 namespace {
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-
-inline bool Finite(glm::vec3 v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
 inline glm::vec3 PrevPos(const Guides& g, int x, int y) {
     return glm::vec3(g.px.At(x, y), g.py.At(x, y), g.pz.At(x, y));
-}
-
-template <class Body>
-void ForRows(int h, Body&& body) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4), [&](const tbb::blocked_range<int>& r) {
-        for (int y = r.begin(); y < r.end(); ++y) body(y);
-    });
 }
 
 // Relative tolerance of the tangent-plane tests: distance to the plane < kPlaneTol * depth.
@@ -41,17 +31,8 @@ constexpr float kPlaneTol = 0.01f;
 constexpr float kShadowPlaneTol = 0.02f;
 constexpr float kNormalCos = 0.9f;
 
-inline float Fin(float v) {
-    return std::fabs(v) < 3.0e38f ? 1.0f : 0.0f;
-}  // 0 for NaN / Inf
 inline float InRange(int v, int n) {
     return (v >= 0 ? 1.0f : 0.0f) * (v < n ? 1.0f : 0.0f);
-}
-// A plain copy loop rather than std::copy_n: memcpy would take the address of a kernel's local
-// result arrays, after which GCC assumes any incoming pointer may alias them.
-template <class T>
-inline __attribute__((always_inline)) void CopyRow(const T* src, int n, T* dst) {
-    for (int i = 0; i < n; ++i) dst[i] = src[i];
 }
 
 // base[idx] and base[idx + 1] with one 8-byte load (x86 is little-endian: the left entry is
@@ -127,8 +108,7 @@ inline void TapPassPair(const TradRowArgs& a, int idx, float inL, float inR, int
         TapPass(qx.r, qy.r, qz.r, mx.r, my.r, mz.r, qid.r, inR, id, ppx, ppy, ppz, nx, ny, nz, tol);
 }
 
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void TradRow(
-    const TradRowArgs& args) {
+TEXCACHE_SCREEN_CLONES void TradRow(const TradRowArgs& args) {
     const TradRowArgs a = args;
     constexpr int kC = 256;
     alignas(64) int mask[kC];
@@ -274,8 +254,7 @@ struct ShadowRowArgs {
 };
 
 // eq. 3 for one row: in-shadow pixels' vectors, eq. 4's alpha^V, and the splat inputs.
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ShadowRow(
-    const ShadowRowArgs& args) {
+TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
     const ShadowRowArgs a = args;
     constexpr int kC = 256;
     // Two loops per chunk (geometry, then eq. 4 and the taps): one loop with everything has too
@@ -398,8 +377,7 @@ struct SplatRowArgs {
 
 // Pixels without a shadow vector of their own: the mean vector of the in-shadow pixels around,
 // or the traditional one far from shadows.
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void SplatRow(
-    const SplatRowArgs& args) {
+TEXCACHE_SCREEN_CLONES void SplatRow(const SplatRowArgs& args) {
     const SplatRowArgs a = args;
     constexpr int kC = 256;
     alignas(64) float ox[kC], oy[kC], oa[kC];
@@ -534,8 +512,7 @@ struct GlossyRowArgs {
     uint8_t* om;
 };
 
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void GlossyRow(
-    const GlossyRowArgs& args) {
+TEXCACHE_SCREEN_CLONES void GlossyRow(const GlossyRowArgs& args) {
     const GlossyRowArgs a = args;
     constexpr int kC = 256;
     // Two loops per chunk (eq. 5's vectors, then the lobe's jitter and the taps): one loop holds
@@ -855,4 +832,4 @@ void OcclusionMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& 
     });
 }
 
-}  // namespace texcache::screen::detail
+}  // namespace texcache::screen::internal

@@ -20,7 +20,7 @@
 #include "filters/screen_space/frame_buffers.h"
 #include "filters/screen_space/planes.h"
 
-namespace texcache::screen::detail {
+namespace texcache::screen::internal {
 
 /// Previous-frame positions and usable bilinear taps of one kind of motion vector.
 struct MotionField {
@@ -211,4 +211,4 @@ inline uint8_t TapMask(const Footprint& fp, const Guides& prev, Accept&& accept)
     return m;
 }
 
-}  // namespace texcache::screen::detail
+}  // namespace texcache::screen::internal

@@ -21,7 +21,7 @@
 
 #include <sys/mman.h>
 
-namespace texcache::screen::detail {
+namespace texcache::screen::internal {
 
 /// Columns of zero padding on each side of a row: the widest horizontal tap offset (a-trous
 /// level 4: 2 x 16).
@@ -204,4 +204,4 @@ inline float Luma(float r, float g, float b) {
     return 0.2126f * r + 0.7152f * g + 0.0722f * b;
 }
 
-}  // namespace texcache::screen::detail
+}  // namespace texcache::screen::internal

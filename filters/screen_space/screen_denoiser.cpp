@@ -47,11 +47,12 @@
 #include <tbb/parallel_for.h>
 
 #include "filters/screen_space/denoiser_state.h"
+#include "filters/screen_space/internal.h"
 #include "texcache/error.h"
 
 namespace texcache::screen {
 
-using namespace detail;
+using namespace internal;
 
 const char* MethodName(Method m) {
     switch (m) {
@@ -69,7 +70,6 @@ const char* MethodName(Method m) {
 
 namespace {
 
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 // Below this a remodulation factor (F_beta, albedo) is not divided out: nothing to recover.
 constexpr float kMinRemod = 1e-3f;
 
@@ -106,17 +106,6 @@ private:
     Clock::time_point t0_, last_;
     double c0_, lastCpu_;
 };
-
-inline bool Finite(glm::vec3 v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
-
-template <class Body>
-void ForRows(int h, Body&& body) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4), [&](const tbb::blocked_range<int>& r) {
-        for (int y = r.begin(); y < r.end(); ++y) body(y);
-    });
-}
 
 }  // namespace
 
@@ -249,17 +238,6 @@ void CheckInputs(const FrameBuffers& f, Method m, Demodulation d) {
 // loads, the BRDF table lookups gathers); validity is carried as 0/1 floats (GCC 12 gives up on
 // loops that mix boolean widths).
 
-inline float Fin(float v) {
-    return std::fabs(v) < 3.0e38f ? 1.0f : 0.0f;
-}  // 0 for NaN / Inf
-
-// A plain copy loop rather than std::copy_n: memcpy would take the address of a kernel's local
-// result arrays, after which GCC assumes any incoming pointer may alias them.
-template <class T>
-inline __attribute__((always_inline)) void CopyRow(const T* src, int n, T* dst) {
-    for (int i = 0; i < n; ++i) dst[i] = src[i];
-}
-
 constexpr int kPrepChunk = 256;
 
 // Guides and visibility of one row.
@@ -274,8 +252,7 @@ struct GuideRow {
     int32_t* oid;
     uint8_t* ok;
 };
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void PrepGuides(
-    const GuideRow& args) {
+TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
     const GuideRow a = args;
     constexpr int kC = kPrepChunk;
     alignas(64) float px[kC], py[kC], pz[kC], nx[kC], ny[kC], nz[kC], dz[kC], vv[kC], vok[kC],
@@ -370,12 +347,10 @@ inline __attribute__((always_inline)) void PrepGlossyImpl(const GlossyRow& args)
         CopyRow(gok, n, a.valid + x0);
     }
 }
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void PrepGlossy(
-    const GlossyRow& a) {
+TEXCACHE_SCREEN_CLONES void PrepGlossy(const GlossyRow& a) {
     PrepGlossyImpl<false>(a);
 }
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void PrepGlossyDemod(
-    const GlossyRow& a) {
+TEXCACHE_SCREEN_CLONES void PrepGlossyDemod(const GlossyRow& a) {
     PrepGlossyImpl<true>(a);
 }
 
@@ -448,10 +423,9 @@ inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& a
         CopyRow(iok, n, a.valid + x0);
     }
 }
-#define TEXCACHE_PREP_IND(name, M)                                                           \
-    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
-        const IndirectRow& a) {                                                              \
-        PrepIndirectImpl<M>(a);                                                              \
+#define TEXCACHE_PREP_IND(name, M)                           \
+    TEXCACHE_SCREEN_CLONES void name(const IndirectRow& a) { \
+        PrepIndirectImpl<M>(a);                              \
     }
 TEXCACHE_PREP_IND(PrepIndirect, IndMode::Colour)
 TEXCACHE_PREP_IND(PrepIndirectDemod, IndMode::ColourDemod)
@@ -461,9 +435,9 @@ TEXCACHE_PREP_IND(PrepIndirectCones, IndMode::Cones)
 // Depth tolerance of the edge-stopping weights: 1 / (the larger of the per-axis depth steps +
 // 0.1% of the depth), each step the smaller one-sided step to a usable neighbour (so an edge
 // does not widen its own tolerance).
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void DepthTolRow(
-    int w, const float* z, const float* zu, const float* zd, const uint8_t* ok, const uint8_t* oku,
-    const uint8_t* okd, float* out) {
+TEXCACHE_SCREEN_CLONES void DepthTolRow(int w, const float* z, const float* zu, const float* zd,
+                                        const uint8_t* ok, const uint8_t* oku, const uint8_t* okd,
+                                        float* out) {
     constexpr float kBig = 3.0e38f;
     for (int x = 0; x < w; ++x) {
         // Padding columns have ok = 0 (the guides' valid plane is padded with 0).
@@ -634,8 +608,7 @@ struct ComposeRowArgs {
     const float* res[2][3];
     float* out;  // xyz interleaved
 };
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ComposeRow(
-    const ComposeRowArgs& args) {
+TEXCACHE_SCREEN_CLONES void ComposeRow(const ComposeRowArgs& args) {
     const ComposeRowArgs a = args;
     constexpr int kC = kPrepChunk;
     alignas(64) float o[3][kC];

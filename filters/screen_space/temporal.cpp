@@ -16,18 +16,13 @@
 #include <tbb/parallel_for.h>
 
 #include "filters/screen_space/denoiser_state.h"
+#include "filters/screen_space/internal.h"
 
-namespace texcache::screen::detail {
+namespace texcache::screen::internal {
 namespace {
 
 constexpr float kMaxLen = 255.0f;           // history lengths only select alpha and the variance
 constexpr int kConeFloats = 3 * kNumCones;  // a pixel's cones in FrameBuffers
-
-template <class Body>
-void ForRowBlocks(int h, Body&& body) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 4),
-                      [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); });
-}
 
 // Rows y-1, y, y+1 of a plane, with factor 0 for a row outside the image (then the centre row
 // is read in its place).
@@ -178,10 +173,9 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     }
 }
 
-#define TEXCACHE_SVGF(name, NC, H, C)                                                        \
-    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
-        const SvgfArgs& a) {                                                                 \
-        SvgfRowImpl<NC, H, C>(a);                                                            \
+#define TEXCACHE_SVGF(name, NC, H, C)                     \
+    TEXCACHE_SCREEN_CLONES void name(const SvgfArgs& a) { \
+        SvgfRowImpl<NC, H, C>(a);                         \
     }
 TEXCACHE_SVGF(Svgf1, 1, false, false)
 TEXCACHE_SVGF(Svgf1H, 1, true, false)
@@ -276,10 +270,9 @@ inline __attribute__((always_inline)) void ReliableRowImpl(const ReliableArgs& a
     }
 }
 
-#define TEXCACHE_RELIABLE(name, NC, H, AV)                                                   \
-    __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void name( \
-        const ReliableArgs& a) {                                                             \
-        ReliableRowImpl<NC, H, AV>(a);                                                       \
+#define TEXCACHE_RELIABLE(name, NC, H, AV)                    \
+    TEXCACHE_SCREEN_CLONES void name(const ReliableArgs& a) { \
+        ReliableRowImpl<NC, H, AV>(a);                        \
     }
 TEXCACHE_RELIABLE(Reliable1, 1, false, false)
 TEXCACHE_RELIABLE(Reliable1H, 1, true, false)
@@ -590,12 +583,10 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
     }
 }
 
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ConeRow(
-    const ConeArgs& a) {
+TEXCACHE_SCREEN_CLONES void ConeRow(const ConeArgs& a) {
     ConeRowImpl<false>(a);
 }
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) void ConeRowH(
-    const ConeArgs& a) {
+TEXCACHE_SCREEN_CLONES void ConeRowH(const ConeArgs& a) {
     ConeRowImpl<true>(a);
 }
 #pragma GCC diagnostic pop
@@ -646,4 +637,4 @@ void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const M
     });
 }
 
-}  // namespace texcache::screen::detail
+}  // namespace texcache::screen::internal

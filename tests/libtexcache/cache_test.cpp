@@ -16,7 +16,8 @@
 #include <thread>
 #include <unordered_map>
 
-#include "libtexcache/cages.h"
+#include "libtexcache/topology_checks.h"
+#include "tests/support/cages.h"
 #include "texcache/direct_mapped_cache.h"
 #include "texcache/footprint.h"
 #include "texcache/shading_cache.h"

@@ -1,12 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
-// Small control cages built in code for the cache library's tests (no file loading needed).
+// Small control cages built in code for the cache library's tests and benchmarks (no file loading
+// needed).
 #pragma once
 #include <cmath>
 
-#include <gtest/gtest.h>
-
 #include "texcache/cage.h"
-#include "texcache/topology.h"
 
 namespace texcache::test {
 
@@ -73,22 +71,6 @@ inline ControlCage PentagonCage() {
     c.boundary = BoundaryInterpolation::EdgeAndCorner;
     c.sourcePath = "pentagon";
     return c;
-}
-
-/// Every link has its way back: face f's edge e sees g, and g's edge sees f on e.
-inline void ExpectSymmetricAdjacency(const PtexTopology& topo, const std::string& name = "") {
-    for (int f = 0; f < topo.NumPtexFaces(); ++f)
-        for (int e = 0; e < 4; ++e) {
-            const auto& link = topo.Edge(f, e);
-            for (int j = 0; j < link.count; ++j) {
-                const auto& back = topo.Edge(link.face[j], link.edge[j]);
-                bool found = false;
-                for (int k = 0; k < back.count; ++k)
-                    found |= back.face[k] == f && back.edge[k] == e;
-                EXPECT_TRUE(found)
-                    << name << " face " << f << " edge " << e << " -> " << link.face[j];
-            }
-        }
 }
 
 }  // namespace texcache::test
