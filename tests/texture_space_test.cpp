@@ -51,6 +51,12 @@ const RenderScene& TorusAo() {
     return rs;
 }
 
+// The image of a render limited to `threads` TBB threads.
+Image RenderOnThreads(const RenderScene& rs, const RenderOptions& o, int threads) {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
+    return Render(rs, o).beauty;
+}
+
 RenderOptions AoOptions(int spp, int aoSamples) {
     RenderOptions o;
     o.integrator = IntegratorKind::AO;
@@ -163,16 +169,7 @@ TEST(TextureSpace, ProgressivePassesKeepConverging) {
 TEST(TextureSpace, ProgressivePassesAreDeterministicAcrossThreadCounts) {
     const RenderScene& rs = TorusAo();
     RenderOptions o = CachedAo(16, 2, TextureFilterKind::Normal);
-    Image one, two;
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
-        one = Render(rs, o).beauty;
-    }
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
-        two = Render(rs, o).beauty;
-    }
-    EXPECT_EQ(one.data, two.data);
+    EXPECT_EQ(RenderOnThreads(rs, o, 1).data, RenderOnThreads(rs, o, 2).data);
 }
 
 // The radius schedule r_k = round(r_0 (k + 1)^(-1/6)): r_0 at pass 0, never growing, half at
@@ -206,16 +203,7 @@ TEST(TextureSpace, DeterministicAcrossThreadCounts) {
     RenderOptions o = AoOptions(4, 4);
     o.texture.enabled = true;
     o.texture.cache.sampleCacheBytes = 256 * 1024;
-    Image one, two;
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
-        one = Render(rs, o).beauty;
-    }
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
-        two = Render(rs, o).beauty;
-    }
-    EXPECT_EQ(one.data, two.data);
+    EXPECT_EQ(RenderOnThreads(rs, o, 1).data, RenderOnThreads(rs, o, 2).data);
 }
 
 // The caches persist across frames: a second render of the same view hits every texel but the
