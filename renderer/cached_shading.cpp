@@ -8,10 +8,29 @@ namespace texcache::internal {
 
 namespace {
 
-/// Random stream of a cache sample: a function of its key, so the same texel gets the same
-/// shading whichever thread shades it, and a re-shade after eviction reproduces it.
+/// Seed of a cache sample's random streams: a function of its key and the cache's pass, so the
+/// same texel gets the same shading whichever thread shades it, a re-shade after eviction
+/// reproduces it, and each progressive pass shades it anew.
+uint64_t SampleSeed(const Context& c, const SampleRequest& r) {
+    const uint64_t pass = c.tsc->Pass();
+    return MixBits(c.opt.seed ^ (r.key.Pack() * 0x9E3779B97F4A7C15ull) ^
+                   (pass * 0xD1B54A32D192ED03ull));
+}
+
 Rng SampleRng(const Context& c, const SampleRequest& r) {
-    return Rng(MixBits(c.opt.seed ^ (r.key.Pack() * 0x9E3779B97F4A7C15ull)), 0x7ca7);
+    return Rng(SampleSeed(c, r), 0x7ca7);
+}
+
+/// Where in its texel a sample is shaded: the centre in pass 0 (the paper's grid), a uniform
+/// point of the texel in later passes, so that the mean over passes is the texel's mean shading
+/// rather than its centre's (see the consistency note in texture_space.h).
+PtexCoord SamplePosition(const Context& c, const SampleRequest& r) {
+    if (c.tsc->Pass() == 0) return {r.face, r.u, r.v};
+    Rng rng(SampleSeed(c, r), 0x1177e7);
+    const float texel = 1.0f / float(c.tsc->Resolution(r));
+    const glm::vec2 j = rng.Next2D() - 0.5f;
+    return {r.face, std::clamp(r.u + j.x * texel, 0.0f, 1.0f),
+            std::clamp(r.v + j.y * texel, 0.0f, 1.0f)};
 }
 
 /// Limit-surface point of a cache sample, and the origin its secondary rays start from. The
@@ -23,7 +42,7 @@ Rng SampleRng(const Context& c, const SampleRequest& r) {
 bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, glm::vec3* origin,
                  RayCounts& rays) {
     const int object = c.tsc->ObjectOfMesh(r.mesh);
-    if (!c.rs.EvalSurface(object, {r.face, r.u, r.v}, 0.0f, ss)) return false;
+    if (!c.rs.EvalSurface(object, SamplePosition(c, r), 0.0f, ss)) return false;
     if (c.tsc->IsBackMesh(r.mesh)) ss->N = -ss->N;  // the back side of an open surface
     if (!std::isfinite(ss->P.x + ss->P.y + ss->P.z + ss->N.x + ss->N.y + ss->N.z)) return false;
     const float edge = std::max(glm::length(ss->dPdu), glm::length(ss->dPdv));

@@ -308,11 +308,19 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                               tile(r, counts.local());
                           });
     };
+    // Progressive texture space: passes of opt.texture.passSpp camera samples, each after the
+    // first starting a new pass of the cache (fresh shading, jittered sample positions, smaller
+    // footprints: see texture_space.h), whether the budget is samples or seconds.
+    const bool progressive =
+        c.tsc && c.tsc->Progressive() && opt.texture.passSpp > 0 && opt.texture.constantTerm < 0.0f;
     int done = 0;
-    int passSpp = opt.seconds > 0.0f ? 1 : sppCap;
+    int passSpp = progressive ? opt.texture.passSpp : opt.seconds > 0.0f ? 1 : sppCap;
     while (done < sppCap) {
         const int s0 = done, s1 = std::min(sppCap, done + passSpp);
         const auto passStart = Clock::now();
+        // The pass count saturates: a wrap to 0 would repeat pass 0's random numbers.
+        if (progressive && done > 0 && c.tsc->Pass() < UINT32_MAX)
+            c.tsc->BeginPass(c.tsc->Pass() + 1);
         if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r.rows().begin(), r.rows().end(), r.cols().begin(),
@@ -334,6 +342,10 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();
             const double left = opt.seconds - elapsed();
             if (left <= 0.0) break;
+            if (progressive) {
+                if (left < passTime) break;  // the next pass would not fit
+                continue;
+            }
             // Size the next pass to fit the remaining budget (at most doubling).
             const double perSample = passTime / double(s1 - s0);
             passSpp = std::clamp(int(left / std::max(perSample, 1e-9)), 0, 2 * (s1 - s0));

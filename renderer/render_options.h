@@ -53,6 +53,12 @@ struct TextureSpaceOptions {
     /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
     /// keep a history table the size of the texel cache.
     float temporalAlpha = 0.0f;
+    /// Progressive texture space (see texture_space.h): a render of more camera samples than
+    /// this runs passes of this many, each re-shading the cache with fresh random numbers,
+    /// sample positions jittered inside their texels and a filter radius shrinking with the pass
+    /// count, so that error keeps falling with the budget. 0 = one pass (the paper's cache,
+    /// shaded once). Off with temporal accumulation, which accumulates over frames instead.
+    int passSpp = 4;
     CacheSettings cache;
     /// Mip-0 texel size as a fraction of each object's bounding-box diagonal; eq. 1 then picks
     /// the level whose texels are about a pixel.

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <string>
 
 #include "texcache/error.h"
@@ -40,6 +41,20 @@ VisibleTexels& TextureSpaceCache::Visibility(int width, int height) {
 void TextureSpaceCache::BeginFrame(uint32_t frame) {
     frame_ = frame;
     cache_.InvalidateAll();
+    pass_ = 0;
+    passRadiusOf_ = radiusOf_;
+}
+
+int TextureSpaceCache::PassRadius(int radius, uint32_t pass) {
+    if (pass == 0) return radius;
+    return int(std::lround(float(radius) * std::pow(float(pass) + 1.0f, -1.0f / 6.0f)));
+}
+
+void TextureSpaceCache::BeginPass(uint32_t pass) {
+    if (pass != pass_) cache_.InvalidateAll();
+    pass_ = pass;
+    passRadiusOf_.resize(radiusOf_.size());
+    for (size_t o = 0; o < radiusOf_.size(); ++o) passRadiusOf_[o] = PassRadius(radiusOf_[o], pass);
 }
 
 TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options)
@@ -88,6 +103,7 @@ void TextureSpaceCache::AssignFilters(const Scene& scene) {
                                                    : DefaultFilterRadius(filterOf_.back()));
         CheckFilterRadius(radiusOf_.back(), where);
     }
+    passRadiusOf_ = radiusOf_;
 }
 
 bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOptions& options) {
@@ -103,6 +119,7 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
     options_ = options;
     AssignFilters(rs.scene());
     frame_ = 0;
+    pass_ = 0;
     cache_.InvalidateAll();
     return true;
 }

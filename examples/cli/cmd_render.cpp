@@ -52,6 +52,7 @@ struct RenderArgs {
     std::string footprint = "auto";
     int shadowSamples = 4;
     float temporalAlpha = 0.0f;
+    int passSpp = TextureSpaceOptions{}.passSpp;
     // Animation: frames "A:B" (inclusive) or "N" (frames 0..N-1) at fps.
     std::string frames;
     float fps = 24.0f;
@@ -93,6 +94,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
             throw InputError("--temporal-alpha", "accumulates across frames: give --frames");
     }
     t.temporalAlpha = a.temporalAlpha;
+    t.passSpp = CheckRange("--pass-spp", a.passSpp, 0, 1 << 20);
     auto bytes = [](const char* opt, double mb) {
         CheckRange(opt, mb, 1.0 / 1024.0, 1024.0 * 1024.0);
         return size_t(mb * 1024.0 * 1024.0);
@@ -549,6 +551,12 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->add_option("--shadow-samples", args->shadowSamples,
                     "Shadow rays per cached visibility sample (--filter softshadow)")
+        ->capture_default_str();
+    cmd->add_option("--pass-spp", args->passSpp,
+                    "Progressive texture space: camera samples per pass; each further pass "
+                    "re-shades the cache (fresh random numbers, jittered sample positions, "
+                    "smaller footprints) so error keeps falling with --spp/--seconds (0: one pass, "
+                    "the cache shaded once)")
         ->capture_default_str();
     cmd->add_option("--temporal-alpha", args->temporalAlpha,
                     "Temporal accumulation of texels across --frames: c = (1-A) c + A c_prev "

@@ -441,8 +441,10 @@ void ProgressiveRenderer::Run() {
                 // Heat views record each pixel's lookups during this very frame (a probe of the
                 // cache afterwards would find everything it just stored).
                 opt.pixelCache = heatView ? &pixelCounts : nullptr;
+                // Still: each accumulated frame is a progressive pass of the cache (fresh
+                // shading, jittered samples, smaller footprints; see texture_space.h).
                 if (cur.refineCacheWhenStill && accumulated > 0 && opt.texture.enabled)
-                    cache->Invalidate();
+                    cache->BeginPass(uint32_t(accumulated));
                 const RenderResult r =
                     Render(*rs, opt, opt.texture.enabled ? cache.get() : nullptr);
                 if (heatView) {
