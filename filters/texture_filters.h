@@ -33,7 +33,8 @@ struct ShadedSample {
 
 /// A ShadedSample as the sample cache keeps it, in 16 bytes instead of 36, so a sample-cache slot
 /// takes 32 bytes instead of 56 (1.75x the samples per MB; overshading at 4K with 16 MB fell
-/// from 14.2% to 9.4%): the normal octahedron-encoded in 2 x 16 bits (error below 1e-4
+/// from 14.2% to 9.4%: `texcache experiment cache-size --out DIR`, its 4096x2304 / 16 MB cell,
+/// before and after ab2e9ac): the normal octahedron-encoded in 2 x 16 bits (error below 1e-4
 /// radians; filters compare normals at cos 0.9), value, variance and extra as half floats
 /// (relative precision 5e-4, far below the Monte Carlo noise of a sample; magnitudes past 65504,
 /// extreme fireflies, are clamped there; inf and NaN are kept).

@@ -34,11 +34,13 @@ PtexCoord SamplePosition(const Context& c, const SampleRequest& r) {
 }
 
 /// Limit-surface point of a cache sample, and the origin its secondary rays start from. The
-/// rays hit the tessellated surface, which lies up to ~1.4% of an edge off the limit surface:
-/// a short ray along -N against this object alone finds the tessellated surface under the
-/// sample, and rays start just above it. (A fixed lift large enough for curved faces would put
-/// samples on big flat faces above nearby objects, e.g. the ground under a car's sills; and
-/// another object crossing the short ray must not be taken for the surface.)
+/// rays hit the tessellated surface, which lies up to ~1.4% of an edge off the limit surface at
+/// the default rate (figure from 9bb82c3; closest command: ctest -R
+/// RayHitsDecodeToTheirPtexLocation, which bounds it at rate 8): a short ray along -N against
+/// this object alone finds the tessellated surface under the sample, and rays start just above
+/// it. (A fixed lift large enough for curved faces would put samples on big flat faces above
+/// nearby objects, e.g. the ground under a car's sills; and another object crossing the short
+/// ray must not be taken for the surface.)
 bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, glm::vec3* origin,
                  RayCounts& rays) {
     const int object = c.tsc->ObjectOfMesh(r.mesh);

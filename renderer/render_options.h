@@ -18,16 +18,21 @@ namespace texcache {
 ///   Visible  only those the render's camera rays reach (a prepass traces the camera rays and
 ///            marks them: texcache/visible_texels.h), point-symmetric for the averaging filters.
 ///            A 21x21 window then shades 1.3x the samples of no filter instead of 5.2x (car AO,
-///            640x360, 4 spp) at lower error: AO has sharp detail (contact shadows), and the
-///            hidden texels a full window averages in are biased, not just costly.
+///            640x360, 4 spp; `texcache experiment filter-size --out DIR`) at lower error: AO
+///            has sharp detail (contact shadows), and the hidden texels a full window averages
+///            in are biased, not just costly.
 ///   All      every texel of the window (the paper's footprint). Smooth, noisy signals gain from
 ///            the unseen texels: they are still samples of nearly the same shading (path-traced
 ///            indirect light on sunlit.json, 480x270, 4 spp, one path per sample: relMSE 0.0068
-///            in 0.74 s with full windows, 0.0212 in 0.56 s visible).
+///            in 0.74 s with full windows, 0.0212 in 0.56 s visible; `texcache experiment
+///            speed-vs-error --only sunlit-indirect --out DIR`, ts-normal at budget 1, visible
+///            footprints set in the experiment's code for the second: figures from 9824931).
 ///   Auto     Visible for ambient occlusion, All for the direct and path integrators: the
 ///            paper's footprint where the evidence is mixed (speed-vs-error's best equal-time
 ///            ratios, visible / all: sunlit-indirect 2.69x / 4.00x, but car-diffuse 2.54x /
-///            2.07x and chess-diffuse 1.58x / 1.34x).
+///            2.07x and chess-diffuse 1.58x / 1.34x; `texcache experiment speed-vs-error --only
+///            sunlit-indirect,car-diffuse,chess-diffuse --out DIR`: the "all" run is
+///            results/speed_vs_error.md, the visible run's figures are from c6c07c5).
 enum class FootprintMode { Auto, Visible, All };
 /// "auto", "visible" or "all"; throws InputError naming `where` and the valid names otherwise.
 FootprintMode ParseFootprintMode(const std::string& name, const std::string& where);
@@ -44,8 +49,11 @@ struct TextureSpaceOptions {
     /// Path integrator: diffuse materials cache their direct light too (one NEE sample per
     /// cached path), not just indirect. Both are view-independent for a diffuse surface, but
     /// direct light has the sharp shadows: filtering them blurs hard shadow edges (measured on
-    /// sunlit.json: relMSE 0.40 with the 13x13 normal filter against 0.16 unfiltered), so this is
-    /// for soft lighting (environment, large area lights) and off by default.
+    /// sunlit.json: relMSE 0.40 with the 13x13 normal filter against 0.16 unfiltered; closest
+    /// command `texcache render scenes/sunlit.json --integrator path --shading texture
+    /// --cached-light all --filter normal` and `--filter none`, each put through `texcache
+    /// compare` against a per-hit reference: figure from 8db43ea), so this is for soft lighting
+    /// (environment, large area lights) and off by default.
     bool cacheDirect = false;
     int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
     /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.

@@ -5,8 +5,11 @@
 // Progressive texture space (why the cache keeps converging). The paper shades each cached
 // sample once, so a larger budget only buys camera rays: the shading noise the filter leaves
 // and the filter's bias stay (issue 16 measured relMSE 0.0061 at 1 s and 0.0057 at 4 s on a clay
-// car). Here a render of more than options.passSpp camera samples runs passes of passSpp
-// samples (render.cpp, RunPasses) and every pass k > 0 begins with BeginPass(k):
+// car; closest command `texcache render scenes/sunlit.json --integrator path --shading texture
+// --pass-spp 0 --seconds 1` and `--seconds 4`, each put through `texcache compare` against a
+// reference: figure from f6075fe). Here a render of more than options.passSpp camera samples
+// runs passes of passSpp samples (render.cpp, RunPasses) and every pass k > 0 begins with
+// BeginPass(k):
 //   * every sample and texel is evicted and shaded again from random streams of (key, k), so
 //     the passes are independent estimates and the image, their mean, loses variance as 1/K;
 //   * a sample of pass k > 0 sits at a uniform point of its texel instead of the centre, so the
@@ -110,8 +113,10 @@ public:
     /// Takes new options and starts empty, keeping the cache storage when its layout is the same
     /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
     /// clears 2 x 64 MB instead of having the kernel map and zero them again for every render
-    /// (measured: 0.3 s of CPU on a 480x270 render, more than its shading). Returns false, and
-    /// changes nothing, when the storage does not match: build a new cache then.
+    /// (measured: 0.3 s of CPU on a 480x270 render, more than its shading; figure from e62355c,
+    /// closest command `texcache experiment speed-vs-error --only car-ao --out DIR`, whose
+    /// renders are 480x270). Returns false, and changes nothing, when the storage does not
+    /// match: build a new cache then.
     bool Reconfigure(const RenderScene& rs, const TextureSpaceOptions& options);
 
     /// Starts a frame of an animation: shading changes when objects move, so samples and texels

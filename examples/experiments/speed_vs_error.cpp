@@ -41,8 +41,9 @@ struct Point {
 const Method kPerHit{"per-hit", false, TextureFilterKind::None};
 const Method kNone{"ts-none", true, TextureFilterKind::None};
 const Method kNormal{"ts-normal", true, TextureFilterKind::Normal};
-// The paper's 13x13 blurs AO detail of the car (a bias floor near 0.007 relMSE); 7x7 trades
-// some of the variance reduction for a quarter of that blur.
+// The paper's 13x13 blurs AO detail of the car (a bias floor near 0.007 relMSE: the ts-normal
+// curve of `texcache experiment speed-vs-error --only car-ao --out DIR`); 7x7 trades some of the
+// variance reduction for a quarter of that blur.
 const Method kNormal7{"ts-normal-7x7", true, TextureFilterKind::Normal, 3};
 const Method kGaussian{"ts-gaussian", true, TextureFilterKind::Gaussian};
 const Method kRegression{"ts-regression", true, TextureFilterKind::Regression};

@@ -29,8 +29,9 @@ inline constexpr int kPad = 32;
 
 /// Heap array for large per-frame buffers: 2 MB aligned and advised onto transparent huge pages
 /// when it spans one, because first-touch page faults are what a fresh 8 MB plane costs most
-/// (measured ~25 us per 4 KB fault on the shared VM: 130 ms for a 24 MB buffer). Allocated once
-/// per size; never per frame.
+/// (measured ~25 us per 4 KB fault on the shared VM: 130 ms for a 24 MB buffer; figure from
+/// b0d92c3, closest command build/bin/screen_space_benchmark). Allocated once per size; never
+/// per frame.
 template <class T>
 class HugeArray {
 public:

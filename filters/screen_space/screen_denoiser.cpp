@@ -18,15 +18,18 @@
 //     c~_i; ours (geometry guides only, std w/4 from the blocker-light spread) was worse than the
 //     variance-guided a-trous with no history at all (direct-light RMSE on frame 0, 96x54:
 //     anim_light 0.0116 vs 0.0072, anim_disocclusion 0.0240 vs 0.0172, where an environment
-//     light's visibility is noisy everywhere, not only in penumbrae), so Reliable was worse than
+//     light's visibility is noisy everywhere, not only in penumbrae; `texcache experiment
+//     temporal --quick --only anim_light,anim_disocclusion --out DIR`, frame 0's rmse_direct of
+//     reliable against spatial, before 42eb8e3 removed that filter), so Reliable was worse than
 //     the baseline before any history existed. The paper's point is the motion vectors, and its
 //     Sec. 7 names the spatial filter as orthogonal.
 // Why not Zeng's order for glossy too: a spatial filter that only ever sees 1 spp keeps its bias
 // however many frames are averaged (on a static glossy sphere the glossy RMSE after 16 frames
 // was 0.026, against 0.017 accumulating first, which lets the a-trous sharpen as the temporal
-// variance drops); Zeng et al. use a BRDF-lobe-sized glossy filter we do not have. The glossy
-// component keeps the stochastic glossy vectors and the 3-sigma clamp; its a-trous, which runs
-// after the blend, takes the clean-up's place.
+// variance drops; the scene of ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges, glossy
+// RMSE: figure from 6a7cb45); Zeng et al. use a BRDF-lobe-sized glossy filter we do not have.
+// The glossy component keeps the stochastic glossy vectors and the 3-sigma clamp; its a-trous,
+// which runs after the blend, takes the clean-up's place.
 // All a-trous work of a frame runs as one pass per level over every component that needs it, so
 // the depth/normal weights are computed once per tap. The Reliable indirect keeps incident
 // radiance in 6 cones per pixel as its history (Sec. 4.3): history cones are moved into the
@@ -368,7 +371,9 @@ enum class IndMode { Colour, ColourDemod, Cones };
 
 // The shading of one pixel's cones (kConeShadeWeight per cone, per channel) and whether all 18
 // floats are finite (1 / 0). Plain scalar multiply-adds: GCC vectorizes them across pixels
-// (strided loads); the former 8-wide-per-pixel form spent most of its time in horizontal sums.
+// (strided loads); the former 8-wide-per-pixel form spent most of its time in horizontal sums
+// (a profile, figure from 2838e24; closest command build/bin/screen_space_benchmark
+// --benchmark_filter=reliable, prepare_ms, where the cones are shaded).
 inline __attribute__((always_inline)) void ConeShade(const float* q, float* c0, float* c1,
                                                      float* c2, float* finite) {
     float o[3] = {0.0f, 0.0f, 0.0f}, sum = 0.0f;
@@ -598,7 +603,9 @@ void Cleanup(ScreenSpaceDenoiser::State& s, int ci) {
 
 // The final sum of one row, written like the preparation kernels (plain pointers, local result
 // arrays, 0/1 floats) so that it vectorizes: the per-pixel glm version with its Finite() tests
-// and plane accessors cost ~12 ms a frame at 1080p, several times this.
+// and plane accessors cost ~12 ms a frame at 1080p, several times this
+// (build/bin/screen_space_benchmark --benchmark_filter=reliable, compose_ms; the glm version's
+// figure from 2838e24).
 struct ComposeRowArgs {
     int w;
     const float* emitted;   // xyz interleaved, or null

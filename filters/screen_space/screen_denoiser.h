@@ -69,8 +69,10 @@ struct DenoiserSettings {
     /// Reliable: eq. 4's non-planarity falloff (alpha^V) on the visibility blend. Off by default:
     /// it raised the direct-light RMSE on every ghosting scene (temporal experiment, 96x54, 8
     /// frames, mean direct RMSE with / without: anim_glossy 0.0382 / 0.0334, anim_light 0.0053 /
-    /// 0.0052, anim_shadow 0.0098 / 0.0096, anim_disocclusion 0.0185 / 0.0180), i.e. it sends
-    /// pixels back to the spatial filter where the shadow vectors were usable.
+    /// 0.0052, anim_shadow 0.0098 / 0.0096, anim_disocclusion 0.0185 / 0.0180; `texcache
+    /// experiment temporal --quick --out DIR`, reliable's rmse_direct, "with" by setting this in
+    /// code: figure from 77a9f14), i.e. it sends pixels back to the spatial filter where the
+    /// shadow vectors were usable.
     bool shadowFalloff = false;
     float shadowFalloffSigma = 0.1f;  ///< Reliable: eq. 4's sigma (radians)
     float glossyLobeScale = 1.0f;     ///< Reliable: glossy lobe's angular std = scale * GGX alpha
@@ -78,7 +80,8 @@ struct DenoiserSettings {
     /// lobe's footprint, tens of pixels at 1080p for alpha > 0.2; history that far away is
     /// another part of the reflection, and in a static scene the jitter is a blur that never
     /// converges (glossy RMSE after 16 static frames, 96x64 test: 0.025 at 8 px, 0.023 at 4,
-    /// 0.017 without jitter).
+    /// 0.017 without jitter; the scene of ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges,
+    /// glossy RMSE of Reliable: figure from 6a7cb45).
     float maxGlossyJitter = 4.0f;
     int brdfSamples = 1024;  ///< samples per BRDF-table entry (Zhuang et al.'s count)
     unsigned seed = 1;       ///< glossy motion-vector sampling
@@ -115,7 +118,7 @@ public:
                                    Demodulation demodulation = Demodulation::On);
     /// The same into `image` (resized), whose allocation is reused from frame to frame: on
     /// machines where first-touch page faults are slow, a fresh 1080p image costs more than the
-    /// whole stage.
+    /// whole stage (figure from b0d92c3; closest command build/bin/screen_space_benchmark).
     void Denoise(const FrameBuffers& frame, Method method, Demodulation demodulation,
                  std::vector<glm::vec3>* image);
     /// Forgets the history: the next frame is treated as the first.

@@ -95,7 +95,8 @@ bool Closer(const FootprintSample& a, const FootprintSample& b) {
 
 // Drops all but the closest walk to each texel, in O(n) with a small open-addressing table of
 // sample indices (thread-local; emptied by bumping a generation stamp rather than clearing).
-// Sorting by key did the same in O(n log n) and was 9% of a 21x21 AO render.
+// Sorting by key did the same in O(n log n) and was 9% of a 21x21 AO render (a profile of the
+// 21x21 render of `texcache experiment filter-size --out DIR`; figure from 7aea17b).
 void RemoveDuplicateTexels(std::vector<FootprintSample>* out) {
     const size_t n = out->size();
     thread_local std::vector<uint32_t> index, stamp;
@@ -148,8 +149,9 @@ void RemoveDuplicateTexels(std::vector<FootprintSample>* out) {
 // dropped. Why: the taps a camera sees are one-sided where a surface disappears behind another
 // (the ground under a car body) or where eq. 1 switches mip level, and a one-sided average of a
 // shading gradient is biased by the gradient times the taps' mean offset (car AO, 13x13:
-// relMSE 0.024 one-sided against 0.014 for the full window). A point-symmetric set has its mean
-// offset at the centre, so linear gradients average out as in the full window.
+// relMSE 0.024 one-sided against 0.014 for the full window; `texcache experiment filter-size
+// --out DIR`, the one-sided figure from f721c1e, before this function). A point-symmetric set
+// has its mean offset at the centre, so linear gradients average out as in the full window.
 int KeepSymmetric(std::vector<FootprintSample>* out, int radius) {
     const int side = 2 * radius + 1;
     thread_local std::vector<uint8_t> present;

@@ -335,7 +335,8 @@ LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
     auto refiner = internal::CreateRefiner(cage);
     // Infinitely sharp features are isolated and end-capped, not given OSD's inf-sharp patches:
     // measured, that is what matches Embree on the regression shapes (the inf-sharp patches
-    // differ from Embree near sharp extraordinary vertices of the bishop and rook).
+    // differ from Embree near sharp extraordinary vertices of the bishop and rook; ctest -R
+    // LimitPositionsAgreeWithOpenSubdiv).
     refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(maxIsolationLevel));
 
     Far::PatchTableFactory::Options options(maxIsolationLevel);
@@ -389,7 +390,8 @@ bool LimitSurface::Eval(int ptexFace, float u, float v, LimitPoint* out) const {
         }
     }
     // OSD 3.5 normalizes derivatives on n-gon sub-faces to a domain twice as large as the
-    // sub-face's own (u,v) (measured against finite differences): bring them to the sub-face.
+    // sub-face's own (u,v) (measured against finite differences: ctest -R
+    // OpenSubdivDerivativesMatchFiniteDifferences): bring them to the sub-face.
     if (impl_->nonQuadPtex[ptexFace]) {
         for (int k = 0; k < 3; ++k) {
             r.dPdu[k] *= 0.5f;

@@ -235,8 +235,9 @@ public:
 private:
     // The slot array is 2 MB-aligned and asks for transparent huge pages: lookups land at random
     // in a table of tens of MB, and with 4 KB pages nearly every one missed the TLB (measured:
-    // software prefetches did not help until the table was on huge pages). Exactly
-    // numSlots * kSlotBytes are allocated (rounded to a cache line), so the budget holds.
+    // software prefetches did not help until the table was on huge pages; figure from 0b4f00b,
+    // closest command `texcache bench cache`). Exactly numSlots * kSlotBytes are allocated
+    // (rounded to a cache line), so the budget holds.
     struct SlotDeleter {
         size_t n;
         void operator()(Slot* p) const {
@@ -266,7 +267,8 @@ private:
         // x86. Each word goes straight to `out` (which holds garbage if we then return kRetry):
         // staging the words in a local buffer and copying it out made the compiler reload them
         // with 16-byte loads from 8-byte stores, a store-forwarding stall measured at 60% of
-        // this function.
+        // this function (a profile; figure from 7aea17b, closest command `perf record
+        // build/bin/cache_benchmark --benchmark_filter=BM_TexelCacheHit`).
         char* dst = reinterpret_cast<char*>(out);
         for (size_t i = 0; i < kWords; ++i) {
             const uint64_t w = s.words[i].load(std::memory_order_acquire);

@@ -36,12 +36,15 @@ struct CacheSettings {
     bool referenceMode =
         false;  ///< unbounded caches: every sample and texel kept (overshading baseline)
     /// Let a texel live in one of two slots (see direct_mapped_cache.h): a warm frame then hits
-    /// ~99.9% instead of ~91% of its texels (measured on the car at 640x360, 4 spp); false is the
-    /// paper's strictly direct-mapped texel cache.
+    /// ~99.9% instead of ~91% of its texels (measured on the car at 640x360, 4 spp: the warm
+    /// frame of `texcache bench cache`; ~91% with this false, which has no flag there: figure
+    /// from 5a67a7b); false is the paper's strictly direct-mapped texel cache.
     bool texelTwoChoices = true;
     /// The same for samples. Off by default: measured on the car at 4096x2304 with a 16 MB
     /// sample cache, two choices re-shaded 15.8% against 14.4% direct-mapped (a sample's reuse is
     /// short-lived, so keeping older keys helps little), and the paper's cache is direct-mapped.
+    /// (`texcache experiment cache-size --out DIR`, its 4096x2304 / 16 MB cell, with this set in
+    /// code; figure from 4728839, before packed samples.)
     bool sampleTwoChoices = false;
 
     /// Throws InputError naming the setting when a value is out of range.
