@@ -105,6 +105,7 @@ BrdfPreintegration::BrdfPreintegration(int samples) : samples_(samples) {
     }
     table_.resize(size_t(kSize) * kSize);
     tbb::parallel_for(tbb::blocked_range<int>(0, kSize), [&](const tbb::blocked_range<int>& r) {
+        const internal::DenormalsAreZero mode;  // the same table whichever thread computes it
         for (int j = r.begin(); j < r.end(); ++j)
             for (int i = 0; i < kSize; ++i) {
                 double a, b;

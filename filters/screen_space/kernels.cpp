@@ -353,24 +353,28 @@ void BoxSum(int nc, const Plane* const* in, Plane* const* out, Plane* const* tmp
     // Vertical: a running sum down each block of rows, vectorized across x (the first row of a
     // block is summed directly). Counts and small sums stay exact enough in float: the inputs
     // are 0/1 masks and pixel offsets.
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 32), [&](const tbb::blocked_range<int>& rr) {
-        for (int c = 0; c < nc; ++c) {
-            const uint8_t* zc = zero.data() + size_t(c) * size_t(h);
-            auto row = [&](int yy) -> const float* {
-                return yy >= 0 && yy < h && !zc[yy] ? tmp[c]->Row(yy) : nullptr;
-            };
-            float* first = out[c]->Row(rr.begin());
-            std::fill_n(first, w, 0.0f);
-            for (int yy = rr.begin() - r; yy <= rr.begin() + r; ++yy)
-                if (const float* t = row(yy)) AddSubRow(first, t, nullptr, w);
-            for (int y = rr.begin() + 1; y < rr.end(); ++y) {
-                float* d = out[c]->Row(y);
-                std::copy_n(out[c]->Row(y - 1), w, d);
-                const float *add = row(y + r), *sub = row(y - r - 1);
-                if (add || sub) AddSubRow(d, add, sub, w);
+    ForRowBlocks(
+        h,
+        [&](int rowBegin, int rowEnd) {
+            const tbb::blocked_range<int> rr(rowBegin, rowEnd);
+            for (int c = 0; c < nc; ++c) {
+                const uint8_t* zc = zero.data() + size_t(c) * size_t(h);
+                auto row = [&](int yy) -> const float* {
+                    return yy >= 0 && yy < h && !zc[yy] ? tmp[c]->Row(yy) : nullptr;
+                };
+                float* first = out[c]->Row(rr.begin());
+                std::fill_n(first, w, 0.0f);
+                for (int yy = rr.begin() - r; yy <= rr.begin() + r; ++yy)
+                    if (const float* t = row(yy)) AddSubRow(first, t, nullptr, w);
+                for (int y = rr.begin() + 1; y < rr.end(); ++y) {
+                    float* d = out[c]->Row(y);
+                    std::copy_n(out[c]->Row(y - 1), w, d);
+                    const float *add = row(y + r), *sub = row(y - r - 1);
+                    if (add || sub) AddSubRow(d, add, sub, w);
+                }
             }
-        }
-    });
+        },
+        32);
 }
 
 }  // namespace texcache::screen::internal
