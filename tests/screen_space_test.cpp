@@ -4,7 +4,6 @@
 // and BRDF tables, demodulation. Every tolerance is stated where it is checked.
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -111,12 +110,8 @@ TEST(ScreenSpaceTables, MazonkaOverlapMatchesMonteCarlo) {
 }
 
 TEST(ScreenSpaceTables, BrdfTableMatchesHighSampleEstimate) {
-    const auto t0 = std::chrono::steady_clock::now();
+    // Its build time is screen_space_benchmark's to measure, not a test's (machines are shared).
     BrdfPreintegration table;  // 1024 samples per entry, the size Zhuang et al. use
-    const double ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    std::printf("BRDF table: 256x256, %d samples/entry, built in %.0f ms\n", table.Samples(), ms);
-    EXPECT_LT(ms, 1000.0);
     // In [0, 1], and F_beta = F0 A + B <= 1 for F0 = 1 (energy: A + B is the albedo of a
     // perfect reflector), with 1e-3 slack for the estimate's error.
     for (int j = 0; j < BrdfPreintegration::kSize; ++j)

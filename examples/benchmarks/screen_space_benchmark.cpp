@@ -113,7 +113,16 @@ void BM_Stage(benchmark::State& state, Method method, Demodulation demod) {
     Report(state, "cpu_", cpu);
 }
 
+// The pre-integrated BRDF table (256x256 entries, 1024 samples each), built once per denoiser.
+void BM_BrdfTable(benchmark::State& state) {
+    for (auto _ : state) {
+        BrdfPreintegration table;
+        benchmark::DoNotOptimize(table.Samples());
+    }
+}
+
 void Register() {
+    benchmark::RegisterBenchmark("brdf_table/build", BM_BrdfTable)->Unit(benchmark::kMillisecond);
     for (Method m :
          {Method::SpatialOnly, Method::Baseline, Method::BaselineClamp, Method::Reliable})
         for (Demodulation d : {Demodulation::Off, Demodulation::On}) {
