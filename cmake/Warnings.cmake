@@ -2,14 +2,25 @@
 add_library(texcache_warnings INTERFACE)
 # -Wno-restrict: GCC 12 false positive in libstdc++ string concatenation (GCC PR 105329).
 target_compile_options(texcache_warnings INTERFACE -Wall -Wextra -Wpedantic -Wno-unused-parameter -Wno-restrict)
+# scripts/test.sh (so CI) turns this on: a new warning in project code fails the build there.
+# Off by default, so that a newer compiler's new warnings don't break a developer's build.
+option(TEXCACHE_WERROR "Treat compiler warnings in project code as errors" OFF)
+if(TEXCACHE_WERROR)
+  target_compile_options(texcache_warnings INTERFACE -Werror)
+endif()
 
 add_library(texcache_sanitizers INTERFACE)
 if(TEXCACHE_SANITIZE STREQUAL "address")
-  target_compile_options(texcache_sanitizers INTERFACE -fsanitize=address,undefined -fno-omit-frame-pointer)
+  # -fno-sanitize-recover: an UBSan finding aborts the program (so fails its test) instead of
+  # printing a report and going on, as ASan findings already do.
+  target_compile_options(texcache_sanitizers INTERFACE -fsanitize=address,undefined
+                         -fno-sanitize-recover=all -fno-omit-frame-pointer)
   target_link_options(texcache_sanitizers INTERFACE -fsanitize=address,undefined)
 elseif(TEXCACHE_SANITIZE STREQUAL "thread")
   target_compile_options(texcache_sanitizers INTERFACE -fsanitize=thread -fno-omit-frame-pointer)
   target_link_options(texcache_sanitizers INTERFACE -fsanitize=thread)
+elseif(NOT TEXCACHE_SANITIZE STREQUAL "")
+  message(FATAL_ERROR "TEXCACHE_SANITIZE must be address, thread or empty, not '${TEXCACHE_SANITIZE}'")
 endif()
 
 add_library(texcache_options INTERFACE)

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs missing Debian packages, then configures and builds texcache into build/.
-# Usage: scripts/setup.sh [extra cmake args...]   (BUILD_DIR overrides build/)
+# Usage: scripts/setup.sh [extra cmake args...]   (BUILD_DIR overrides build/;
+#        SETUP_PACKAGES_ONLY=1 installs the packages and stops)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${BUILD_DIR:-$root/build}"
@@ -8,7 +9,8 @@ build="${BUILD_DIR:-$root/build}"
 pkgs=(build-essential cmake pkg-config
       libembree-dev libosd-dev libopenimageio-dev libopenexr-dev libglm-dev libtbb-dev
       libeigen3-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev gnuplot-nox
-      libglfw3-dev libimgui-dev xvfb xauth libgl1-mesa-dri)
+      libglfw3-dev libimgui-dev xvfb xauth libgl1-mesa-dri
+      clang-format)   # scripts/check_format.sh
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -20,6 +22,7 @@ if [ ${#missing[@]} -gt 0 ]; then
   $sudo_cmd apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends "${missing[@]}" >&2
 fi
+[ "${SETUP_PACKAGES_ONLY:-0}" = 1 ] && exit 0
 
 cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null
 cmake --build "$build" -j"$(nproc)" 2>&1 | grep -E "error|warning|Error" >&2 || true
