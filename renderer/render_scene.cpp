@@ -89,6 +89,15 @@ struct RenderScene::Impl {
         if (device) rtcReleaseDevice(device);
     }
 
+    /// World-space geometric normal of a hit on an object (Embree gives it in object space).
+    glm::vec3 WorldNormal(int object, float time, const RTCHit& h) const {
+        const Instance& inst = objects[object];
+        const glm::mat3 N = inst.steps.size() == 1
+                                ? inst.normalMatrix
+                                : glm::transpose(glm::inverse(glm::mat3(Transform(object, time))));
+        return N * glm::vec3(h.Ng_x, h.Ng_y, h.Ng_z);
+    }
+
     glm::mat4 Transform(int object, float time) const {
         const auto& steps = objects[object].steps;
         if (steps.size() == 1) return steps[0];
@@ -346,13 +355,7 @@ bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
     if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
         hit->object = impl_->geomToObject[rh.hit.instID[0]];
         hit->light = -1;
-        // Embree returns instance hits' Ng in object space.
-        const Impl::Instance& inst = impl_->objects[hit->object];
-        const glm::mat3 N =
-            inst.steps.size() == 1
-                ? inst.normalMatrix
-                : glm::transpose(glm::inverse(glm::mat3(impl_->Transform(hit->object, ray.time))));
-        hit->Ng = N * glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+        hit->Ng = impl_->WorldNormal(hit->object, ray.time, rh.hit);
     } else {
         hit->object = -1;
         hit->light = impl_->geomToLight[rh.hit.geomID];
@@ -361,7 +364,7 @@ bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
     return true;
 }
 
-bool RenderScene::IntersectObject(int object, const Ray& ray, float* t) const {
+bool RenderScene::IntersectObject(int object, const Ray& ray, Hit* hit) const {
     const Impl& I = *impl_;
     const glm::mat4 inv = glm::inverse(I.Transform(object, ray.time));
     Ray local = ray;
@@ -374,7 +377,13 @@ bool RenderScene::IntersectObject(int object, const Ray& ray, float* t) const {
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rtcIntersect1(I.meshes[I.objects[object].mesh].scene, &ctx, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-    *t = rh.ray.tfar;
+    hit->t = rh.ray.tfar;
+    hit->object = object;
+    hit->light = -1;
+    hit->primID = rh.hit.primID;
+    hit->U = rh.hit.u;
+    hit->V = rh.hit.v;
+    hit->Ng = I.WorldNormal(object, ray.time, rh.hit);
     return true;
 }
 

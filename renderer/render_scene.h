@@ -79,9 +79,9 @@ public:
     bool Intersect(const Ray& ray, Hit* hit) const;
     /// True when anything blocks the segment (tnear, tfar) along the ray.
     bool Occluded(const Ray& ray) const;
-    /// Closest hit distance along a world-space ray against one object only (other objects are
-    /// ignored); false on a miss.
-    bool IntersectObject(int object, const Ray& ray, float* t) const;
+    /// Closest hit along a world-space ray against one object only (other objects are ignored);
+    /// false on a miss.
+    bool IntersectObject(int object, const Ray& ray, Hit* hit) const;
     /// Shading data at a hit (limit normal, derivatives, Ptex coordinates, uvs); the footprint
     /// fields are filled when `diff` is given.
     SurfaceInteraction Interact(const Ray& ray, const Hit& hit,
