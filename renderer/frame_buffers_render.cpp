@@ -191,9 +191,7 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
     glm::vec3 wi, weight;
     float pdf;
     if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
-    Ray ray;
-    ray.org = OffsetOrigin(si.P, si.Ng, wi);
-    ray.dir = wi;
+    const Ray ray = SpawnRay(si, wi);
     Hit hit;
     ++rays.bounce;
     const bool found = c.rs.Intersect(ray, &hit);
@@ -223,9 +221,7 @@ void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bs
     glm::vec3 wi;
     glm::vec3 L(0.0f);
     if (bsdf.SampleDiffuse(wo, rng.Next2D(), &wi)) {
-        Ray ray;
-        ray.org = OffsetOrigin(si.P, si.Ng, wi);
-        ray.dir = wi;
+        const Ray ray = SpawnRay(si, wi);
         Hit hit;
         ++rays.bounce;
         const bool found = c.rs.Intersect(ray, &hit);

@@ -128,6 +128,14 @@ inline Bsdf MakeBsdf(const Context& c, const SurfaceInteraction& si) {
     return Bsdf(si.N, si.Ng, c.rs.Albedo(si), ggx, ggx ? c.rs.Roughness(si) : 1.0f, m.specular);
 }
 
+/// A ray leaving the surface at `si` in direction `wi` (offset off the surface, unbounded).
+inline Ray SpawnRay(const SurfaceInteraction& si, glm::vec3 wi) {
+    Ray ray;
+    ray.org = OffsetOrigin(si.P, si.Ng, wi);
+    ray.dir = wi;
+    return ray;
+}
+
 /// The shadow ray of a light sample, stopping just short of an area light's surface.
 inline Ray ShadowRay(const SurfaceInteraction& si, const LightSample& ls, float time) {
     Ray shadow;
