@@ -2,6 +2,9 @@
 #include "renderer/envmap.h"
 
 #include <cmath>
+#include <filesystem>
+#include <map>
+#include <mutex>
 
 #include "renderer/image.h"
 #include "renderer/sampling.h"
@@ -55,6 +58,31 @@ EnvironmentMap EnvironmentMap::Load(const std::string& path, float intensity,
         }
     e.dist_ = Distribution2D(blurred, img.width, img.height);
     return e;
+}
+
+std::shared_ptr<const EnvironmentMap> EnvironmentMap::Shared(const std::string& path,
+                                                             float intensity,
+                                                             float rotationDegrees) {
+    namespace fs = std::filesystem;
+    std::error_code ec;  // a missing file gets Load()'s own error below
+    const auto size = fs::file_size(path, ec);
+    const auto mtime = fs::last_write_time(path, ec).time_since_epoch().count();
+    const std::string key = fs::absolute(path, ec).string() + '|' + std::to_string(size) + '|' +
+                            std::to_string(mtime) + '|' + std::to_string(intensity) + '|' +
+                            std::to_string(rotationDegrees);
+    // Weak references, so that a map no scene uses is freed, except for the last one loaded: an
+    // animation builds and drops a RenderScene per frame, and without it each frame would read
+    // the file again. Loads are rare and serialized.
+    static std::mutex mutex;
+    static std::map<std::string, std::weak_ptr<const EnvironmentMap>> loaded;
+    static std::shared_ptr<const EnvironmentMap> last;
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (auto e = loaded[key].lock()) return last = e;
+    std::erase_if(loaded, [](const auto& kv) { return kv.second.expired(); });
+    last.reset();  // before loading, so that two maps are never held only by the cache
+    last = std::make_shared<const EnvironmentMap>(Load(path, intensity, rotationDegrees));
+    loaded[key] = last;
+    return last;
 }
 
 EnvironmentMap EnvironmentMap::Constant(glm::vec3 radiance) {

@@ -6,6 +6,7 @@
 // (v = 0 looks along +Y). A rotation of r degrees turns the map by the right-handed rotation
 // R_y(r): what was seen along d is seen along R_y(r) d.
 #pragma once
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,13 @@ class EnvironmentMap {
 public:
     /// Loads a lat-long image (width == 2 * height); throws InputError otherwise.
     static EnvironmentMap Load(const std::string& path, float intensity, float rotationDegrees);
+    /// Load(), once while any caller holds the result, and the last map loaded stays loaded: a
+    /// RenderScene is rebuilt for every frame of an animation, and reading a 4k map and building
+    /// its distribution each time was most of `texcache experiment temporal --quick`
+    /// (clear_page + Distribution in `perf`). The key includes the file's size and modification
+    /// time, so an edited file is read again.
+    static std::shared_ptr<const EnvironmentMap> Shared(const std::string& path, float intensity,
+                                                        float rotationDegrees);
     /// A uniform environment of the given radiance (white-furnace tests).
     static EnvironmentMap Constant(glm::vec3 radiance);
 

@@ -278,9 +278,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         }
         if (options.needEnvironment && !scene.environments.empty()) {
             const EnvironmentLight& e = scene.environments.front();
-            env_ = std::make_unique<EnvironmentMap>(
-                e.path.empty() ? EnvironmentMap::Constant(e.constant * e.intensity)
-                               : EnvironmentMap::Load(e.path, e.intensity, e.rotationDegrees));
+            env_ = e.path.empty() ? std::make_shared<const EnvironmentMap>(
+                                        EnvironmentMap::Constant(e.constant * e.intensity))
+                                  : EnvironmentMap::Shared(e.path, e.intensity, e.rotationDegrees);
         }
     }
     rtcCommitScene(I.top);

@@ -107,7 +107,7 @@ private:
     struct Impl;
     const Scene& scene_;
     std::unique_ptr<Impl> impl_;
-    std::unique_ptr<EnvironmentMap> env_;
+    std::shared_ptr<const EnvironmentMap> env_;  // shared by the scenes of an animation's frames
 };
 
 }  // namespace texcache

@@ -28,8 +28,8 @@ namespace texcache::screen::internal {
 inline constexpr int kPad = 32;
 
 /// Heap array for large per-frame buffers: 2 MB aligned and advised onto transparent huge pages
-/// when it spans one, because first-touch page faults are what a fresh 8 MB plane costs most
-/// (measured ~25 us per 4 KB fault on the shared VM: 130 ms for a 24 MB buffer; figure from
+/// when it spans at least one, because first-touch page faults are what a fresh 8 MB plane costs
+/// most (measured ~25 us per 4 KB fault on the shared VM: 130 ms for a 24 MB buffer; figure from
 /// b0d92c3, closest command build/bin/screen_space_benchmark). Allocated once per size; never
 /// per frame.
 template <class T>
@@ -45,12 +45,18 @@ public:
             std::free(data_);
             data_ = nullptr, size_ = 0;
             if (n) {
+                // Only a buffer of at least one huge page is rounded up to whole huge pages:
+                // rounding every plane up made a 96x54 denoiser touch 2 MB per plane, 300 MB
+                // per denoiser (`texcache experiment temporal --quick`: 2.6 GB peak RSS, half
+                // its time in the kernel's clear_page).
                 constexpr size_t kHuge = size_t(2) << 20;
-                const size_t bytes = (n * sizeof(T) + kHuge - 1) / kHuge * kHuge;
-                data_ = static_cast<T*>(std::aligned_alloc(bytes >= kHuge ? kHuge : 64, bytes));
+                const size_t raw = n * sizeof(T);
+                const size_t align = raw >= kHuge ? kHuge : 64;
+                const size_t bytes = (raw + align - 1) / align * align;
+                data_ = static_cast<T*>(std::aligned_alloc(align, bytes));
                 if (!data_) throw std::bad_alloc();
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
-                madvise(data_, bytes, MADV_HUGEPAGE);
+                if (align == kHuge) madvise(data_, bytes, MADV_HUGEPAGE);
 #endif
                 size_ = n;
             }
