@@ -10,6 +10,10 @@ if(TEXCACHE_WERROR)
 endif()
 
 add_library(texcache_sanitizers INTERFACE)
+if(NOT TEXCACHE_SANITIZE STREQUAL "")
+  # One ISA for the screen-space kernels (filters/screen_space/internal.h says why).
+  target_compile_definitions(texcache_sanitizers INTERFACE TEXCACHE_NO_ISA_CLONES)
+endif()
 if(TEXCACHE_SANITIZE STREQUAL "address")
   # -fno-sanitize-recover: an UBSan finding aborts the program (so fails its test) instead of
   # printing a report and going on, as ASan findings already do.

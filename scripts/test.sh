@@ -28,7 +28,8 @@ phase "Release build (build/)"
 took "Release build"
 
 # A sanitizer build of `targets` in `dir`: -O1 with line tables (-g1), which is what sanitizer
-# reports need, and compiles in about half the time of -O2 -g on 2 cores. Warnings as errors are
+# reports need, and compiles in about half the time of -O2 -g on 2 cores; the screen-space
+# kernels in one ISA, not three (TEXCACHE_NO_ISA_CLONES). Warnings as errors are
 # the Release build's job (other optimization levels warn differently).
 sanitizer_build() {
   local dir="$1" sanitizer="$2"
@@ -53,7 +54,7 @@ phase "AddressSanitizer + UBSan: whole suite (build-asan/)"
 # add stack traces. Leaks are checked (the preview tests excepted: tests/CMakeLists.txt says why).
 export ASAN_OPTIONS="detect_leaks=1:check_initialization_order=1:strict_init_order=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
-sanitizer_build "$root/build-asan" address
+sanitizer_build "$root/build-asan" address --target texcache_test_programs
 took "ASan build"
 t0=$SECONDS
 (cd "$root/build-asan" && ctest --output-on-failure -j"$jobs" "$@") || failed+=("ASan + UBSan tests")

@@ -15,8 +15,14 @@
 // The row kernels are compiled for x86-64-v4 (AVX-512), x86-64-v3 (AVX2) and the baseline
 // (SSE2), and the loader picks the CPU's clone once (ifunc), like Embree's per-ISA kernels: the
 // build stays portable (no -march) while the vectorized loops use the widest registers there are.
+// Sanitizer builds compile the baseline only (TEXCACHE_NO_ISA_CLONES, cmake/Warnings.cmake):
+// the clones are one source, so the checks see the same code, in a third of the compile time.
+#ifdef TEXCACHE_NO_ISA_CLONES
+#define TEXCACHE_SCREEN_CLONES
+#else
 #define TEXCACHE_SCREEN_CLONES \
     __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#endif
 
 namespace texcache::screen::internal {
 
