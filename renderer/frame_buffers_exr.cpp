@@ -2,8 +2,6 @@
 // The frame buffers' EXR files: one multi-layer file per frame (see WriteFrameBuffers).
 #include "renderer/frame_buffers_render.h"
 
-#include <unistd.h>
-
 #include <cmath>
 #include <filesystem>
 #include <functional>
@@ -13,6 +11,8 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "renderer/atomic_files.h"
+#include "renderer/image.h"
 #include "texcache/error.h"
 
 namespace texcache {
@@ -98,7 +98,8 @@ auto Layers(FB& fb, bool resize, std::vector<float>* ids) {
 
 }  // namespace
 
-void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn) {
+void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn,
+                       AtomicFiles* group) {
     fbIn.Validate(path);
     const fs::path dir = fs::path(path).parent_path();
     if (!dir.empty() && !fs::is_directory(dir))
@@ -134,27 +135,19 @@ void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn
         }
     }
 
-    // Temporary file + rename, as WriteImage: readers never see a partial file.
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
+    // A temporary file renamed by the group's (or our own) Commit(), as WriteImage: readers
+    // never see a partial file.
+    AtomicFiles own;
+    const std::string tmp = (group ? *group : own).Stage(path);
     auto out = ImageOutput::create("openexr");
     if (!out) throw InputError(path, "cannot write frame buffers: " + OIIO::geterror());
-    const bool ok =
-        out->open(tmp, spec) && out->write_image(TypeDesc::FLOAT, px.data()) && out->close();
-    std::error_code ec;
-    if (!ok) {
+    if (!(out->open(tmp, spec) && out->write_image(TypeDesc::FLOAT, px.data()) && out->close())) {
         const std::string err = out->geterror();
-        out.reset();
-        fs::remove(tmp, ec);
         throw InputError(path,
                          "cannot write frame buffers: " + (err.empty() ? "write failed" : err));
     }
     out.reset();
-    fs::rename(tmp, path, ec);
-    if (ec) {
-        std::error_code ignored;
-        fs::remove(tmp, ignored);
-        throw InputError(path, "cannot write frame buffers: " + ec.message());
-    }
+    if (!group) own.Commit();
 }
 
 screen::FrameBuffers ReadFrameBuffers(const std::string& path) {
@@ -167,8 +160,7 @@ screen::FrameBuffers ReadFrameBuffers(const std::string& path) {
     screen::FrameBuffers fb;
     fb.width = spec.width;
     fb.height = spec.height;
-    if (fb.width <= 0 || fb.height <= 0 || double(fb.width) * fb.height * spec.nchannels > 1e10)
-        throw InputError(path, "cannot read frame buffers: bad image size");
+    CheckImageSizeClaim(path, spec.width, spec.height, spec.nchannels, spec.image_bytes(true));
     glm::mat4 m(1.0f);
     glm::vec3 cam(0.0f);
     float time = 0.0f;

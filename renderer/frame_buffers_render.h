@@ -73,6 +73,8 @@
 
 namespace texcache {
 
+class AtomicFiles;
+
 /// Renders the frame at options.frameTime (the time `scene` was built for) into `out` (every
 /// buffer filled, sizes options.width x options.height, options.spp samples per pixel); "prev"
 /// buffers are moved to `prevTime` (usually frameTime - 1/fps). options.integrator, seconds,
@@ -90,11 +92,14 @@ screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, in
 /// then a layer per buffer ("shading.R", "visibility.Y", "position.X", "objectId.Y", "cone3.G",
 /// ...; empty buffers are left out) and the camera and time as header attributes
 /// ("texcache:worldToClip", "texcache:cameraPosition", "texcache:time"). Writes a temporary file
-/// and renames it over `path`. Throws InputError naming the path.
-void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fb);
+/// and renames it over `path` (with a `group`: the group's Commit() does). Throws InputError
+/// naming the path.
+void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fb,
+                       AtomicFiles* group = nullptr);
 
 /// Reads a file WriteFrameBuffers wrote (missing layers stay empty); throws InputError naming the
-/// path when it cannot be read or lacks the camera attributes.
+/// path when it cannot be read, claims a size it cannot hold (CheckImageSizeClaim) or lacks the
+/// camera attributes.
 screen::FrameBuffers ReadFrameBuffers(const std::string& path);
 
 }  // namespace texcache

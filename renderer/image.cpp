@@ -1,8 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "renderer/image.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -11,6 +9,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include "renderer/atomic_files.h"
 #include "texcache/error.h"
 
 namespace texcache {
@@ -53,29 +52,23 @@ void CheckDirectory(const std::string& path) {
                          "cannot write image: directory '" + dir.string() + "' does not exist");
 }
 
-// Writes `pixels` with `spec` to "<path>.tmp-<pid>", then renames it over `path`: rename within a
-// directory is atomic, so readers see the old file or the complete new one, never a partial one.
+// Writes `pixels` with `spec` to the temporary file `group` stages for `path` (own group of one
+// when null, committed at once: rename within a directory is atomic, so readers see the old file
+// or the complete new one, never a partial one).
 void WriteAtomic(const std::string& path, const FormatInfo& fmt, const ImageSpec& spec,
-                 const void* pixels, TypeDesc type) {
+                 const void* pixels, TypeDesc type, AtomicFiles* group) {
     CheckDirectory(path);
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
+    AtomicFiles own;
+    AtomicFiles& files = group ? *group : own;
+    const std::string tmp = files.Stage(path);
     auto out = ImageOutput::create(fmt.oiioName);
     if (!out) throw InputError(path, "cannot write image: " + OIIO::geterror());
-    const bool ok = out->open(tmp, spec) && out->write_image(type, pixels) && out->close();
-    std::error_code ec;
-    if (!ok) {
+    if (!(out->open(tmp, spec) && out->write_image(type, pixels) && out->close())) {
         const std::string err = out->geterror();
-        out.reset();
-        fs::remove(tmp, ec);
         throw InputError(path, "cannot write image: " + (err.empty() ? "write failed" : err));
     }
     out.reset();
-    fs::rename(tmp, path, ec);
-    if (ec) {
-        std::error_code ignored;
-        fs::remove(tmp, ignored);
-        throw InputError(path, "cannot write image: " + ec.message());
-    }
+    if (!group) own.Commit();
 }
 
 }  // namespace
@@ -93,7 +86,7 @@ void CheckImageOutputPath(const std::string& path) {
 }
 
 void WriteImage(const std::string& path, const Image& beauty, const std::vector<ImageLayer>& layers,
-                float exposure) {
+                float exposure, AtomicFiles* group) {
     // Validate everything before the temporary file exists, so a bad call leaves no trace.
     const FormatInfo& fmt = FormatOf(path);
     if (beauty.width <= 0 || beauty.height <= 0 || beauty.channels <= 0 ||
@@ -115,7 +108,7 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
                 px[p * c + k] = LinearToSrgb8(beauty.data[p * bc + k] * scale);
         ImageSpec spec(beauty.width, beauty.height, c, TypeDesc::UINT8);
         spec.attribute("oiio:ColorSpace", "sRGB");
-        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::UINT8);
+        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::UINT8, group);
         return;
     }
 
@@ -125,7 +118,7 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
         for (size_t p = 0; p < n; ++p)
             for (int k = 0; k < 3; ++k) px[p * 3 + k] = beauty.data[p * bc + (bc >= 3 ? k : 0)];
         ImageSpec spec(beauty.width, beauty.height, 3, TypeDesc::FLOAT);
-        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT);
+        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT, group);
         return;
     }
 
@@ -157,10 +150,35 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
             for (int k = 0; k < l.image.channels; ++k)
                 *o++ = l.image.data[p * l.image.channels + k];
     }
-    WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT);
+    WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT, group);
 }
 
-Image ReadImage(const std::string& path) {
+void CheckImageSizeClaim(const std::string& path, int width, int height, int channels,
+                         uint64_t rawBytes) {
+    const std::string size =
+        std::to_string(width) + "x" + std::to_string(height) + "x" + std::to_string(channels);
+    if (width <= 0 || height <= 0 || channels <= 0)
+        throw InputError(path, "cannot read image: empty image (" + size + ")");
+    const uint64_t pixels = uint64_t(width) * uint64_t(height);
+    if (pixels > kMaxImagePixels || pixels * uint64_t(channels) > (uint64_t(1) << 30))
+        throw InputError(path, "cannot read image: its header claims " + size +
+                                   " values, more than the 16384x16384 pixels and 2^30 values "
+                                   "read here");
+    std::error_code ec;
+    const uintmax_t fileBytes = fs::file_size(path, ec);
+    constexpr uint64_t kFree = uint64_t(256) << 20;
+    if (!ec && rawBytes > kFree && rawBytes / kMaxCompression > fileBytes)
+        throw InputError(path, "cannot read image: its header claims " + size + " (" +
+                                   std::to_string(rawBytes >> 20) +
+                                   " MiB of pixels) but the file "
+                                   "has only " +
+                                   std::to_string(fileBytes) + " bytes: corrupt or truncated");
+}
+
+namespace {
+
+/// The first `maxChannels` channels of `path` (all when 0) as float, checked before allocating.
+Image ReadChannels(const std::string& path, int maxChannels, ColorEncoding* encoding) {
     std::error_code ec;
     if (!fs::is_regular_file(path, ec))
         throw InputError(path, fs::exists(path, ec) ? "cannot read image: not a regular file"
@@ -171,16 +189,20 @@ Image ReadImage(const std::string& path) {
         throw InputError(path, "cannot read image: " + (err.empty() ? "unknown format" : err));
     }
     const ImageSpec& spec = in->spec();
-    if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
-        throw InputError(path, "cannot read image: empty image");
-    // A corrupt header must not turn into a huge allocation (bad_alloc is not a user error).
-    const double floats = double(spec.width) * spec.height * spec.nchannels;
-    if (floats > double(1u << 31))
-        throw InputError(path, "cannot read image: " + std::to_string(spec.width) + "x" +
-                                   std::to_string(spec.height) + "x" +
-                                   std::to_string(spec.nchannels) + " is too large");
-    Image img(spec.width, spec.height, spec.nchannels);
-    if (!in->read_image(0, 0, 0, spec.nchannels, TypeDesc::FLOAT, img.data.data())) {
+    CheckImageSizeClaim(path, spec.width, spec.height, spec.nchannels, spec.image_bytes(true));
+    const int channels = maxChannels > 0 ? std::min(spec.nchannels, maxChannels) : spec.nchannels;
+    if (encoding) {
+        // OIIO names the colour space it read (PNG: "sRGB" unless a gAMA chunk says otherwise);
+        // without one, integer pixels are display values and float pixels are linear.
+        std::string cs = spec.get_string_attribute("oiio:ColorSpace");
+        for (char& c : cs) c = char(std::tolower(static_cast<unsigned char>(c)));
+        const bool srgbName = cs.find("srgb") != std::string::npos && cs.find("lin") != 0;
+        *encoding = srgbName || (cs.empty() && !spec.format.is_floating_point())
+                        ? ColorEncoding::Srgb
+                        : ColorEncoding::Linear;
+    }
+    Image img(spec.width, spec.height, channels);
+    if (!in->read_image(0, 0, 0, channels, TypeDesc::FLOAT, img.data.data())) {
         const std::string err = in->geterror();
         throw InputError(path, "cannot read image: " + (err.empty() ? "read failed" : err));
     }
@@ -188,14 +210,24 @@ Image ReadImage(const std::string& path) {
     return img;
 }
 
-Image ReadImageRGB(const std::string& path) {
-    Image src = ReadImage(path);
+}  // namespace
+
+Image ReadImage(const std::string& path) {
+    return ReadChannels(path, 0, nullptr);
+}
+
+Image ReadImageRGB(const std::string& path, ColorEncoding* encoding) {
+    Image src = ReadChannels(path, 3, encoding);
     if (src.channels == 3) return src;
     Image rgb(src.width, src.height, 3);
-    const int c = src.channels;
     for (size_t p = 0; p < src.NumPixels(); ++p)
-        for (int k = 0; k < 3; ++k) rgb.data[p * 3 + k] = src.data[p * c + (c < 3 ? 0 : k)];
+        for (int k = 0; k < 3; ++k) rgb.data[p * 3 + k] = src.data[p * src.channels];
     return rgb;
+}
+
+void SrgbToLinear(Image* img) {
+    for (float& v : img->data)
+        v = v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
 }
 
 }  // namespace texcache

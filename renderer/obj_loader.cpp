@@ -43,9 +43,14 @@ struct Cursor {
     }
 };
 
+/// A token quoted for a message, cut to an Excerpt (a token may be an 8 MB line).
 std::string Quoted(std::string_view t) {
-    return "'" + std::string(t) + "'";
+    return "'" + Excerpt(t) + "'";
 }
+
+/// Cage coordinates beyond this are rejected: Embree's bounds are limited to about +-1.8e18
+/// (its FLT_LARGE), and a cage that large cannot be framed by a camera in float either.
+constexpr float kMaxCoordinate = 1e18f;
 
 class Parser {
 public:
@@ -71,7 +76,13 @@ public:
             if (kw == "v") {
                 // `v x y z [w]`: w (and the colours some exporters append) are ignored.
                 std::array<float, 3> p;
-                for (float& x : p) x = Float(c.Token(), "vertex needs 3 coordinates");
+                for (float& x : p) {
+                    const std::string_view t = c.Token();
+                    x = Float(t, "vertex needs 3 coordinates");
+                    if (std::abs(x) > kMaxCoordinate)
+                        Fail("vertex coordinate " + Quoted(t) +
+                             " is beyond +-1e18, the range the ray tracer (Embree) handles");
+                }
                 cage_.positions.push_back(p);
             } else if (kw == "vt") {
                 std::array<float, 2> uv;
@@ -161,7 +172,7 @@ private:
         const long i = Int(t, what, " index");
         const long r = i > 0 ? i - 1 : long(count) + i;
         if (i == 0 || r < 0 || r >= long(count))
-            Fail(std::string(what) + " index " + std::string(t) + " is out of range (" +
+            Fail(std::string(what) + " index " + Excerpt(t) + " is out of range (" +
                  std::to_string(count) + " defined so far" +
                  (i == 0 ? "; OBJ indices start at 1)" : ")"));
         return int(r);
@@ -191,7 +202,7 @@ private:
                     const long nr = ni > 0 ? ni - 1 : long(numNormals_) + ni;
                     if ((ni == 0 || nr < 0 || nr >= long(numNormals_)) && !warnedNormal_) {
                         warnedNormal_ = true;
-                        WarnAt(line_, "normal index " + std::string(tn) + " is out of range (" +
+                        WarnAt(line_, "normal index " + Excerpt(tn) + " is out of range (" +
                                           std::to_string(numNormals_) +
                                           " defined so far); normals are ignored anyway");
                     }
@@ -245,7 +256,7 @@ private:
         tag.line = line_;
         tag.name = c.Token();
         if (tag.name.empty()) Fail("tag line without a tag name");
-        const std::string name(tag.name);
+        const std::string name = Excerpt(tag.name);
         const std::string_view counts = c.Token();
         long n[3] = {-1, -1, -1};
         const char* p = counts.data();
@@ -379,7 +390,7 @@ private:
                             std::to_string(t.ints[0]));
                 }
             } else {
-                WarnAt(line_, "unknown tag '" + std::string(t.name) + "' skipped");
+                WarnAt(line_, "unknown tag " + Quoted(t.name) + " skipped");
             }
         }
         for (const auto& [e, s] : creases) {

@@ -5,11 +5,13 @@
 #include "renderer/scene_loader.h"
 
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <unordered_set>
 
 #include <glm/gtc/quaternion.hpp>
 #include <nlohmann/json.hpp>
@@ -26,20 +28,33 @@ using json = nlohmann::json;
 namespace {
 
 constexpr float kBig = 1e30f;  // finite values beyond this are almost certainly typos
+/// Scene files nest 5 levels deep (lights[0].keyframes[0].rotate); deeper input is rejected as
+/// soon as it opens level 65, before it costs more than its own bytes.
+constexpr size_t kMaxJsonDepth = 64;
+
+/// nlohmann's messages quote the token they stopped at ("last read: '/* ...'"), which may be
+/// megabytes long: the quoted part is cut to an Excerpt.
+std::string ExcerptQuoted(const std::string& msg) {
+    const size_t q0 = msg.find('\''), q1 = msg.rfind('\'');
+    if (q0 == std::string::npos || q1 <= q0) return msg;
+    return msg.substr(0, q0 + 1) + Excerpt(std::string_view(msg).substr(q0 + 1, q1 - q0 - 1)) +
+           msg.substr(q1);
+}
 
 std::string TypeName(const json& j) {
     if (j.is_number()) return "the number " + j.dump();
-    if (j.is_string()) return "the string " + j.dump();
+    if (j.is_string()) return "the string " + Excerpt(j.dump());
     if (j.is_array()) return "an array";
     if (j.is_object()) return "an object";
     if (j.is_boolean()) return j.dump();
     return "null";
 }
 
-std::string Fmt(double v) {
-    std::ostringstream o;
-    o << v;
-    return o.str();
+/// Shortest round-trip form: a value just outside a bound does not print as the bound itself.
+template <typename T>
+std::string Fmt(T v) {
+    char buf[64];
+    return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
 }
 
 std::string List(std::initializer_list<const char*> names) {
@@ -86,8 +101,9 @@ public:
         return j_->size();
     }
 
-    /// A finite number in [lo, hi].
-    float Number(float lo = -kBig, float hi = kBig) const {
+    /// A finite number in [lo, hi] (bounds in double: 1e12 is within [1e-12, 1e12], though the
+    /// float nearest 1e12 is below it).
+    float Number(double lo = -kBig, double hi = kBig) const {
         if (!j_->is_number()) Fail("expected a number, got " + TypeName(*j_));
         const double v = j_->get<double>();
         if (!std::isfinite(v)) Fail("expected a finite number");
@@ -96,7 +112,7 @@ public:
         return float(v);
     }
     /// A finite number in the open interval (lo, hi).
-    float NumberOpen(float lo, float hi) const {
+    float NumberOpen(double lo, double hi) const {
         const float v = Number();
         if (!(v > lo && v < hi))
             Fail("value " + Fmt(v) + " is out of range (" + Fmt(lo) + ", " + Fmt(hi) + ")");
@@ -126,7 +142,7 @@ public:
         if (!j_->is_string()) Fail("expected a string, got " + TypeName(*j_));
         return j_->get<std::string>();
     }
-    glm::vec3 Vec3(float lo = -kBig, float hi = kBig) const {
+    glm::vec3 Vec3(double lo = -kBig, double hi = kBig) const {
         if (!j_->is_array() || j_->size() != 3)
             Fail("expected an array of 3 numbers, got " +
                  (j_->is_array() ? "an array of " + std::to_string(j_->size()) : TypeName(*j_)));
@@ -134,7 +150,9 @@ public:
     }
 
 private:
-    std::string Join(const std::string& k) const { return path_.empty() ? k : path_ + "." + k; }
+    std::string Join(const std::string& k) const {
+        return path_.empty() ? Excerpt(k) : path_ + "." + Excerpt(k);
+    }
     const json* j_;
     std::string path_;
     const std::string* file_;
@@ -176,7 +194,7 @@ Keyframe ParseRigid(const Node& n, bool keyed) {
     if (n.Has("scale")) {
         const Node s = n["scale"];
         // A zero or negative scale collapses or mirrors the cage (inside-out normals).
-        k.scale = s.raw().is_number() ? glm::vec3(s.Number(1e-12f, 1e12f)) : s.Vec3(1e-12f, 1e12f);
+        k.scale = s.raw().is_number() ? glm::vec3(s.Number(1e-12, 1e12)) : s.Vec3(1e-12, 1e12);
     }
     return k;
 }
@@ -255,7 +273,16 @@ int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
         }
         if (n.Has("scale")) t.scale = n["scale"].NumberOpen(0.0f, 1e6f);
     } else {
-        n.Keys({"texture"});  // images take no parameters
+        // Not a kind we know: an image file, which has an extension and takes no parameters. A
+        // name without one ("noise") is a texture kind we do not have, whatever keys follow.
+        if (fs::path(name).extension().empty())
+            n["texture"].Fail("unknown texture kind '" + Excerpt(name) +
+                              "' (valid: checker, or the path of an image file)");
+        for (const auto& [k, v] : n.raw().items())
+            if (k != "texture")
+                n["texture"].Fail("the image texture '" + Excerpt(name) +
+                                  "' takes no parameters, but '" + Excerpt(k) +
+                                  "' is given (only the checker texture has colors and scale)");
         t.kind = Texture::Kind::Image;
         t.path = Resolve(base, name);
         RequireFile(n["texture"], t.path, "texture file");
@@ -276,7 +303,7 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
     else if (type == "ggx")
         m.type = Material::Type::GGX;
     else
-        n["type"].Fail("unknown material type '" + type + "' (valid: diffuse, ggx)");
+        n["type"].Fail("unknown material type '" + Excerpt(type) + "' (valid: diffuse, ggx)");
     if (n.Has("albedo")) {
         const Node a = n["albedo"];
         if (a.raw().is_object())
@@ -345,7 +372,8 @@ void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
         d.transform = ParseTrack(n);
         scene->distantLights.push_back(d);
     } else {
-        n["type"].Fail("unknown light type '" + type + "' (valid: environment, quad, distant)");
+        n["type"].Fail("unknown light type '" + Excerpt(type) +
+                       "' (valid: environment, quad, distant)");
     }
 }
 
@@ -378,55 +406,96 @@ void ParseRender(const Node& n, RenderSettings* s) {
     if (n.Has("time")) s->time = n["time"].Number();
 }
 
-/// Parses with comments allowed and duplicate keys rejected (nlohmann keeps the last silently,
-/// which would hide a typo'd override); syntax errors become "file:line:col: ...".
-json ParseJson(const std::string& text, const std::string& file) {
-    struct Frame {
-        bool object;
-        std::string path;
-        std::vector<std::string> keys;  // objects: keys seen so far (the last is the current one)
-        size_t index = 0;               // arrays: index of the next element
-    };
-    std::vector<Frame> stack;
-    const auto childPath = [&]() -> std::string {
-        if (stack.empty()) return "";
-        const Frame& p = stack.back();
-        if (!p.object) return p.path + "[" + std::to_string(p.index) + "]";
-        const std::string& k = p.keys.empty() ? std::string() : p.keys.back();
-        return p.path.empty() ? k : p.path + "." + k;
-    };
-    const auto valueDone = [&] {
-        if (!stack.empty() && !stack.back().object) ++stack.back().index;
-    };
-    const json::parser_callback_t callback = [&](int, json::parse_event_t ev, json& parsed) {
-        switch (ev) {
-            case json::parse_event_t::object_start:
-            case json::parse_event_t::array_start:
-                stack.push_back({ev == json::parse_event_t::object_start, childPath(), {}, 0});
-                break;
-            case json::parse_event_t::key: {
-                Frame& f = stack.back();
-                const std::string k = parsed.get<std::string>();
-                for (const std::string& seen : f.keys)
-                    if (seen == k) {
-                        const std::string path = f.path.empty() ? k : f.path + "." + k;
-                        throw InputError(file + ": key '" + path + "'",
-                                         "duplicate key (given twice in the same object)");
-                    }
-                f.keys.push_back(k);
-                break;
-            }
-            case json::parse_event_t::object_end:
-            case json::parse_event_t::array_end:
-                stack.pop_back();
-                valueDone();
-                break;
-            case json::parse_event_t::value:
-                valueDone();
-                break;
+/// Builds the JSON document from nlohmann's SAX events, rejecting duplicate keys (nlohmann keeps
+/// the last silently, which would hide a typo'd override) and nesting beyond kMaxJsonDepth. Not
+/// nlohmann's parser callback: its DOM builder scans the parent object for a discarded value at
+/// every object end, quadratic in the number of sibling objects (100,000 materials took 257 s).
+/// Here time and memory stay proportional to the text: each open container keeps its own
+/// current key (the key path is built only for a message) and its keys in a hash set.
+class JsonBuilder {
+public:
+    explicit JsonBuilder(const std::string& file) : file_(file) {}
+    json Take() { return std::move(root_); }
+
+    bool null() { return Add(nullptr); }
+    bool boolean(bool v) { return Add(v); }
+    bool number_integer(json::number_integer_t v) { return Add(v); }
+    bool number_unsigned(json::number_unsigned_t v) { return Add(v); }
+    bool number_float(json::number_float_t v, const std::string&) { return Add(v); }
+    bool string(json::string_t& v) { return Add(std::move(v)); }
+    bool binary(json::binary_t& v) { return Add(std::move(v)); }
+    bool start_object(size_t) { return Open(json::object()); }
+    bool start_array(size_t) { return Open(json::array()); }
+    bool end_object() { return Close(); }
+    bool end_array() { return Close(); }
+    bool key(json::string_t& k) {
+        Frame& f = stack_.back();
+        if (!f.keys.insert(k).second) {
+            f.key = k;
+            throw InputError(file_ + ": key '" + Path(stack_.size()) + "'",
+                             "duplicate key (given twice in the same object)");
         }
+        f.key = std::move(k);
         return true;
+    }
+    template <class Exception>
+    bool parse_error(size_t, const std::string&, const Exception& e) {
+        throw e;  // the parse_error or out_of_range (number overflow) ParseJson reports
+    }
+
+private:
+    struct Frame {
+        json* value;
+        std::string key;                       // objects: the current key
+        std::unordered_set<std::string> keys;  // objects: keys seen so far
     };
+    /// "a.b[2].c": the path of the current value in the first `depth` open containers.
+    std::string Path(size_t depth) const {
+        std::string p;
+        for (size_t i = 0; i < depth; ++i) {
+            const Frame& f = stack_[i];
+            if (f.value->is_array())  // open ancestors hold their open child already
+                p += "[" + std::to_string(f.value->size() - (i + 1 < stack_.size())) + "]";
+            else
+                p += (p.empty() ? "" : ".") + Excerpt(f.key);
+        }
+        return p;
+    }
+    /// Puts `v` where the parse is: the root, the end of the open array or the current key.
+    json* Place(json&& v) {
+        if (stack_.empty()) return &(root_ = std::move(v));
+        json& top = *stack_.back().value;
+        if (top.is_array()) return &top.emplace_back(std::move(v));
+        return &(top[stack_.back().key] = std::move(v));
+    }
+    bool Open(json&& container) {
+        if (stack_.size() >= kMaxJsonDepth)
+            throw InputError(file_ + ": key '" + Path(std::min<size_t>(stack_.size(), 8)) +
+                                 (stack_.size() > 8 ? "...'" : "'"),
+                             "JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
+                                 " levels (scene files need fewer than 10)");
+        json* v = Place(std::move(container));
+        stack_.push_back({v, {}, {}});
+        return true;
+    }
+    bool Close() {
+        stack_.pop_back();
+        return true;
+    }
+    template <class T>
+    bool Add(T&& v) {
+        Place(json(std::forward<T>(v)));
+        return true;
+    }
+
+    const std::string& file_;
+    json root_;
+    std::vector<Frame> stack_;
+};
+
+/// Parses with comments allowed (JsonBuilder: duplicate keys and deep nesting rejected); syntax
+/// errors become "file:line:col: ...".
+json ParseJson(const std::string& text, const std::string& file) {
     // Editors want line:column, nlohmann gives a byte offset (1-based: the offending character).
     const auto lineCol = [&](size_t byte) {
         size_t line = 1, col = 1;
@@ -439,11 +508,15 @@ json ParseJson(const std::string& text, const std::string& file) {
         return file + ":" + std::to_string(line) + ":" + std::to_string(col);
     };
     try {
-        return json::parse(text, callback, /*allow_exceptions=*/true, /*ignore_comments=*/true);
+        JsonBuilder builder(file);
+        json::sax_parse(text, &builder, json::input_format_t::json, /*strict=*/true,
+                        /*ignore_comments=*/true);
+        return builder.Take();
     } catch (const json::parse_error& e) {
         const std::string msg = e.what();
         const size_t p = msg.find("syntax error");
-        throw InputError(lineCol(e.byte), "JSON " + (p == std::string::npos ? msg : msg.substr(p)));
+        throw InputError(lineCol(e.byte),
+                         "JSON " + ExcerptQuoted(p == std::string::npos ? msg : msg.substr(p)));
     } catch (const json::out_of_range& e) {
         // "number overflow parsing '1e999'" carries no position: point at the literal instead.
         const std::string msg = e.what();
@@ -451,7 +524,7 @@ json ParseJson(const std::string& text, const std::string& file) {
         const size_t at = q0 < q1 ? text.find(msg.substr(q0 + 1, q1 - q0 - 1)) : std::string::npos;
         const size_t p = msg.find(']');
         throw InputError(at == std::string::npos ? file : lineCol(at + 1),
-                         "JSON " + (p == std::string::npos ? msg : msg.substr(p + 2)));
+                         "JSON " + ExcerptQuoted(p == std::string::npos ? msg : msg.substr(p + 2)));
     }
 }
 
@@ -470,8 +543,17 @@ void SceneBounds(const Scene& scene, float time, glm::vec3* lo, glm::vec3* hi) {
 }
 
 /// A camera pose that fits the box's bounding sphere into the narrower of the two fields of view
-/// with a 10% margin, seen from a 3/4 view above (+Y up).
-Keyframe FrameBounds(glm::vec3 lo, glm::vec3 hi, float fovYDegrees, float aspect) {
+/// with a 10% margin, seen from a 3/4 view above (+Y up). Objects placed beyond +-1e18 (OBJ
+/// coordinates are limited to that, transforms may move them further) cannot be framed in float:
+/// the error names the scene's objects, not the camera.
+Keyframe FrameBounds(glm::vec3 lo, glm::vec3 hi, float fovYDegrees, float aspect,
+                     const std::string& scenePath) {
+    const glm::vec3 far = glm::max(glm::abs(lo), glm::abs(hi));
+    const float reach = std::max({far.x, far.y, far.z});
+    if (!(reach <= 1e18f))
+        throw InputError(scenePath, "the objects reach " + Fmt(reach) +
+                                        " from the origin (beyond +-1e18): too large to frame "
+                                        "with the default camera or to ray trace");
     const glm::vec3 centre = 0.5f * (lo + hi);
     const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f);
     const float halfY = 0.5f * glm::radians(fovYDegrees);
@@ -553,8 +635,8 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
             if (mit == materialIds.end()) {
                 std::string known;
                 for (const auto& [k, v] : materialIds) known += (known.empty() ? "" : ", ") + k;
-                o["material"].Fail("unknown material '" + m +
-                                   "' (defined: " + (known.empty() ? "none" : known) + ")");
+                o["material"].Fail("unknown material '" + Excerpt(m) + "' (defined: " +
+                                   (known.empty() ? "none" : Excerpt(known, 200)) + ")");
             }
             obj.material = mit->second;
         } else {
@@ -584,7 +666,7 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         SceneBounds(scene, scene.settings.time, &lo, &hi);
         scene.camera.pose.keys.push_back(
             FrameBounds(lo, hi, scene.camera.fovYDegrees,
-                        float(scene.settings.width) / float(scene.settings.height)));
+                        float(scene.settings.width) / float(scene.settings.height), scene.path));
     }
     return scene;
 }
@@ -629,7 +711,7 @@ Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath
     SceneBounds(scene, 0.0f, &lo, &hi);
     scene.camera.pose.keys.push_back(
         FrameBounds(lo, hi, scene.camera.fovYDegrees,
-                    float(scene.settings.width) / float(scene.settings.height)));
+                    float(scene.settings.width) / float(scene.settings.height), scene.path));
     return scene;
 }
 

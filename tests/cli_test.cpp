@@ -8,6 +8,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "cli_run.h"
 #include "renderer/image.h"
@@ -197,6 +202,176 @@ TEST(Cli, CompareReportsMetrics) {
     EXPECT_NE(r.out.find("SSIM"), std::string::npos);
     EXPECT_TRUE(fs::exists(Dir() / "err.png"));
     EXPECT_EQ(Texcache("compare " + a.string() + " " + c.string()).code, 2);
+}
+
+std::string Slurp(const fs::path& p) {
+    std::ifstream f(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+// Every error is one line: "texcache: error: ...", exit code 2.
+void ExpectOneLineError(const CliRun& r, const std::string& args, const std::string& expect) {
+    EXPECT_EQ(r.code, 2) << args << ": " << r.out;
+    EXPECT_EQ(r.out.rfind("texcache: error: ", 0), 0u) << args << ": " << r.out;
+    EXPECT_EQ(r.out.find('\n'), r.out.size() - 1) << args << ": " << r.out;
+    EXPECT_NE(r.out.find(expect), std::string::npos) << args << ": " << r.out;
+}
+
+// A refused command line, one CTest case each (every case is one run of the program): the
+// placeholders {scene} (a scene with a mesh {obj} and an environment map {env}), {good} and
+// {goodpng} (outputs of an earlier run), {cube} (the bundled cube) and {dir} are replaced by the
+// fixture's files.
+struct Refusal {
+    const char* name;
+    const char* args;
+    const char* expect;
+};
+
+class CliRefuses : public ::testing::TestWithParam<Refusal> {
+protected:
+    void SetUp() override {
+        dir_ = Dir() / (std::string("refuses_") + GetParam().name);
+        fs::remove_all(dir_);
+        fs::create_directories(dir_ / "blocked.png");
+        fs::copy_file(test::MeshPath("catmark_cube"), dir_ / "cube.obj");
+        WriteImage((dir_ / "env.exr").string(), Image(8, 4, 3, 1.0f));
+        std::ofstream(dir_ / "s.json") << R"({"objects": [{"mesh": "cube.obj"}],
+            "lights": [{"type": "environment", "file": "env.exr"}]})";
+        WriteImage((dir_ / "good.exr").string(), Image(4, 4, 3, 0.5f));
+        WriteImage((dir_ / "good.png").string(), Image(4, 4, 3, 0.5f));
+        for (const auto& e : fs::directory_iterator(dir_))
+            if (e.is_regular_file()) before_[e.path().filename().string()] = Slurp(e.path());
+    }
+    std::string Args() const {
+        std::string a = GetParam().args;
+        const std::pair<std::string, std::string> subs[] = {
+            {"{scene}", (dir_ / "s.json").string()},
+            {"{obj}", (dir_ / "cube.obj").string()},
+            {"{env}", (dir_ / "env.exr").string()},
+            {"{good}", (dir_ / "good.exr").string()},
+            {"{goodpng}", (dir_ / "good.png").string()},
+            {"{cube}", test::MeshPath("catmark_cube")},
+            {"{dir}", dir_.string()}};
+        for (const auto& [from, to] : subs)
+            for (size_t at; (at = a.find(from)) != std::string::npos;)
+                a.replace(at, from.size(), to);
+        return a;
+    }
+    fs::path dir_;
+    std::map<std::string, std::string> before_;
+};
+
+// Exit 2 with one line naming the problem, and every file of the directory exactly as it was:
+// nothing replaced, nothing new (no output, no temporary).
+TEST_P(CliRefuses, WithOneLineAndNoFileTouched) {
+    const std::string args = Args();
+    ExpectOneLineError(Texcache(args), args, GetParam().expect);
+    std::map<std::string, std::string> after;
+    for (const auto& e : fs::directory_iterator(dir_))
+        if (e.is_regular_file()) after[e.path().filename().string()] = Slurp(e.path());
+    EXPECT_EQ(after, before_) << args;
+}
+
+std::string RefusalName(const ::testing::TestParamInfo<Refusal>& info) {
+    return info.param.name;
+}
+
+#define RENDER_SCENE "render {scene} --spp 1 --resolution 8x8 -q "
+#define RENDER_CUBE "render {cube} --spp 1 -q -o {dir}/x.png "
+
+// Item 2 of issue 18: no flag can destroy a file. An output that is an input (the scene, its
+// mesh, its environment map, a compared image) or another output (the PNG beside the EXR,
+// --stats) is refused, and so is an output that cannot be written (missing directory, a
+// directory in the way, a path under a regular file), all before anything renders.
+INSTANTIATE_TEST_SUITE_P(
+    DataLoss, CliRefuses,
+    ::testing::Values(
+        Refusal{"StatsOverTheScene", RENDER_SCENE "-o {dir}/x.exr --stats {scene}",
+                "is the same file as the scene"},
+        Refusal{"StatsOverTheImage", RENDER_SCENE "-o {good} --stats {good}", "--stats: '"},
+        Refusal{"StatsOverThePngSibling", RENDER_SCENE "-o {good} --stats {dir}/./good.png",
+                "the PNG beside the EXR"},
+        Refusal{"OutputOverTheEnvironmentMap", RENDER_SCENE "-o {env}", "environment map"},
+        Refusal{"StatsOverTheMesh", RENDER_SCENE "-o {dir}/x.exr --stats {obj}", "mesh file"},
+        Refusal{"ErrorImageOverTheTestImage", "compare {good} {goodpng} --error-image {good}",
+                "--error-image: "},
+        Refusal{"ErrorImageOverTheReference",
+                "compare {good} {goodpng} --error-image {dir}/../refuses_"
+                "ErrorImageOverTheReference/good.png",
+                "the reference image"},
+        Refusal{"StatsInAMissingDirectory", RENDER_SCENE "-o {good} --stats {dir}/no/s.json",
+                "does not exist"},
+        Refusal{"PngSiblingIsADirectory", RENDER_SCENE "-o {dir}/blocked.exr", "is a directory"},
+        Refusal{"StatsUnderARegularFile", RENDER_SCENE "-o {good} --stats {good}/s.json",
+                "--stats: cannot write"}),
+    RefusalName);
+
+// Item 4: numbers are taken as written or refused (no wraparound, NaN is not "not given"),
+// empty values and combinations that would silently drop something are errors naming the option.
+INSTANTIATE_TEST_SUITE_P(
+    Numbers, CliRefuses,
+    ::testing::Values(
+        Refusal{"ResolutionWraparound", RENDER_CUBE "--resolution 4294967360x64",
+                "--resolution: '4294967360x64'"},
+        Refusal{"FramesWraparound", RENDER_CUBE "--frames 0:4294967296", "--frames"},
+        Refusal{"SecondsNan", RENDER_CUBE "--seconds nan", "--seconds: expected a number"},
+        Refusal{"AoDistanceNan", RENDER_CUBE "--ao-distance nan", "--ao-distance: expected"},
+        Refusal{"TessellationRateNan", RENDER_CUBE "--tessellation-rate nan",
+                "--tessellation-rate: expected"},
+        Refusal{"TimeNan", RENDER_CUBE "--time nan", "--time: expected a number"},
+        Refusal{"ExposureRange", RENDER_CUBE "--exposure 1e9",
+                "--exposure: value 1e+09 is out of range [-64, 64]"},
+        Refusal{"EmptyIntegrator", RENDER_CUBE "--integrator ''", "--integrator: empty value"},
+        Refusal{"EmptyThreads", RENDER_CUBE "--threads ''", "--threads: empty value"},
+        Refusal{"EmptyFrames", RENDER_CUBE "--frames ''", "--frames: empty value"},
+        Refusal{"EmptyFrameBuffers", RENDER_CUBE "--frame-buffers ''",
+                "--frame-buffers: empty value"},
+        Refusal{"FilterRadiusMinusOne", RENDER_CUBE "--shading texture --filter-radius -1",
+                "--filter-radius"},
+        Refusal{"SoftShadowWithAo",
+                RENDER_CUBE "--shading texture --filter softshadow "
+                            "--integrator ao",
+                "--filter: softshadow"},
+        Refusal{"AovIntoPng", RENDER_CUBE "--aov albedo", "--aov: AOV layers are written to EXR"},
+        Refusal{"CacheBeyondMemory", RENDER_CUBE "--shading texture --sample-cache-mb 1048576",
+                "do not fit in this machine's"}),
+    RefusalName);
+
+// Item 5: CLI11's own errors (a bad number, an unknown option, a repeated option, a missing
+// argument) in the same one-line form, pointing at --help.
+INSTANTIATE_TEST_SUITE_P(
+    Messages, CliRefuses,
+    ::testing::Values(
+        Refusal{"BadNumber", "render {cube} --spp abc", "--spp = abc (see texcache render --help)"},
+        Refusal{"UnknownOption", "render {cube} --bogus", "--bogus (see texcache render --help)"},
+        Refusal{"RepeatedOption", "render {cube} --spp 1 --spp 2", "--spp"},
+        Refusal{"MissingArgument", "compare {good}", "reference"}),
+    RefusalName);
+
+// compare of a PNG (sRGB-encoded) with an EXR (linear) of the same picture decodes the PNG and
+// says so: the error is the PNG's 8-bit quantization (relMSE < 1e-4), not the encoding (~0.09).
+TEST(Cli, CompareDecodesSrgbAgainstLinearAndSaysSo) {
+    const fs::path exr = Dir() / "enc.exr", png = Dir() / "enc.png";
+    Image ramp(32, 4, 3);
+    for (size_t i = 0; i < ramp.data.size(); ++i) ramp.data[i] = 0.1f + 0.8f * float(i % 32) / 31;
+    WriteImage(exr.string(), ramp);
+    WriteImage(png.string(), ramp);
+    const CliRun r = Texcache("compare " + png.string() + " " + exr.string() + " --json");
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("decoded to linear"), std::string::npos) << r.out;
+    const size_t at = r.out.find("\"relmse\": ");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    EXPECT_LT(std::stod(r.out.substr(at + 10)), 1e-4) << r.out;
+}
+
+// compare never trusts an EXR header's size: a 23 KB file claiming 46340x46340 pixels is refused
+// at once (it took 8.5 GB and 37 s before failing).
+TEST(Cli, CompareRefusesHeadersClaimingHugeSizes) {
+    const fs::path liar = Dir() / "liar.exr";
+    WriteImage(liar.string(), Image(64, 64, 1, 0.5f));
+    test::ClaimExrSize(liar.string(), 46340, 46340);
+    const std::string args = "compare " + liar.string() + " " + liar.string();
+    ExpectOneLineError(Texcache(args), args, "46340x46340");
 }
 
 }  // namespace

@@ -10,7 +10,9 @@
 #include <limits>
 #include <string>
 
+#include "renderer/atomic_files.h"
 #include "renderer/image.h"
+#include "test_util.h"
 #include "texcache/error.h"
 
 namespace texcache {
@@ -264,6 +266,84 @@ TEST(ImageFiles, UnreadableFilesNameThePath) {
             EXPECT_NE(msg.find("cannot read image"), std::string::npos) << msg;
         }
     }
+}
+
+// Files written as a group appear together or not at all: nothing is renamed before Commit(), a
+// group abandoned on the way (an exception) leaves every target as it was and no temporary.
+TEST(ImageFiles, GroupsOfFilesAreReplacedTogetherOrNotAtAll) {
+    const fs::path dir = TempDir();
+    const fs::path exr = dir / "a.exr", png = dir / "a.png";
+    WriteImage(exr.string(), Image(4, 4, 3, 0.25f));
+    WriteImage(png.string(), Image(4, 4, 3, 0.25f));
+    const std::string exrBefore = Slurp(exr), pngBefore = Slurp(png);
+    try {
+        AtomicFiles group;
+        WriteImage(exr.string(), Image(4, 4, 3, 0.75f), {}, 0.0f, &group);
+        EXPECT_EQ(Slurp(exr), exrBefore);                     // staged, not renamed
+        WriteImage(png.string(), Image(), {}, 0.0f, &group);  // fails: empty image
+        FAIL() << "an empty image was written";
+    } catch (const InputError&) {
+    }
+    EXPECT_EQ(Slurp(exr), exrBefore);
+    EXPECT_EQ(Slurp(png), pngBefore);
+    ExpectNoTemporaries(dir);
+
+    AtomicFiles group;
+    WriteImage(exr.string(), Image(4, 4, 3, 0.75f), {}, 0.0f, &group);
+    WriteImage(png.string(), Image(4, 4, 3, 0.75f), {}, 0.0f, &group);
+    group.Commit();
+    EXPECT_EQ(ReadImageRGB(exr.string()).At(0, 0)[0], 0.75f);
+    EXPECT_NE(Slurp(png), pngBefore);
+    ExpectNoTemporaries(dir);
+}
+
+// A header may claim any size: a small file claiming 46340x46340 pixels is rejected before any
+// allocation (it ended in bad_alloc), naming the file; honest files of any compression pass.
+TEST(ImageFiles, HeaderSizeClaimsAreCheckedBeforeAllocating) {
+    const fs::path dir = TempDir();
+    const std::string liar = (dir / "liar.exr").string();
+    WriteImage(liar, Image(64, 64, 1, 0.5f));
+    test::ClaimExrSize(liar, 46340, 46340);
+    for (const auto read : {+[](const std::string& p) { ReadImageRGB(p); },
+                            +[](const std::string& p) { ReadImage(p); }}) {
+        try {
+            read(liar);
+            FAIL() << "read a file claiming 46340x46340 pixels";
+        } catch (const InputError& e) {
+            const std::string msg = e.what();
+            EXPECT_NE(msg.find(liar), std::string::npos) << msg;
+            EXPECT_NE(msg.find("46340x46340"), std::string::npos) << msg;
+        }
+    }
+    // The limits themselves: beyond 16384^2 pixels or 2^30 values always; a constant image
+    // compresses well but stays under 4096:1 (the 256 MiB allowance covers small images).
+    EXPECT_THROW(CheckImageSizeClaim(liar, 16385, 16384, 1, 0), InputError);
+    EXPECT_THROW(CheckImageSizeClaim(liar, 16384, 16384, 5, 0), InputError);
+    EXPECT_THROW(CheckImageSizeClaim(liar, 8192, 8192, 3, uint64_t(8192) * 8192 * 12), InputError);
+    EXPECT_NO_THROW(CheckImageSizeClaim(liar, 4096, 4096, 4, uint64_t(4096) * 4096 * 16));
+    const std::string flat = (dir / "flat.exr").string();
+    WriteImage(flat, Image(512, 512, 3, 1.0f));
+    EXPECT_EQ(ReadImageRGB(flat).width, 512);
+}
+
+// PNG holds sRGB-encoded display values, EXR linear light; ReadImageRGB says which, and
+// SrgbToLinear decodes (the inverse of the PNG writer's OETF to within 8-bit quantization).
+TEST(ImageFiles, ReadsTellTheColorEncoding) {
+    const fs::path dir = TempDir();
+    const std::string exr = (dir / "x.exr").string(), png = (dir / "x.png").string();
+    Image ramp(16, 1, 3);
+    for (int x = 0; x < 16; ++x)
+        for (int k = 0; k < 3; ++k) ramp.At(x, 0)[k] = float(x) / 15.0f;
+    WriteImage(exr, ramp);
+    WriteImage(png, ramp);
+    ColorEncoding e = ColorEncoding::Srgb;
+    ReadImageRGB(exr, &e);
+    EXPECT_EQ(e, ColorEncoding::Linear);
+    Image back = ReadImageRGB(png, &e);
+    EXPECT_EQ(e, ColorEncoding::Srgb);
+    SrgbToLinear(&back);
+    for (size_t i = 0; i < back.data.size(); ++i)
+        EXPECT_NEAR(back.data[i], ramp.data[i], 0.01f) << i;  // 8-bit steps near 1: < 0.009
 }
 
 TEST(ImageFiles, ReadsBundledEnvironmentMap) {

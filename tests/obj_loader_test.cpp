@@ -251,6 +251,21 @@ TEST(ObjLoader, BadInputNamesFileLineAndProblem) {
     EXPECT_THROW(LoadObj(test::SceneDir(), nullptr), InputError);  // a directory
 }
 
+// Coordinates beyond +-1e18 (Embree's range) are an error at their line, not a failure of the
+// default camera later; long tokens are cut to an excerpt and NUL bytes escaped in messages.
+TEST(ObjLoader, HugeCoordinatesLongTokensAndNulBytes) {
+    EXPECT_TRUE(Contains(ErrorOf("v 0 0 0\nv 1e30 0 0\n"),
+                         "bad.obj:2: vertex coordinate '1e30' is beyond +-1e18"));
+    EXPECT_EQ(ErrorOf(std::string(kQuad) + "v 1e18 -1e18 0\nf 1 2 3\n"), "");
+    const std::string longLine = "v 1 2 " + std::string(1000000, '9') + "x\n";
+    const std::string msg = ErrorOf(longLine);
+    EXPECT_TRUE(Contains(msg, "bad.obj:1: ")) << msg.substr(0, 200);
+    EXPECT_TRUE(Contains(msg, "(1000001 bytes)")) << msg.substr(0, 200);
+    EXPECT_LT(msg.size(), 200u);
+    EXPECT_TRUE(Contains(ErrorOf(std::string(kQuad) + std::string("f 1 2 q\0z\n", 10)),
+                         "malformed vertex index 'q\\x00z' (expected an integer)"));
+}
+
 TEST(ObjLoader, BundledMeshesHaveTheirDocumentedCounts) {
     struct Expect {
         const char* name;

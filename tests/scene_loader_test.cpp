@@ -3,6 +3,7 @@
 // and the key path; bare OBJs are framed; keyframed transforms interpolate and clamp.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -268,7 +269,8 @@ TEST(SceneLoader, BadInputNamesFileAndKey) {
         {"{\"texture\": \"checker\", \"colors\": [[1,1,1],[0,0,0]], \"scale\": 4}",
          "{\"texture\": \"missing.png\"}", "key 'materials.chk.albedo.texture': texture file '"},
         {"\"texture\": \"checker\"", "\"texture\": \"valid.json\"",
-         "key 'materials.chk.albedo.colors': unknown key (expected one of: texture)"},
+         "key 'materials.chk.albedo.texture': the image texture 'valid.json' takes no "
+         "parameters, but 'colors' is given"},
         {"\"material\": \"red\"", "\"material\": \"blue\"",
          "key 'objects[0].material': unknown material 'blue' (defined: chk, red)"},
         {"\"name\": \"a\", \"mesh\": " + Mesh(), "\"name\": \"a\"",
@@ -413,6 +415,92 @@ TEST(SceneLoader, JsonSyntaxErrorsReportLineAndColumn) {
         EXPECT_TRUE(Contains(e.what(), "/nonexistent/scene.json: cannot open")) << e.what();
     }
     EXPECT_THROW(LoadScene(TempDir().string(), &w), InputError);  // a directory
+}
+
+std::string SceneError(const std::string& name, const std::string& text) {
+    std::vector<std::string> w;
+    try {
+        LoadScene(WriteFile(name, text), &w);
+    } catch (const InputError& e) {
+        return e.what();
+    }
+    return "";
+}
+
+// Nesting is limited to 64 levels, stated in the message, and rejected as the 65th level opens:
+// a 40,000-deep file (80 KB) fails like a 65-deep one, with a message of bounded size (it took
+// 3 GB and 7 s when every level kept its whole key path).
+TEST(SceneLoader, NestingBeyondTheStatedLimitIsRejected) {
+    const auto nested = [](int depth) {
+        return "{\"objects\": " + std::string(size_t(depth), '[') +
+               std::string(size_t(depth), ']') + "}";
+    };
+    EXPECT_FALSE(Contains(SceneError("d63.json", nested(63)), "nested"));  // 64 levels: schema
+    for (const int depth : {64, 40000}) {
+        const std::string msg = SceneError("deep.json", nested(depth));
+        EXPECT_TRUE(Contains(msg, "JSON nested deeper than 64 levels")) << depth << ": " << msg;
+        EXPECT_LT(msg.size(), 400u) << msg;
+    }
+}
+
+// Duplicate keys are found among 100,000 objects (a hash set per object; the linear scan and
+// nlohmann's callback parser took 257 s here),
+// named with their path.
+TEST(SceneLoader, DuplicateKeysAreFoundAmongManyKeys) {
+    std::string text = "{\"render\": {\"spp\": 1}, \"materials\": {";
+    for (int i = 0; i < 100000; ++i) text += "\"m" + std::to_string(i) + "\": {}, ";
+    text += "\"m99999\": {}}, \"objects\": []}";
+    const std::string msg = SceneError("dup.json", text);
+    EXPECT_TRUE(Contains(msg, "key 'materials.m99999': duplicate key")) << msg.substr(0, 300);
+}
+
+// Long tokens are cut to an excerpt (a 1 MB key, a 1 MB string value, a 700-byte unterminated
+// comment), a NUL byte (a key's \u0000) is escaped rather than ending the message.
+TEST(SceneLoader, MessagesQuoteExcerptsOfLongTokens) {
+    const std::string big(1000000, 'k');
+    for (const auto& [name, text, expect] : std::vector<std::array<std::string, 3>>{
+             {"key.json", "{\"" + big + "\": 1}", "(1000000 bytes)': unknown key"},
+             {"value.json", "{\"objects\": \"" + big + "\"}", "expected an array, got the string"},
+             {"comment.json", "{\"objects\": [] /*" + std::string(700, 'x'), "(747 bytes)"},
+             {"nul.json", "{\"obj\\u0000ects\": []}", "key 'obj\\x00ects': unknown key"}}) {
+        const std::string msg = SceneError(name, text);
+        EXPECT_TRUE(Contains(msg, expect)) << name << ": " << msg.substr(0, 300);
+        EXPECT_LT(msg.size(), 400u) << name;
+    }
+}
+
+// Range bounds hold as written: 1e12 is inside [1e-12, 1e12] (its float is below 1e12), a value
+// just above is outside and printed so that it differs from the bound.
+TEST(SceneLoader, RangeBoundsAreInclusiveAsWritten) {
+    const std::string head =
+        "{\"objects\": [{\"mesh\": " + Mesh() + ", \"transform\": {\"scale\": ";
+    std::vector<std::string> w;
+    EXPECT_NO_THROW(LoadScene(WriteFile("s12.json", head + "1e12}}]}"), &w));
+    const std::string msg = SceneError("s13.json", head + "1.0000001e12}}]}");
+    EXPECT_TRUE(Contains(msg, "value 1000000100000 is out of range [1e-12, 1e+12]")) << msg;
+}
+
+// An unknown texture kind is named as such, not as an unknown key of the image texture.
+TEST(SceneLoader, UnknownTextureKindIsNamed) {
+    const std::string head = "{\"materials\": {\"m\": {\"albedo\": ";
+    const std::string tail = "}}, \"objects\": [{\"mesh\": " + Mesh() + ", \"material\": \"m\"}]}";
+    EXPECT_TRUE(
+        Contains(SceneError("noise.json", head + "{\"texture\": \"noise\", \"scale\": 2}" + tail),
+                 "key 'materials.m.albedo.texture': unknown texture kind 'noise' "
+                 "(valid: checker, or the path of an image file)"));
+    EXPECT_TRUE(
+        Contains(SceneError("img.json", head + "{\"texture\": \"wood.png\", \"scale\": 2}" + tail),
+                 "the image texture 'wood.png' takes no parameters, but 'scale' is given"));
+}
+
+// Objects moved beyond +-1e18 by their transforms are blamed on the objects (the scene file),
+// not on the default camera that cannot frame them.
+TEST(SceneLoader, HugeObjectsAreBlamedOnTheObjectsNotTheCamera) {
+    const std::string msg =
+        SceneError("far.json", "{\"objects\": [{\"mesh\": " + Mesh() +
+                                   ", \"transform\": {\"translate\": [1e25, 0, 0]}}]}");
+    EXPECT_TRUE(Contains(msg, "far.json: the objects reach 1e+25")) << msg;
+    EXPECT_FALSE(Contains(msg, "camera:")) << msg;
 }
 
 TEST(SceneLoader, WarnsAboutIgnoredValuesAndMissingLights) {

@@ -1,6 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
 // Helpers for tests: bundled data paths and tiny scenes built in code.
 #pragma once
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -67,6 +71,43 @@ inline ControlCage PlaneCage(float h) {
     c.boundary = BoundaryInterpolation::EdgeAndCorner;
     c.sourcePath = "plane";
     return c;
+}
+
+/// Rewrites a zip-compressed scanline EXR (as WriteImage writes) so that its header claims
+/// width x height pixels (dataWindow, displayWindow) and its line-offset table has that height's
+/// entries (16 scanlines per chunk; the new ones 0), while its pixel data stays what it was: a
+/// small file lying about its size that OpenEXR still opens.
+inline void ClaimExrSize(const std::string& path, int width, int height) {
+    std::string bytes;
+    {
+        std::ifstream f(path, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(f), {});
+    }
+    // Header: magic and version (8 bytes), then attributes "name\0type\0" int32 size, value,
+    // up to an empty name.
+    size_t pos = 8;
+    int oldHeight = 0;
+    while (pos < bytes.size() && bytes[pos] != '\0') {
+        const std::string name = bytes.c_str() + pos;
+        pos += name.size() + 1;
+        const std::string type = bytes.c_str() + pos;
+        pos += type.size() + 1;
+        int32_t size = 0;
+        std::memcpy(&size, &bytes[pos], 4);
+        pos += 4;
+        if (name == "dataWindow" || name == "displayWindow") {
+            int32_t box[4];
+            std::memcpy(box, &bytes[pos], sizeof box);
+            oldHeight = box[3] - box[1] + 1;
+            const int32_t claim[4] = {0, 0, width - 1, height - 1};
+            std::memcpy(&bytes[pos], claim, sizeof claim);
+        }
+        pos += size_t(size);
+    }
+    const size_t table = pos + 1, oldChunks = size_t(oldHeight + 15) / 16;
+    const size_t newChunks = size_t(height + 15) / 16;
+    bytes.insert(table + 8 * oldChunks, 8 * (newChunks - oldChunks), '\0');
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
 }
 
 }  // namespace texcache::test

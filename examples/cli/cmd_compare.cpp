@@ -5,6 +5,7 @@
 #include <memory>
 #include <string>
 
+#include "cli_util.h"
 #include "commands.h"
 #include "renderer/image.h"
 #include "renderer/metrics.h"
@@ -27,11 +28,36 @@ std::string JsonNumber(double v) {
     return buf;
 }
 
+/// "a.png" -> "sRGB-encoded", for the note on mixed encodings.
+const char* EncodingName(ColorEncoding e) {
+    return e == ColorEncoding::Srgb ? "sRGB-encoded" : "linear";
+}
+
 int RunCompare(const CompareArgs& a) {
-    // Reject a bad error-image name before reading anything.
-    if (!a.errorImage.empty()) CheckImageOutputPath(a.errorImage);
-    const Image test = ReadImageRGB(a.test);
-    const Image ref = ReadImageRGB(a.ref);
+    // Reject a bad or dangerous error-image name (an input, an unwritable place) before reading.
+    if (!a.errorImage.empty()) {
+        CheckImageOutputPath(a.errorImage);
+        FileSet files;
+        files.Input(a.test, "the test image");
+        files.Input(a.ref, "the reference image");
+        files.Output(a.errorImage, "--error-image");
+        files.Check();
+    }
+    ColorEncoding testEnc, refEnc;
+    Image test = ReadImageRGB(a.test, &testEnc);
+    Image ref = ReadImageRGB(a.ref, &refEnc);
+    // A PNG holds display values (sRGB OETF), an EXR linear light: comparing them as they are
+    // would measure the encoding. The sRGB one is decoded to linear and the user told so (its
+    // values were clipped to [0, 1] and quantized when it was written, which stays in the error).
+    if (testEnc != refEnc) {
+        const bool testSrgb = testEnc == ColorEncoding::Srgb;
+        SrgbToLinear(testSrgb ? &test : &ref);
+        std::fprintf(stderr,
+                     "texcache: note: %s is %s and %s %s: %s decoded to linear light for the "
+                     "comparison\n",
+                     a.test.c_str(), EncodingName(testEnc), a.ref.c_str(), EncodingName(refEnc),
+                     testSrgb ? a.test.c_str() : a.ref.c_str());
+    }
     if (test.width != ref.width || test.height != ref.height)
         throw InputError(a.test, "size " + std::to_string(test.width) + "x" +
                                      std::to_string(test.height) + " differs from the reference " +
@@ -76,7 +102,8 @@ void AddCompareCommand(CLI::App& app, int& exitCode) {
         "compare",
         "Error of an image against a reference: relMSE (eps = 0.001, Munkberg et al. 2016), RMSE, "
         "PSNR (peak 1), SSIM (of the sRGB-encoded luma). Pixels with NaN/Inf are counted and "
-        "excluded.");
+        "excluded. Images are compared in the values they store; when one is sRGB-encoded (PNG) "
+        "and the other linear (EXR), the sRGB one is decoded to linear first, with a note.");
     cmd->add_option("test", args->test, "Image to evaluate (any format OpenImageIO reads)")
         ->required();
     cmd->add_option("reference", args->ref, "Reference image of the same size (high sample count)")

@@ -2,12 +2,16 @@
 // `texcache render`: render a scene file or a bare OBJ to EXR (+ a tone-mapped PNG beside it).
 #include <sys/resource.h>
 
+#include <charconv>
+#include <climits>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <memory>
 #include <optional>
+#include <set>
+#include <string_view>
 
 #include <tbb/global_control.h>
 
@@ -28,19 +32,21 @@ namespace {
 struct RenderArgs {
     std::string scene;
     std::string output = "out/render.exr";
-    // Unset options keep the scene's settings: kUnset / NaN mark "not given".
-    static constexpr int kUnset = std::numeric_limits<int>::min();
-    int spp = kUnset;
-    float seconds = NAN;
+    // Options not given keep the scene's settings (Given(); no value of the type means "unset",
+    // so a NaN or -1 on the command line is checked like any other value).
+    std::set<std::string> given;
+    bool Given(const std::string& option) const { return given.count(option) > 0; }
+    int spp = 0;
+    float seconds = 0.0f;
     std::string resolution;
     int threads = 0;
-    long long seed = std::numeric_limits<long long>::min();
+    long long seed = 0;
     std::string integrator;
-    int maxDepth = kUnset;
-    int aoSamples = kUnset;
-    float aoDistance = NAN;
-    float tessellationRate = NAN;
-    float time = NAN;
+    int maxDepth = 0;
+    int aoSamples = 0;
+    float aoDistance = 0.0f;
+    float tessellationRate = 0.0f;
+    float time = 0.0f;
     std::vector<std::string> aovs;
     float exposure = 0.0f;
     bool quiet = false;
@@ -48,7 +54,7 @@ struct RenderArgs {
     // Texture-space shading (libtexcache).
     std::string shading = "hit";
     std::string filter = "normal";
-    int filterRadius = -1;  // -1: the filter's own default (DefaultFilterRadius)
+    int filterRadius = -1;  // not given: the filter's own default (DefaultFilterRadius)
     std::string footprint = "auto";
     int shadowSamples = 4;
     float temporalAlpha = 0.0f;
@@ -70,7 +76,6 @@ struct RenderArgs {
     // Screen-space stage on the frame buffers, written as images.
     std::string denoise;
     bool demodulate = false;
-    bool outputGiven = false;
 };
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
@@ -79,8 +84,8 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
         throw InputError("--shading", "unknown mode '" + a.shading + "' (valid: hit, texture)");
     t.enabled = a.shading == "texture";
     t.filter = ParseTextureFilter(a.filter, "--filter");
-    if (a.filterRadius != -1) CheckFilterRadius(a.filterRadius, "--filter-radius");
-    t.radius = a.filterRadius;
+    if (a.Given("--filter-radius")) CheckFilterRadius(a.filterRadius, "--filter-radius");
+    t.radius = a.Given("--filter-radius") ? a.filterRadius : -1;
     t.footprint = ParseFootprintMode(a.footprint, "--footprint");
     t.shadowSamples = CheckRange("--shadow-samples", a.shadowSamples, 1, 1 << 16);
     if (a.temporalAlpha != 0.0f) {
@@ -113,8 +118,8 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     return t;
 }
 
-void WriteStatsJson(const std::string& path, const RenderStats& s, const TextureSpaceCache* cache,
-                    const RenderOptions& opt, double overshading) {
+std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
+                      const RenderOptions& opt, double overshading) {
     const CacheStats& c = s.cache;
     std::string json = "{\n";
     auto add = [&](const char* k, double v, bool last = false) {
@@ -146,7 +151,7 @@ void WriteStatsJson(const std::string& path, const RenderStats& s, const Texture
     add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
     add("bytes_used", cache ? double(cache->BytesUsed()) : 0.0, true);
     json += "}\n";
-    WriteTextAtomic(path, json);
+    return json;
 }
 
 AovFlags ParseAovs(const std::vector<std::string>& names) {
@@ -171,19 +176,31 @@ AovFlags ParseAovs(const std::vector<std::string>& names) {
     return f;
 }
 
-/// Frame range of --frames: "A:B" (inclusive) or "N" (0..N-1).
+/// Frame range of --frames: "A:B" (inclusive) or "N" (0..N-1); from_chars, so that
+/// "0:4294967296" is an error rather than one frame.
 void ParseFrames(const std::string& s, int* first, int* last) {
-    int a = 0, b = 0;
-    char extra;
-    if (std::sscanf(s.c_str(), "%d:%d%c", &a, &b, &extra) == 2) {
-        *first = a, *last = b;
-    } else if (std::sscanf(s.c_str(), "%d%c", &a, &extra) == 1 && a >= 1) {
-        *first = 0, *last = a - 1;
+    const auto number = [&](std::string_view t, long long* v) {
+        const auto r = std::from_chars(t.data(), t.data() + t.size(), *v);
+        return !t.empty() && r.ec == std::errc() && r.ptr == t.data() + t.size();
+    };
+    const size_t colon = s.find(':');
+    long long a = 0, b = 0;
+    bool ok;
+    if (colon == std::string::npos) {
+        ok = number(s, &b) && b >= 1;
+        b -= 1;  // N frames: 0..N-1
     } else {
-        throw InputError("--frames", "expected A:B (first and last frame) or N, got '" + s + "'");
+        ok = number(std::string_view(s).substr(0, colon), &a) &&
+             number(std::string_view(s).substr(colon + 1), &b);
     }
-    if (*first < 0 || *last < *first || *last - *first >= 100000)
-        throw InputError("--frames", "'" + s + "' is not a range of 1 to 100000 frames from 0");
+    if (!ok)
+        throw InputError("--frames",
+                         "expected A:B (first and last frame) or N, got '" + Excerpt(s) + "'");
+    if (a < 0 || b < a || b - a >= 100000 || b > INT_MAX - 1)
+        throw InputError("--frames",
+                         "'" + Excerpt(s) + "' is not a range of 1 to 100000 frames from 0");
+    *first = int(a);
+    *last = int(b);
 }
 
 /// Output name of frame f: the run of '#' in the name replaced by the zero-padded number, or
@@ -227,13 +244,13 @@ struct AnimationFrame {
 /// The checks shared by the outputs of the path tracer's decomposition (--frame-buffers,
 /// --denoise): options that make no sense for it are errors naming `opt`.
 void CheckDecompositionOptions(const RenderArgs& a, const char* opt, const char* aovReason) {
-    if (!a.integrator.empty() && a.integrator != "path")
+    if (a.Given("--integrator") && a.integrator != "path")
         throw InputError(
             opt, "renders the path tracer's decomposition: drop --integrator " + a.integrator);
-    if (!std::isnan(a.seconds)) throw InputError(opt, "renders --spp samples: drop --seconds");
+    if (a.Given("--seconds")) throw InputError(opt, "renders --spp samples: drop --seconds");
     if (!a.aovs.empty()) throw InputError(opt, std::string(aovReason) + ": drop --aov");
     if (a.overshading) throw InputError(opt, "cannot be combined with --overshading");
-    if (!a.statsFile.empty()) throw InputError(opt, "cannot be combined with --stats");
+    if (a.Given("--stats")) throw InputError(opt, "cannot be combined with --stats");
 }
 
 /// TBB's thread limit for --threads N (none for 0).
@@ -275,11 +292,22 @@ double ForEachFrameBuffers(const RenderArgs& a, const Scene& scene, const Render
     return total;
 }
 
+/// Checks the planned outputs against each other and against every file the scene reads, and
+/// that each can be written, before anything renders (FileSet).
+void CheckFiles(const Scene& scene, const std::vector<OutputPaths>& outs,
+                const std::string& statsFile = "") {
+    FileSet files;
+    files.SceneInputs(scene);
+    for (const OutputPaths& o : outs) AddOutputs(files, o);
+    if (!statsFile.empty()) files.Output(statsFile, "--stats");
+    files.Check();
+}
+
 int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool sppGiven,
                     int first, int last, float fps) {
     const char* opt_ = "--frame-buffers";
     CheckDecompositionOptions(a, opt_, "writes every buffer already");
-    if (a.outputGiven) throw InputError(opt_, "names the output directory: drop -o/--output");
+    if (a.Given("--output")) throw InputError(opt_, "names the output directory: drop -o/--output");
     if (!sppGiven) opt.spp = 1;  // the real-time setting the buffers are for
     namespace fs = std::filesystem;
     std::error_code ec;
@@ -287,25 +315,35 @@ int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, 
     if (!fs::is_directory(a.frameBuffers))
         throw InputError(opt_, "cannot create directory '" + a.frameBuffers + "'" +
                                    (ec ? ": " + ec.message() : ""));
+    // Each frame: the buffers' EXR (+ the composed image's PNG), checked before rendering.
+    std::vector<OutputPaths> outs;
+    for (int f = first; f <= last; ++f) {
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%04d", f);
+        const fs::path stem = fs::path(a.frameBuffers) / name;
+        OutputPaths o;
+        o.exr = stem.string() + ".exr";
+        if (!a.noPng) o.png = stem.string() + ".png";
+        outs.push_back(o);
+    }
+    CheckFiles(scene, outs);
 
     const double total = ForEachFrameBuffers(
         a, scene, opt, first, last, fps,
         [&](int f, const RenderOptions& fo, const RenderStats& st, const screen::FrameBuffers& fb,
             double tf) {
-            char name[32];
-            std::snprintf(name, sizeof name, "frame_%04d", f);
-            const std::string exr =
-                (fs::path(a.frameBuffers) / (std::string(name) + ".exr")).string();
-            WriteFrameBuffers(exr, fb);
-            if (!a.noPng) {
-                WriteImage((fs::path(a.frameBuffers) / (std::string(name) + ".png")).string(),
-                           ToImage(fb.Compose(), fb.width, fb.height), {}, a.exposure);
-            }
+            const OutputPaths& out = outs[size_t(f - first)];
+            AtomicFiles group;
+            WriteFrameBuffers(out.exr, fb, &group);
+            if (!out.png.empty())
+                WriteImage(out.png, ToImage(fb.Compose(), fb.width, fb.height), {}, a.exposure,
+                           &group);
+            group.Commit();
             std::printf(
                 "frame %d (%d of %d, t = %.3f): %.3f s render (%.2f Mrays/s), %.3f s total -> %s\n",
                 f, f - first + 1, last - first + 1, fo.frameTime, st.seconds,
                 double(st.TotalRays()) / std::max(st.seconds, 1e-9) * 1e-6, NowSeconds() - tf,
-                exr.c_str());
+                out.exr.c_str());
             std::fflush(stdout);
         });
     std::printf("wrote frame buffers of %d frames of %s in %.2f s (%dx%d, %d spp) to %s\n",
@@ -339,10 +377,11 @@ int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool
                                    "' reuses the previous frame: give --frames A:B (or use "
                                    "--denoise spatial for a single frame)");
     if (!sppGiven) opt.spp = 1;  // the real-time setting the stage is for
-    // Plan every frame's outputs first: a bad name fails before anything renders.
+    // Plan and check every frame's outputs first: a bad name fails before anything renders.
     std::vector<OutputPaths> outs;
     for (int f = first; f <= last; ++f)
         outs.push_back(PlanOutputs(animated ? FramePath(a.output, f) : a.output, !a.noPng));
+    CheckFiles(scene, outs);
 
     const screen::Demodulation demod =
         a.demodulate ? screen::Demodulation::On : screen::Demodulation::Off;
@@ -354,7 +393,9 @@ int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool
             double) {
             denoiser.Denoise(fb, method, demod, &denoised);
             OutputPaths& out = outs[size_t(f - first)];
-            WriteOutputs(out, ToImage(denoised, fb.width, fb.height), {}, a.exposure);
+            AtomicFiles group;
+            WriteOutputs(out, ToImage(denoised, fb.width, fb.height), {}, a.exposure, group);
+            group.Commit();
             std::printf("frame %d (%d of %d, t = %.3f): %.3f s render, %.1f ms %s%s -> %s\n", f,
                         f - first + 1, last - first + 1, fo.frameTime, st.seconds,
                         denoiser.Timings().total, screen::MethodName(method),
@@ -367,29 +408,69 @@ int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool
     return 0;
 }
 
+/// Both cache sizes must fit in this machine's memory: the caches are allocated and zeroed up
+/// front, and a size the machine cannot hold would end in bad_alloc or the OOM killer mid-render.
+void CheckCacheMemory(const RenderArgs& a, const TextureSpaceOptions& t) {
+    if (!t.enabled || t.cache.referenceMode) return;
+    const double need = a.sampleCacheMb + a.texelCacheMb, have = PhysicalMemoryMiB();
+    if (need > have)
+        throw InputError("--sample-cache-mb/--texel-cache-mb",
+                         "the caches (" + std::to_string(llround(a.sampleCacheMb)) + " + " +
+                             std::to_string(llround(a.texelCacheMb)) +
+                             " MiB) do not fit in this machine's " + std::to_string(llround(have)) +
+                             " MiB of memory");
+}
+
+/// The texture-space cache of `rs`, its allocation failure reported as the options' fault.
+std::unique_ptr<TextureSpaceCache> MakeCache(const RenderScene& rs, const TextureSpaceOptions& t) {
+    try {
+        return std::make_unique<TextureSpaceCache>(rs, t);
+    } catch (const std::bad_alloc&) {
+        throw InputError("--sample-cache-mb/--texel-cache-mb",
+                         "cannot allocate the texture-space caches (" +
+                             std::to_string(t.cache.sampleCacheBytes >> 20) + " + " +
+                             std::to_string(t.cache.texelCacheBytes >> 20) + " MiB)");
+    }
+}
+
+/// Options that only mean something together with others are errors when they would be ignored.
+void CheckCombinations(const RenderArgs& a, const RenderSettings& s, const RenderOptions& opt,
+                       const OutputPaths& out) {
+    if (a.Given("--filter") && opt.texture.filter == TextureFilterKind::SoftShadow &&
+        s.integrator != IntegratorKind::Direct)
+        throw InputError("--filter", std::string("softshadow filters area-light visibility, which "
+                                                 "only the direct integrator caches (the "
+                                                 "integrator is ") +
+                                         IntegratorName(s.integrator) + ")");
+    if (!a.aovs.empty() && out.exr.empty())
+        throw InputError("--aov", "AOV layers are written to EXR files only: give -o NAME.exr");
+    if (a.Given("--stats") && !a.frames.empty())
+        throw InputError("--stats", "reports one frame: drop --frames");
+}
+
 int RunRender(const RenderArgs& a) {
     std::vector<std::string> warnings;
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
     for (const std::string& w : warnings)
-        std::fprintf(stderr, "texcache: warning: %s\n", w.c_str());
+        std::fprintf(stderr, "texcache: warning: %s\n", internal::OneLine(w).c_str());
 
     // Command-line values override the scene's render settings.
     RenderSettings& s = scene.settings;
-    constexpr int kUnset = RenderArgs::kUnset;
-    if (a.spp != kUnset) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
-    if (!std::isnan(a.seconds)) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
-    if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
-    if (a.seed != std::numeric_limits<long long>::min())
+    if (a.Given("--spp")) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
+    if (a.Given("--seconds")) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
+    if (a.Given("--resolution")) ParseResolution(a.resolution, &s.width, &s.height);
+    if (a.Given("--seed"))
         s.seed = uint64_t(CheckRange("--seed", a.seed, 0LL, std::numeric_limits<long long>::max()));
-    if (!a.integrator.empty()) s.integrator = ParseIntegrator(a.integrator, "--integrator");
-    if (a.maxDepth != kUnset) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
-    if (a.aoSamples != kUnset) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
-    if (!std::isnan(a.aoDistance))
+    if (a.Given("--integrator")) s.integrator = ParseIntegrator(a.integrator, "--integrator");
+    if (a.Given("--max-depth")) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
+    if (a.Given("--ao-samples")) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
+    if (a.Given("--ao-distance"))
         s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
-    if (!std::isnan(a.tessellationRate))
+    if (a.Given("--tessellation-rate"))
         s.tessellationRate = CheckRange("--tessellation-rate", a.tessellationRate, 1.0f, 64.0f);
-    if (!std::isnan(a.time)) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
+    if (a.Given("--time")) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     CheckRange("--threads", a.threads, 0, 4096);
+    CheckRange("--exposure", a.exposure, -64.0f, 64.0f);  // stops: 2^64 is far beyond any scene
 
     if (a.demodulate && a.denoise.empty())
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
@@ -401,18 +482,21 @@ int RunRender(const RenderArgs& a) {
         fbo.integrator = IntegratorKind::Path;
         fbo.seconds = 0.0f;
         fbo.texture = ParseTextureOptions(a);
+        CheckCacheMemory(a, fbo.texture);
         fbo.progress = false;
         int first = 0, last = 0;
         if (!a.frames.empty()) ParseFrames(a.frames, &first, &last);
         const float fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
         if (!a.denoise.empty())
-            return RunDenoised(a, scene, fbo, a.spp != kUnset, !a.frames.empty(), first, last, fps);
-        return RunFrameBuffers(a, scene, fbo, a.spp != kUnset, first, last, fps);
+            return RunDenoised(a, scene, fbo, a.Given("--spp"), !a.frames.empty(), first, last,
+                               fps);
+        return RunFrameBuffers(a, scene, fbo, a.Given("--spp"), first, last, fps);
     }
     RenderOptions opt = common;
     opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
     opt.aovs = ParseAovs(a.aovs);
     opt.texture = ParseTextureOptions(a);
+    CheckCacheMemory(a, opt.texture);
     opt.progress = !a.quiet;
     int first = 0, last = 0;
     float fps = 0.0f;
@@ -421,7 +505,16 @@ int RunRender(const RenderArgs& a) {
         fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
         if (a.overshading) throw InputError("--overshading", "renders one frame: drop --frames");
     }
-    OutputPaths out = a.frames.empty() ? PlanOutputs(a.output, !a.noPng) : OutputPaths{};
+    // Plan and check every output first: a bad or dangerous name fails before anything renders.
+    std::vector<OutputPaths> outs;
+    if (a.frames.empty()) {
+        outs.push_back(PlanOutputs(a.output, !a.noPng));
+    } else {
+        for (int f = first; f <= last; ++f)
+            outs.push_back(PlanOutputs(FramePath(a.output, f), !a.noPng));
+    }
+    CheckCombinations(a, s, opt, outs.front());
+    CheckFiles(scene, outs, a.statsFile);
 
     const std::unique_ptr<tbb::global_control> limit = ThreadLimit(a.threads);
 
@@ -433,10 +526,6 @@ int RunRender(const RenderArgs& a) {
     ro.needEnvironment = ro.needLights;
     ro.needTextures = true;
     if (!a.frames.empty()) {
-        // Plan every frame's outputs first: a bad name fails before anything renders.
-        std::vector<OutputPaths> outs;
-        for (int f = first; f <= last; ++f)
-            outs.push_back(PlanOutputs(FramePath(a.output, f), !a.noPng));
         std::unique_ptr<TextureSpaceCache> cache;
         AnimationFrame frame;
         double total = 0.0;
@@ -449,7 +538,9 @@ int RunRender(const RenderArgs& a) {
             fo.progress = false;
             RenderResult r = Render(*frame.rs, fo, cache.get());
             OutputPaths& out = outs[size_t(f - first)];
-            WriteOutputs(out, r.beauty, r.aovs, a.exposure);
+            AtomicFiles group;
+            WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
+            group.Commit();
             total += NowSeconds() - tf;
             std::printf("frame %d (%d of %d, t = %.3f): %.3f s, %.1f%% texel hits -> %s\n", f,
                         f - first + 1, last - first + 1, fo.frameTime, r.stats.seconds,
@@ -461,6 +552,7 @@ int RunRender(const RenderArgs& a) {
                     IntegratorName(s.integrator));
         return 0;
     }
+    OutputPaths& out = outs.front();
     RenderScene rs(scene, ro);
     const double buildSeconds = NowSeconds() - t0;
 
@@ -475,15 +567,18 @@ int RunRender(const RenderArgs& a) {
         referenceShaded = Render(rs, ref).stats.cache.samplesShaded;
     }
     std::unique_ptr<TextureSpaceCache> cache;
-    if (opt.texture.enabled) cache = std::make_unique<TextureSpaceCache>(rs, opt.texture);
+    if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
     RenderResult r = Render(rs, opt, cache.get());
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
-    WriteOutputs(out, r.beauty, r.aovs, a.exposure);
+    // Every output into one group, renamed only once all are complete.
+    AtomicFiles group;
+    WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
     if (!a.statsFile.empty()) {
-        WriteStatsJson(a.statsFile, r.stats, cache.get(), opt, overshading);
+        WriteText(a.statsFile, StatsJson(r.stats, cache.get(), opt, overshading), group);
         out.written.push_back(a.statsFile);
     }
+    group.Commit();
 
     std::printf("rendered %s: %dx%d, %d spp, integrator %s\n", scene.path.c_str(), opt.width,
                 opt.height, r.stats.sppDone, IntegratorName(s.integrator));
@@ -514,9 +609,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     CLI::App* cmd = app.add_subcommand("render", "Render a scene file (.json) or a bare OBJ cage");
     cmd->add_option("scene", args->scene, "Scene file (.json) or OBJ control cage (.obj)")
         ->required();
-    CLI::Option* output = cmd->add_option("-o,--output", args->output,
-                                          "Output image (.exr writes a .png beside it; .png only)")
-                              ->capture_default_str();
+    cmd->add_option("-o,--output", args->output,
+                    "Output image (.exr writes a .png beside it; .png only)")
+        ->capture_default_str();
     cmd->add_option("--spp", args->spp, "Samples per pixel (a cap when --seconds is given)");
     cmd->add_option("--seconds", args->seconds, "Time budget in seconds (progressive passes)");
     cmd->add_option("--resolution", args->resolution, "Image size WxH, e.g. 1280x720");
@@ -608,8 +703,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--demodulate", args->demodulate,
                   "With --denoise: filter glossy and diffuse indirect light divided by their "
                   "pre-integrated BRDF / albedo (Zhuang et al. 2021)");
-    cmd->callback([args, output, &exitCode] {
-        args->outputGiven = output->count() > 0;
+    cmd->callback([args, cmd, &exitCode] {
+        for (const CLI::Option* o : cmd->get_options())
+            if (o->count() > 0) args->given.insert(o->get_name());
         exitCode = RunRender(*args);
     });
 }
