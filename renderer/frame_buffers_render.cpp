@@ -287,6 +287,11 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
             c, si, [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, false, rays); },
             c.opt.texture.indirectSamples);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
+        // The cache knows irradiance, not its direction: the same radiance in every cone, so
+        // that indirect = albedo * ShadeCones(cones) holds here too and the stage's cone
+        // history (Reliable) carries the cached light instead of finding no cones.
+        const glm::vec3 Epi = FiniteOrZero(E);
+        for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = Epi;
     }
     const std::array<glm::vec3, screen::kNumCones> axes = screen::ConeAxes(si.N);
     FramePixel px;
