@@ -40,6 +40,13 @@ screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, in
     return fc;
 }
 
+Image ToImage(const std::vector<glm::vec3>& colours, int width, int height) {
+    Image img(width, height, 3);
+    for (size_t p = 0; p < colours.size() && p < img.NumPixels(); ++p)
+        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = colours[p][k];
+    return img;
+}
+
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();

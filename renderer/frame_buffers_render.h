@@ -90,6 +90,9 @@ RenderStats RenderFrameBuffers(const RenderScene& scene, const RenderOptions& op
 /// projection CameraModel traces (lens and shutter ignored).
 screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, int height);
 
+/// A frame's colours (FrameBuffers::Compose(), a denoised image) as a width x height RGB image.
+Image ToImage(const std::vector<glm::vec3>& colours, int width, int height);
+
 /// Writes a frame's buffers as one multi-layer EXR (32-bit float, lossless): R,G,B = Compose(),
 /// then a layer per buffer ("shading.R", "visibility.Y", "position.X", "objectId.Y", "cone3.G",
 /// ...; empty buffers are left out) and the camera and time as header attributes

@@ -42,7 +42,7 @@ struct PreviewCliArgs {
     std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
-    int referenceSpp = 32;
+    int referenceSpp = 0;  // 0: 32 (AO, x 16 rays) or 128 (--denoise: path traced)
     std::string benchOut = "out/preview_bench";
 };
 
@@ -113,7 +113,9 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.bench) {
         preview::BenchArgs b;
         b.frames = CheckRange("--bench-frames", a.benchFrames, 1, 10000);
-        b.referenceSpp = CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
+        b.referenceSpp = a.referenceSpp == 0
+                             ? (s.denoise ? 128 : 32)
+                             : CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
         b.out = a.benchOut;
         return preview::RunPreviewBench(scene, s, p, b);
     }
@@ -185,11 +187,13 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->add_flag("--bench", a->bench,
                   "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
-                  "(no window)");
+                  "(no window); with --denoise, the stage's frames (texture-space vs per-hit "
+                  "indirect light, render and stage times, relMSE)");
     cmd->add_option("--bench-frames", a->benchFrames, "Bench: timed orbit frames")
         ->capture_default_str();
-    cmd->add_option("--reference-spp", a->referenceSpp, "Bench: spp of the per-hit reference")
-        ->capture_default_str();
+    cmd->add_option("--reference-spp", a->referenceSpp,
+                    "Bench: spp of the reference (default 32 per-hit AO x 16 rays; with --denoise "
+                    "128 path traced)");
     cmd->add_option("--bench-out", a->benchOut, "Bench: prefix of the images written")
         ->capture_default_str();
     cmd->callback([a, &exitCode] { exitCode = RunPreview(*a); });

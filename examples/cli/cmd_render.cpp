@@ -243,14 +243,6 @@ std::unique_ptr<tbb::global_control> ThreadLimit(int threads) {
                                                  threads);
 }
 
-/// Colours as a 3-channel image.
-Image ToImage(const std::vector<glm::vec3>& c, int w, int h) {
-    Image img(w, h, 3);
-    for (size_t p = 0; p < c.size(); ++p)
-        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = c[p][k];
-    return img;
-}
-
 /// Renders the frame buffers of frames first..last (the texture-space cache, if any, kept across
 /// them) and hands each to `body(f, options, stats, buffers)`; returns the seconds spent.
 template <class Body>

@@ -51,13 +51,6 @@ const char* DemodName(Demodulation d) {
     return d == Demodulation::On ? "on" : "off";
 }
 
-Image ToImage(const std::vector<glm::vec3>& c, int w, int h) {
-    Image img(w, h, 3);
-    for (size_t p = 0; p < c.size(); ++p)
-        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = c[p][k];
-    return img;
-}
-
 /// `_` escaped for gnuplot's enhanced text (where it would start a subscript).
 std::string Escaped(const std::string& s) {
     std::string out;

@@ -41,7 +41,9 @@ bool SameImage(const PreviewSettings& a, const PreviewSettings& b) {
     return x == y;
 }
 
-TextureSpaceOptions TextureOptions(const PreviewSettings& s) {
+}  // namespace
+
+TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s) {
     TextureSpaceOptions t;
     t.enabled = s.textureSpace;
     t.filter = s.filter;
@@ -53,6 +55,8 @@ TextureSpaceOptions TextureOptions(const PreviewSettings& s) {
     t.cache.Validate();
     return t;
 }
+
+namespace {
 
 glm::vec3 HashColour(uint64_t h) {
     h ^= h >> 33;
@@ -466,7 +470,7 @@ void ProgressiveRenderer::Run() {
                     scene_.materials[m].cacheRadius =
                         m < cur.materialRadius.size() ? cur.materialRadius[m] : -1;
                 }
-                cache = std::make_unique<TextureSpaceCache>(*rs, TextureOptions(cur));
+                cache = std::make_unique<TextureSpaceCache>(*rs, TextureOptionsOf(cur));
                 built = eff;
             }
 
@@ -501,7 +505,7 @@ void ProgressiveRenderer::Run() {
                 opt.maxDepth = cur.maxDepth;
                 opt.frameTime = frameTime;
                 opt.progress = false;
-                opt.texture = cache ? cache->options() : TextureOptions(cur);
+                opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
                 // "prev" points go to the previous frame's time: the stage's history was
                 // rendered there (the same time while only the camera moves).
@@ -553,7 +557,7 @@ void ProgressiveRenderer::Run() {
                 opt.aoDistance = cur.aoDistance;
                 opt.frameTime = frameTime;
                 opt.progress = false;
-                opt.texture = cache ? cache->options() : TextureOptions(cur);
+                opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
                 // Heat views record each pixel's lookups during this very frame (a probe of the
                 // cache afterwards would find everything it just stored).

@@ -90,6 +90,10 @@ struct PreviewSettings {
     bool operator==(const PreviewSettings&) const = default;
 };
 
+/// The texture-space cache options of the settings (filter, radius, footprint, cache sizes,
+/// LOD bias); `enabled` is settings.textureSpace.
+TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s);
+
 /// Whether the screen-space stage's history survives going from settings `a` to `b`: only what
 /// moves the view along (scene time), how it is shown (exposure, view, motion kind) and the
 /// accumulation cap may differ; anything else (integrator, resolution, cache, filters,
