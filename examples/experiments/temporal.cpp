@@ -265,17 +265,19 @@ int Temporal(const Setup& s) {
         if (s.ablation) {
             struct Change {
                 const char* label;
-                float alpha, jitter;
+                float alpha, jitter, clampK;
             };
             const screen::DenoiserSettings def;
-            for (const Change& c : {Change{"reliable, alpha 0.1", 0.1f, def.maxGlossyJitter},
-                                    Change{"reliable, glossy jitter 0", def.alpha, 0.0f},
-                                    Change{"reliable, glossy jitter 16", def.alpha, 16.0f},
-                                    Change{"reliable, alpha 0.1, jitter 0", 0.1f, 0.0f}}) {
+            const float a = def.alpha, j = def.maxGlossyJitter, k = def.reliableClampK;
+            // k = 1000: no clamping in practice (history within 1000 sigma of the 3x3 mean).
+            for (const Change& c : {Change{"reliable, alpha 0.1", 0.1f, j, k},
+                                    Change{"reliable, glossy jitter 0", a, 0.0f, k},
+                                    Change{"reliable, glossy jitter 16", a, 16.0f, k},
+                                    Change{"reliable, no clamping", a, j, 1000.0f}}) {
                 Variant& v = ablation.emplace_back();
                 v.method = Method::Reliable, v.demod = Demodulation::On, v.label = c.label;
                 screen::DenoiserSettings set;
-                set.alpha = c.alpha, set.maxGlossyJitter = c.jitter;
+                set.alpha = c.alpha, set.maxGlossyJitter = c.jitter, set.reliableClampK = c.clampK;
                 v.denoiser = std::make_unique<screen::ScreenSpaceDenoiser>(set, brdf);
             }
         }
