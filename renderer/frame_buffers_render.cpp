@@ -40,6 +40,13 @@ screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, in
     return fc;
 }
 
+Image ToImage(const std::vector<glm::vec3>& colours, int width, int height) {
+    Image img(width, height, 3);
+    for (size_t p = 0; p < colours.size() && p < img.NumPixels(); ++p)
+        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = colours[p][k];
+    return img;
+}
+
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
@@ -287,6 +294,11 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
             c, si, [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, false, rays); },
             c.opt.texture.indirectSamples);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
+        // The cache knows irradiance, not its direction: the same radiance in every cone, so
+        // that indirect = albedo * ShadeCones(cones) holds here too and the stage's cone
+        // history (Reliable) carries the cached light instead of finding no cones.
+        const glm::vec3 Epi = FiniteOrZero(E);
+        for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = Epi;
     }
     const std::array<glm::vec3, screen::kNumCones> axes = screen::ConeAxes(si.N);
     FramePixel px;

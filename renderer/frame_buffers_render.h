@@ -51,7 +51,8 @@
 //   screen::AddConeSample in the cone of each ray's direction and averaged over the spp, so that
 //   indirect = albedo * ShadeCones(cones) and each cone's expectation is the cosine-weighted mean
 //   radiance of its cell; a cone no ray fell in is 0. All six are NaN where there is no diffuse
-//   ray (background, lights, cached indirect). A ray below the tessellated surface brings back 0
+//   ray (background, lights, a shading normal facing away); with cached indirect all six are
+//   the cache's irradiance / pi (see below). A ray below the tessellated surface brings back 0
 //   and still counts. Sampling density is cos/pi about the normal.
 // * guides: position = primary hit (tessellated surface), normal = limit shading normal facing
 //   the camera, depth = ray distance, roughness = the GGX alpha used (max(r^2, 1e-3); 0 for
@@ -61,9 +62,12 @@
 //   prevNormal of the light's surface (moved by its keyframes) and objectId -1 (not an object).
 //   The environment seen directly: `emitted` only, every guide NaN / INF / -1.
 // * Texture-space shading (options.texture.enabled): diffuse materials take `indirect` from the
-//   cache, as the path integrator does (albedo * cached indirect irradiance / pi; no diffuse ray,
-//   cones NaN); direct light always stays per hit here (the split needs its visibility), so
-//   options.texture.cacheDirect is ignored. GGX materials are shaded per hit as above.
+//   cache, as the path integrator does (albedo * cached indirect irradiance / pi; no diffuse ray;
+//   the six cones all hold the cached irradiance / pi, so indirect = albedo * ShadeCones(cones)
+//   still holds and the stage's cone history keeps the cached light: NaN cones sent Reliable's
+//   indirect to 0 there, issue 21); direct light always stays per hit here (the split needs its
+//   visibility), so options.texture.cacheDirect is ignored. GGX materials are shaded per hit as
+//   above.
 #pragma once
 #include <string>
 
@@ -87,6 +91,9 @@ RenderStats RenderFrameBuffers(const RenderScene& scene, const RenderOptions& op
 /// The screen-space camera of `cam` at scene time `time` for a width x height raster: the pinhole
 /// projection CameraModel traces (lens and shutter ignored).
 screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, int height);
+
+/// A frame's colours (FrameBuffers::Compose(), a denoised image) as a width x height RGB image.
+Image ToImage(const std::vector<glm::vec3>& colours, int width, int height);
 
 /// Writes a frame's buffers as one multi-layer EXR (32-bit float, lossless): R,G,B = Compose(),
 /// then a layer per buffer ("shading.R", "visibility.Y", "position.X", "objectId.Y", "cone3.G",

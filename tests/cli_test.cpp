@@ -179,6 +179,35 @@ TEST(Cli, DenoisesAnAnimation) {
     EXPECT_FALSE(fs::exists(none));
 }
 
+// `texcache montage` puts images of the same height side by side, `--gap` black columns apart,
+// pixel for pixel; a different height or a bad output name is exit 2 naming the file, and
+// nothing is written.
+TEST(Cli, MontagePutsImagesSideBySide) {
+    const fs::path a = Dir() / "montage_a.exr", b = Dir() / "montage_b.exr";
+    WriteImage(a.string(), Image(3, 2, 3, 0.25f));
+    WriteImage(b.string(), Image(4, 2, 3, 0.75f));
+    const fs::path out = Dir() / "montage.exr";
+    const CliRun r =
+        Texcache("montage " + a.string() + " " + b.string() + " --gap 2 -o " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    const Image m = ReadImageRGB(out.string());
+    ASSERT_EQ(m.width, 3 + 2 + 4);
+    ASSERT_EQ(m.height, 2);
+    for (int x = 0; x < m.width; ++x) {
+        const float want = x < 3 ? 0.25f : x < 5 ? 0.0f : 0.75f;
+        EXPECT_FLOAT_EQ(m.At(x, 1)[0], want) << x;
+    }
+    const fs::path tall = Dir() / "montage_tall.exr", bad = Dir() / "montage_bad.exr";
+    WriteImage(tall.string(), Image(2, 5, 3, 0.5f));
+    const CliRun h =
+        Texcache("montage " + a.string() + " " + tall.string() + " -o " + bad.string());
+    EXPECT_EQ(h.code, 2);
+    EXPECT_NE(h.out.find("montage_tall.exr"), std::string::npos) << h.out;
+    EXPECT_NE(h.out.find("height 5"), std::string::npos) << h.out;
+    EXPECT_EQ(Texcache("montage " + a.string() + " -o " + (Dir() / "m.xyz").string()).code, 2);
+    EXPECT_FALSE(fs::exists(bad));
+}
+
 TEST(Cli, FailedRenderKeepsTheGoodOutput) {
     const fs::path out = Dir() / "keep.png";
     WriteImage(out.string(), Image(8, 8, 3, 0.5f));

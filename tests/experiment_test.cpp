@@ -142,7 +142,7 @@ TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
 TEST(TemporalExperiment, EveryMethodHasFiniteRmseOnEveryScene) {
     const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_temporal_rmse";
     fs::remove_all(out);
-    const CliRun r = Texcache("experiment temporal --quick --out " + out.string());
+    const CliRun r = Texcache("experiment temporal --quick --ablation --out " + out.string());
     ASSERT_EQ(r.code, 0) << r.out;
     std::ifstream f(out / "temporal.csv");
     std::string line;
@@ -179,6 +179,49 @@ TEST(TemporalExperiment, EveryMethodHasFiniteRmseOnEveryScene) {
     text << md.rdbuf();
     for (const char* needle : {"Paper", "Quick mode", "**Goal 1: ", "**Goal 2: "})
         EXPECT_NE(text.str().find(needle), std::string::npos) << needle;
+    // --ablation: Reliable with one setting changed, on every scene, beside the defaults.
+    std::ifstream ab(out / "temporal_ablation.md");
+    std::stringstream abText;
+    abText << ab.rdbuf();
+    for (const char* scene :
+         {"anim_shadow", "anim_light", "anim_glossy", "anim_disocclusion", "anim_flythrough"})
+        for (const char* variant : {"alpha 0.1", "glossy jitter 0", "no clamping", "baseline"})
+            EXPECT_NE(abText.str().find(std::string("| ") + scene + " | " +
+                                        (std::string(variant) == "baseline" ? "" : "reliable, ") +
+                                        variant),
+                      std::string::npos)
+                << scene << " " << variant << "\n"
+                << abText.str();
+}
+
+// `experiment disocclusion --quick`: each way of rendering the indirect light (per hit, cache,
+// cache with temporal accumulation) gets a row with newly disoccluded pixels and finite RMSE
+// figures, in [0, 10).
+TEST(DisocclusionExperiment, EveryRowHasPixelsAndFiniteRmse) {
+    const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_disocclusion";
+    fs::remove_all(out);
+    const CliRun r = Texcache("experiment disocclusion --quick --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    std::ifstream f(out / "disocclusion.md");
+    std::string line;
+    int rows = 0;
+    while (std::getline(f, line)) {
+        if (line.rfind("| per hit |", 0) != 0 && line.rfind("| cache", 0) != 0) continue;
+        ++rows;
+        std::vector<double> v;
+        std::stringstream ss(line);
+        std::string cell;
+        while (std::getline(ss, cell, '|')) {
+            char* end = nullptr;
+            const double x = std::strtod(cell.c_str(), &end);
+            if (end != cell.c_str()) v.push_back(x);
+        }
+        ASSERT_EQ(v.size(), 7u) << line;  // pixels, then 6 RMSE figures
+        EXPECT_GT(v[0], 0.0) << line;
+        for (size_t i = 1; i < v.size(); ++i)
+            EXPECT_TRUE(std::isfinite(v[i]) && v[i] >= 0.0 && v[i] < 10.0) << line;
+    }
+    EXPECT_EQ(rows, 3) << r.out;
 }
 
 TEST(TemporalExperiment, UnknownSceneListsTheValidOnes) {

@@ -21,6 +21,7 @@ struct ExperimentArgs {
     bool quick = false;
     std::string only;
     int cameraSpp = 0;
+    bool ablation = false;
 };
 
 const std::map<std::string, std::function<int(const experiments::Setup&)>>& Experiments() {
@@ -31,6 +32,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
         {"threads", experiments::Threads},
         {"lod-bias", experiments::LodBias},
         {"temporal", experiments::Temporal},
+        {"disocclusion", experiments::Disocclusion},
     };
     return m;
 }
@@ -56,7 +58,7 @@ int RunExperiment(const ExperimentArgs& a) {
     if (a.cameraSpp < 0 || a.cameraSpp > 1024)
         throw InputError("--camera-spp",
                          "must be in 1..1024 (got " + std::to_string(a.cameraSpp) + ")");
-    experiments::Setup s{a.out, a.scenes, a.quick, a.only, a.cameraSpp};
+    experiments::Setup s{a.out, a.scenes, a.quick, a.only, a.cameraSpp, a.ablation};
     const double t0 = NowSeconds();
     int code = 0;
     for (const auto& [name, fn] : all)
@@ -81,6 +83,10 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--camera-spp", args->cameraSpp,
                     "speed-vs-error: camera samples per pixel, the same rays for every render "
                     "(default 4; Munkberg et al. Fig. 7 use 16)");
+    cmd->add_flag("--ablation", args->ablation,
+                  "temporal: also Reliable (demodulation on) with alpha 0.1 (the paper's), the "
+                  "glossy jitter cap at 0 and 16 px, and without clamping, summarised in "
+                  "temporal_ablation.md");
     cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
         ->capture_default_str();
     cmd->callback([args, &exitCode] { exitCode = RunExperiment(*args); });

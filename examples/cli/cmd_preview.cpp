@@ -37,9 +37,12 @@ struct PreviewCliArgs {
     bool play = false;
     float fps = 24.0f;
     bool saveCamera = false;
+    std::string denoise = "off";
+    bool demodulate = false;
+    std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
-    int referenceSpp = 32;
+    int referenceSpp = 0;  // 0: 32 (AO, x 16 rays) or 128 (--denoise: path traced)
     std::string benchOut = "out/preview_bench";
 };
 
@@ -65,6 +68,19 @@ int RunPreview(const PreviewCliArgs& a) {
     s.texelCacheMb = float(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0));
     s.exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
     s.view = preview::ParseViewMode(a.view, "--view");
+    s.denoise = a.denoise != "off";
+    if (s.denoise) {
+        try {
+            s.denoiseMethod = screen::ParseMethodKey(a.denoise, "--denoise");
+        } catch (const InputError&) {
+            throw InputError("--denoise", "unknown method '" + a.denoise + "' (valid: off, " +
+                                              screen::MethodKeys() + ")");
+        }
+    }
+    s.demodulate = a.demodulate;
+    if (a.demodulate && !s.denoise)
+        throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    s.motionKind = preview::ParseMotionKind(a.motion, "--motion");
     if (!std::isnan(a.time)) scene.settings.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     // The scene's settings that the preview keeps (its size, spp and AO rays are its own).
     const RenderOptions fromScene = RenderOptionsFrom(scene.settings);
@@ -97,7 +113,9 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.bench) {
         preview::BenchArgs b;
         b.frames = CheckRange("--bench-frames", a.benchFrames, 1, 10000);
-        b.referenceSpp = CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
+        b.referenceSpp = a.referenceSpp == 0
+                             ? (s.denoise ? 128 : 32)
+                             : CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
         b.out = a.benchOut;
         return preview::RunPreviewBench(scene, s, p, b);
     }
@@ -147,7 +165,20 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--exposure", a->exposure, "Display exposure in stops")->capture_default_str();
     cmd->add_option("--view", a->view,
                     "What the window shows: beauty, faceid, mip, texels, hitmiss (texel-cache hits "
-                    "and misses of the frame), overshading (samples shaded per pixel)")
+                    "and misses of the frame), overshading (samples shaded per pixel), motion (the "
+                    "screen-space stage's motion vectors, --motion)")
+        ->capture_default_str();
+    cmd->add_option("--denoise", a->denoise,
+                    "The screen-space stage on the preview's frames (the path tracer's split, "
+                    "diffuse indirect light from the cache with --shading texture): off, spatial, "
+                    "baseline, clamp or reliable")
+        ->type_name("METHOD")
+        ->capture_default_str();
+    cmd->add_flag("--demodulate", a->demodulate,
+                  "With --denoise: filter glossy and diffuse indirect light divided by their "
+                  "pre-integrated BRDF / albedo");
+    cmd->add_option("--motion", a->motion,
+                    "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())
         ->capture_default_str();
     cmd->add_option("--time", a->time, "Scene time to render (seconds; default: the scene's)");
     cmd->add_flag("--play", a->play,
@@ -156,11 +187,13 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->add_flag("--bench", a->bench,
                   "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
-                  "(no window)");
+                  "(no window); with --denoise, the stage's frames (texture-space vs per-hit "
+                  "indirect light, render and stage times, relMSE)");
     cmd->add_option("--bench-frames", a->benchFrames, "Bench: timed orbit frames")
         ->capture_default_str();
-    cmd->add_option("--reference-spp", a->referenceSpp, "Bench: spp of the per-hit reference")
-        ->capture_default_str();
+    cmd->add_option("--reference-spp", a->referenceSpp,
+                    "Bench: spp of the reference (default 32 per-hit AO x 16 rays; with --denoise "
+                    "128 path traced)");
     cmd->add_option("--bench-out", a->benchOut, "Bench: prefix of the images written")
         ->capture_default_str();
     cmd->callback([a, &exitCode] { exitCode = RunPreview(*a); });

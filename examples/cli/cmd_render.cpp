@@ -260,14 +260,6 @@ std::unique_ptr<tbb::global_control> ThreadLimit(int threads) {
                                                  threads);
 }
 
-/// Colours as a 3-channel image.
-Image ToImage(const std::vector<glm::vec3>& c, int w, int h) {
-    Image img(w, h, 3);
-    for (size_t p = 0; p < c.size(); ++p)
-        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = c[p][k];
-    return img;
-}
-
 /// Renders the frame buffers of frames first..last (the texture-space cache, if any, kept across
 /// them) and hands each to `body(f, options, stats, buffers)`; returns the seconds spent.
 template <class Body>
@@ -352,24 +344,13 @@ int RunFrameBuffers(const RenderArgs& a, const Scene& scene, RenderOptions opt, 
     return 0;
 }
 
-/// --denoise NAME: the screen-space method (the names the CLI accepts, as MethodName() spells
-/// them where they differ).
-screen::Method ParseDenoise(const std::string& name) {
-    static constexpr EnumName<screen::Method> kMethods[] = {
-        {"spatial", screen::Method::SpatialOnly},
-        {"baseline", screen::Method::Baseline},
-        {"clamp", screen::Method::BaselineClamp},
-        {"reliable", screen::Method::Reliable}};
-    return ParseEnum(kMethods, name, "--denoise", "method");
-}
-
 /// --denoise: each frame's buffers rendered in memory (RenderFrameBuffers, 1 spp unless --spp),
 /// denoised by one ScreenSpaceDenoiser that keeps its history across the frames, and written as
 /// images (numbered with --frames, like a plain animation; temporary file + rename).
 int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool sppGiven,
                 bool animated, int first, int last, float fps) {
     const char* opt_ = "--denoise";
-    const screen::Method method = ParseDenoise(a.denoise);
+    const screen::Method method = screen::ParseMethodKey(a.denoise, "--denoise");
     CheckDecompositionOptions(a, opt_, "writes the denoised image only");
     if (!a.frameBuffers.empty()) throw InputError(opt_, "cannot be combined with --frame-buffers");
     if (!animated && method != screen::Method::SpatialOnly)

@@ -9,6 +9,7 @@ namespace texcache::cli {
 
 void AddRenderCommand(CLI::App& app, int& exitCode);
 void AddCompareCommand(CLI::App& app, int& exitCode);
+void AddMontageCommand(CLI::App& app, int& exitCode);
 void AddBenchCommand(CLI::App& app, int& exitCode);
 void AddPreviewCommand(CLI::App& app, int& exitCode);
 void AddExperimentCommand(CLI::App& app, int& exitCode);

@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
     int exitCode = 0;
     texcache::cli::AddRenderCommand(app, exitCode);
     texcache::cli::AddCompareCommand(app, exitCode);
+    texcache::cli::AddMontageCommand(app, exitCode);
     texcache::cli::AddBenchCommand(app, exitCode);
     texcache::cli::AddExperimentCommand(app, exitCode);
     texcache::cli::AddPreviewCommand(app, exitCode);

@@ -24,6 +24,10 @@ struct Setup {
     std::string only;
     /// speed-vs-error: camera samples per pixel (0: the experiment's default, 16).
     int cameraSpp = 0;
+    /// temporal: also Reliable (demodulation on) with the paper's alpha 0.1, with the glossy
+    /// jitter cap at 0 and 16 pixels and without clamping (issue 21: why Reliable trails the
+    /// baseline on some scenes).
+    bool ablation = false;
 };
 
 /// A scene file loaded and built once for a given integrator family. Not movable: the
@@ -117,5 +121,6 @@ int FilterSize(const Setup& s);
 int Threads(const Setup& s);
 int LodBias(const Setup& s);
 int Temporal(const Setup& s);
+int Disocclusion(const Setup& s);
 
 }  // namespace texcache::experiments

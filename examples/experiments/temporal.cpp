@@ -51,13 +51,6 @@ const char* DemodName(Demodulation d) {
     return d == Demodulation::On ? "on" : "off";
 }
 
-Image ToImage(const std::vector<glm::vec3>& c, int w, int h) {
-    Image img(w, h, 3);
-    for (size_t p = 0; p < c.size(); ++p)
-        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = c[p][k];
-    return img;
-}
-
 /// `_` escaped for gnuplot's enhanced text (where it would start a subscript).
 std::string Escaped(const std::string& s) {
     std::string out;
@@ -95,6 +88,7 @@ double Mean(const std::vector<double>& v) {
 struct Variant {
     Method method = Method::SpatialOnly;
     Demodulation demod = Demodulation::Off;
+    std::string label;  ///< ablation variants: what differs from the default settings
     std::unique_ptr<screen::ScreenSpaceDenoiser> denoiser;
     std::vector<glm::vec3> image;  // reused allocation
     std::vector<float> prevY;
@@ -221,6 +215,14 @@ struct SceneResult {
     Rect crop;
 };
 
+/// Pointers to the variants of both lists, in order.
+std::vector<Variant*> AllOf(std::vector<Variant>& a, std::vector<Variant>& b) {
+    std::vector<Variant*> out;
+    for (Variant& v : a) out.push_back(&v);
+    for (Variant& v : b) out.push_back(&v);
+    return out;
+}
+
 int Index(Method m, Demodulation d) {
     return int(m) * 2 + (d == Demodulation::On ? 1 : 0);
 }
@@ -242,6 +244,7 @@ int Temporal(const Setup& s) {
     // nothing times it alone; closest command ctest -R ScreenSpaceTables.BrdfTable).
     const auto brdf = std::make_shared<const screen::BrdfPreintegration>();
     std::vector<SceneResult> results;
+    std::string ablationRows;  // --ablation: markdown rows, per scene
 
     for (const std::string& name : scenes) {
         std::vector<std::string> warnings;
@@ -257,6 +260,27 @@ int Temporal(const Setup& s) {
                 v.denoiser =
                     std::make_unique<screen::ScreenSpaceDenoiser>(screen::DenoiserSettings{}, brdf);
             }
+        // Ablation: Reliable with one setting changed at a time (and both), demodulation on.
+        std::vector<Variant> ablation;
+        if (s.ablation) {
+            struct Change {
+                const char* label;
+                float alpha, jitter, clampK;
+            };
+            const screen::DenoiserSettings def;
+            const float a = def.alpha, j = def.maxGlossyJitter, k = def.reliableClampK;
+            // k = 1000: no clamping in practice (history within 1000 sigma of the 3x3 mean).
+            for (const Change& c : {Change{"reliable, alpha 0.1", 0.1f, j, k},
+                                    Change{"reliable, glossy jitter 0", a, 0.0f, k},
+                                    Change{"reliable, glossy jitter 16", a, 16.0f, k},
+                                    Change{"reliable, no clamping", a, j, 1000.0f}}) {
+                Variant& v = ablation.emplace_back();
+                v.method = Method::Reliable, v.demod = Demodulation::On, v.label = c.label;
+                screen::DenoiserSettings set;
+                set.alpha = c.alpha, set.maxGlossyJitter = c.jitter, set.reliableClampK = c.clampK;
+                v.denoiser = std::make_unique<screen::ScreenSpaceDenoiser>(set, brdf);
+            }
+        }
         std::vector<float> refPrevY;
         // The reference, the 1-spp frame and the stage's input, as series without a denoiser.
         Variant reference, input;
@@ -296,7 +320,8 @@ int Temporal(const Setup& s) {
             reference.change.push_back(rc);
             input.rmse.push_back(RMSE(noisy, ref)), input.ssim.push_back(SSIM(noisy, ref));
 
-            for (Variant& v : variants) {
+            for (Variant* vp : AllOf(variants, ablation)) {
+                Variant& v = *vp;
                 v.denoiser->Denoise(fb, v.method, v.demod, &v.image);
                 const Image img = ToImage(v.image, W, H);
                 const std::vector<float> y = Luminance(img);
@@ -329,6 +354,19 @@ int Temporal(const Setup& s) {
         AddRows(&table, name, "noisy", "-", input);
         for (const Variant& v : variants)
             AddRows(&table, name, screen::MethodName(v.method), DemodName(v.demod), v);
+        for (const Variant& v : ablation) {
+            AddRows(&table, name, v.label, DemodName(v.demod), v);
+            ablationRows +=
+                Format("| %s | %s | %.4f | %.4f | %.4f | %.4f |\n", name.c_str(), v.label.c_str(),
+                       Mean(v.rmse), Mean(v.part[0]), Mean(v.part[1]), Mean(v.part[2]));
+        }
+        for (Method m : {Method::Baseline, Method::BaselineClamp, Method::Reliable}) {
+            const Variant& v = variants[Index(m, Demodulation::On)];
+            if (s.ablation)
+                ablationRows += Format("| %s | %s (default) | %.4f | %.4f | %.4f | %.4f |\n",
+                                       name.c_str(), screen::MethodName(m), Mean(v.rmse),
+                                       Mean(v.part[0]), Mean(v.part[1]), Mean(v.part[2]));
+        }
 
         SceneResult sr;
         sr.name = name;
@@ -551,6 +589,18 @@ int Temporal(const Setup& s) {
             r.crop.y, r.crop.y + r.crop.h - 1, W, H, r.name.c_str(), r.name.c_str());
     }
     WriteText((fs::path(s.outDir) / "temporal.md").string(), md);
+    if (s.ablation) {
+        WriteText(
+            (fs::path(s.outDir) / "temporal_ablation.md").string(),
+            Format("# Reliable's settings, one at a time\n\n%d frames, %dx%d, 1 spp, reference %d "
+                   "spp, demodulation on (as temporal.md). Mean RMSE over the frames, of the image "
+                   "and of each component (direct = shading * visibility).\n\n"
+                   "| scene | variant | RMSE | direct | glossy | indirect |\n"
+                   "|---|---|---|---|---|---|\n",
+                   frames, W, H, refSpp) +
+                ablationRows);
+        Say("wrote temporal_ablation.md");
+    }
     Say("wrote %s, plots, crops and temporal.md in %s", csv.c_str(), s.outDir.c_str());
     return 0;
 }

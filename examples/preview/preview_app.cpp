@@ -148,6 +148,57 @@ void DrawViewLegend(ViewMode view, const FrameStats& st) {
     }
 }
 
+/// The screen-space stage's controls: method (off or one of the stage's), demodulation, and the
+/// motion view's vectors with their legend.
+void DrawDenoiseControls(PreviewSettings& s) {
+    static const std::vector<std::string> kMethods = [] {
+        std::vector<std::string> m = {"off"};
+        for (const std::string& k : SplitNames(screen::MethodKeys())) m.push_back(k);
+        return m;
+    }();
+    int method = s.denoise ? IndexOf(kMethods, screen::MethodKey(s.denoiseMethod)) : 0;
+    if (NameCombo("denoise", kMethods, &method)) {
+        s.denoise = method > 0;
+        if (s.denoise) s.denoiseMethod = screen::ParseMethodKey(kMethods[method], "denoise");
+    }
+    if (ImGui::IsItemHovered())
+        ImGui::SetTooltip(
+            "screen-space stage on each frame: the path tracer's split at 1 spp (diffuse "
+            "indirect from the cache when it is on), denoised with history kept while the "
+            "camera or the animation moves");
+    if (s.denoise || s.view == ViewMode::Motion) {
+        ImGui::Checkbox("demodulate (BRDF / albedo)", &s.demodulate);
+        ImGui::TextDisabled("the stage renders the path tracer's split");
+    }
+    if (s.view == ViewMode::Motion) {
+        static const std::vector<std::string> kKinds = SplitNames(MotionKindKeys());
+        int kind = IndexOf(kKinds, MotionKindKey(s.motionKind));
+        if (NameCombo("motion vectors", kKinds, &kind))
+            s.motionKind = ParseMotionKind(kKinds[kind], "motion vectors");
+        LegendBar(
+            [](float t) {
+                return MotionColour(glm::vec2(std::cos(6.2831853f * t), std::sin(6.2831853f * t)),
+                                    1.0f);
+            },
+            {0.0f, 0.25f, 0.5f, 0.75f}, {"right", "down", "left", "up"});
+        LegendSwatch(glm::vec3(1.0f), "no motion (saturation: length, full at 8 px)");
+        LegendSwatch(glm::vec3(0.0f), "no history (disoccluded, off screen, first frame)");
+        if (!s.denoise) ImGui::TextDisabled("the stage runs reliable for this view");
+    }
+}
+
+/// The stage's passes of the last frame, wall-clock milliseconds.
+void DrawStageTimings(const FrameStats& st) {
+    const screen::StageTimings& t = st.stage;
+    const double frameMs = st.seconds * 1e3;
+    ImGui::Text("render %.1f ms + stage %.1f ms (%.0f %%), history %d", st.renderSeconds * 1e3,
+                t.total, frameMs > 0.0 ? 100.0 * t.total / frameMs : 0.0, st.stageHistory);
+    ImGui::TextDisabled("prepare %.1f  motion %.1f + %.1f  temporal %.1f", t.prepare,
+                        t.traditionalMotion, t.reliableMotion, t.temporal);
+    ImGui::TextDisabled("a-trous %.1f  clean-up %.1f  compose %.1f (ms)", t.spatial, t.cleanup,
+                        t.compose);
+}
+
 /// The window's contents as a linear image (sRGB decoded, so WriteImage's PNG encoding gives the
 /// read-back bytes again), rows flipped to top-first.
 Image ReadWindow(int width, int height) {
@@ -362,6 +413,7 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         ImGui::TextDisabled("texture-space cache not in use");
     }
     ImGui::Text("cache memory %.1f MiB", double(st.cacheBytes) / (1 << 20));
+    if (st.staged) DrawStageTimings(st);
     float maxMs = 1.0f;
     for (float v : ui.frameMs) maxMs = std::max(maxMs, v);
     ImGui::PlotLines("##ft", ui.frameMs, kPlotLength, ui.plotNext, "frame time (ms)", 0.0f,
@@ -382,6 +434,7 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         ImGui::Combo("view", &view, views, kNumViewModes);
         s.view = ViewMode(view);
         DrawViewLegend(s.view, st);
+        DrawDenoiseControls(s);
         ImGui::SliderInt("spp / frame", &s.sppPerFrame, 1, 64);
         ImGui::SliderInt("AO rays / sample", &s.aoSamples, 1, 256, "%d",
                          ImGuiSliderFlags_Logarithmic);
@@ -614,9 +667,17 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
                 last = renderer.Stats();
                 std::printf(
                     "frame %d: t = %.3f s, %.1f ms, %.2f Mrays/s, cache hit rate %.2f %%, %llu "
-                    "samples shaded\n",
+                    "samples shaded",
                     i, last.time, last.seconds * 1e3, last.raysPerSecond * 1e-6,
                     100.0 * last.texelHitRate, (unsigned long long)last.samplesShaded);
+                if (last.staged)
+                    std::printf(
+                        ", render %.1f ms + stage %.1f ms (%.0f %% of the frame), %d frames "
+                        "of history",
+                        last.renderSeconds * 1e3, last.stage.total,
+                        100.0 * last.stage.total / std::max(last.seconds * 1e3, 1e-9),
+                        last.stageHistory);
+                std::printf("\n");
                 if (shot.width > 0) {
                     WriteImage(args.screenshot, shot);
                     std::printf("wrote %s (%dx%d)\n", args.screenshot.c_str(), shot.width,

@@ -3,12 +3,18 @@
 // the trivial filter and a cache kept across frames against per-hit AO at the same relMSE. Both
 // run the same orbit in the same process; relMSE is measured at the orbit's last view against a
 // high-sample per-hit reference of that view.
+#include <time.h>
+
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
+#include <string>
 
 #include "orbit_camera.h"
 #include "preview.h"
+#include "renderer/frame_buffers_render.h"
 #include "renderer/metrics.h"
 #include "renderer/render.h"
 #include "renderer/render_scene.h"
@@ -26,32 +32,160 @@ struct OrbitRun {
     Image last;  ///< the last view's image
 };
 
+/// The bench's scene at its time and the orbit's views: view 0 at the scene camera, view n
+/// `orbitDegrees` around it (where relMSE is measured).
+struct BenchOrbit {
+    Scene scene;  // the RenderScene keeps a reference: SetView's camera edits are seen
+    float time = 0.0f;
+    int n = 1;
+    float degrees = 0.0f;
+    OrbitCamera home;
+    std::unique_ptr<RenderScene> rs;
+
+    BenchOrbit(const Scene& in, const PreviewSettings& s, const PreviewArgs& args, int frames,
+               bool lights)
+        : scene(in), time(in.settings.time), n(frames), degrees(args.orbitDegrees) {
+        scene.settings.tessellationRate = s.tessellationRate;
+        RenderSceneOptions ro;
+        ro.frameTime = time;
+        ro.needLights = ro.needEnvironment = lights;
+        rs = std::make_unique<RenderScene>(scene, ro);
+        home.FromScene(scene, time);
+    }
+    void SetView(int i) {
+        OrbitCamera c = home;
+        c.Orbit(degrees * float(i) / float(n), 0.0f);
+        c.ToCamera(&scene.camera);
+    }
+};
+
+double CpuSeconds() {
+    timespec t;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return double(t.tv_sec) + double(t.tv_nsec) * 1e-9;
+}
+
+/// One configuration of the stage bench: frame buffers (texture-space indirect or per hit) and
+/// the stage on them, with its times summed over the timed frames.
+struct StageRun {
+    const char* name;
+    bool textureSpace;
+    std::unique_ptr<TextureSpaceCache> cache;
+    screen::ScreenSpaceDenoiser denoiser;
+    screen::FrameBuffers fb;
+    std::vector<glm::vec3> image;
+    double renderWall = 0.0, renderCpu = 0.0, stageWall = 0.0, stageCpu = 0.0;
+    double maxStageWall = 0.0;
+    CacheStats cacheStats;
+
+    StageRun(const char* n, bool tex) : name(n), textureSpace(tex) {}
+    double Fps(int frames) const { return double(frames) / (renderWall + 1e-3 * stageWall); }
+};
+
+/// `--bench --denoise METHOD`: the preview's stage frames while orbiting, texture-space indirect
+/// light from a warm cache against per-hit, each frame rendered as the stage's buffers and
+/// denoised; interleaved frame by frame, relMSE of the last view against a path-traced reference.
+int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewArgs& args,
+                  const BenchArgs& b) {
+    BenchOrbit orbit(sceneIn, s, args, b.frames, true);
+    const Scene& scene = orbit.scene;
+    const RenderScene& rs = *orbit.rs;
+    const float time = orbit.time;
+    const int n = b.frames;
+    auto setView = [&](int i) { orbit.SetView(i); };
+    const screen::Method method = s.denoiseMethod;
+    const screen::Demodulation demod =
+        s.demodulate ? screen::Demodulation::On : screen::Demodulation::Off;
+    std::printf(
+        "preview bench: %s, %dx%d, path tracer's split + %s stage%s, orbit of %.1f degrees in %d "
+        "frames\n",
+        scene.path.c_str(), s.width, s.height, screen::MethodName(method),
+        s.demodulate ? " (demodulated)" : "", args.orbitDegrees, n);
+
+    RenderOptions base;
+    base.integrator = IntegratorKind::Path;
+    base.width = s.width, base.height = s.height;
+    base.spp = s.sppPerFrame;
+    base.maxDepth = s.maxDepth;
+    base.frameTime = time;
+    base.progress = false;
+
+    setView(n);
+    RenderOptions refOpt = base;
+    refOpt.spp = b.referenceSpp;
+    refOpt.seed = 0xC0FFEE;
+    refOpt.progress = true;
+    const RenderResult ref = Render(rs, refOpt);
+    std::printf("reference       : path traced, %d spp, %.1f s\n", refOpt.spp, ref.stats.seconds);
+
+    StageRun runs[2] = {StageRun("texture space", true), StageRun("per hit", false)};
+    TextureSpaceOptions tex = TextureOptionsOf(s);
+    tex.enabled = true;
+    runs[0].cache = std::make_unique<TextureSpaceCache>(rs, tex);
+    // View 0 untimed (cold cache, lazy tessellation, the BRDF table), then views 1..n in turn.
+    for (int i = 0; i <= n; ++i) {
+        setView(i);
+        for (StageRun& r : runs) {
+            RenderOptions o = base;
+            o.seed = uint64_t(i);
+            if (r.textureSpace) o.texture = tex;
+            const double c0 = CpuSeconds();
+            const RenderStats st = RenderFrameBuffers(rs, o, time, &r.fb, r.cache.get());
+            const double c1 = CpuSeconds();
+            r.denoiser.Denoise(r.fb, method, demod, &r.image);
+            if (i == 0) continue;
+            r.renderWall += st.seconds, r.renderCpu += c1 - c0;
+            const screen::StageTimings& t = r.denoiser.Timings();
+            r.stageWall += t.total, r.stageCpu += r.denoiser.CpuTimings().total;
+            r.maxStageWall = std::max(r.maxStageWall, t.total);
+            r.cacheStats.Merge(st.cache);
+        }
+    }
+    for (const StageRun& r : runs) {
+        const Image noisy = ToImage(r.fb.Compose(), s.width, s.height);
+        const Image img = ToImage(r.image, s.width, s.height);
+        std::printf(
+            "  %-13s: %5.1f fps (%.1f ms/frame): render %.1f ms (%.1f ms cpu) + stage %.1f ms "
+            "(%.1f ms cpu, %.0f %% of the frame, slowest %.1f ms)%s; relMSE %.5f denoised, %.5f "
+            "undenoised\n",
+            r.name, r.Fps(n), 1e3 / r.Fps(n), 1e3 * r.renderWall / n, 1e3 * r.renderCpu / n,
+            r.stageWall / n, r.stageCpu / n,
+            100.0 * 1e-3 * r.stageWall / (r.renderWall + 1e-3 * r.stageWall), r.maxStageWall,
+            r.textureSpace
+                ? (", hit rate " +
+                   std::to_string(int(std::lround(100.0 * r.cacheStats.TexelHitRate()))) + " %")
+                      .c_str()
+                : "",
+            RelMSE(img, ref.beauty), RelMSE(noisy, ref.beauty));
+        const std::string stem = b.out + (r.textureSpace ? "_stage_texture" : "_stage_hit");
+        WriteImage(stem + ".png", img);
+    }
+    WriteImage(b.out + "_stage_ref.png", ref.beauty);
+    const StageRun& t = runs[0];
+    std::printf("warm texture-space frame + %s stage: %.1f fps (goal >= 10) %s\n",
+                screen::MethodName(method), t.Fps(n), t.Fps(n) >= 10.0 ? "ok" : "MISSED");
+    std::printf("stage passes: %.1f ms a frame (goal < 25) %s\n", t.stageWall / n,
+                t.stageWall / n < 25.0 ? "ok" : "MISSED");
+    std::printf("wrote %s_stage_{ref,texture,hit}.png\n", b.out.c_str());
+    return 0;
+}
+
 }  // namespace
 
 int RunPreviewBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewArgs& args,
                     const BenchArgs& b) {
-    Scene scene = sceneIn;
-    scene.settings.tessellationRate = s.tessellationRate;
-    const float time = scene.settings.time;
     if (const auto dir = std::filesystem::path(b.out).parent_path(); !dir.empty()) {
         std::error_code ec;
         std::filesystem::create_directories(dir, ec);
         if (ec) throw InputError("--bench-out", "cannot create '" + dir.string() + "'");
     }
-    RenderSceneOptions ro;
-    ro.frameTime = time;
-    ro.needLights = ro.needEnvironment = false;
-    RenderScene rs(scene, ro);  // keeps a reference to `scene`: camera edits below are seen
-
-    OrbitCamera home;
-    home.FromScene(scene, time);
+    if (s.denoise) return RunStageBench(sceneIn, s, args, b);
+    BenchOrbit orbitViews(sceneIn, s, args, b.frames, false);
+    const Scene& scene = orbitViews.scene;
+    const RenderScene& rs = *orbitViews.rs;
+    const float time = orbitViews.time;
     const int n = b.frames;
-    // View i of the orbit; view n is the last (where relMSE is measured).
-    auto setView = [&](int i) {
-        OrbitCamera c = home;
-        c.Orbit(args.orbitDegrees * float(i) / float(n), 0.0f);
-        c.ToCamera(&scene.camera);
-    };
+    auto setView = [&](int i) { orbitViews.SetView(i); };
 
     RenderOptions base;
     base.integrator = IntegratorKind::AO;
@@ -98,14 +232,8 @@ int RunPreviewBench(const Scene& sceneIn, const PreviewSettings& s, const Previe
 
     // Texture space: the preview's settings (trivial filter by default), one cache for the orbit.
     RenderOptions texOpt = base;
+    texOpt.texture = TextureOptionsOf(s);
     texOpt.texture.enabled = true;
-    texOpt.texture.filter = s.filter;
-    texOpt.texture.radius = s.radius;
-    texOpt.texture.footprint = s.footprint;
-    texOpt.texture.cache.sampleCacheBytes = size_t(double(s.sampleCacheMb) * (1 << 20));
-    texOpt.texture.cache.texelCacheBytes = size_t(double(s.texelCacheMb) * (1 << 20));
-    texOpt.texture.cache.lodBias = s.lodBias;
-    texOpt.texture.cache.Validate();
     TextureSpaceCache cache(rs, texOpt.texture);
     const OrbitRun tex = orbit(texOpt, &cache);
     const double eTex = RelMSE(tex.last, ref.beauty);

@@ -10,8 +10,10 @@
 #include <tbb/parallel_for.h>
 
 #include "renderer/camera.h"
+#include "renderer/frame_buffers_render.h"
 #include "renderer/render_scene.h"
 #include "renderer/texture_space.h"
+#include "texcache/enum_names.h"
 #include "texcache/error.h"
 
 namespace texcache::preview {
@@ -39,7 +41,9 @@ bool SameImage(const PreviewSettings& a, const PreviewSettings& b) {
     return x == y;
 }
 
-TextureSpaceOptions TextureOptions(const PreviewSettings& s) {
+}  // namespace
+
+TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s) {
     TextureSpaceOptions t;
     t.enabled = s.textureSpace;
     t.filter = s.filter;
@@ -51,6 +55,8 @@ TextureSpaceOptions TextureOptions(const PreviewSettings& s) {
     t.cache.Validate();
     return t;
 }
+
+namespace {
 
 glm::vec3 HashColour(uint64_t h) {
     h ^= h >> 33;
@@ -83,6 +89,7 @@ constexpr ViewNames kViewNames[] = {
     {ViewMode::Texels, "cache texels", "texels"},
     {ViewMode::HitMiss, "cache hit / miss", "hitmiss"},
     {ViewMode::Overshading, "overshading", "overshading"},
+    {ViewMode::Motion, "motion vectors", "motion"},
 };
 const ViewNames* FindView(ViewMode m) {
     for (const ViewNames& v : kViewNames)
@@ -131,6 +138,49 @@ glm::vec3 HeatColour(float t) {
     const float x = std::clamp(t, 0.0f, 1.0f) * float(n - 1);
     const int i = std::min(int(x), n - 2);
     return glm::mix(stops[i], stops[i + 1], x - float(i));
+}
+
+namespace {
+constexpr EnumName<screen::MotionKind> kMotionKinds[] = {
+    {"traditional", screen::MotionKind::Traditional},
+    {"shadow", screen::MotionKind::Shadow},
+    {"glossy", screen::MotionKind::Glossy},
+    {"occlusion", screen::MotionKind::Occlusion}};
+}  // namespace
+
+std::string MotionKindKeys() {
+    return EnumNames(kMotionKinds);
+}
+
+screen::MotionKind ParseMotionKind(const std::string& key, const std::string& where) {
+    return ParseEnum(kMotionKinds, key, where, "motion-vector kind");
+}
+
+const char* MotionKindKey(screen::MotionKind k) {
+    return EnumToName(kMotionKinds, k);
+}
+
+bool KeepsStageHistory(const PreviewSettings& a, const PreviewSettings& b) {
+    PreviewSettings x = a, y = b;
+    x.time = y.time = 0.0f;
+    x.exposure = y.exposure = 0.0f;
+    x.view = y.view = ViewMode::Beauty;
+    x.motionKind = y.motionKind = screen::MotionKind::Traditional;
+    x.maxFrames = y.maxFrames = 0;
+    return x == y;
+}
+
+glm::vec3 MotionColour(glm::vec2 offset, float fullPixels) {
+    if (!std::isfinite(offset.x + offset.y)) return glm::vec3(0.0f);
+    const float len = glm::length(offset);
+    const float sat = std::min(len / std::max(fullPixels, 1e-6f), 1.0f);
+    // Hue from the direction (raster y is down), HSV with value 1.
+    const float hue = (std::atan2(offset.y, offset.x) / (2.0f * 3.14159265f) + 1.0f) * 6.0f;
+    glm::vec3 rgb;
+    const float shift[3] = {0.0f, 4.0f, 2.0f};
+    for (int k = 0; k < 3; ++k)
+        rgb[k] = std::clamp(std::abs(std::fmod(hue + shift[k], 6.0f) - 3.0f) - 1.0f, 0.0f, 1.0f);
+    return glm::mix(glm::vec3(1.0f), rgb, sat);
 }
 
 uint32_t OvershadeTop(uint32_t maxShaded) {
@@ -303,6 +353,15 @@ void ProgressiveRenderer::Run() {
     // Worker-side buffers, swapped with the published ones (no allocation per frame once sized).
     std::vector<uint8_t> display;
     Image mean;
+    // The screen-space stage (UsesStage): made on first use, its history kept across frames.
+    std::unique_ptr<screen::ScreenSpaceDenoiser> denoiser;
+    screen::FrameBuffers frameBuffers;
+    std::vector<glm::vec3> denoised;
+    PreviewSettings stageSettings;                  // what the stage's history was made with
+    int stageHistory = 0;                           // frames in it (0: none)
+    float stagePrevTime = 0.0f;                     // scene time of its last frame
+    uint64_t stageFrames = 0;                       // frames the stage ran (a new seed each)
+    uint64_t sceneBuilds = 0, stageSceneBuild = 0;  // RenderScene rebuilds (tessellation)
 
     // Tone-maps `mean` and publishes it with the frame's statistics (null: keep the last ones).
     auto publish = [&](const PreviewSettings& cur, uint64_t version, const FrameStats* frame) {
@@ -368,6 +427,7 @@ void ProgressiveRenderer::Run() {
                 ro.frameTime = frameTime;
                 // Lights always: the integrator can be switched to direct/path at any time.
                 rs = std::make_unique<RenderScene>(scene_, ro);
+                if (retessellate) ++sceneBuilds;
                 built.tessellationRate = cur.tessellationRate;
                 if (timeChanged && cache) cache->BeginFrame(++cacheFrame);
                 std::lock_guard<std::mutex> lock(mutex_);
@@ -396,9 +456,13 @@ void ProgressiveRenderer::Run() {
             const bool cacheView = cur.view == ViewMode::TexelMip || cur.view == ViewMode::Texels;
             const bool heatView =
                 cur.view == ViewMode::HitMiss || cur.view == ViewMode::Overshading;
+            const bool staged = UsesStage(cur);
+            // The stage renders the path tracer's split: its cache holds diffuse indirect light.
+            PreviewSettings eff = cur;
+            if (staged) eff.integrator = IntegratorKind::Path;
             const bool wantCache =
-                (cur.textureSpace && CachedIntegrator(cur.integrator)) || cacheView;
-            if (wantCache && (!cache || !SameCacheContents(cur, built))) {
+                (cur.textureSpace && CachedIntegrator(eff.integrator)) || cacheView;
+            if (wantCache && (!cache || !SameCacheContents(eff, built))) {
                 cache.reset();  // free the old slots before allocating new ones
                 for (size_t m = 0; m < scene_.materials.size(); ++m) {
                     scene_.materials[m].cacheFilter =
@@ -406,8 +470,8 @@ void ProgressiveRenderer::Run() {
                     scene_.materials[m].cacheRadius =
                         m < cur.materialRadius.size() ? cur.materialRadius[m] : -1;
                 }
-                cache = std::make_unique<TextureSpaceCache>(*rs, TextureOptions(cur));
-                built = cur;
+                cache = std::make_unique<TextureSpaceCache>(*rs, TextureOptionsOf(cur));
+                built = eff;
             }
 
             if (imageChanged) {
@@ -423,6 +487,63 @@ void ProgressiveRenderer::Run() {
                 // Deterministic: one frame says everything.
                 RenderCacheView(*rs, *cache, frameTime, cur.view, &mean);
                 accumulated = INT_MAX;
+            } else if (staged) {
+                if (!denoiser) denoiser = std::make_unique<screen::ScreenSpaceDenoiser>();
+                if (stageHistory == 0 || !KeepsStageHistory(stageSettings, cur) ||
+                    stageSceneBuild != sceneBuilds) {
+                    denoiser->Reset();
+                    stageHistory = 0;
+                    stagePrevTime = frameTime;  // no previous frame: nothing moved
+                }
+                stageSettings = cur, stageSceneBuild = sceneBuilds;
+                RenderOptions opt;
+                opt.integrator = IntegratorKind::Path;
+                opt.width = cur.width, opt.height = cur.height;
+                opt.spp = cur.sppPerFrame;
+                // A new seed per frame: the stage's history averages independent estimates.
+                opt.seed = cur.seed + stageFrames++ * 0x9E3779B9ull;
+                opt.maxDepth = cur.maxDepth;
+                opt.frameTime = frameTime;
+                opt.progress = false;
+                opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
+                opt.texture.enabled = cur.textureSpace && cache != nullptr;
+                // "prev" points go to the previous frame's time: the stage's history was
+                // rendered there (the same time while only the camera moves).
+                const RenderStats st =
+                    RenderFrameBuffers(*rs, opt, stagePrevTime, &frameBuffers,
+                                       opt.texture.enabled ? cache.get() : nullptr);
+                const screen::Method method =
+                    cur.denoise ? cur.denoiseMethod : screen::Method::Reliable;
+                denoiser->Denoise(
+                    frameBuffers, method,
+                    cur.demodulate ? screen::Demodulation::On : screen::Demodulation::Off,
+                    &denoised);
+                stagePrevTime = frameTime;
+                ++stageHistory;
+                if (cur.view == ViewMode::Motion) {
+                    const std::vector<glm::vec2> from = denoiser->LastMotion(cur.motionKind);
+                    for (int y = 0; y < mean.height; ++y)
+                        for (int x = 0; x < mean.width; ++x) {
+                            const glm::vec2 centre(float(x) + 0.5f, float(y) + 0.5f);
+                            const glm::vec3 c = MotionColour(
+                                from[size_t(y) * size_t(mean.width) + size_t(x)] - centre, 8.0f);
+                            float* px = mean.At(x, y);
+                            px[0] = c.x, px[1] = c.y, px[2] = c.z;
+                        }
+                } else {
+                    for (size_t p = 0; p < denoised.size(); ++p)
+                        for (int k = 0; k < 3; ++k) mean.data[3 * p + k] = denoised[p][k];
+                }
+                ++accumulated;  // frames since the last change: a still view stops at maxFrames
+                frame.staged = true;
+                frame.stageHistory = stageHistory;
+                frame.renderSeconds = st.seconds;
+                frame.stage = denoiser->Timings();
+                frame.raysPerSecond = st.seconds > 0.0 ? double(st.TotalRays()) / st.seconds : 0.0;
+                frame.textureSpace = opt.texture.enabled;
+                frame.texelHitRate = st.cache.TexelHitRate();
+                frame.lookups = st.cache.lookups;
+                frame.samplesShaded = st.cache.samplesShaded;
             } else {
                 RenderOptions opt;
                 opt.integrator =
@@ -436,7 +557,7 @@ void ProgressiveRenderer::Run() {
                 opt.aoDistance = cur.aoDistance;
                 opt.frameTime = frameTime;
                 opt.progress = false;
-                opt.texture = cache ? cache->options() : TextureOptions(cur);
+                opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
                 // Heat views record each pixel's lookups during this very frame (a probe of the
                 // cache afterwards would find everything it just stored).

@@ -14,6 +14,14 @@
 // scene time (animation) re-poses the RenderScene and starts a cache frame (BeginFrame: every
 // sample and texel re-shaded), as `texcache render --frames` does between frames; when only the
 // camera is animated, shading does not change and the cache is kept, as for any camera move.
+//
+// The screen-space stage (denoise on, or the motion-vector view): each frame renders the path
+// tracer's split (RenderFrameBuffers, diffuse indirect light from the cache where texture-space
+// shading is on) and one ScreenSpaceDenoiser, owned by the worker, denoises it. Its history is
+// the point: it is kept while the camera orbits and while an animation plays (the previous
+// frame's time is where "prev" points are moved to), and dropped when anything else changes what
+// the stage sees (KeepsStageHistory). The image shown is the stage's latest output, not an
+// average of frames: the stage's own temporal accumulation converges a still view.
 #pragma once
 #include <atomic>
 #include <condition_variable>
@@ -24,6 +32,7 @@
 #include <thread>
 #include <vector>
 
+#include "filters/screen_space/screen_denoiser.h"
 #include "orbit_camera.h"
 #include "renderer/image.h"
 #include "renderer/render.h"
@@ -32,9 +41,11 @@
 namespace texcache::preview {
 
 /// What the preview window shows. HitMiss and Overshading are heat maps of the texel-cache
-/// lookups of the frame rendered after the last change (camera, settings or time).
-enum class ViewMode { Beauty, FaceId, TexelMip, Texels, HitMiss, Overshading };
-constexpr int kNumViewModes = 6;
+/// lookups of the frame rendered after the last change (camera, settings or time); Motion shows
+/// the screen-space stage's motion vectors of the last frame (PreviewSettings::motionKind) as
+/// colour (MotionColour).
+enum class ViewMode { Beauty, FaceId, TexelMip, Texels, HitMiss, Overshading, Motion };
+constexpr int kNumViewModes = 7;
 /// The panel's name of a view.
 const char* ViewModeName(ViewMode m);
 /// The command line's name of a view (--view), e.g. "hitmiss".
@@ -67,9 +78,45 @@ struct PreviewSettings {
     /// converges too (otherwise only anti-aliasing improves while still).
     bool refineCacheWhenStill = false;
     uint64_t seed = 0;
+    /// The screen-space stage on the preview's frames (see the top of this file): off, or this
+    /// method, with demodulation as `texcache render --demodulate`. While it is on, frames are
+    /// the path tracer's split whatever `integrator` says.
+    bool denoise = false;
+    screen::Method denoiseMethod = screen::Method::Reliable;
+    bool demodulate = true;
+    /// The motion vectors the Motion view shows (the stage runs Reliable for it when off).
+    screen::MotionKind motionKind = screen::MotionKind::Traditional;
 
     bool operator==(const PreviewSettings&) const = default;
 };
+
+/// The texture-space cache options of the settings (filter, radius, footprint, cache sizes,
+/// LOD bias); `enabled` is settings.textureSpace.
+TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s);
+
+/// Whether the screen-space stage's history survives going from settings `a` to `b`: only what
+/// moves the view along (scene time), how it is shown (exposure, view, motion kind) and the
+/// accumulation cap may differ; anything else (integrator, resolution, cache, filters,
+/// tessellation, method, ...) changes what the stage sees and resets it. Camera moves are not
+/// settings: they keep the history.
+bool KeepsStageHistory(const PreviewSettings& a, const PreviewSettings& b);
+
+/// The names of the motion-vector kinds ("traditional, shadow, glossy, occlusion") and the kind a
+/// name stands for (InputError naming `where` and the valid names otherwise).
+std::string MotionKindKeys();
+screen::MotionKind ParseMotionKind(const std::string& key, const std::string& where);
+const char* MotionKindKey(screen::MotionKind k);
+
+/// Whether frames with settings `s` go through the screen-space stage.
+inline bool UsesStage(const PreviewSettings& s) {
+    return (s.denoise && s.view == ViewMode::Beauty) || s.view == ViewMode::Motion;
+}
+
+/// Colour of a motion vector: a pixel whose history comes from `offset` pixels away (previous
+/// raster position minus this pixel's centre) gets the hue of its direction (right red, down
+/// yellow-green, left cyan, up blue-violet) and a saturation growing with its length, full at
+/// `fullPixels`; no motion is white, no history (NaN) black.
+glm::vec3 MotionColour(glm::vec2 offset, float fullPixels);
 
 /// Statistics of the last finished frame.
 struct FrameStats {
@@ -85,6 +132,11 @@ struct FrameStats {
     float time = 0.0f;          ///< scene time of the frame
     uint32_t cacheFrame = 0;    ///< cache frames begun so far (one per time change)
     uint32_t overshadeTop = 0;  ///< Overshading view: samples per pixel at the top of the scale
+    // The screen-space stage (UsesStage), when it ran on this frame:
+    bool staged = false;
+    int stageHistory = 0;        ///< frames in the stage's history, this one included (1: reset)
+    double renderSeconds = 0.0;  ///< the frame buffers' render (the rest of `seconds` is the stage)
+    screen::StageTimings stage;  ///< the stage's passes, wall-clock ms
 };
 
 class ProgressiveRenderer {

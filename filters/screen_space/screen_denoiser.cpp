@@ -51,6 +51,7 @@
 
 #include "filters/screen_space/denoiser_state.h"
 #include "filters/screen_space/internal.h"
+#include "texcache/enum_names.h"
 #include "texcache/error.h"
 
 namespace texcache::screen {
@@ -69,6 +70,25 @@ const char* MethodName(Method m) {
             return "reliable";
     }
     return "?";
+}
+
+namespace {
+constexpr EnumName<Method> kMethodKeys[] = {{"spatial", Method::SpatialOnly},
+                                            {"baseline", Method::Baseline},
+                                            {"clamp", Method::BaselineClamp},
+                                            {"reliable", Method::Reliable}};
+}  // namespace
+
+std::string MethodKeys() {
+    return EnumNames(kMethodKeys);
+}
+
+Method ParseMethodKey(std::string_view key, const std::string& where) {
+    return ParseEnum(kMethodKeys, key, where, "denoise method");
+}
+
+const char* MethodKey(Method m) {
+    return EnumToName(kMethodKeys, m);
 }
 
 namespace {

@@ -32,6 +32,7 @@
 #pragma once
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -47,6 +48,14 @@ enum class Demodulation { Off, On };
 
 /// Short name of a method ("spatial", "baseline", "baseline+clamp", "reliable").
 const char* MethodName(Method m);
+/// The command lines' names of the methods (`--denoise`): "spatial", "baseline", "clamp",
+/// "reliable", comma separated.
+std::string MethodKeys();
+/// The method a command-line name stands for; throws InputError naming `where` and the valid
+/// names otherwise.
+Method ParseMethodKey(std::string_view key, const std::string& where);
+/// The command-line name of a method (MethodKeys()).
+const char* MethodKey(Method m);
 
 /// Which motion vectors LastMotion() returns.
 enum class MotionKind {
