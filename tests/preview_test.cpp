@@ -50,7 +50,7 @@ ShellResult Shell(const std::string& cmd) {
 }
 
 fs::path TempDir(const std::string& name) {
-    const fs::path d = fs::temp_directory_path() / ("texcache_preview_test_" + name);
+    const fs::path d = fs::path(::testing::TempDir()) / ("texcache_preview_test_" + name);
     fs::remove_all(d);
     fs::create_directories(d);
     return d;
