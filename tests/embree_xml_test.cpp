@@ -76,8 +76,9 @@ TEST(EmbreeXml, CageWithCreasesCornersHolesAndNgonsReadsBack) {
         for (size_t i = 0; i < holes.size(); ++i) EXPECT_EQ(int(holes[i]), cage.holes[i]);
         EXPECT_NE(xml.find("<float3 name=\"Kd\">1 0.5 0.25</float3>"), std::string::npos);
         // Smooth boundaries are the loader's default, which it has no name for.
-        if (cage.boundary == BoundaryInterpolation::EdgeOnly)
+        if (cage.boundary == BoundaryInterpolation::EdgeOnly) {
             EXPECT_NE(xml.find("<position_indices>"), std::string::npos);
+        }
     }
 }
 
