@@ -183,8 +183,12 @@ int RunPeerBench(const PeerArgs& a) {
     if (ec) throw InputError("--out", "cannot create directory '" + a.out + "': " + ec.message());
     const fs::path dir = fs::absolute(a.out);
     const std::string xml = (dir / "peer.xml").string(), json = (dir / "ours.json").string();
-    WriteTextAtomic(xml, EmbreeXmlScene(cage, glm::vec3(a.albedo)));
-    WriteTextAtomic(json, OurScene(a, width, height));
+    {
+        AtomicFiles files;  // both scene files, renamed together once written
+        WriteText(xml, EmbreeXmlScene(cage, glm::vec3(a.albedo)), files);
+        WriteText(json, OurScene(a, width, height), files);
+        files.Commit();
+    }
 
     const std::string self = a.ours.empty() ? fs::read_symlink("/proc/self/exe").string()
                                             : fs::absolute(a.ours).string();
