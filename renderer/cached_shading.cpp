@@ -154,7 +154,7 @@ ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool d
         c, r, c.opt.texture.indirectSamples, rays, [&](Ray& ray, Rng& rng, glm::vec3 N) {
             glm::vec3 Ld(0.0f);
             LightSample ls;
-            if (direct && c.SampleLight(ray.org, rng.Next1D(), rng.Next2D(), &ls)) {
+            if (direct && c.SampleLight(ray.org, N, rng.Next1D(), rng.Next2D(), &ls)) {
                 const float cosi = glm::dot(ls.wi, N);
                 if (cosi > 0.0f) {
                     Ray shadow;
@@ -265,7 +265,8 @@ glm::vec3 LiDirectCachedShadows(const Context& c, const Ray& ray, const Hit& hit
             int(c.quads.size()) + std::min(int(rng.Next1D() * float(others)), others - 1);
         LightSample ls;
         // SampleLight takes a uniform pick over all lights: map `pick` into its interval.
-        if (c.SampleLight(si.P, (float(pick) + 0.5f) / float(c.numLights), rng.Next2D(), &ls)) {
+        if (c.SampleLight(si.P, si.N, (float(pick) + 0.5f) / float(c.numLights), rng.Next2D(),
+                          &ls)) {
             const glm::vec3 f = bsdf.Eval(wo, ls.wi);
             ++rays.shadow;
             if (f != glm::vec3(0.0f) && !c.rs.Occluded(ShadowRay(si, ls, ray.time))) {

@@ -23,6 +23,10 @@ public:
 
 private:
     glm::mat4 camToWorld_, worldToCam_;
+    // Pinhole: the unnormalized world-space direction through film position (px, py) is
+    // dirBase_ + px * dirX_ + py * dirY_ (one normalize per ray, no matrix: the camera's ray
+    // generation was 10% of a path-traced frame's profile; `perf record` on `texcache bench peer`).
+    glm::vec3 eye_, dirBase_, dirX_, dirY_;
     float tanHalfY_, aspect_;
     int width_, height_;
     float lensRadius_, focusDistance_;

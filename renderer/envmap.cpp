@@ -118,10 +118,11 @@ glm::vec3 EnvironmentMap::Eval(glm::vec3 dir) const {
                     glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx), fy);
 }
 
-glm::vec3 EnvironmentMap::Sample(glm::vec2 u, glm::vec3* dir, float* pdf) const {
+glm::vec3 EnvironmentMap::Sample(glm::vec3 n, glm::vec2 u, glm::vec3* dir, float* pdf) const {
     if (isConstant_) {
-        *dir = SampleUniformSphere(u);
-        *pdf = kUniformSpherePdf;
+        const glm::vec3 local = SampleCosineHemisphere(u);
+        *dir = Frame::FromZ(n).FromLocal(local);
+        *pdf = CosineHemispherePdf(local.z);
         return constant_;
     }
     float pdfUv;
@@ -133,8 +134,8 @@ glm::vec3 EnvironmentMap::Sample(glm::vec2 u, glm::vec3* dir, float* pdf) const 
     return Eval(*dir);
 }
 
-float EnvironmentMap::Pdf(glm::vec3 dir) const {
-    if (isConstant_) return kUniformSpherePdf;
+float EnvironmentMap::Pdf(glm::vec3 n, glm::vec3 dir) const {
+    if (isConstant_) return CosineHemispherePdf(glm::dot(n, dir));
     const glm::vec2 uv = DirToUv(dir);
     const float sinTheta = std::sin(uv.y * kPiF);
     return sinTheta > 0.0f ? dist_.Pdf(uv) / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;

@@ -142,7 +142,7 @@ void FrameDirectSample(const Context& c, const FrameMotion& motion, const Surfac
         const glm::vec2 u(std::fmod(shift.x + kG1 * float(k), 1.0f),
                           std::fmod(shift.y + kG2 * float(k), 1.0f));
         LightSample& ls = cand[k];
-        if (!c.SampleLight(si.P, std::min(uPick, kOneMinusEpsilon),
+        if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
                            glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
             continue;
         glm::vec3 fd, fs;
@@ -205,7 +205,8 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
     glm::vec3 L(0.0f);
     if (!found) {
         // Direct light from the environment: the light sample's MIS partner.
-        if (c.env) L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(wi) * c.PickPdf());
+        if (c.env)
+            L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(si.N, wi) * c.PickPdf());
     } else if (hit.light >= 0) {
         L = c.QuadEmission(hit.light, wi) *
             PowerHeuristic(1, pdf, 1, c.QuadPdf(hit.light, wi, hit.t));

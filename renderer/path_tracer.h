@@ -86,7 +86,8 @@ struct Context {
         return c > 0.0f ? dist * dist / (q.area * c) * PickPdf() : 0.0f;
     }
 
-    bool SampleLight(glm::vec3 p, float uPick, glm::vec2 u, LightSample* s) const {
+    /// One light sample for the surface point `p` of shading normal `n` (facing the viewer).
+    bool SampleLight(glm::vec3 p, glm::vec3 n, float uPick, glm::vec2 u, LightSample* s) const {
         if (numLights == 0) return false;
         int i = std::min(int(uPick * float(numLights)), numLights - 1);
         if (i < int(quads.size())) {
@@ -114,7 +115,7 @@ struct Context {
             return true;
         }
         float pdf;
-        s->Li = env->Sample(u, &s->wi, &pdf);
+        s->Li = env->Sample(n, u, &s->wi, &pdf);
         s->pdf = pdf * PickPdf();
         s->dist = INFINITY;
         s->delta = false;
@@ -164,7 +165,8 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                  int maxDepth, RayCounts& rays, bool emitFirst = true,
                  const CachedIndirect& cached = CachedIndirect()) {
     glm::vec3 L(0.0f), beta(1.0f);
-    float prevPdf = 0.0f;  // BSDF pdf of the ray being traced (0: camera ray, no MIS)
+    float prevPdf = 0.0f;   // BSDF pdf of the ray being traced (0: camera ray, no MIS)
+    glm::vec3 prevN(0.0f);  // shading normal where it left (the environment's pdf depends on it)
     Hit hit = firstHit;
     bool found = hitFirst;
     for (int depth = 0;; ++depth) {
@@ -178,7 +180,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                 const glm::vec3 Le = c.env->Eval(ray.dir);
                 float w = 1.0f;
                 if (prevPdf > 0.0f)
-                    w = PowerHeuristic(1, prevPdf, 1, c.env->Pdf(ray.dir) * c.PickPdf());
+                    w = PowerHeuristic(1, prevPdf, 1, c.env->Pdf(prevN, ray.dir) * c.PickPdf());
                 L += beta * Le * w;
             }
             break;
@@ -206,7 +208,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         }
 
         LightSample ls;
-        if (c.SampleLight(si.P, rng.Next1D(), rng.Next2D(), &ls)) {
+        if (c.SampleLight(si.P, si.N, rng.Next1D(), rng.Next2D(), &ls)) {
             const glm::vec3 f = bsdf.Eval(wo, ls.wi);
             if (f != glm::vec3(0.0f)) {
                 ++rays.shadow;
@@ -228,6 +230,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         if (!bsdf.Sample(wo, uChoice, rng.Next2D(), &wi, &weight, &pdf)) break;
         beta *= weight;
         prevPdf = pdf;
+        prevN = si.N;
         ray.org = OffsetOrigin(si.P, si.Ng, wi);
         ray.dir = wi;
         ray.tnear = 0.0f;

@@ -90,12 +90,30 @@ struct RenderScene::Impl {
     }
 
     /// World-space geometric normal of a hit on an object (Embree gives it in object space).
-    glm::vec3 WorldNormal(int object, float time, const RTCHit& h) const {
+    glm::vec3 WorldNormal(int object, float time, glm::vec3 Ng) const {
         const Instance& inst = objects[object];
         const glm::mat3 N = inst.steps.size() == 1
                                 ? inst.normalMatrix
                                 : glm::transpose(glm::inverse(glm::mat3(Transform(object, time))));
-        return N * glm::vec3(h.Ng_x, h.Ng_y, h.Ng_z);
+        return N * Ng;
+    }
+
+    /// A hit from Embree's fields (geomID valid), as Intersect and Intersect16 report it.
+    void ToHit(float tfar, unsigned geomID, unsigned instID, unsigned primID, float u, float v,
+               glm::vec3 Ng, float time, Hit* hit) const {
+        hit->t = tfar;
+        hit->primID = primID;
+        hit->U = u;
+        hit->V = v;
+        if (instID != RTC_INVALID_GEOMETRY_ID) {
+            hit->object = geomToObject[instID];
+            hit->light = -1;
+            hit->Ng = WorldNormal(hit->object, time, Ng);
+        } else {
+            hit->object = -1;
+            hit->light = geomToLight[geomID];
+            hit->Ng = Ng;
+        }
     }
 
     glm::mat4 Transform(int object, float time) const {
@@ -348,20 +366,36 @@ bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     rtcIntersect1(impl_->top, &ctx, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-    hit->t = rh.ray.tfar;
-    hit->primID = rh.hit.primID;
-    hit->U = rh.hit.u;
-    hit->V = rh.hit.v;
-    if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
-        hit->object = impl_->geomToObject[rh.hit.instID[0]];
-        hit->light = -1;
-        hit->Ng = impl_->WorldNormal(hit->object, ray.time, rh.hit);
-    } else {
-        hit->object = -1;
-        hit->light = impl_->geomToLight[rh.hit.geomID];
-        hit->Ng = glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
-    }
+    impl_->ToHit(rh.ray.tfar, rh.hit.geomID, rh.hit.instID[0], rh.hit.primID, rh.hit.u, rh.hit.v,
+                 glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z), ray.time, hit);
     return true;
+}
+
+void RenderScene::Intersect16(const Ray* rays, int n, Hit* hits, bool* found) const {
+    alignas(64) int valid[16];
+    alignas(64) RTCRayHit16 rh;
+    for (int i = 0; i < 16; ++i) {
+        valid[i] = i < n ? -1 : 0;
+        const Ray& r = rays[i < n ? i : 0];  // idle lanes hold a copy, masked off by `valid`
+        rh.ray.org_x[i] = r.org.x, rh.ray.org_y[i] = r.org.y, rh.ray.org_z[i] = r.org.z;
+        rh.ray.dir_x[i] = r.dir.x, rh.ray.dir_y[i] = r.dir.y, rh.ray.dir_z[i] = r.dir.z;
+        rh.ray.tnear[i] = r.tnear, rh.ray.tfar[i] = r.tfar, rh.ray.time[i] = r.time;
+        rh.ray.mask[i] = 0xFFFFFFFFu, rh.ray.id[i] = unsigned(i), rh.ray.flags[i] = 0;
+        rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+    }
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    rtcIntersect16(valid, impl_->top, &ctx, &rh);
+    for (int i = 0; i < n; ++i) {
+        found[i] = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+        if (found[i])
+            impl_->ToHit(rh.ray.tfar[i], rh.hit.geomID[i], rh.hit.instID[0][i], rh.hit.primID[i],
+                         rh.hit.u[i], rh.hit.v[i],
+                         glm::vec3(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]), rays[i].time,
+                         &hits[i]);
+    }
 }
 
 bool RenderScene::IntersectObject(int object, const Ray& ray, Hit* hit) const {
@@ -383,7 +417,7 @@ bool RenderScene::IntersectObject(int object, const Ray& ray, Hit* hit) const {
     hit->primID = rh.hit.primID;
     hit->U = rh.hit.u;
     hit->V = rh.hit.v;
-    hit->Ng = I.WorldNormal(object, ray.time, rh.hit);
+    hit->Ng = I.WorldNormal(object, ray.time, glm::vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z));
     return true;
 }
 

@@ -10,7 +10,8 @@ pkgs=(build-essential cmake pkg-config
       libembree-dev libosd-dev libopenimageio-dev libopenexr-dev libglm-dev libtbb-dev
       libeigen3-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev gnuplot-nox
       libglfw3-dev libimgui-dev xvfb xauth libgl1-mesa-dri
-      clang-format)   # scripts/check_format.sh
+      clang-format    # scripts/check_format.sh
+      embree-tools)   # Embree's pathtracer, the peer of `texcache bench peer` (optional at run time)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

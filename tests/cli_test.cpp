@@ -3,9 +3,11 @@
 // never replaces a good output.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -55,8 +57,8 @@ TEST(Cli, WritesRequestedAovLayers) {
 }
 
 TEST(Cli, HelpOnEverySubcommand) {
-    for (const char* c :
-         {"--help", "render --help", "compare --help", "bench --help", "bench rays --help"}) {
+    for (const char* c : {"--help", "render --help", "compare --help", "bench --help",
+                          "bench rays --help", "bench peer --help"}) {
         const CliRun r = Texcache(c);
         EXPECT_EQ(r.code, 0) << c << ": " << r.out;
         EXPECT_NE(r.out.find("Usage"), std::string::npos) << c;
@@ -401,6 +403,48 @@ TEST(Cli, CompareRefusesHeadersClaimingHugeSizes) {
     test::ClaimExrSize(liar.string(), 46340, 46340);
     const std::string args = "compare " + liar.string() + " " + liar.string();
     ExpectOneLineError(Texcache(args), args, "46340x46340");
+}
+
+// `bench peer` without Embree's pathtracer: one line saying so, exit 2, nothing rendered. The
+// cage check comes first: a cage the peer cannot take is named whether or not it is installed.
+TEST(Cli, BenchPeerSaysWhatItCannotRun) {
+    const fs::path out = Dir() / "peer";
+    fs::remove_all(out);
+    const std::string cube = test::MeshPath("catmark_cube");
+    CliRun r =
+        Texcache("bench peer " + cube + " --pathtracer /no/such/pathtracer --out " + out.string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("/no/such/pathtracer: Embree's pathtracer is not installed"),
+              std::string::npos)
+        << r.out;
+    EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << r.out;
+    EXPECT_FALSE(fs::exists(out));
+
+    // Found on PATH by default: with an empty PATH it is not.
+    const std::string path = std::getenv("PATH") ? std::getenv("PATH") : "";
+    setenv("PATH", "/no/such/dir", 1);
+    r = Texcache("bench peer " + cube + " --out " + out.string());
+    setenv("PATH", path.c_str(), 1);
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("bench peer: Embree's pathtracer is not installed (Debian: apt-get "
+                         "install embree-tools)"),
+              std::string::npos)
+        << r.out;
+
+    const fs::path big = Dir() / "sixteen.obj";
+    {
+        std::ofstream f(big);
+        for (int i = 0; i < 16; ++i)
+            f << "v " << std::cos(0.3927 * i) << " " << std::sin(0.3927 * i) << " 0\n";
+        f << "f";
+        for (int i = 1; i <= 16; ++i) f << " " << i;
+        f << "\n";
+    }
+    r = Texcache("bench peer " + big.string() + " --out " + out.string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("cannot render this cage: a face of 16 vertices"), std::string::npos)
+        << r.out;
+    EXPECT_FALSE(fs::exists(out));
 }
 
 }  // namespace

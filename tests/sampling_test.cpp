@@ -138,9 +138,9 @@ TEST(EnvironmentMap, SamplingConcentratesOnTheSunAndPdfsAgree) {
     for (int i = 0; i < n; ++i) {
         glm::vec3 dir;
         float pdf;
-        const glm::vec3 L = env.Sample(rng.Next2D(), &dir, &pdf);
+        const glm::vec3 L = env.Sample(glm::vec3(0, 0, 1), rng.Next2D(), &dir, &pdf);
         ASSERT_GT(pdf, 0.0f);
-        EXPECT_NEAR(env.Pdf(dir), pdf, 2e-3f * pdf);
+        EXPECT_NEAR(env.Pdf(glm::vec3(0, 0, 1), dir), pdf, 2e-3f * pdf);
         EXPECT_TRUE(std::isfinite(L.x));
         nearSun += L.x > 100.0f;
     }
@@ -158,7 +158,7 @@ TEST(EnvironmentMap, ImportanceSamplingIsUnbiasedOnABundledMap) {
     for (int i = 0; i < n; ++i) {
         glm::vec3 dir;
         float pdf;
-        const glm::vec3 L = env.Sample(rng.Next2D(), &dir, &pdf);
+        const glm::vec3 L = env.Sample(glm::vec3(0, 0, 1), rng.Next2D(), &dir, &pdf);
         if (pdf > 0.0f) is += double(L.y) / pdf;
         const glm::vec3 d = SampleUniformSphere(rng.Next2D());
         const double u = double(env.Eval(d).y) / kUniformSpherePdf;
@@ -179,9 +179,9 @@ TEST(EnvironmentMap, RotationTurnsTheMapAboutUp) {
     glm::vec3 da, db;
     float pdf;
     for (int i = 0; i < 50; ++i)
-        a.Sample(rng.Next2D(), &da, &pdf);  // any sample: the sun dominates
-    a.Sample({0.5f, 0.5f}, &da, &pdf);
-    b.Sample({0.5f, 0.5f}, &db, &pdf);
+        a.Sample(glm::vec3(0, 0, 1), rng.Next2D(), &da, &pdf);  // any sample: the sun dominates
+    a.Sample(glm::vec3(0, 0, 1), {0.5f, 0.5f}, &da, &pdf);
+    b.Sample(glm::vec3(0, 0, 1), {0.5f, 0.5f}, &db, &pdf);
     // Rotating by +90 degrees is the right-handed R_y(90): (x, y, z) -> (z, y, -x).
     const glm::vec3 rotated(da.z, da.y, -da.x);
     EXPECT_NEAR(glm::dot(glm::normalize(rotated), db), 1.0f, 1e-3f);
@@ -198,7 +198,28 @@ TEST(EnvironmentMap, BadFilesAreClearErrors) {
     EXPECT_THROW(EnvironmentMap::Load("/no/such/env.exr", 1.0f, 0.0f), InputError);
     const EnvironmentMap c = EnvironmentMap::Constant(glm::vec3(2.0f));
     EXPECT_EQ(c.Eval(glm::vec3(0, 1, 0)), glm::vec3(2.0f));
-    EXPECT_FLOAT_EQ(c.Pdf(glm::vec3(1, 0, 0)), kUniformSpherePdf);
+}
+
+// A constant sky is sampled cosine-weighted about the surface normal: every sample above the
+// horizon, pdf = cos / pi, and E[L cos / pdf] = pi L exactly (each sample gives it).
+TEST(EnvironmentMap, ConstantSkyIsSampledByTheCosine) {
+    const EnvironmentMap c = EnvironmentMap::Constant(glm::vec3(2.0f));
+    const glm::vec3 n = glm::normalize(glm::vec3(0.3f, -0.8f, 0.5f));
+    Rng rng(6, 0);
+    for (int i = 0; i < 1000; ++i) {
+        glm::vec3 dir;
+        float pdf;
+        const glm::vec3 L = c.Sample(n, rng.Next2D(), &dir, &pdf);
+        const float cosTheta = glm::dot(dir, n);
+        ASSERT_GE(cosTheta, 0.0f);
+        EXPECT_NEAR(glm::length(dir), 1.0f, 1e-5f);
+        EXPECT_NEAR(pdf, cosTheta / kPiF, 1e-5f);
+        EXPECT_NEAR(c.Pdf(n, dir), pdf, 1e-5f);
+        if (pdf > 1e-3f) {
+            EXPECT_NEAR(L.x * cosTheta / pdf, 2.0f * kPiF, 1e-3f);
+        }
+    }
+    EXPECT_EQ(c.Pdf(n, -n), 0.0f);  // below the horizon: never sampled
 }
 
 }  // namespace

@@ -318,6 +318,8 @@ void AddBenchCommand(CLI::App& app, int& exitCode) {
     cache->add_option("--texel-cache-mb", cargs->texelCacheMb, "Texel cache size (MiB)")
         ->capture_default_str();
     cache->callback([cargs, &exitCode] { exitCode = RunCacheBench(*cargs); });
+
+    AddBenchPeerCommand(*bench, exitCode);
 }
 
 }  // namespace texcache::cli

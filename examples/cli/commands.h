@@ -11,6 +11,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode);
 void AddCompareCommand(CLI::App& app, int& exitCode);
 void AddMontageCommand(CLI::App& app, int& exitCode);
 void AddBenchCommand(CLI::App& app, int& exitCode);
+/// `bench peer` (cmd_bench_peer.cpp), registered by AddBenchCommand under `bench`.
+void AddBenchPeerCommand(CLI::App& bench, int& exitCode);
 void AddPreviewCommand(CLI::App& app, int& exitCode);
 void AddExperimentCommand(CLI::App& app, int& exitCode);
 
