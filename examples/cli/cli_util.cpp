@@ -7,6 +7,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <chrono>
@@ -163,6 +164,29 @@ void WriteText(const std::string& path, const std::string& text, AtomicFiles& gr
     const std::string tmp = group.Stage(path);
     std::ofstream f(tmp, std::ios::binary);
     if (!f || !(f << text) || !f.flush()) throw InputError(path, "cannot write file");
+}
+
+Image Montage(const std::vector<std::vector<const Image*>>& rows, int gap) {
+    int width = 0, height = 0;
+    for (const auto& row : rows) {
+        int w = 0;
+        for (const Image* img : row) w += img->width + (w ? gap : 0);
+        width = std::max(width, w);
+        height += row.front()->height + (height ? gap : 0);
+    }
+    Image out(width, height, 3);
+    int y0 = 0;
+    for (const auto& row : rows) {
+        int x0 = 0;
+        for (const Image* img : row) {
+            for (int y = 0; y < img->height; ++y)
+                for (int x = 0; x < img->width; ++x)
+                    std::copy_n(img->At(x, y), 3, out.At(x0 + x, y0 + y));
+            x0 += img->width + gap;
+        }
+        y0 += row.front()->height + gap;
+    }
+    return out;
 }
 
 double NowSeconds() {

@@ -79,6 +79,10 @@ void WriteOutputs(OutputPaths& out, const Image& beauty, const std::vector<Image
 /// Writes a text file into `group` (renamed when the caller commits it).
 void WriteText(const std::string& path, const std::string& text, AtomicFiles& group);
 
+/// Images in a grid, rows top to bottom and each row left to right, `gap` black pixels apart
+/// (montage, bench peer's side-by-side picture). Every image of a row has the row's height.
+Image Montage(const std::vector<std::vector<const Image*>>& rows, int gap);
+
 double NowSeconds();
 /// Peak resident memory of this process so far.
 double PeakMemoryMiB();

@@ -139,13 +139,7 @@ double Median(std::vector<double> v) {
 /// high-sample row; written as a PNG.
 void WriteSideBySide(const std::string& path, const Image& ours, const Image& peer,
                      const Image& oursRef, const Image& peerRef) {
-    const int W = ours.width, H = ours.height;
-    Image grid(2 * W, 2 * H, 3);
-    const Image* cells[4] = {&ours, &peer, &oursRef, &peerRef};
-    for (int c = 0; c < 4; ++c)
-        for (int y = 0; y < H; ++y)
-            for (int x = 0; x < W; ++x)
-                std::copy_n(cells[c]->At(x, y), 3, grid.At(x + (c % 2) * W, y + (c / 2) * H));
+    const Image grid = Montage({{&ours, &peer}, {&oursRef, &peerRef}}, 0);
     WriteImage(path, grid);
 }
 

@@ -27,7 +27,6 @@ int RunMontage(const MontageArgs& a) {
     const int gap = CheckRange("--gap", a.gap, 0, 4096);
     const float exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
     std::vector<Image> images;
-    int width = 0;
     for (const std::string& path : a.inputs) {
         images.push_back(ReadImageRGB(path));
         const Image& img = images.back();
@@ -35,16 +34,10 @@ int RunMontage(const MontageArgs& a) {
             throw InputError(path, "height " + std::to_string(img.height) + " differs from " +
                                        a.inputs.front() + "'s (" +
                                        std::to_string(images.front().height) + ")");
-        width += img.width + (images.size() > 1 ? gap : 0);
     }
-    Image out(width, images.front().height, 3);
-    int x0 = 0;
-    for (const Image& img : images) {
-        for (int y = 0; y < img.height; ++y)
-            for (int x = 0; x < img.width; ++x)
-                for (int k = 0; k < 3; ++k) out.At(x0 + x, y)[k] = img.At(x, y)[k];
-        x0 += img.width + gap;
-    }
+    std::vector<const Image*> row;
+    for (const Image& img : images) row.push_back(&img);
+    const Image out = Montage({row}, gap);
     WriteImage(a.output, out, {}, exposure);
     std::printf("wrote %s (%dx%d)\n", a.output.c_str(), out.width, out.height);
     return 0;
