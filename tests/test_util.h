@@ -115,6 +115,18 @@ inline void ClaimExrSize(const std::string& path, int width, int height) {
     std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
 }
 
+/// Writes a cage's positions and faces as an OBJ file (for the programs' tests).
+inline void WriteObj(const ControlCage& c, const std::string& path) {
+    std::ofstream f(path);
+    for (const auto& p : c.positions) f << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+    size_t at = 0;
+    for (int n : c.faceVertexCounts) {
+        f << 'f';
+        for (int i = 0; i < n; ++i) f << ' ' << c.faceVertexIndices[at++] + 1;
+        f << '\n';
+    }
+}
+
 /// Bounding-box centre and diagonal of a cage.
 inline void CageBounds(const ControlCage& c, glm::vec3* center, float* diagonal) {
     glm::vec3 lo(1e30f), hi(-1e30f);
