@@ -22,7 +22,11 @@
 // quad's child j is its quadrant j, an n-gon's child j its sub-face j), so a hit's quad (u,v)
 // maps affinely to Ptex (u,v). Shading derivatives (and the cache's surface queries) come from
 // OpenSubdiv's patches (LimitSurface) off the regular faces, which keep the bicubic fast path.
-// Ptex adjacency and footprints come from the cage alone and do not change.
+// Ptex adjacency and footprints come from the cage alone and do not change. At a power-of-two
+// rate the quads are exactly Embree's grid (its grids sample the limit at the same dyadic Ptex
+// parameters): on cages both take, the same rays hit within 1e-6 of the diagonal on the same Ptex
+// face and (u,v). Cost (README, "Cages Embree cannot take"): render time as through Embree, scene
+// build ~0.35 s more for the car's 1576 faces (OpenSubdiv refinement and patch table).
 #include "renderer/render_scene.h"
 
 #include <algorithm>
