@@ -6,11 +6,11 @@
 // 'N<MAX_PATCH_VALENCE' failed`), larger faces and every face around a vertex of valence 65 or
 // more silently vanish (embree-opensubdiv-facts.md), and so do the faces around a vertex whose
 // faces are large and many (ten 15-gons; probes of Embree alone, FacesBeyondEmbree below; ctest
-// -R EmbreeLimits renders each case). OpenSubdiv takes
-// any face size and valence. A mesh with any such face is therefore rendered, whole, as quads on
-// its limit surface (texcache/limit_tessellation.h): OpenSubdiv refines the cage uniformly
-// (level from the tessellation rate, as many segments per quad edge as Embree's grids) and moves
-// every vertex to its exact limit position. Why this and not the alternatives:
+// -R EmbreeLimits renders each case). OpenSubdiv takes any face size and valence. A mesh with
+// any such face is therefore rendered, whole, as quads on its limit surface
+// (texcache/limit_tessellation.h): OpenSubdiv refines the cage uniformly (level from the
+// tessellation rate, as many segments per quad edge as Embree's grids) and moves every vertex to
+// its exact limit position. Why this and not the alternatives:
 // - Only part of a mesh cannot be handed over: Embree's patch of a face depends on its
 //   neighbours, so the faces next to a removed 16-gon (or marked as a hole: Embree turns hole
 //   edges into boundaries) would change shape, and a seam between Embree's grids and our quads
@@ -84,9 +84,9 @@ void RejectHoleHits(const RTCFilterFunctionNArguments* args) {
 
 // Embree 3.13's subdivision limits (measured with probes on this machine, see the design note):
 // a face of 16 vertices aborts the process, larger faces vanish, and so does every face around a
-// vertex whose 1-ring holds more than 64 edges or more than 128 vertices (the vertices of its
-// faces other than itself and its two neighbours on each face, plus the far end of a boundary
-// edge: valence 64 quads give 128, ten 15-gons 130).
+// vertex whose 1-ring holds more than 64 edges or more than 128 vertices (of each face around
+// it, the vertices other than itself and one of its two neighbours, which the next face shares;
+// plus the far end of a boundary edge: valence 64 quads give 128, ten 15-gons 130).
 constexpr int kEmbreeMaxFaceVertices = 15;
 constexpr int kEmbreeMaxValence = 64;
 constexpr int kEmbreeMaxRingVertices = 128;
@@ -409,8 +409,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
                                   I.device, cage, scene.settings.tessellationRate, wantUv, &mesh);
         if (mesh.limit) {
             // Watertight quads: a ray through a shared vertex of the tessellation otherwise
-            // slips between its quads (measured: 1 in 4 rays aimed at the limit points of the
-            // prisms' cage vertices missed; ctest -R EmbreeLimits.ClosedCagesHaveNoHoles).
+            // may slip between its quads (measured: 15 of 1848 rays aimed at the limit points on
+            // the n-gons' edges missed, all at cage vertices; ctest -R
+            // EmbreeLimits.ClosedCagesHaveNoHoles).
             rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
             ++I.tessellation.meshes;
             I.tessellation.cageFaces += size_t(cage.numFaces());

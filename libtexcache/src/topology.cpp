@@ -58,7 +58,10 @@ std::unique_ptr<Far::TopologyRefiner> CreateRefiner(const ControlCage& cage, boo
             options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
             break;
     }
-    options.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_BOUNDARIES);
+    // Uvs linear along boundaries, as the renderer's Embree geometry pins them
+    // (RTC_SUBDIVISION_MODE_PIN_BOUNDARY; ctest -R TessellationAgreesWithEmbreeWhereBothWork).
+    if (desc.numFVarChannels > 0)
+        options.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_BOUNDARIES);
     using Factory = Far::TopologyRefinerFactory<Far::TopologyDescriptor>;
     std::unique_ptr<Far::TopologyRefiner> refiner(
         Factory::Create(desc, Factory::Options(Sdc::SCHEME_CATMARK, options)));
