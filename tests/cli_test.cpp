@@ -58,7 +58,7 @@ TEST(Cli, RendersA16GonAndCountsTheFacesPastEmbreesLimits) {
                               "-o " +
                               out.string());
     ASSERT_EQ(r.code, 0) << r.out;
-    EXPECT_NE(r.out.find("2 cage faces past Embree's limits (1 meshes, 18 cage faces "
+    EXPECT_NE(r.out.find("2 cage faces past Embree's limits (1 mesh, 18 cage faces "
                          "tessellated"),
               std::string::npos)
         << r.out;

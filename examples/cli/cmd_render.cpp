@@ -157,11 +157,12 @@ std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
 /// The scene's size, and the meshes Embree could not take (render_scene.cpp's design note).
 void PrintSceneStats(const RenderScene& rs) {
     const RenderScene::TessellationStats t = rs.LimitTessellated();
-    std::printf("scene: %zu objects, %zu Ptex faces; %zu cage faces past Embree's limits",
-                rs.scene().objects.size(), rs.NumPtexFaces(), t.beyondEmbree);
+    const size_t objects = rs.scene().objects.size();
+    std::printf("scene: %zu object%s, %zu Ptex faces; %zu cage faces past Embree's limits", objects,
+                objects == 1 ? "" : "s", rs.NumPtexFaces(), t.beyondEmbree);
     if (t.meshes > 0)
-        std::printf(" (%d meshes, %zu cage faces tessellated from OpenSubdiv's limit surface)",
-                    t.meshes, t.cageFaces);
+        std::printf(" (%d mesh%s, %zu cage faces tessellated from OpenSubdiv's limit surface)",
+                    t.meshes, t.meshes == 1 ? "" : "es", t.cageFaces);
     std::printf("\n");
 }
 
