@@ -49,11 +49,12 @@ class EmbreeLimitsTest : public ::testing::TestWithParam<std::string> {};
 
 // The scene statistics count the faces, and rays from all around hit the surface where
 // OpenSubdiv's limit surface has the hit's decoded Ptex location, within the tessellation's
-// error at rate 8: these coarse cages curve strongly, and Embree's own tessellation of a 15-gon
-// prism is off by up to 2.4% of the diagonal on the same rays (the two tessellations agree,
-// see TessellationAgreesWithEmbreeWhereBothWork), so the bound is 3% (a wrong Ptex square is
-// off by a face's size). Shading normals are unit length, and the cache's surface query agrees
-// with OpenSubdiv at isolation level 10 to 5e-4 of the diagonal (as Embree does).
+// error at rate 8: these coarse cages curve strongly (measured 1.2-1.8% of the diagonal), and
+// Embree's own tessellation of a 15-gon prism is off by up to 2.4% on 2000 such rays (the two
+// tessellations agree, see TessellationAgreesWithEmbreeWhereBothWork), so the bound is 3% (a
+// wrong Ptex square is off by a face's size). Shading normals are unit length, and the cache's
+// surface query agrees with OpenSubdiv at isolation level 10 to 5e-4 of the diagonal (as Embree
+// does).
 TEST_P(EmbreeLimitsTest, HitsLieOnTheLimitSurfaceAtTheirPtexLocation) {
     const ControlCage cage = test::BeyondEmbreeCage(GetParam());
     const float diag = Diagonal(cage);
