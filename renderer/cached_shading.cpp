@@ -41,10 +41,11 @@ PtexCoord SamplePosition(const Context& c, const SampleRequest& r) {
 /// edge of it (texels at a face's border may snap onto the neighbour) that continues the surface
 /// smoothly (within 60 degrees) or lies `above` the limit point. Not onto the far side of a
 /// crease below the point: rays would start on a wall across their hemisphere.
-bool OnOwnSheet(const PtexTopology& topo, int face, glm::vec3 n, const Hit& h, bool above) {
+bool OnOwnSheet(const RenderScene& rs, const PtexTopology& topo, int face, glm::vec3 n,
+                const Hit& h, bool above) {
     const float cosine = glm::dot(glm::normalize(h.Ng), n);
     if (!(cosine > 0.0f)) return false;
-    const int f = EmbreeToPtex(topo, h.primID, h.U, h.V).face;
+    const int f = rs.HitPtex(h).face;
     if (f == face) return true;
     if (!(cosine > 0.5f || above)) return false;
     for (int e = 0; e < 4; ++e) {
@@ -96,7 +97,7 @@ bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, gl
     for (int sheets = 0; sheets < kSheets; ++sheets) {
         ++rays.bounce;
         if (!c.rs.IntersectObject(object, snap, &hit)) break;
-        if (OnOwnSheet(topo, r.face, limitN, hit, hit.t < reach)) {
+        if (OnOwnSheet(c.rs, topo, r.face, limitN, hit, hit.t < reach)) {
             t = hit.t;
             break;
         }

@@ -1,6 +1,35 @@
 // SPDX-License-Identifier: Apache-2.0
+// Design note: cages Embree cannot take.
+//
+// Embree 3.13 (Debian) renders a Catmull-Clark cage as its own subdivision geometry, but not
+// every valid cage: a face of exactly 16 vertices aborts the process (`Assertion
+// 'N<MAX_PATCH_VALENCE' failed`), larger faces and every face around a vertex of valence 65 or
+// more silently vanish (embree-opensubdiv-facts.md), and so do the faces around a vertex whose
+// faces are large and many (ten 15-gons; probes of Embree alone, FacesBeyondEmbree below; ctest
+// -R EmbreeLimits renders each case). OpenSubdiv takes any face size and valence. A mesh with
+// any such face is therefore rendered, whole, as quads on its limit surface
+// (texcache/limit_tessellation.h): OpenSubdiv refines the cage uniformly (level from the
+// tessellation rate, as many segments per quad edge as Embree's grids) and moves every vertex to
+// its exact limit position. Why this and not the alternatives:
+// - Only part of a mesh cannot be handed over: Embree's patch of a face depends on its
+//   neighbours, so the faces next to a removed 16-gon (or marked as a hole: Embree turns hole
+//   edges into boundaries) would change shape, and a seam between Embree's grids and our quads
+//   only closes if both sample the shared edge identically, which Embree does not promise.
+//   One tessellation per mesh has no seam: neighbouring quads share their limit vertices.
+// - One level of refinement before Embree would fix large faces (every child is a quad) but not
+//   valence: a vertex keeps its valence under refinement. The tessellation handles both.
+// The Ptex mapping stays exact: after the first refinement every quad lies in one Ptex face (a
+// quad's child j is its quadrant j, an n-gon's child j its sub-face j), so a hit's quad (u,v)
+// maps affinely to Ptex (u,v). Shading derivatives (and the cache's surface queries) come from
+// OpenSubdiv's patches (LimitSurface) off the regular faces, which keep the bicubic fast path.
+// Ptex adjacency and footprints come from the cage alone and do not change. At a power-of-two
+// rate the quads are exactly Embree's grid (its grids sample the limit at the same dyadic Ptex
+// parameters): on cages both take, the same rays hit within 1e-6 of the diagonal on the same Ptex
+// face and (u,v). Cost (README, "Cages Embree cannot take"): render time as through Embree, scene
+// build ~0.35 s more for the car's 1576 faces (OpenSubdiv refinement and patch table).
 #include "renderer/render_scene.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -10,6 +39,7 @@
 #include "renderer/envmap.h"
 #include "renderer/texture.h"
 #include "texcache/error.h"
+#include "texcache/limit_tessellation.h"
 
 namespace texcache {
 
@@ -52,21 +82,234 @@ void RejectHoleHits(const RTCFilterFunctionNArguments* args) {
             args->valid[i] = 0;
 }
 
+// Embree 3.13's subdivision limits (measured with probes on this machine, see the design note):
+// a face of 16 vertices aborts the process, larger faces vanish, and so does every face around a
+// vertex whose 1-ring holds more than 64 edges or more than 128 vertices (of each face around
+// it, the vertices other than itself and one of its two neighbours, which the next face shares;
+// plus the far end of a boundary edge: valence 64 quads give 128, ten 15-gons 130).
+constexpr int kEmbreeMaxFaceVertices = 15;
+constexpr int kEmbreeMaxValence = 64;
+constexpr int kEmbreeMaxRingVertices = 128;
+
+/// Cage faces Embree cannot take: too many vertices, or a vertex with too large a 1-ring.
+size_t FacesBeyondEmbree(const ControlCage& cage, const PtexTopology& topo) {
+    std::vector<int> faces(size_t(cage.numVertices()), 0), ring(size_t(cage.numVertices()), 0);
+    int offset = 0;
+    for (int f = 0; f < cage.numFaces(); ++f) {
+        for (int i = 0; i < cage.faceVertexCounts[f]; ++i) {
+            const int v = cage.faceVertexIndices[offset + i];
+            ++faces[v];
+            ring[v] += cage.faceVertexCounts[f] - 2;
+        }
+        offset += cage.faceVertexCounts[f];
+    }
+    auto vertexBeyond = [&](int v) {
+        const int boundaryEnds = std::max(0, topo.Valence(v) - faces[v]);
+        return topo.Valence(v) > kEmbreeMaxValence ||
+               ring[v] + boundaryEnds > kEmbreeMaxRingVertices;
+    };
+    size_t n = 0;
+    offset = 0;
+    for (int f = 0; f < cage.numFaces(); ++f) {
+        const int count = cage.faceVertexCounts[f];
+        bool beyond = count > kEmbreeMaxFaceVertices;
+        for (int i = 0; i < count && !beyond; ++i)
+            beyond = vertexBeyond(cage.faceVertexIndices[offset + i]);
+        n += beyond;
+        offset += count;
+    }
+    return n;
+}
+
+/// One mesh's Embree geometry and how its hits map to Ptex faces: Embree's own subdivision
+/// surface, or quads on the limit surface tessellated with OpenSubdiv (`limit` set).
+struct EmbreeMesh {
+    RTCScene scene = nullptr;
+    RTCGeometry geom = nullptr;
+    std::unique_ptr<PtexTopology> topo;
+    std::unique_ptr<RegularPatches> regular;  // fast path for rtcInterpolate
+    bool hasUv = false;
+    std::vector<uint8_t> isHole;  // per coarse face, only for subdivision cages with holes
+    // Limit tessellation only: the general evaluator, and per quad its Ptex square and uvs.
+    std::unique_ptr<LimitSurface> limit;
+    std::vector<LimitTessellation::Square> squares;
+    std::vector<std::array<float, 2>> cornerUvs;
+
+    /// Ptex location of a hit (Embree's primitive and hit parameters).
+    PtexCoord ToPtex(unsigned prim, float U, float V) const {
+        if (!limit) return EmbreeToPtex(*topo, prim, U, V);
+        const LimitTessellation::Square& s = squares[prim];
+        return {s.face, std::clamp(s.u0 + s.size * U, 0.0f, 1.0f),
+                std::clamp(s.v0 + s.size * V, 0.0f, 1.0f)};
+    }
+
+    /// Limit derivatives in Ptex (u,v), and the position when P is given, at `c`, which is
+    /// Embree's (prim, U, V) on a subdivision mesh (16-byte aligned outputs); false on a hole.
+    bool Eval(const PtexCoord& c, unsigned prim, float U, float V, float* P, float* du,
+              float* dv) const {
+        if (regular->Has(c.face)) {
+            // Regular patches: our bicubic evaluation, ~10x cheaper than rtcInterpolate (same
+            // surface; figure from 2ad54fc, nothing times it alone: closest command `texcache
+            // bench rays`).
+            float unused[3];
+            regular->Eval(c.face, c.u, c.v, P ? P : unused, du, dv);
+            return true;
+        }
+        if (limit) {
+            LimitPoint p;
+            if (!limit->Eval(c.face, c.u, c.v, &p)) return false;
+            for (int k = 0; k < 3; ++k) {
+                if (P) P[k] = p.P[k];
+                du[k] = p.dPdu[k], dv[k] = p.dPdv[k];
+            }
+            return true;
+        }
+        rtcInterpolate1(geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
+        return true;
+    }
+
+    /// Texture coordinates at a hit (only when hasUv).
+    glm::vec2 Uv(unsigned prim, float U, float V) const {
+        if (limit) {
+            // Bilinear in the quad, whose corners carry OpenSubdiv's limit uvs.
+            const auto* c = &cornerUvs[size_t(prim) * 4];
+            auto at = [&](int k) { return glm::vec2(c[k][0], c[k][1]); };
+            return (1.0f - V) * ((1.0f - U) * at(0) + U * at(1)) +
+                   V * ((1.0f - U) * at(3) + U * at(2));
+        }
+        alignas(16) float uv[4];
+        rtcInterpolate1(geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, uv, nullptr, nullptr,
+                        2);
+        return {uv[0], uv[1]};
+    }
+};
+
+/// The cage as Embree's subdivision surface.
+RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, float rate,
+                                   bool withUv, EmbreeMesh* mesh) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SUBDIVISION);
+    auto* faces = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0,
+                                                                 RTC_FORMAT_UINT, sizeof(unsigned),
+                                                                 cage.faceVertexCounts.size()));
+    for (size_t i = 0; i < cage.faceVertexCounts.size(); ++i)
+        faces[i] = unsigned(cage.faceVertexCounts[i]);
+    auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
+                                                               RTC_FORMAT_UINT, sizeof(unsigned),
+                                                               cage.faceVertexIndices.size()));
+    for (size_t i = 0; i < cage.faceVertexIndices.size(); ++i)
+        idx[i] = unsigned(cage.faceVertexIndices[i]);
+    // 16-byte stride with w = 0: Embree loads vertices as 4-wide vectors, and garbage in the
+    // 4th lane (the buffer's padding after the last vertex) made rtcInterpolate read
+    // uninitialised memory and, at random, reject valid patches.
+    auto* pos = static_cast<float*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), cage.positions.size()));
+    for (size_t i = 0; i < cage.positions.size(); ++i) {
+        for (int k = 0; k < 3; ++k) pos[4 * i + k] = cage.positions[i][k];
+        pos[4 * i + 3] = 0.0f;
+    }
+    if (!cage.creaseEdges.empty()) {
+        auto* ce = static_cast<unsigned*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_INDEX, 0, RTC_FORMAT_UINT2,
+                                    2 * sizeof(unsigned), cage.creaseEdges.size()));
+        auto* cw = static_cast<float*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT,
+                                    sizeof(float), cage.creaseEdges.size()));
+        for (size_t i = 0; i < cage.creaseEdges.size(); ++i) {
+            ce[2 * i] = unsigned(cage.creaseEdges[i][0]);
+            ce[2 * i + 1] = unsigned(cage.creaseEdges[i][1]);
+            cw[i] = ToEmbreeSharpness(cage.creaseWeights[i]);
+        }
+    }
+    if (!cage.cornerVertices.empty()) {
+        auto* vi = static_cast<unsigned*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_INDEX, 0, RTC_FORMAT_UINT,
+                                    sizeof(unsigned), cage.cornerVertices.size()));
+        auto* vw = static_cast<float*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT,
+                                    sizeof(float), cage.cornerVertices.size()));
+        for (size_t i = 0; i < cage.cornerVertices.size(); ++i) {
+            vi[i] = unsigned(cage.cornerVertices[i]);
+            vw[i] = ToEmbreeSharpness(cage.cornerWeights[i]);
+        }
+    }
+    if (!cage.holes.empty()) {
+        // OpenSubdiv's holes hide a face but leave its neighbours' limit surface unchanged;
+        // Embree's hole buffer turns the hole's edges into boundaries instead (measured: up
+        // to 0.5 units on catmark_hole_test1; figure from 9bb82c3, closest command: ctest -R
+        // LimitPositionsAgreeWithOpenSubdiv/catmark_hole_test1 with the hole buffer set).
+        // So keep the face and reject its hits.
+        mesh->isHole.assign(cage.faceVertexCounts.size(), 0);
+        for (int h : cage.holes) mesh->isHole[h] = 1;
+        rtcSetGeometryUserData(g, mesh->isHole.data());
+        rtcSetGeometryIntersectFilterFunction(g, RejectHoleHits);
+        rtcSetGeometryOccludedFilterFunction(g, RejectHoleHits);
+    }
+    rtcSetGeometrySubdivisionMode(g, 0, ToEmbree(cage.boundary));
+    rtcSetGeometryTessellationRate(g, rate);
+    if (withUv) {
+        // Face-varying uvs: a second topology (uv indices) with linear boundaries, as OBJ uvs
+        // are authored on the cage.
+        rtcSetGeometryTopologyCount(g, 2);
+        auto* uidx = static_cast<unsigned*>(
+            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT, sizeof(unsigned),
+                                    cage.faceUvIndices.size()));
+        for (size_t i = 0; i < cage.faceUvIndices.size(); ++i)
+            uidx[i] = unsigned(cage.faceUvIndices[i]);
+        rtcSetGeometrySubdivisionMode(g, 1, RTC_SUBDIVISION_MODE_PIN_BOUNDARY);
+        rtcSetGeometryVertexAttributeCount(g, 1);
+        rtcSetGeometryVertexAttributeTopology(g, 0, 1);
+        auto* uv = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE,
+                                                               0, RTC_FORMAT_FLOAT2,
+                                                               4 * sizeof(float), cage.uvs.size()));
+        for (size_t i = 0; i < cage.uvs.size(); ++i) {
+            uv[4 * i] = cage.uvs[i][0];
+            uv[4 * i + 1] = cage.uvs[i][1];
+            uv[4 * i + 2] = uv[4 * i + 3] = 0.0f;
+        }
+        mesh->hasUv = true;
+    }
+    return g;
+}
+
+/// Tessellation level matching Embree's rate: `rate` segments per quad edge, at least one
+/// refinement (so every quad lies in one Ptex face), at most 4 (256 quads per cage quad: the
+/// refined topology OpenSubdiv holds while building grows as 4^level).
+int LimitTessellationLevel(float rate) {
+    return std::clamp(int(std::ceil(std::log2(std::max(rate, 1.0f)))), 1, 4);
+}
+
+/// The cage as quads on its limit surface (see the design note at the top).
+RTCGeometry NewLimitQuadGeometry(RTCDevice device, const ControlCage& cage, float rate, bool withUv,
+                                 EmbreeMesh* mesh) {
+    LimitTessellation t = TessellateLimitSurface(cage, LimitTessellationLevel(rate), withUv);
+    mesh->limit = std::make_unique<LimitSurface>(cage);
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
+    // 16-byte stride with w = 0, as for the subdivision cage's vertices.
+    auto* pos = static_cast<float*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), t.positions.size()));
+    for (size_t i = 0; i < t.positions.size(); ++i) {
+        for (int k = 0; k < 3; ++k) pos[4 * i + k] = t.positions[i][k];
+        pos[4 * i + 3] = 0.0f;
+    }
+    auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), t.quads.size()));
+    for (size_t q = 0; q < t.quads.size(); ++q)
+        for (int k = 0; k < 4; ++k) idx[4 * q + k] = unsigned(t.quads[q][k]);
+    mesh->squares = std::move(t.squares);
+    mesh->cornerUvs = std::move(t.cornerUvs);
+    mesh->hasUv = !mesh->cornerUvs.empty();
+    return g;
+}
+
 }  // namespace
 
 struct RenderScene::Impl {
     RTCDevice device = nullptr;
     RTCScene top = nullptr;
 
-    struct Mesh {
-        RTCScene scene = nullptr;
-        RTCGeometry geom = nullptr;
-        std::unique_ptr<PtexTopology> topo;
-        std::unique_ptr<RegularPatches> regular;  // fast path for rtcInterpolate
-        bool hasUv = false;
-        std::vector<uint8_t> isHole;  // per coarse face, only for cages with holes
-    };
+    using Mesh = EmbreeMesh;
     std::vector<Mesh> meshes;  // by Scene::meshes index; unused meshes stay empty
+    TessellationStats tessellation;
 
     struct Instance {
         int mesh = -1;
@@ -157,87 +400,22 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         mesh.topo = std::make_unique<PtexTopology>(cage);
         mesh.regular = std::make_unique<RegularPatches>(cage);
         mesh.scene = rtcNewScene(I.device);
-        RTCGeometry g = rtcNewGeometry(I.device, RTC_GEOMETRY_TYPE_SUBDIVISION);
-        auto* faces = static_cast<unsigned*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0, RTC_FORMAT_UINT, sizeof(unsigned),
-                                    cage.faceVertexCounts.size()));
-        for (size_t i = 0; i < cage.faceVertexCounts.size(); ++i)
-            faces[i] = unsigned(cage.faceVertexCounts[i]);
-        auto* idx = static_cast<unsigned*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT, sizeof(unsigned),
-                                    cage.faceVertexIndices.size()));
-        for (size_t i = 0; i < cage.faceVertexIndices.size(); ++i)
-            idx[i] = unsigned(cage.faceVertexIndices[i]);
-        // 16-byte stride with w = 0: Embree loads vertices as 4-wide vectors, and garbage in the
-        // 4th lane (the buffer's padding after the last vertex) made rtcInterpolate read
-        // uninitialised memory and, at random, reject valid patches.
-        auto* pos = static_cast<float*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                    4 * sizeof(float), cage.positions.size()));
-        for (size_t i = 0; i < cage.positions.size(); ++i) {
-            for (int k = 0; k < 3; ++k) pos[4 * i + k] = cage.positions[i][k];
-            pos[4 * i + 3] = 0.0f;
-        }
-        if (!cage.creaseEdges.empty()) {
-            auto* ce = static_cast<unsigned*>(
-                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_INDEX, 0, RTC_FORMAT_UINT2,
-                                        2 * sizeof(unsigned), cage.creaseEdges.size()));
-            auto* cw = static_cast<float*>(
-                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT,
-                                        sizeof(float), cage.creaseEdges.size()));
-            for (size_t i = 0; i < cage.creaseEdges.size(); ++i) {
-                ce[2 * i] = unsigned(cage.creaseEdges[i][0]);
-                ce[2 * i + 1] = unsigned(cage.creaseEdges[i][1]);
-                cw[i] = ToEmbreeSharpness(cage.creaseWeights[i]);
-            }
-        }
-        if (!cage.cornerVertices.empty()) {
-            auto* vi = static_cast<unsigned*>(
-                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_INDEX, 0, RTC_FORMAT_UINT,
-                                        sizeof(unsigned), cage.cornerVertices.size()));
-            auto* vw = static_cast<float*>(rtcSetNewGeometryBuffer(
-                g, RTC_BUFFER_TYPE_VERTEX_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT, sizeof(float),
-                cage.cornerVertices.size()));
-            for (size_t i = 0; i < cage.cornerVertices.size(); ++i) {
-                vi[i] = unsigned(cage.cornerVertices[i]);
-                vw[i] = ToEmbreeSharpness(cage.cornerWeights[i]);
-            }
-        }
-        if (!cage.holes.empty()) {
-            // OpenSubdiv's holes hide a face but leave its neighbours' limit surface unchanged;
-            // Embree's hole buffer turns the hole's edges into boundaries instead (measured: up
-            // to 0.5 units on catmark_hole_test1; figure from 9bb82c3, closest command: ctest -R
-            // LimitPositionsAgreeWithOpenSubdiv/catmark_hole_test1 with the hole buffer set).
-            // So keep the face and reject its hits.
-            mesh.isHole.assign(cage.faceVertexCounts.size(), 0);
-            for (int h : cage.holes) mesh.isHole[h] = 1;
-            rtcSetGeometryUserData(g, mesh.isHole.data());
-            rtcSetGeometryIntersectFilterFunction(g, RejectHoleHits);
-            rtcSetGeometryOccludedFilterFunction(g, RejectHoleHits);
-        }
-        rtcSetGeometrySubdivisionMode(g, 0, ToEmbree(cage.boundary));
-        rtcSetGeometryTessellationRate(g, scene.settings.tessellationRate);
-        if (needUv[m] && !cage.uvs.empty()) {
-            // Face-varying uvs: a second topology (uv indices) with linear boundaries, as OBJ uvs
-            // are authored on the cage.
-            rtcSetGeometryTopologyCount(g, 2);
-            auto* uidx = static_cast<unsigned*>(
-                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT,
-                                        sizeof(unsigned), cage.faceUvIndices.size()));
-            for (size_t i = 0; i < cage.faceUvIndices.size(); ++i)
-                uidx[i] = unsigned(cage.faceUvIndices[i]);
-            rtcSetGeometrySubdivisionMode(g, 1, RTC_SUBDIVISION_MODE_PIN_BOUNDARY);
-            rtcSetGeometryVertexAttributeCount(g, 1);
-            rtcSetGeometryVertexAttributeTopology(g, 0, 1);
-            auto* uv = static_cast<float*>(
-                rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, RTC_FORMAT_FLOAT2,
-                                        4 * sizeof(float), cage.uvs.size()));
-            for (size_t i = 0; i < cage.uvs.size(); ++i) {
-                uv[4 * i] = cage.uvs[i][0];
-                uv[4 * i + 1] = cage.uvs[i][1];
-                uv[4 * i + 2] = uv[4 * i + 3] = 0.0f;
-            }
-            mesh.hasUv = true;
+        const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
+        const bool wantUv = needUv[m] && !cage.uvs.empty();
+        RTCGeometry g = beyond > 0 || options.tessellateAll
+                            ? NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate,
+                                                   wantUv, &mesh)
+                            : NewSubdivisionGeometry(
+                                  I.device, cage, scene.settings.tessellationRate, wantUv, &mesh);
+        if (mesh.limit) {
+            // Watertight quads: a ray through a shared vertex of the tessellation otherwise
+            // may slip between its quads (measured: 15 of 1848 rays aimed at the limit points on
+            // the n-gons' edges missed, all at cage vertices; ctest -R
+            // EmbreeLimits.ClosedCagesHaveNoHoles).
+            rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
+            ++I.tessellation.meshes;
+            I.tessellation.cageFaces += size_t(cage.numFaces());
+            I.tessellation.beyondEmbree += beyond;
         }
         rtcCommitGeometry(g);
         rtcAttachGeometry(mesh.scene, g);
@@ -333,6 +511,10 @@ void* RenderScene::EmbreeScene() const {
 
 const PtexTopology& RenderScene::Topology(int object) const {
     return *impl_->meshes[impl_->objects[object].mesh].topo;
+}
+
+RenderScene::TessellationStats RenderScene::LimitTessellated() const {
+    return impl_->tessellation;
 }
 
 size_t RenderScene::NumPtexFaces() const {
@@ -454,17 +636,10 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     si.material = scene_.objects[hit.object].material;
     si.P = ray.org + hit.t * ray.dir;
 
-    si.ptex = EmbreeToPtex(*mesh.topo, hit.primID, hit.U, hit.V);
-    alignas(16) float P[4], du[4], dv[4];
-    if (mesh.regular->Has(si.ptex.face)) {
-        // Regular patches: our bicubic evaluation, ~10x cheaper than rtcInterpolate (same surface;
-        // figure from 2ad54fc, nothing times it alone: closest command `texcache bench rays`).
-        mesh.regular->Eval(si.ptex.face, si.ptex.u, si.ptex.v, P, du, dv);
-    } else {
-        // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
-        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX, 0, nullptr, du,
-                        dv, 3);
-    }
+    si.ptex = mesh.ToPtex(hit.primID, hit.U, hit.V);
+    // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
+    alignas(16) float du[4] = {0, 0, 0, 0}, dv[4] = {0, 0, 0, 0};
+    mesh.Eval(si.ptex, hit.primID, hit.U, hit.V, nullptr, du, dv);
     const glm::mat4 M = I.Transform(hit.object, ray.time);
     const glm::mat3 L(M);
     si.dPdu = L * glm::vec3(du[0], du[1], du[2]);
@@ -479,14 +654,7 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     si.backFacing = glm::dot(si.N, si.Ng) < 0.0f;
     if (si.backFacing) si.N = -si.N;
 
-    if (mesh.hasUv) {
-        alignas(16) float uv[4];
-        rtcInterpolate1(mesh.geom, hit.primID, hit.U, hit.V, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0,
-                        uv, nullptr, nullptr, 2);
-        si.uv = {uv[0], uv[1]};
-    } else {
-        si.uv = {si.ptex.u, si.ptex.v};
-    }
+    si.uv = mesh.hasUv ? mesh.Uv(hit.primID, hit.U, hit.V) : glm::vec2(si.ptex.u, si.ptex.v);
 
     if (diff) {
         // Igehy: move the offset rays to the tangent plane at the hit, then express the offsets
@@ -507,20 +675,20 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     return si;
 }
 
+PtexCoord RenderScene::HitPtex(const Hit& hit) const {
+    return impl_->meshes[impl_->objects[hit.object].mesh].ToPtex(hit.primID, hit.U, hit.V);
+}
+
 bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
                               SurfaceSample* out) const {
     const Impl& I = *impl_;
     const Impl::Mesh& mesh = I.meshes[I.objects[object].mesh];
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
+    unsigned prim = 0;
+    float U = c.u, V = c.v;
+    if (!mesh.limit) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
     alignas(16) float P[4], du[4], dv[4];
-    if (mesh.regular->Has(c.face)) {
-        mesh.regular->Eval(c.face, c.u, c.v, P, du, dv);
-    } else {
-        unsigned prim;
-        float U, V;
-        PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
-        rtcInterpolate1(mesh.geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
-    }
+    if (!mesh.Eval(c, prim, U, V, P, du, dv)) return false;
     const glm::mat4 M = I.Transform(object, time);
     const glm::mat3 L(M);
     out->P = glm::vec3(M * glm::vec4(P[0], P[1], P[2], 1.0f));

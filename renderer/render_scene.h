@@ -64,6 +64,9 @@ struct RenderSceneOptions {
     bool needTextures = true;  ///< load textures and face-varying uvs
     bool needEnvironment = true;
     int threads = 0;  ///< Embree build threads (0 = all)
+    /// Tessellate every mesh's limit surface with OpenSubdiv, not only the meshes Embree cannot
+    /// take (to compare the two on the same cage).
+    bool tessellateAll = false;
 };
 
 /// Embree device + scene for one frame of a Scene. Thread-safe for queries after construction.
@@ -91,6 +94,8 @@ public:
     /// fields are filled when `diff` is given.
     SurfaceInteraction Interact(const Ray& ray, const Hit& hit,
                                 const RayDifferentials* diff = nullptr) const;
+    /// Ptex location of a hit on an object (the Embree primitive's mapping of its mesh).
+    PtexCoord HitPtex(const Hit& hit) const;
     /// Limit surface at (ptex face, u, v) of an object at normalized shutter time `time`.
     bool EvalSurface(int object, const PtexCoord& c, float time, SurfaceSample* out) const;
 
@@ -105,8 +110,18 @@ public:
     glm::mat4 ObjectToWorld(int object, float time) const;
     /// Embree scene handle (for raw-throughput benchmarks).
     void* EmbreeScene() const;
-    /// Bytes Embree reports for BVH + tessellation (approximate), for memory reporting.
+    /// Number of Ptex faces over the meshes the scene uses.
     size_t NumPtexFaces() const;
+
+    /// The meshes whose limit surface OpenSubdiv tessellated because Embree cannot take them.
+    struct TessellationStats {
+        int meshes = 0;        ///< meshes tessellated
+        size_t cageFaces = 0;  ///< their cage faces
+        /// Of which past Embree's limits: 16+ vertices, or a vertex with over 64 edges or over
+        /// 128 vertices in its 1-ring.
+        size_t beyondEmbree = 0;
+    };
+    TessellationStats LimitTessellated() const;
 
 private:
     struct Impl;

@@ -18,6 +18,7 @@
 
 #include "cli_run.h"
 #include "renderer/image.h"
+#include "support/cages.h"
 #include "test_util.h"
 
 namespace texcache {
@@ -44,6 +45,27 @@ TEST(Cli, RendersAnObjToExrAndPng) {
     const Image img = ReadImageRGB(out.string());
     EXPECT_EQ(img.width, 64);
     EXPECT_TRUE(fs::exists(Dir() / "cube.png"));
+}
+
+// Issue 18: a 16-gon aborted the program inside Embree (exit 134). Now it renders through the
+// limit tessellation, and the scene statistics say which faces needed it.
+TEST(Cli, RendersA16GonAndCountsTheFacesPastEmbreesLimits) {
+    const fs::path obj = Dir() / "prism16.obj", out = Dir() / "prism16.exr";
+    test::WriteObj(test::PrismCage(16), obj.string());
+    const CliRun r = Texcache("render " + obj.string() +
+                              " --spp 2 --resolution 64x32 --integrator ao --shading texture -q "
+                              "--sample-cache-mb 4 --texel-cache-mb 4 "
+                              "-o " +
+                              out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("2 cage faces past Embree's limits (1 mesh, 18 cage faces "
+                         "tessellated"),
+              std::string::npos)
+        << r.out;
+    const Image img = ReadImageRGB(out.string());
+    int lit = 0;
+    for (float x : img.data) lit += x > 0.1f;
+    EXPECT_GT(lit, 64 * 32 / 10) << "the prism covers ~20% of the view";
 }
 
 TEST(Cli, WritesRequestedAovLayers) {

@@ -134,30 +134,14 @@ TEST_P(PtexMappingTest, RayHitsDecodeToTheirPtexLocation) {
     RenderSceneOptions ro;
     ro.needLights = false;
     RenderScene rs(scene, ro);
-    glm::vec3 lo(1e30f), hi(-1e30f);
-    for (const auto& p : cage.positions) lo = glm::min(lo, V(p)), hi = glm::max(hi, V(p));
-    const glm::vec3 center = 0.5f * (lo + hi);
-    std::mt19937 gen(3);
-    std::uniform_real_distribution<float> U11(-1.0f, 1.0f);
-    int hits = 0;
-    for (int i = 0; i < 400; ++i) {
-        glm::vec3 d(U11(gen), U11(gen), U11(gen));
-        if (glm::length(d) < 0.1f) continue;
-        d = glm::normalize(d);
-        Ray ray;
-        ray.org = center - d * diag * 2.0f + glm::vec3(U11(gen), U11(gen), U11(gen)) * 0.2f * diag;
-        ray.dir = d;
-        Hit hit;
-        if (!rs.Intersect(ray, &hit)) continue;
-        const SurfaceInteraction si = rs.Interact(ray, hit);
-        LimitPoint ref;
-        ASSERT_TRUE(osd.Eval(si.ptex.face, si.ptex.u, si.ptex.v, &ref));
-        EXPECT_LE(glm::length(si.P - V(ref.P)), 1e-2f * diag) << GetParam() << " ray " << i;
-        EXPECT_TRUE(std::isfinite(si.N.x + si.N.y + si.N.z));
-        EXPECT_NEAR(glm::length(si.N), 1.0f, 1e-4f);
-        ++hits;
+    const auto hits = test::DecodeHits(rs, osd, test::RaysAround(cage, 400, 3, 0.2f));
+    for (const test::DecodedHit& h : hits) {
+        ASSERT_GE(h.offLimit, 0.0f) << GetParam() << " ray " << h.ray;
+        EXPECT_LE(h.offLimit, 1e-2f * diag) << GetParam() << " ray " << h.ray;
+        EXPECT_TRUE(std::isfinite(h.N.x + h.N.y + h.N.z));
+        EXPECT_NEAR(glm::length(h.N), 1.0f, 1e-4f);
     }
-    EXPECT_GT(hits, 20) << GetParam();
+    EXPECT_GT(hits.size(), 20u) << GetParam();
 }
 
 // Embree's derivatives (what ray differentials and the cache's surface query use) are those of

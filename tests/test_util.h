@@ -1,15 +1,20 @@
 // SPDX-License-Identifier: Apache-2.0
 // Helpers for tests: bundled data paths and tiny scenes built in code.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <random>
 #include <string>
 #include <vector>
 
+#include "renderer/image.h"
 #include "renderer/obj_loader.h"
+#include "renderer/render_scene.h"
 #include "renderer/scene.h"
+#include "texcache/topology.h"
 
 namespace texcache::test {
 
@@ -108,6 +113,84 @@ inline void ClaimExrSize(const std::string& path, int width, int height) {
     const size_t newChunks = size_t(height + 15) / 16;
     bytes.insert(table + 8 * oldChunks, 8 * (newChunks - oldChunks), '\0');
     std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+}
+
+/// Writes a cage's positions and faces as an OBJ file (for the programs' tests).
+inline void WriteObj(const ControlCage& c, const std::string& path) {
+    std::ofstream f(path);
+    for (const auto& p : c.positions) f << "v " << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+    size_t at = 0;
+    for (int n : c.faceVertexCounts) {
+        f << 'f';
+        for (int i = 0; i < n; ++i) f << ' ' << c.faceVertexIndices[at++] + 1;
+        f << '\n';
+    }
+}
+
+/// Bounding-box centre and diagonal of a cage.
+inline void CageBounds(const ControlCage& c, glm::vec3* center, float* diagonal) {
+    glm::vec3 lo(1e30f), hi(-1e30f);
+    for (const auto& p : c.positions) {
+        lo = glm::min(lo, glm::vec3(p[0], p[1], p[2]));
+        hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
+    }
+    *center = 0.5f * (lo + hi);
+    *diagonal = glm::length(hi - lo);
+}
+
+/// Up to n rays from all around towards a cage (random directions, from two diagonals away,
+/// origins jittered by `jitter` diagonals so they do not all pass through the centre).
+inline std::vector<Ray> RaysAround(const ControlCage& cage, int n, unsigned seed, float jitter) {
+    glm::vec3 center;
+    float diag;
+    CageBounds(cage, &center, &diag);
+    std::mt19937 gen(seed);
+    std::uniform_real_distribution<float> U11(-1.0f, 1.0f);
+    std::vector<Ray> rays;
+    for (int i = 0; i < n; ++i) {
+        glm::vec3 d(U11(gen), U11(gen), U11(gen));
+        if (glm::length(d) < 0.1f) continue;
+        d = glm::normalize(d);
+        Ray ray;
+        ray.org =
+            center - d * diag * 2.0f + glm::vec3(U11(gen), U11(gen), U11(gen)) * jitter * diag;
+        ray.dir = d;
+        rays.push_back(ray);
+    }
+    return rays;
+}
+
+/// A ray's hit on a one-object scene: the distance from the hit point to OpenSubdiv's limit point
+/// at the hit's decoded Ptex location (-1 when that location is not on the limit surface), and
+/// the shading normal.
+struct DecodedHit {
+    size_t ray;
+    float offLimit;
+    glm::vec3 N;
+};
+inline std::vector<DecodedHit> DecodeHits(const RenderScene& rs, const LimitSurface& osd,
+                                          const std::vector<Ray>& rays) {
+    std::vector<DecodedHit> out;
+    for (size_t i = 0; i < rays.size(); ++i) {
+        Hit hit;
+        if (!rs.Intersect(rays[i], &hit)) continue;
+        const SurfaceInteraction si = rs.Interact(rays[i], hit);
+        LimitPoint ref;
+        const bool on = osd.Eval(si.ptex.face, si.ptex.u, si.ptex.v, &ref);
+        const float d = glm::length(si.P - glm::vec3(ref.P[0], ref.P[1], ref.P[2]));
+        out.push_back({i, on ? d : -1.0f, si.N});
+    }
+    return out;
+}
+
+/// Mean of an image over the mean of a reference; NaN when the image has a non-finite value.
+inline double MeanRatio(const Image& img, const Image& ref) {
+    double a = 0.0, b = 0.0;
+    for (size_t i = 0; i < img.data.size(); ++i) {
+        if (!std::isfinite(img.data[i])) return std::nan("");
+        a += img.data[i], b += ref.data[i];
+    }
+    return a / b;
 }
 
 }  // namespace texcache::test

@@ -4,6 +4,7 @@
 // surface, and footprints around extraordinary vertices.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <set>
 
 #include "libtexcache/topology_checks.h"
@@ -17,8 +18,16 @@ namespace {
 
 class TopologyTest : public ::testing::TestWithParam<std::string> {};
 
+// A bundled mesh, or one of the cages past Embree's limits (support/cages.h).
+ControlCage Cage(const std::string& name) {
+    const auto& beyond = test::BeyondEmbreeCages();
+    if (std::find(beyond.begin(), beyond.end(), name) != beyond.end())
+        return test::BeyondEmbreeCage(name);
+    return test::LoadMesh(name);
+}
+
 TEST_P(TopologyTest, AdjacencyIsSymmetricAndRoundTrips) {
-    const ControlCage cage = test::LoadMesh(GetParam());
+    const ControlCage cage = Cage(GetParam());
     const PtexTopology topo(cage);
     test::ExpectSymmetricAdjacency(topo, GetParam());
     int links = 0;
@@ -44,7 +53,7 @@ TEST_P(TopologyTest, AdjacencyIsSymmetricAndRoundTrips) {
 // Tolerance 5e-4 of the bounding-box diagonal (OpenSubdiv's end caps near extraordinary
 // vertices; elsewhere ~1e-6).
 TEST_P(TopologyTest, SharedEdgesAreContinuousOnTheLimitSurface) {
-    const ControlCage cage = test::LoadMesh(GetParam());
+    const ControlCage cage = Cage(GetParam());
     const PtexTopology topo(cage);
     const LimitSurface osd(cage, 8);
     glm::vec3 lo(1e30f), hi(-1e30f);
@@ -70,7 +79,7 @@ TEST_P(TopologyTest, SharedEdgesAreContinuousOnTheLimitSurface) {
 // Footprints at every corner of every face (where extraordinary vertices and n-gon centres
 // sit): each sample once, all finite, inside their faces.
 TEST_P(TopologyTest, FootprintsAtEveryCornerAreWellFormed) {
-    const ControlCage cage = test::LoadMesh(GetParam());
+    const ControlCage cage = Cage(GetParam());
     const MeshGrids grids(cage, 0.01f, 7);
     std::vector<FootprintSample> fp;
     for (int f = 0; f < grids.NumFaces(); ++f)
@@ -93,6 +102,10 @@ TEST_P(TopologyTest, FootprintsAtEveryCornerAreWellFormed) {
 }
 
 INSTANTIATE_TEST_SUITE_P(BundledMeshes, TopologyTest, ::testing::ValuesIn(test::BundledMeshes()),
+                         [](const auto& info) { return info.param; });
+// Large n-gons and valences past Embree's limits: adjacency and footprints come from the cage,
+// whichever way the renderer tessellates it.
+INSTANTIATE_TEST_SUITE_P(BeyondEmbree, TopologyTest, ::testing::ValuesIn(test::BeyondEmbreeCages()),
                          [](const auto& info) { return info.param; });
 
 }  // namespace

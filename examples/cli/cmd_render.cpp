@@ -154,6 +154,18 @@ std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
     return json;
 }
 
+/// The scene's size, and the meshes Embree could not take (render_scene.cpp's design note).
+void PrintSceneStats(const RenderScene& rs) {
+    const RenderScene::TessellationStats t = rs.LimitTessellated();
+    const size_t objects = rs.scene().objects.size();
+    std::printf("scene: %zu object%s, %zu Ptex faces; %zu cage faces past Embree's limits", objects,
+                objects == 1 ? "" : "s", rs.NumPtexFaces(), t.beyondEmbree);
+    if (t.meshes > 0)
+        std::printf(" (%d mesh%s, %zu cage faces tessellated from OpenSubdiv's limit surface)",
+                    t.meshes, t.meshes == 1 ? "" : "es", t.cageFaces);
+    std::printf("\n");
+}
+
 AovFlags ParseAovs(const std::vector<std::string>& names) {
     AovFlags f;
     for (const std::string& n : names) {
@@ -566,6 +578,7 @@ int RunRender(const RenderArgs& a) {
     std::printf("time: %.3f s render + %.3f s scene build; %.2f Mrays/s (%llu rays)\n",
                 r.stats.seconds, buildSeconds, double(r.stats.TotalRays()) / r.stats.seconds * 1e-6,
                 (unsigned long long)r.stats.TotalRays());
+    PrintSceneStats(rs);
     if (cache) {
         const CacheStats& c = r.stats.cache;
         std::printf(

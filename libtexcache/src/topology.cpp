@@ -19,7 +19,7 @@ namespace Sdc = OpenSubdiv::Sdc;
 
 namespace internal {
 
-std::unique_ptr<Far::TopologyRefiner> CreateRefiner(const ControlCage& cage) {
+std::unique_ptr<Far::TopologyRefiner> CreateRefiner(const ControlCage& cage, bool withUvs) {
     Far::TopologyDescriptor desc;
     desc.numVertices = cage.numVertices();
     desc.numFaces = cage.numFaces();
@@ -36,6 +36,13 @@ std::unique_ptr<Far::TopologyRefiner> CreateRefiner(const ControlCage& cage) {
     desc.cornerWeights = cage.cornerWeights.data();
     desc.numHoles = int(cage.holes.size());
     desc.holeIndices = cage.holes.data();
+    Far::TopologyDescriptor::FVarChannel uvChannel;
+    if (withUvs && !cage.uvs.empty()) {
+        uvChannel.numValues = int(cage.uvs.size());
+        uvChannel.valueIndices = cage.faceUvIndices.data();
+        desc.numFVarChannels = 1;
+        desc.fvarChannels = &uvChannel;
+    }
 
     Sdc::Options options;
     // Always explicit: OSD defaults to VTX_BOUNDARY_NONE, which turns every boundary face into a
@@ -51,6 +58,10 @@ std::unique_ptr<Far::TopologyRefiner> CreateRefiner(const ControlCage& cage) {
             options.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
             break;
     }
+    // Uvs linear along boundaries, as the renderer's Embree geometry pins them
+    // (RTC_SUBDIVISION_MODE_PIN_BOUNDARY; ctest -R TessellationAgreesWithEmbreeWhereBothWork).
+    if (desc.numFVarChannels > 0)
+        options.SetFVarLinearInterpolation(Sdc::Options::FVAR_LINEAR_BOUNDARIES);
     using Factory = Far::TopologyRefinerFactory<Far::TopologyDescriptor>;
     std::unique_ptr<Far::TopologyRefiner> refiner(
         Factory::Create(desc, Factory::Options(Sdc::SCHEME_CATMARK, options)));
@@ -318,18 +329,6 @@ struct LimitSurface::Impl {
     std::vector<char> nonQuadPtex;             // per ptex face: belongs to an n-gon
 };
 
-namespace {
-struct Vertex {
-    float p[3];
-    void Clear(void* = nullptr) { p[0] = p[1] = p[2] = 0.0f; }
-    void AddWithWeight(const Vertex& s, float w) {
-        p[0] += w * s.p[0];
-        p[1] += w * s.p[1];
-        p[2] += w * s.p[2];
-    }
-};
-}  // namespace
-
 LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
     : impl_(std::make_unique<Impl>()) {
     auto refiner = internal::CreateRefiner(cage);
@@ -349,13 +348,13 @@ LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
     // (UBSan flags it in OpenSubdiv's header).
     const Far::StencilTableReal<float>* local = impl_->patches->GetLocalPointStencilTable<float>();
     const int numLocal = local ? local->GetNumStencils() : 0;
-    std::vector<Vertex> verts(numRefined + numLocal);
+    std::vector<internal::OsdVertex> verts(numRefined + numLocal);
     for (int i = 0; i < cage.numVertices(); ++i)
         for (int k = 0; k < 3; ++k) verts[i].p[k] = cage.positions[i][k];
     Far::PrimvarRefiner primvar(*refiner);
-    Vertex* src = verts.data();
+    internal::OsdVertex* src = verts.data();
     for (int level = 1; level <= refiner->GetMaxLevel(); ++level) {
-        Vertex* dst = src + refiner->GetLevel(level - 1).GetNumVertices();
+        internal::OsdVertex* dst = src + refiner->GetLevel(level - 1).GetNumVertices();
         primvar.Interpolate(level, src, dst);
         src = dst;
     }
