@@ -3,6 +3,7 @@
 // diffuse base. Evaluated in the shading frame (z = shading normal); header-only for inlining.
 #pragma once
 #include <algorithm>
+#include <cmath>
 
 #include <glm/glm.hpp>
 
@@ -16,12 +17,23 @@ inline float Luminance(glm::vec3 c) {
 
 class Bsdf {
 public:
-    /// Diffuse when `ggx` is false; otherwise specular GGX (alpha = roughness^2) + (1 - F0)
-    /// diffuse.
-    Bsdf(glm::vec3 n, glm::vec3 ng, glm::vec3 albedo, bool ggx, float roughness, glm::vec3 f0)
+    /// Diffuse when `ggx` is false; otherwise specular GGX + (1 - F0) diffuse, alpha =
+    /// roughness^2 per axis: roughness.x along `tangent` (projected onto the normal's plane),
+    /// roughness.y across it. Isotropic roughness ignores the tangent; so does a tangent
+    /// parallel to n (then the frame's own tangent is used).
+    Bsdf(glm::vec3 n, glm::vec3 ng, glm::vec3 albedo, bool ggx, glm::vec2 roughness, glm::vec3 f0,
+         glm::vec3 tangent = glm::vec3(0.0f))
         : frame_(Frame::FromZ(n)), ng_(ng), albedo_(albedo), ggx_(ggx), f0_(f0) {
-        alpha_ = std::max(roughness * roughness, 1e-3f);
+        alpha_ = glm::max(roughness * roughness, glm::vec2(1e-3f));
         kd_ = ggx ? 1.0f - std::max({f0.x, f0.y, f0.z}) : 1.0f;
+        if (ggx && alpha_.x != alpha_.y) {
+            const glm::vec3 t = tangent - n * glm::dot(n, tangent);
+            const float len2 = glm::dot(t, t);
+            if (len2 > 1e-12f && std::isfinite(len2)) {
+                frame_.s = t / std::sqrt(len2);
+                frame_.t = glm::cross(n, frame_.s);
+            }
+        }
     }
 
     /// BSDF value f(wo, wi) for world directions (both pointing away from the surface).
@@ -72,8 +84,13 @@ public:
 
     /// Whether there is a specular (GGX) lobe.
     bool HasSpecular() const { return ggx_; }
-    /// GGX alpha of the specular lobe (0 without one).
-    float Alpha() const { return ggx_ ? alpha_ : 0.0f; }
+    /// GGX alpha of the specular lobe (0 without one); the geometric mean of the two axes'
+    /// alphas when anisotropic.
+    float Alpha() const { return ggx_ ? std::sqrt(alpha_.x * alpha_.y) : 0.0f; }
+    /// GGX alphas along the frame's s and t axes.
+    glm::vec2 AlphaXY() const { return alpha_; }
+    /// Schlick F0 of the specular lobe.
+    glm::vec3 F0() const { return f0_; }
     /// Reflectance of the diffuse lobe: albedo, times (1 - max F0) under a specular layer.
     glm::vec3 DiffuseReflectance() const { return kd_ * albedo_; }
 
@@ -137,7 +154,8 @@ private:
     glm::vec3 ng_, albedo_;
     bool ggx_;
     glm::vec3 f0_;
-    float alpha_, kd_;
+    glm::vec2 alpha_;
+    float kd_;
 };
 
 }  // namespace texcache

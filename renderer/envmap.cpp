@@ -6,6 +6,7 @@
 #include <map>
 #include <mutex>
 
+#include "renderer/bsdf.h"
 #include "renderer/image.h"
 #include "renderer/sampling.h"
 #include "texcache/error.h"
@@ -139,6 +140,32 @@ float EnvironmentMap::Pdf(glm::vec3 n, glm::vec3 dir) const {
     const glm::vec2 uv = DirToUv(dir);
     const float sinTheta = std::sin(uv.y * kPiF);
     return sinTheta > 0.0f ? dist_.Pdf(uv) / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;
+}
+
+const EnvironmentMap::LuminancePyramid& EnvironmentMap::Pyramid() const {
+    std::call_once(pyramid_->once, [this] {
+        std::vector<LuminancePyramid::Level>& levels = pyramid_->pyramid.levels;
+        if (isConstant_) {
+            levels.push_back({2, 1, std::vector<float>(2, Luminance(constant_))});
+            return;
+        }
+        LuminancePyramid::Level l0{width_, height_, std::vector<float>(texels_.size())};
+        for (size_t i = 0; i < texels_.size(); ++i) l0.texels[i] = Luminance(texels_[i]);
+        levels.push_back(std::move(l0));
+        while (levels.back().width > 2 && levels.back().height > 1) {
+            const LuminancePyramid::Level& f = levels.back();
+            LuminancePyramid::Level c{f.width / 2, f.height / 2, {}};
+            c.texels.resize(size_t(c.width) * c.height);
+            for (int y = 0; y < c.height; ++y)
+                for (int x = 0; x < c.width; ++x) {
+                    const float* r0 = &f.texels[size_t(2 * y) * f.width + 2 * x];
+                    const float* r1 = r0 + f.width;
+                    c.texels[size_t(y) * c.width + x] = 0.25f * (r0[0] + r0[1] + r1[0] + r1[1]);
+                }
+            levels.push_back(std::move(c));
+        }
+    });
+    return pyramid_->pyramid;
 }
 
 glm::vec3 EnvironmentMap::AverageRadiance() const {

@@ -6,7 +6,9 @@
 // (v = 0 looks along +Y). A rotation of r degrees turns the map by the right-handed rotation
 // R_y(r): what was seen along d is seen along R_y(r) d.
 #pragma once
+#include <algorithm>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -43,9 +45,33 @@ public:
     /// Mean radiance over the sphere.
     glm::vec3 AverageRadiance() const;
 
-private:
+    /// Whether this is a constant environment (no map).
+    bool IsConstant() const { return isConstant_; }
+    /// Lat-long coordinates of a direction (see the convention at the top) and back.
     glm::vec2 DirToUv(glm::vec3 d) const;
     glm::vec3 UvToDir(glm::vec2 uv) const;
+
+    /// A mip pyramid of the map's luminance, for distributions that need the light averaged over
+    /// a solid angle and then refined (product sampling): level 0 is the map, each level a 2x2
+    /// box average of the one before (an odd last row or column is left out), down to 2x1 texels
+    /// or one row. A constant environment has one 2x1 level. Built on first use (thread-safe),
+    /// never for renders that do not ask.
+    struct LuminancePyramid {
+        struct Level {
+            int width, height;
+            std::vector<float> texels;
+        };
+        std::vector<Level> levels;
+        /// Texel (x, y) of level `level` (in range).
+        float Texel(int level, int x, int y) const {
+            const Level& l = levels[size_t(level)];
+            return l.texels[size_t(y) * size_t(l.width) + size_t(x)];
+        }
+        int NumLevels() const { return int(levels.size()); }
+    };
+    const LuminancePyramid& Pyramid() const;
+
+private:
     glm::vec3 Texel(int x, int y) const { return texels_[size_t(y) * width_ + x]; }
 
     int width_ = 0, height_ = 0;
@@ -54,6 +80,11 @@ private:
     bool isConstant_ = true;
     float rotation_ = 0.0f;  // radians
     Distribution2D dist_;
+    struct LazyPyramid {
+        std::once_flag once;
+        LuminancePyramid pyramid;
+    };
+    std::shared_ptr<LazyPyramid> pyramid_ = std::make_shared<LazyPyramid>();
 };
 
 }  // namespace texcache

@@ -35,6 +35,7 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
         quads.push_back(w);
     }
     numLights = int(quads.size() + distantDir.size()) + (env ? 1 : 0);
+    if (env) lightSampling = o.lightSampling;
 }
 
 glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,

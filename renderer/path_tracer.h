@@ -15,6 +15,7 @@
 #include "renderer/bsdf.h"
 #include "renderer/camera.h"
 #include "renderer/envmap.h"
+#include "renderer/product_sampling.h"
 #include "renderer/render_options.h"
 #include "renderer/render_scene.h"
 #include "renderer/sampling.h"
@@ -69,6 +70,10 @@ struct Context {
     PixelCacheCounts* pixelCache = nullptr;              // per-pixel cache traffic, when asked for
     std::optional<CameraModel> cameraOpen, cameraClose;  // for motion vectors
     bool cameraMoves = false;
+    /// opt.lightSampling, or Mis without an environment map (nothing to take a product with).
+    LightSampling lightSampling = LightSampling::Mis;
+    ProductRecordCache* psrCache = nullptr;  // set by the renderer for Cpis
+    tbb::enumerable_thread_specific<RecordStats>* psrStats = nullptr;
 
     Context(const RenderScene& r, const RenderOptions& o);
 
@@ -86,8 +91,10 @@ struct Context {
         return c > 0.0f ? dist * dist / (q.area * c) * PickPdf() : 0.0f;
     }
 
-    /// One light sample for the surface point `p` of shading normal `n` (facing the viewer).
-    bool SampleLight(glm::vec3 p, glm::vec3 n, float uPick, glm::vec2 u, LightSample* s) const {
+    /// One light sample for the surface point `p` of shading normal `n` (facing the viewer); the
+    /// environment is sampled from `psr` when given (a valid record).
+    bool SampleLight(glm::vec3 p, glm::vec3 n, float uPick, glm::vec2 u, LightSample* s,
+                     const ProductRecord* psr = nullptr) const {
         if (numLights == 0) return false;
         int i = std::min(int(uPick * float(numLights)), numLights - 1);
         if (i < int(quads.size())) {
@@ -115,7 +122,15 @@ struct Context {
             return true;
         }
         float pdf;
-        s->Li = env->Sample(n, u, &s->wi, &pdf);
+        if (psr) {
+            // The pick's leftover: uniform and independent of u.
+            const float uWalk =
+                std::min(uPick * float(numLights) - float(numLights - 1), kOneMinusEpsilon);
+            if (!SampleProductLight(*psr, *env, n, u, uWalk, &s->wi, &pdf)) return false;
+            s->Li = env->Eval(s->wi);
+        } else {
+            s->Li = env->Sample(n, u, &s->wi, &pdf);
+        }
         s->pdf = pdf * PickPdf();
         s->dist = INFINITY;
         s->delta = false;
@@ -126,7 +141,10 @@ struct Context {
 inline Bsdf MakeBsdf(const Context& c, const SurfaceInteraction& si) {
     const Material& m = c.scene.materials[si.material];
     const bool ggx = m.type == Material::Type::GGX;
-    return Bsdf(si.N, si.Ng, c.rs.Albedo(si), ggx, ggx ? c.rs.Roughness(si) : 1.0f, m.specular);
+    const float r = ggx ? c.rs.Roughness(si) : 1.0f;
+    // Anisotropic ("brushed"): roughness along the Ptex u direction, and across it.
+    const glm::vec2 roughness(r, m.anisotropic ? m.roughnessV : r);
+    return Bsdf(si.N, si.Ng, c.rs.Albedo(si), ggx, roughness, m.specular, si.dPdu);
 }
 
 /// A ray leaving the surface at `si` in direction `wi` (offset off the surface, unbounded).
@@ -155,18 +173,40 @@ struct NoCachedTerm {
     }
 };
 
+/// The product sampling record of a camera hit, in `storage`, or null when the hit samples the
+/// environment as MIS does (light sampling mis, no record for the lobe, see
+/// BuildProductRecord). Records exist for camera hits only: a cached one is keyed by texel, and
+/// it is built for the camera's view of the texel.
+inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInteraction& si,
+                                            const Bsdf& bsdf, glm::vec3 wo,
+                                            ProductRecord* storage) {
+    if (c.lightSampling == LightSampling::Mis || !WantsProductSampling(bsdf)) return nullptr;
+    if (!c.psrCache)  // Pis (or Cpis in a renderer that keeps no cache: the same records)
+        BuildProductRecord(*c.env, bsdf, wo, storage);
+    else
+        c.psrCache->Lookup(si, bsdf, c.camera.Position(), storage, c.psrStats->local());
+    return storage->valid ? storage : nullptr;
+}
+
 /// Direct lighting (depth 1) and path tracing: NEE with MIS against BSDF sampling.
 /// `emitFirst` = false drops emission seen by the first ray (a cached indirect sample must not
 /// count what NEE at the camera hit already did). `cached(si, ray, &term)` may replace light at
 /// the first surface: Indirect adds the term and stops the path after the first BSDF ray's direct
 /// hit (NEE and MIS still do direct light); All adds the term (direct + indirect) and stops.
+/// `firstDiff` (the camera ray's differentials) says the first hit is a camera hit: with light
+/// sampling pis or cpis it then samples the environment from its product sampling record
+/// (CameraHitRecord; the differentials pick a cached record's texel), MIS-combined with BSDF
+/// sampling as the map's own sampling is.
 template <typename CachedIndirect = NoCachedTerm>
 glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, Rng& rng,
                  int maxDepth, RayCounts& rays, bool emitFirst = true,
-                 const CachedIndirect& cached = CachedIndirect()) {
+                 const CachedIndirect& cached = CachedIndirect(),
+                 const RayDifferentials* firstDiff = nullptr) {
     glm::vec3 L(0.0f), beta(1.0f);
     float prevPdf = 0.0f;   // BSDF pdf of the ray being traced (0: camera ray, no MIS)
     glm::vec3 prevN(0.0f);  // shading normal where it left (the environment's pdf depends on it)
+    ProductRecord psr;      // the camera hit's record (uninitialised unless used)
+    const ProductRecord* prevPsr = nullptr;  // the record the ray being traced left from
     Hit hit = firstHit;
     bool found = hitFirst;
     for (int depth = 0;; ++depth) {
@@ -179,8 +219,11 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
             if (c.env) {
                 const glm::vec3 Le = c.env->Eval(ray.dir);
                 float w = 1.0f;
-                if (prevPdf > 0.0f)
-                    w = PowerHeuristic(1, prevPdf, 1, c.env->Pdf(prevN, ray.dir) * c.PickPdf());
+                if (prevPdf > 0.0f) {
+                    const float pl = prevPsr ? ProductLightPdf(*prevPsr, *c.env, prevN, ray.dir)
+                                             : c.env->Pdf(prevN, ray.dir);
+                    w = PowerHeuristic(1, prevPdf, 1, pl * c.PickPdf());
+                }
                 L += beta * Le * w;
             }
             break;
@@ -194,9 +237,11 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
             break;
         }
         if (depth >= maxDepth) break;
-        const SurfaceInteraction si = c.rs.Interact(ray, hit);
+        const SurfaceInteraction si = c.rs.Interact(ray, hit, depth == 0 ? firstDiff : nullptr);
         const Bsdf bsdf = MakeBsdf(c, si);
         const glm::vec3 wo = -ray.dir;
+        const ProductRecord* record =
+            depth == 0 && firstDiff ? CameraHitRecord(c, si, bsdf, wo, &psr) : nullptr;
         if (depth == 0) {
             glm::vec3 term;
             const CachedTerm t = cached(si, ray, &term);
@@ -208,7 +253,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         }
 
         LightSample ls;
-        if (c.SampleLight(si.P, si.N, rng.Next1D(), rng.Next2D(), &ls)) {
+        if (c.SampleLight(si.P, si.N, rng.Next1D(), rng.Next2D(), &ls, record)) {
             const glm::vec3 f = bsdf.Eval(wo, ls.wi);
             if (f != glm::vec3(0.0f)) {
                 ++rays.shadow;
@@ -231,6 +276,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         beta *= weight;
         prevPdf = pdf;
         prevN = si.N;
+        prevPsr = record;
         ray.org = OffsetOrigin(si.P, si.Ng, wi);
         ray.dir = wi;
         ray.tnear = 0.0f;

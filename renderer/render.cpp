@@ -95,8 +95,9 @@ Ray CameraRay(const Context& c, int x, int y, int s, Rng* rng, RayDifferentials*
 
 /// Differentials feed the cache's mip selection and the debug views; they are skipped otherwise.
 bool NeedsDifferentials(const Context& c) {
-    return c.tsc != nullptr || c.opt.integrator == IntegratorKind::Normal ||
-           c.opt.integrator == IntegratorKind::Ptex || c.opt.integrator == IntegratorKind::Uv;
+    return c.tsc != nullptr || c.lightSampling != LightSampling::Mis ||
+           c.opt.integrator == IntegratorKind::Normal || c.opt.integrator == IntegratorKind::Ptex ||
+           c.opt.integrator == IntegratorKind::Uv;
 }
 
 /// A camera sample between its ray and its shading: the ray, its closest hit and the random
@@ -155,7 +156,7 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
                 return all ? CachedTerm::All : CachedTerm::Indirect;
             };
             return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
-                return LiPath(c, ray, hit, found, r, c.opt.maxDepth, rays, true, cached);
+                return LiPath(c, ray, hit, found, r, c.opt.maxDepth, rays, true, cached, &diff);
             });
         }
         if (c.tsc && k == IntegratorKind::Direct)
@@ -164,7 +165,7 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
             });
         return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
             return LiPath(c, ray, hit, found, r, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
-                          rays);
+                          rays, true, NoCachedTerm(), &diff);
         });
     }
     if (!found) return glm::vec3(0.0f);
@@ -467,6 +468,15 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     const std::clock_t cpuStart = std::clock();
     Context ctx(rs, opt);
     FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::Allowed);
+    // Cached product sampling: the records of this frame (none unless asked for).
+    std::unique_ptr<ProductRecordCache> psrCache;
+    tbb::enumerable_thread_specific<RecordStats> psrStats;
+    if (ctx.lightSampling == LightSampling::Cpis && AnyProductSampled(rs.scene()) &&
+        (opt.integrator == IntegratorKind::Direct || opt.integrator == IntegratorKind::Path)) {
+        psrCache = std::make_unique<ProductRecordCache>(rs, opt.psrCacheBytes, opt.psrLodBias);
+        ctx.psrCache = psrCache.get();
+        ctx.psrStats = &psrStats;
+    }
     const int W = opt.width, H = opt.height;
     const size_t numPixels = size_t(W) * H;
     if (opt.pixelCache) {
@@ -488,6 +498,8 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         result.stats.bounceRays += rc.bounce;
     }
     for (const CacheStats& cs : frameCache.Stats()) result.stats.cache.Merge(cs);
+    for (const RecordStats& ps : psrStats) result.stats.psr.Merge(ps);
+    result.stats.psrBytes = psrCache ? psrCache->BytesUsed() : 0;
     result.stats.sppDone = done;
     result.stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;

@@ -9,7 +9,21 @@ namespace {
 constexpr EnumName<FootprintMode> kFootprintModes[] = {{"auto", FootprintMode::Auto},
                                                        {"visible", FootprintMode::Visible},
                                                        {"all", FootprintMode::All}};
+constexpr EnumName<LightSampling> kLightSamplings[] = {
+    {"mis", LightSampling::Mis}, {"pis", LightSampling::Pis}, {"cpis", LightSampling::Cpis}};
 }  // namespace
+
+LightSampling ParseLightSampling(const std::string& name, const std::string& where) {
+    return ParseEnum(kLightSamplings, name, where, "light sampling");
+}
+
+std::string LightSamplingNames() {
+    return EnumNames(kLightSamplings);
+}
+
+const char* LightSamplingName(LightSampling s) {
+    return EnumToName(kLightSamplings, s);
+}
 
 FootprintMode ParseFootprintMode(const std::string& name, const std::string& where) {
     return ParseEnum(kFootprintModes, name, where, "footprint");

@@ -10,6 +10,7 @@
 #include "filters/texture_filters.h"
 #include "renderer/integrator_kind.h"
 #include "renderer/scene.h"
+#include "texcache/record_cache.h"
 #include "texcache/shading_cache.h"
 
 namespace texcache {
@@ -38,6 +39,21 @@ enum class FootprintMode { Auto, Visible, All };
 FootprintMode ParseFootprintMode(const std::string& name, const std::string& where);
 /// "auto, visible, all" (for help texts and menus).
 std::string FootprintModeNames();
+
+/// How the direct and path integrators sample an environment light at camera hits on glossy
+/// materials (Munkberg et al. 2016, Sec. 6; renderer/product_sampling.h):
+///   Mis   light sampling (the map's luminance) and BSDF sampling, combined by MIS;
+///   Pis   product importance sampling: a product sampling record (PSR) of lobe x environment
+///         built at every hit, MIS-combined with BSDF sampling;
+///   Cpis  the same records built per texel and cached in texture space (a RecordCache), so the
+///         hits of a texel share one.
+enum class LightSampling { Mis, Pis, Cpis };
+/// "mis", "pis" or "cpis"; throws InputError naming `where` and the valid names otherwise.
+LightSampling ParseLightSampling(const std::string& name, const std::string& where);
+/// "mis, pis, cpis".
+std::string LightSamplingNames();
+/// The name ParseLightSampling takes.
+const char* LightSamplingName(LightSampling s);
 
 /// Texture-space shading settings of a render (command line / scene file).
 struct TextureSpaceOptions {
@@ -114,6 +130,14 @@ struct RenderOptions {
     AovFlags aovs;
     TextureSpaceOptions texture;  ///< cached AO / diffuse indirect when texture.enabled
     bool progress = true;         ///< progress bar on stderr for renders longer than a second
+    LightSampling lightSampling = LightSampling::Mis;
+    /// Cpis: the record cache's budget (its slot array: records + 16 bytes each). 16 MiB holds
+    /// about 14K records, several times the texels a 640x360 view of a cage needs at the default
+    /// LOD (figures in results/cpis.md).
+    size_t psrCacheBytes = size_t(16) << 20;
+    /// Cpis: mip levels above the pixel-sized texel (eq. 1) at which records are cached, before
+    /// the lobe's own term (see product_sampling.h, RecordLevelBias).
+    float psrLodBias = 1.0f;
     /// When set, filled with width x height PixelCacheCounts of this frame's lookups (all zero
     /// without texture-space shading); null costs one predictable branch per lookup (the
     /// preview's cache heat maps).
@@ -126,7 +150,9 @@ struct RenderStats {
     int sppDone = 0;
     uint64_t cameraRays = 0, shadowRays = 0, bounceRays = 0;
     uint64_t TotalRays() const { return cameraRays + shadowRays + bounceRays; }
-    CacheStats cache;  ///< texture-space shading only
+    CacheStats cache;     ///< texture-space shading only
+    RecordStats psr;      ///< cached product sampling records (light sampling cpis) only
+    size_t psrBytes = 0;  ///< bytes of the product record cache (0 unless cpis)
 };
 
 /// A scene file's render settings as options: size, spp, time budget, integrator, seed, depth,

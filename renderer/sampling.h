@@ -141,9 +141,45 @@ inline float GgxG(glm::vec3 wo, glm::vec3 wi, float alpha) {
     return 1.0f / (1.0f + GgxLambda(wo, alpha) + GgxLambda(wi, alpha));
 }
 
-/// Visible-normal sampling (Heitz 2018); wo.z > 0.
-inline glm::vec3 GgxSampleVisibleNormal(glm::vec3 wo, float alpha, glm::vec2 u) {
-    const glm::vec3 vh = glm::normalize(glm::vec3(alpha * wo.x, alpha * wo.y, wo.z));
+/// Solid-angle pdf of wi = reflect(-wo, m) with m ~ visible normals: D_wo(m) / (4 |wo.m|).
+inline float GgxPdfReflect(glm::vec3 wo, glm::vec3 wi, float alpha) {
+    if (wo.z <= 0.0f || wi.z <= 0.0f) return 0.0f;
+    const glm::vec3 m = glm::normalize(wo + wi);
+    const float dotWoM = glm::dot(wo, m);
+    if (dotWoM <= 0.0f) return 0.0f;
+    // D_wo(m) = G1(wo) max(0, wo.m) D(m) / wo.z
+    const float dwo = GgxG1(wo, alpha) * dotWoM * GgxD(m, alpha) / wo.z;
+    return dwo / (4.0f * dotWoM);
+}
+
+// ---- GGX, anisotropic: alpha = (alpha_x along the frame's s, alpha_y along t) -----------------
+// The isotropic functions above are the reference these reduce to when alpha.x == alpha.y
+// (tests/sampling_test.cpp checks it); the renderer's Bsdf uses these.
+
+/// Normal distribution D(m) = 1 / (pi ax ay ((mx/ax)^2 + (my/ay)^2 + mz^2)^2); 0 below the horizon.
+inline float GgxD(glm::vec3 m, glm::vec2 alpha) {
+    if (m.z <= 0.0f) return 0.0f;
+    const float x = m.x / alpha.x, y = m.y / alpha.y;
+    const float d = x * x + y * y + m.z * m.z;
+    return 1.0f / (kPiF * alpha.x * alpha.y * d * d);
+}
+/// Smith Lambda: 0.5 (sqrt(1 + (ax^2 wx^2 + ay^2 wy^2) / wz^2) - 1).
+inline float GgxLambda(glm::vec3 w, glm::vec2 alpha) {
+    const float c2 = w.z * w.z;
+    if (c2 <= 0.0f) return 1e30f;  // grazing: fully shadowed
+    const float a2t2 = (alpha.x * alpha.x * w.x * w.x + alpha.y * alpha.y * w.y * w.y) / c2;
+    return 0.5f * (std::sqrt(1.0f + a2t2) - 1.0f);
+}
+inline float GgxG1(glm::vec3 w, glm::vec2 alpha) {
+    return 1.0f / (1.0f + GgxLambda(w, alpha));
+}
+inline float GgxG(glm::vec3 wo, glm::vec3 wi, glm::vec2 alpha) {
+    return 1.0f / (1.0f + GgxLambda(wo, alpha) + GgxLambda(wi, alpha));
+}
+
+/// Visible-normal sampling (Heitz 2018), anisotropic; wo.z > 0.
+inline glm::vec3 GgxSampleVisibleNormal(glm::vec3 wo, glm::vec2 alpha, glm::vec2 u) {
+    const glm::vec3 vh = glm::normalize(glm::vec3(alpha.x * wo.x, alpha.y * wo.y, wo.z));
     const float lensq = vh.x * vh.x + vh.y * vh.y;
     const glm::vec3 t1 =
         lensq > 0.0f ? glm::vec3(-vh.y, vh.x, 0.0f) / std::sqrt(lensq) : glm::vec3(1, 0, 0);
@@ -156,18 +192,21 @@ inline glm::vec3 GgxSampleVisibleNormal(glm::vec3 wo, float alpha, glm::vec2 u) 
     p2 = (1.0f - s) * std::sqrt(std::max(0.0f, 1.0f - p1 * p1)) + s * p2;
     const glm::vec3 nh =
         p1 * t1 + p2 * t2 + std::sqrt(std::max(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
-    return glm::normalize(glm::vec3(alpha * nh.x, alpha * nh.y, std::max(1e-6f, nh.z)));
+    return glm::normalize(glm::vec3(alpha.x * nh.x, alpha.y * nh.y, std::max(1e-6f, nh.z)));
 }
 
-/// Solid-angle pdf of wi = reflect(-wo, m) with m ~ visible normals: D_wo(m) / (4 |wo.m|).
-inline float GgxPdfReflect(glm::vec3 wo, glm::vec3 wi, float alpha) {
+/// Visible-normal sampling, isotropic: the anisotropic sampler with equal alphas.
+inline glm::vec3 GgxSampleVisibleNormal(glm::vec3 wo, float alpha, glm::vec2 u) {
+    return GgxSampleVisibleNormal(wo, glm::vec2(alpha), u);
+}
+
+/// Solid-angle pdf of wi = reflect(-wo, m) with m ~ visible normals, anisotropic.
+inline float GgxPdfReflect(glm::vec3 wo, glm::vec3 wi, glm::vec2 alpha) {
     if (wo.z <= 0.0f || wi.z <= 0.0f) return 0.0f;
     const glm::vec3 m = glm::normalize(wo + wi);
     const float dotWoM = glm::dot(wo, m);
     if (dotWoM <= 0.0f) return 0.0f;
-    // D_wo(m) = G1(wo) max(0, wo.m) D(m) / wo.z
-    const float dwo = GgxG1(wo, alpha) * dotWoM * GgxD(m, alpha) / wo.z;
-    return dwo / (4.0f * dotWoM);
+    return GgxG1(wo, alpha) * GgxD(m, alpha) / (4.0f * wo.z);
 }
 
 /// Schlick's Fresnel approximation.

@@ -66,8 +66,12 @@ struct FloatParam {
 struct Material {
     std::string name;
     enum class Type { Diffuse, GGX } type = Type::Diffuse;
-    ColorParam albedo;          ///< diffuse albedo (Diffuse), or diffuse base under the coat (GGX)
-    FloatParam roughness;       ///< GGX alpha = roughness^2
+    ColorParam albedo;     ///< diffuse albedo (Diffuse), or diffuse base under the coat (GGX)
+    FloatParam roughness;  ///< GGX alpha = roughness^2 (along the Ptex u direction)
+    /// "roughness": [ru, rv] (brushed metal): roughness across the Ptex u direction; the
+    /// tangent of the anisotropic lobe is the limit surface's dP/du.
+    bool anisotropic = false;
+    float roughnessV = 0.5f;
     glm::vec3 specular{0.04f};  ///< GGX Schlick F0
     /// Texture-space filter of this material's cached term ("" = the render's default).
     std::string cacheFilter;

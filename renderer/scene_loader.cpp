@@ -313,10 +313,21 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
     }
     if (n.Has("roughness")) {
         const Node r = n["roughness"];
-        if (r.raw().is_object())
+        if (r.raw().is_object()) {
             m.roughness.texture = ParseTexture(r, base, scene);
-        else
+        } else if (r.raw().is_array()) {
+            // [along Ptex u, across it]: anisotropic GGX (brushed metal).
+            if (r.ArraySize() != 2)
+                r.Fail(
+                    "expected a number or an array of 2 numbers [along u, across u], got an "
+                    "array of " +
+                    std::to_string(r.ArraySize()));
+            m.roughness.value = r.At(0).Number(0.0f, 1.0f);
+            m.roughnessV = r.At(1).Number(0.0f, 1.0f);
+            m.anisotropic = m.roughness.value != m.roughnessV;
+        } else {
             m.roughness.value = r.Number(0.0f, 1.0f);
+        }
     }
     if (n.Has("specular")) m.specular = n["specular"].Vec3(0.0f, 1.0f);
     if (m.type == Material::Type::Diffuse && warnings)

@@ -18,6 +18,16 @@ void CheckOptions(const TextureSpaceOptions& options) {
 }
 }  // namespace
 
+float MipZeroTexelSize(const ControlCage& cage, float texelFraction) {
+    // Grids live in the cage's own (object) space, so texel size is relative to the cage.
+    glm::vec3 lo(1e30f), hi(-1e30f);
+    for (const auto& p : cage.positions) {
+        lo = glm::min(lo, glm::vec3(p[0], p[1], p[2]));
+        hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
+    }
+    return std::max(glm::length(hi - lo) * texelFraction, 1e-12f);
+}
+
 bool TextureSpaceCache::Uses(TextureFilterKind kind) const {
     return std::find(filterOf_.begin(), filterOf_.end(), kind) != filterOf_.end();
 }
@@ -66,14 +76,7 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
     const Scene& scene = rs.scene();
     for (size_t o = 0; o < scene.objects.size(); ++o) {
         const ControlCage& cage = scene.meshes[scene.objects[o].mesh];
-        // Grids live in the cage's own (object) space, so texel size is relative to the cage.
-        glm::vec3 lo(1e30f), hi(-1e30f);
-        for (const auto& p : cage.positions) {
-            lo = glm::min(lo, glm::vec3(p[0], p[1], p[2]));
-            hi = glm::max(hi, glm::vec3(p[0], p[1], p[2]));
-        }
-        const float diag = glm::length(hi - lo);
-        const float texel = std::max(diag * options.texelFraction, 1e-12f);
+        const float texel = MipZeroTexelSize(cage, options.texelFraction);
         meshOf_.push_back(cache_.AddMesh(cage, texel));
         meshObject_.push_back(int(o));
         meshIsBack_.push_back(0);

@@ -42,6 +42,11 @@ namespace texcache {
 
 using RenderShadingCache = ShadingCache<ShadedSample, glm::vec3>;
 
+/// Mip-0 texel size of a cage's shading grids: `texelFraction` of its bounding-box diagonal
+/// (TextureSpaceOptions::texelFraction; eq. 1 then picks the level whose texels are about a
+/// pixel).
+float MipZeroTexelSize(const ControlCage& cage, float texelFraction = 1.0f / 4096.0f);
+
 /// A shading cache for a scene: lives as long as its owner wants (e.g. across frames). The one
 /// door between the renderer and libtexcache: it picks each hit's texel and each object's
 /// filter, and blends texels over frames; nothing else touches the ShadingCache inside.

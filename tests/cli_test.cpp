@@ -12,6 +12,7 @@
 #include <fstream>
 #include <iterator>
 #include <map>
+#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -126,6 +127,14 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
           Case{"render " + cube + " --shading texture --sample-cache-mb 0", "--sample-cache-mb"},
           Case{"render " + cube + " --shading texture --lod-bias 99", "--lod-bias"},
           Case{"render " + scene.string() + " -o " + (Dir() / "x.exr").string(), "lat-long"},
+          Case{"render " + cube + " --light-sampling best", "valid: mis, pis, cpis"},
+          Case{"render " + test::SceneDir() + "/sunlit.json --light-sampling cpis",
+               "sunlit.json has no environment light"},
+          Case{"render " + test::SceneDir() + "/brushed.json --integrator ao --light-sampling pis",
+               "direct and path integrators only"},
+          Case{"render " + test::SceneDir() +
+                   "/brushed.json --light-sampling cpis --psr-cache-mb 0.0001",
+               "--psr-cache-mb"},
           Case{"compare /no/a.exr /no/b.exr", "/no/a.exr"},
           Case{"render", "scene"}}) {
         const CliRun r = Texcache(c.args);
@@ -467,6 +476,31 @@ TEST(Cli, BenchPeerSaysWhatItCannotRun) {
     EXPECT_NE(r.out.find("cannot render this cage: a face of 16 vertices"), std::string::npos)
         << r.out;
     EXPECT_FALSE(fs::exists(out));
+}
+
+// Cached product sampling: --stats reports the record cache (its bytes counted in bytes_used);
+// without an environment light the option is one line naming the problem, exit 2.
+TEST(Cli, LightSamplingCpisReportsRecordBytes) {
+    const fs::path out = Dir() / "cpis.exr", stats = Dir() / "cpis_stats.json";
+    const CliRun r = Texcache("render " + test::SceneDir() +
+                              "/brushed.json --resolution 32x24 --spp 4 --light-sampling cpis -q "
+                              "--no-png -o " +
+                              out.string() + " --stats " + stats.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("product sampling records:"), std::string::npos) << r.out;
+    std::ifstream f(stats);
+    std::stringstream text;
+    text << f.rdbuf();
+    const std::string json = text.str();
+    const size_t at = json.find("\"psr_cache_bytes\": ");
+    ASSERT_NE(at, std::string::npos) << json;
+    EXPECT_GT(std::stod(json.substr(at + 19)), 1e6) << json;  // the 16 MiB default
+    EXPECT_NE(json.find("\"psr_built\": "), std::string::npos);
+
+    const CliRun none = Texcache("render " + test::SceneDir() +
+                                 "/sunlit.json --light-sampling cpis -q -o " + out.string());
+    EXPECT_EQ(none.code, 2);
+    EXPECT_EQ(std::count(none.out.begin(), none.out.end(), '\n'), 1) << none.out;
 }
 
 }  // namespace

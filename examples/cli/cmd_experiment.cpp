@@ -33,6 +33,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
         {"lod-bias", experiments::LodBias},
         {"temporal", experiments::Temporal},
         {"disocclusion", experiments::Disocclusion},
+        {"cpis", experiments::Cpis},
     };
     return m;
 }

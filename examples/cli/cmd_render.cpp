@@ -19,6 +19,7 @@
 #include "commands.h"
 #include "filters/screen_space/screen_denoiser.h"
 #include "renderer/frame_buffers_render.h"
+#include "renderer/product_sampling.h"
 #include "renderer/render.h"
 #include "renderer/scene_loader.h"
 #include "renderer/texture_space.h"
@@ -70,6 +71,9 @@ struct RenderArgs {
     int indirectSamples = 1;
     int hitSamples = 1;
     std::string cachedLight = "indirect";
+    std::string lightSampling = "mis";
+    double psrCacheMb = double(RenderOptions{}.psrCacheBytes) / (1 << 20);
+    float psrLodBias = RenderOptions{}.psrLodBias;
     std::string statsFile;
     // Screen-space frame buffers: one multi-layer EXR per frame in this directory.
     std::string frameBuffers;
@@ -147,9 +151,15 @@ std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
     add("waits", double(c.waits));
     add("reference_mode", opt.texture.cache.referenceMode ? 1.0 : 0.0);
     if (overshading >= 0.0) add("overshading", overshading);
+    add("psr_lookups", double(s.psr.lookups));
+    add("psr_hits", double(s.psr.hits));
+    add("psr_built", double(s.psr.built));
+    add("psr_uncached", double(s.psr.uncached));
+    add("psr_evictions", double(s.psr.evictions));
+    add("psr_cache_bytes", double(s.psrBytes));
     add("sample_cache_bytes", cache ? double(cache->SampleCacheBytes()) : 0.0);
     add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
-    add("bytes_used", cache ? double(cache->BytesUsed()) : 0.0, true);
+    add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes), true);
     json += "}\n";
     return json;
 }
@@ -263,6 +273,32 @@ void CheckDecompositionOptions(const RenderArgs& a, const char* opt, const char*
     if (!a.aovs.empty()) throw InputError(opt, std::string(aovReason) + ": drop --aov");
     if (a.overshading) throw InputError(opt, "cannot be combined with --overshading");
     if (a.Given("--stats")) throw InputError(opt, "cannot be combined with --stats");
+    if (a.Given("--light-sampling"))
+        throw InputError(opt, "samples lights as MIS does: drop --light-sampling");
+}
+
+/// --light-sampling and its record cache: product sampling needs an environment light and an
+/// integrator that samples lights (errors name the option and the problem).
+void ParseLightSamplingOptions(const RenderArgs& a, const Scene& scene, RenderOptions* opt) {
+    opt->lightSampling = ParseLightSampling(a.lightSampling, "--light-sampling");
+    const double mb = CheckRange("--psr-cache-mb", a.psrCacheMb, 1.0 / 1024.0, 1024.0 * 1024.0);
+    opt->psrCacheBytes = size_t(mb * 1024.0 * 1024.0);
+    opt->psrLodBias = CheckRange("--psr-lod-bias", a.psrLodBias, -16.0f, 16.0f);
+    if (opt->lightSampling == LightSampling::Mis) return;
+    const std::string what = std::string("--light-sampling ") + a.lightSampling;
+    if (opt->integrator != IntegratorKind::Direct && opt->integrator != IntegratorKind::Path)
+        throw InputError(what, std::string("samples light for the direct and path integrators "
+                                           "only (the integrator is ") +
+                                   IntegratorName(opt->integrator) + ")");
+    if (scene.environments.empty())
+        throw InputError(what, scene.path +
+                                   " has no environment light (product sampling draws "
+                                   "directions from the BSDF times an environment map)");
+    if (opt->lightSampling == LightSampling::Cpis &&
+        opt->psrCacheBytes < RecordCache<ProductRecord>::kSlotBytes)
+        throw InputError("--psr-cache-mb",
+                         "holds no record (one takes " +
+                             std::to_string(RecordCache<ProductRecord>::kSlotBytes) + " bytes)");
 }
 
 /// TBB's thread limit for --threads N (none for 0).
@@ -490,6 +526,7 @@ int RunRender(const RenderArgs& a) {
     opt.aovs = ParseAovs(a.aovs);
     opt.texture = ParseTextureOptions(a);
     CheckCacheMemory(a, opt.texture);
+    ParseLightSamplingOptions(a, scene, &opt);
     opt.progress = !a.quiet;
     int first = 0, last = 0;
     float fps = 0.0f;
@@ -591,6 +628,16 @@ int RunRender(const RenderArgs& a) {
             std::printf("overshading: %.2f%% more samples than an unbounded cache (%llu)\n",
                         100.0 * overshading, (unsigned long long)referenceShaded);
     }
+    if (r.stats.psrBytes > 0) {
+        const RecordStats& p = r.stats.psr;
+        std::printf(
+            "product sampling records: %llu lookups, %.1f%% hits, %llu built (%llu evictions), "
+            "%.1f MiB\n",
+            (unsigned long long)p.lookups,
+            p.lookups ? 100.0 * double(p.hits) / double(p.lookups) : 0.0,
+            (unsigned long long)p.built, (unsigned long long)p.evictions,
+            double(r.stats.psrBytes) / (1 << 20));
+    }
     std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
     for (const std::string& f : out.written) std::printf("wrote %s\n", f.c_str());
     return 0;
@@ -681,6 +728,19 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag(
         "--overshading", args->overshading,
         "Also render with unbounded caches and report the extra shading of the bounded ones");
+    cmd->add_option("--light-sampling", args->lightSampling,
+                    "Environment light at camera hits on metals: mis (light + BSDF sampling), "
+                    "pis (product importance sampling per hit) or cpis (product records cached "
+                    "per texel); pis and cpis need an environment light")
+        ->capture_default_str();
+    cmd->add_option("--psr-cache-mb", args->psrCacheMb,
+                    "cpis: product record cache size (MiB; a record takes " +
+                        std::to_string(RecordCache<ProductRecord>::kSlotBytes) + " bytes)")
+        ->capture_default_str();
+    cmd->add_option("--psr-lod-bias", args->psrLodBias,
+                    "cpis: mip levels above the pixel-sized texel at which records are cached "
+                    "(plus one per doubling of the lobe's width past GGX alpha 0.1)")
+        ->capture_default_str();
     cmd->add_option("--stats", args->statsFile, "Write cache statistics as JSON to FILE");
     cmd->add_option("--frame-buffers", args->frameBuffers,
                     "Screen-space stage input: write each frame's buffers (components, guides, "

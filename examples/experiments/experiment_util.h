@@ -122,5 +122,6 @@ int Threads(const Setup& s);
 int LodBias(const Setup& s);
 int Temporal(const Setup& s);
 int Disocclusion(const Setup& s);
+int Cpis(const Setup& s);
 
 }  // namespace texcache::experiments

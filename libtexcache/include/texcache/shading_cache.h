@@ -206,7 +206,27 @@ inline uint64_t MixFaceMip(uint32_t face, int mip) {
     return x;
 }
 
+/// Slot hash of a texel key: scanline order of 4x4-texel blocks (after Munkberg et al.'s
+/// scanline texel order): the 16 texels of a block sit in consecutive slots (8 cache lines),
+/// blocks of a block row follow each other, and block rows are scattered by an odd multiplier (a
+/// power-of-two stride aliased rows onto the same slots of a 2^k-slot cache). Neighbouring pixels
+/// and footprint taps then share cache lines instead of each missing to DRAM.
+inline uint64_t TexelSlotHash(const TexelKey& k) {
+    const uint64_t block = uint64_t(k.iv >> 2) * 2654435761u + uint64_t(k.iu >> 2);
+    return MixFaceMip(k.face, k.mip) + block * 16u + uint64_t(k.iv & 3) * 4u + (k.iu & 3);
+}
+
 }  // namespace internal
+
+/// The texel of mesh grids `g` a hit maps to: eq. 1 (floored, plus `lodBias`) and eq. 2.
+inline SampleRequest TexelOfHit(const MeshGrids& g, const CacheHit& h, float lodBias) {
+    const int mip = ComputeMip(g.Log2Res(h.face), h.dudx, h.dvdx, h.dudy, h.dvdy, lodBias);
+    const int res = g.Res(h.face, mip);
+    const int iu = QuantizeCoord(h.u, res), iv = QuantizeCoord(h.v, res);
+    SampleRequest r{h.mesh, h.face, mip, TexelCenter(iu, res), TexelCenter(iv, res), {}};
+    r.key = {g.FaceOffset() + uint32_t(h.face), uint8_t(mip), uint16_t(iu), uint16_t(iv)};
+    return r;
+}
 
 template <typename Sample, typename Texel>
 class ShadingCache {
@@ -242,14 +262,7 @@ public:
 
     /// The texel a hit maps to: eq. 1 (floored, plus the LOD bias) and eq. 2.
     SampleRequest TexelAt(const CacheHit& h) const {
-        const MeshGrids& g = *meshes_[h.mesh];
-        const int mip =
-            ComputeMip(g.Log2Res(h.face), h.dudx, h.dvdx, h.dudy, h.dvdy, settings_.lodBias);
-        const int res = g.Res(h.face, mip);
-        const int iu = QuantizeCoord(h.u, res), iv = QuantizeCoord(h.v, res);
-        SampleRequest r{h.mesh, h.face, mip, TexelCenter(iu, res), TexelCenter(iv, res), {}};
-        r.key = {g.FaceOffset() + uint32_t(h.face), uint8_t(mip), uint16_t(iu), uint16_t(iv)};
-        return r;
+        return TexelOfHit(*meshes_[h.mesh], h, settings_.lodBias);
     }
 
     /// Whether a texel is in the texel cache right now (read-only: never shades, claims or
@@ -358,16 +371,7 @@ public:
     size_t TexelCacheBytes() const { return texels_ ? texels_->BytesUsed() : 0; }
 
 private:
-    uint64_t Hash(const TexelKey& k) const {
-        // Scanline order of 4x4-texel blocks (after Munkberg et al.'s scanline texel order): the
-        // 16 texels of a block sit in consecutive slots (8 cache lines), blocks of a block row
-        // follow each other, and block rows are scattered by an odd multiplier (a power-of-two
-        // stride aliased rows onto the same slots of a 2^k-slot cache). Neighbouring pixels and
-        // footprint taps then share cache lines instead of each missing to DRAM.
-        const uint64_t block = uint64_t(k.iv >> 2) * 2654435761u + uint64_t(k.iu >> 2);
-        return internal::MixFaceMip(k.face, k.mip) + block * 16u + uint64_t(k.iv & 3) * 4u +
-               (k.iu & 3);
-    }
+    uint64_t Hash(const TexelKey& k) const { return internal::TexelSlotHash(k); }
 
     // Gathers the footprint, shades what is missing (deferring samples other threads are
     // shading, revisiting them after the rest), then filters.
