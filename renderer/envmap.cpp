@@ -107,8 +107,11 @@ glm::vec3 EnvironmentMap::UvToDir(glm::vec2 uv) const {
 }
 
 glm::vec3 EnvironmentMap::Eval(glm::vec3 dir) const {
+    return isConstant_ ? constant_ : EvalUv(DirToUv(dir));
+}
+
+glm::vec3 EnvironmentMap::EvalUv(glm::vec2 uv) const {
     if (isConstant_) return constant_;
-    const glm::vec2 uv = DirToUv(dir);
     const float x = uv.x * float(width_) - 0.5f, y = uv.y * float(height_) - 0.5f;
     const int x0 = int(std::floor(x)), y0 = int(std::floor(y));
     const float fx = x - float(x0), fy = y - float(y0);
@@ -132,12 +135,15 @@ glm::vec3 EnvironmentMap::Sample(glm::vec3 n, glm::vec2 u, glm::vec3* dir, float
     *dir = UvToDir(uv);
     // dω = 2π² sinθ du dv
     *pdf = sinTheta > 0.0f ? pdfUv / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;
-    return Eval(*dir);
+    return EvalUv(uv);
 }
 
 float EnvironmentMap::Pdf(glm::vec3 n, glm::vec3 dir) const {
     if (isConstant_) return CosineHemispherePdf(glm::dot(n, dir));
-    const glm::vec2 uv = DirToUv(dir);
+    return PdfUv(DirToUv(dir));
+}
+
+float EnvironmentMap::PdfUv(glm::vec2 uv) const {
     const float sinTheta = std::sin(uv.y * kPiF);
     return sinTheta > 0.0f ? dist_.Pdf(uv) / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;
 }

@@ -45,6 +45,10 @@ public:
     /// Mean radiance over the sphere.
     glm::vec3 AverageRadiance() const;
 
+    /// Eval() at lat-long coordinates (from DirToUv): for callers that have them already.
+    glm::vec3 EvalUv(glm::vec2 uv) const;
+    /// Pdf() of a map (not a constant environment) at lat-long coordinates.
+    float PdfUv(glm::vec2 uv) const;
     /// Whether this is a constant environment (no map).
     bool IsConstant() const { return isConstant_; }
     /// Lat-long coordinates of a direction (see the convention at the top) and back.

@@ -126,8 +126,7 @@ struct Context {
             // The pick's leftover: uniform and independent of u.
             const float uWalk =
                 std::min(uPick * float(numLights) - float(numLights - 1), kOneMinusEpsilon);
-            if (!SampleProductLight(*psr, *env, n, u, uWalk, &s->wi, &pdf)) return false;
-            s->Li = env->Eval(s->wi);
+            if (!SampleProductLight(*psr, *env, n, u, uWalk, &s->wi, &pdf, &s->Li)) return false;
         } else {
             s->Li = env->Sample(n, u, &s->wi, &pdf);
         }

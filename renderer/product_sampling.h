@@ -57,6 +57,12 @@ struct ProductRecord {
     /// texel, uWalk the walk down the pyramid); false when nothing can be drawn.
     bool Sample(const EnvironmentMap& env, glm::vec2 u, float uWalk, glm::vec3* wi,
                 float* pdf) const {
+        glm::vec2 uv;
+        return SampleUv(env, u, uWalk, &uv, wi, pdf);
+    }
+    /// Sample() that also returns the direction's lat-long coordinates.
+    bool SampleUv(const EnvironmentMap& env, glm::vec2 u, float uWalk, glm::vec2* uvOut,
+                  glm::vec3* wi, float* pdf) const {
         const EnvironmentMap::LuminancePyramid& p = env.Pyramid();
         int j = 0;
         while (j < kN - 1 && marginal[j] <= u.y) ++j;
@@ -89,16 +95,18 @@ struct ProductRecord {
                            (float(y) + fy) / float(base.height));
         const float sinTheta = std::sin(kPiF * uv.y);
         if (!(prob > 0.0f && sinTheta > 0.0f)) return false;
+        *uvOut = uv;
         *wi = env.UvToDir(uv);
         *pdf = prob * float(base.width) * float(base.height) / (2.0f * kPiF * kPiF * sinTheta);
         return true;
     }
 
     /// Solid-angle density of Sample() at a direction.
-    float Pdf(const EnvironmentMap& env, glm::vec3 wi) const {
+    float Pdf(const EnvironmentMap& env, glm::vec3 wi) const { return PdfUv(env, env.DirToUv(wi)); }
+    /// Pdf() at the lat-long coordinates of a direction.
+    float PdfUv(const EnvironmentMap& env, glm::vec2 uv) const {
         const EnvironmentMap::LuminancePyramid& p = env.Pyramid();
         const auto& base = p.levels.front();
-        const glm::vec2 uv = env.DirToUv(wi);
         const int x = std::min(int(uv.x * float(base.width)), base.width - 1);
         const int y = std::min(int(uv.y * float(base.height)), base.height - 1);
         const int cx = x >> level, cy = y >> level;
@@ -128,26 +136,33 @@ struct ProductRecord {
 constexpr float kEnvShare = 0.15f;
 
 /// A light sample of product sampling: from `record` with probability 1 - kEnvShare, else from
-/// the map's own distribution (for a surface of normal n); the pdf is the mixture's. `uChoice`
-/// is uniform and independent of u.
+/// the map's own distribution (for a surface of normal n); the pdf is the mixture's, `Li` the
+/// radiance from wi. `uChoice` is uniform and independent of u.
 inline bool SampleProductLight(const ProductRecord& record, const EnvironmentMap& env, glm::vec3 n,
-                               glm::vec2 u, float uChoice, glm::vec3* wi, float* pdf) {
+                               glm::vec2 u, float uChoice, glm::vec3* wi, float* pdf,
+                               glm::vec3* Li) {
     float p;
     if (uChoice < kEnvShare) {
-        env.Sample(n, u, wi, &p);
+        *Li = env.Sample(n, u, wi, &p);
         if (!(p > 0.0f)) return false;
         *pdf = kEnvShare * p + (1.0f - kEnvShare) * record.Pdf(env, *wi);
         return true;
     }
     const float uWalk = std::min((uChoice - kEnvShare) / (1.0f - kEnvShare), kOneMinusEpsilon);
-    if (!record.Sample(env, u, uWalk, wi, &p)) return false;
-    *pdf = (1.0f - kEnvShare) * p + kEnvShare * env.Pdf(n, *wi);
+    glm::vec2 uv;
+    if (!record.SampleUv(env, u, uWalk, &uv, wi, &p)) return false;
+    *Li = env.EvalUv(uv);  // one lat-long conversion for the radiance and both pdfs
+    *pdf =
+        (1.0f - kEnvShare) * p + kEnvShare * (env.IsConstant() ? env.Pdf(n, *wi) : env.PdfUv(uv));
     return true;
 }
 /// Density of SampleProductLight at a direction.
 inline float ProductLightPdf(const ProductRecord& record, const EnvironmentMap& env, glm::vec3 n,
                              glm::vec3 wi) {
-    return (1.0f - kEnvShare) * record.Pdf(env, wi) + kEnvShare * env.Pdf(n, wi);
+    if (env.IsConstant())
+        return (1.0f - kEnvShare) * record.Pdf(env, wi) + kEnvShare * env.Pdf(n, wi);
+    const glm::vec2 uv = env.DirToUv(wi);
+    return (1.0f - kEnvShare) * record.PdfUv(env, uv) + kEnvShare * env.PdfUv(uv);
 }
 
 /// Lobes narrower than this (max alpha) get no record: a near-mirror reflects a sliver of the

@@ -281,7 +281,8 @@ TEST(ProductRecord, EstimatorAgreesWithMis) {
                     em += Luminance(b.Eval(wo, wi) * L) * std::max(0.f, glm::dot(wi, kN)) * w / pdf;
                 }
                 float pp;
-                if (SampleProductLight(r, env, kN, u, rng.Next1D(), &wi, &pp)) {
+                glm::vec3 Li;
+                if (SampleProductLight(r, env, kN, u, rng.Next1D(), &wi, &pp, &Li)) {
                     const float w = PowerHeuristic(1, pp, 1, b.Pdf(wo, wi));
                     ep += Luminance(b.Eval(wo, wi) * env.Eval(wi)) *
                           std::max(0.f, glm::dot(wi, kN)) * w / pp;
