@@ -160,6 +160,7 @@ const EnvironmentMap::LuminancePyramid& EnvironmentMap::Pyramid() const {
         levels.push_back(std::move(l0));
         while (levels.back().width > 2 && levels.back().height > 1) {
             const LuminancePyramid::Level& f = levels.back();
+            if (f.width % 2 || f.height % 2) pyramid_->pyramid.exact = false;
             LuminancePyramid::Level c{f.width / 2, f.height / 2, {}};
             c.texels.resize(size_t(c.width) * c.height);
             for (int y = 0; y < c.height; ++y)

@@ -66,6 +66,9 @@ public:
             std::vector<float> texels;
         };
         std::vector<Level> levels;
+        /// Every level halves the one below exactly (power-of-two maps): a texel's share of an
+        /// ancestor is then its luminance over 4^k times the ancestor's.
+        bool exact = true;
         /// Texel (x, y) of level `level` (in range).
         float Texel(int level, int x, int y) const {
             const Level& l = levels[size_t(level)];

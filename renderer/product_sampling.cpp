@@ -59,10 +59,10 @@ bool BuildProductRecord(const EnvironmentMap& env, const Bsdf& bsdf, glm::vec3 w
     float sinTheta[N];
     for (int j = 0; j < N; ++j)
         sinTheta[j] = std::sin(kPiF * (float(out->y0 + j) + 0.5f) / float(H));
-    double total = 0.0;
+    double weights[N][N], rowSums[N], total = 0.0;
     for (int j = 0; j < N; ++j) {
         const int y = out->y0 + j;
-        double rowSum = 0.0;
+        rowSums[j] = 0.0;
         for (int i = 0; i < N; ++i) {
             float w = 0.0f;
             if (y < H && i < W) {
@@ -71,26 +71,38 @@ bool BuildProductRecord(const EnvironmentMap& env, const Bsdf& bsdf, glm::vec3 w
                 for (int sy = 0; sy < kSub; ++sy)
                     for (int sx = 0; sx < kSub; ++sx) {
                         const float u = (float(x) + (float(sx) + 0.5f) / float(kSub)) / float(W);
-                        const glm::vec3 d =
-                            env.UvToDir({u, (float(y) + (float(sy) + 0.5f) / kSub) / float(H)});
+                        const float v = (float(y) + (float(sy) + 0.5f) / float(kSub)) / float(H);
+                        const glm::vec3 d = env.UvToDir({u, v});
                         const float c = glm::dot(d, f.n);
                         if (c > 0.0f) b += Luminance(bsdf.Eval(woWorld, d)) * c;
                     }
                 w = b * p.Texel(level, x, y) * sinTheta[j];
             }
             if (!(w > 0.0f) || !std::isfinite(w)) w = 0.0f;  // NaN never enters a record
-            rowSum += double(w);
-            out->rows[j][i] = float(rowSum);  // cumulative; normalised below
+            weights[j][i] = double(w);
+            rowSums[j] += double(w);
         }
-        for (int i = 0; i < N; ++i)
-            out->rows[j][i] = rowSum > 0.0 ? float(out->rows[j][i] / rowSum) : float(i + 1) / N;
-        out->rows[j][N - 1] = 1.0f;
-        total += rowSum;
-        out->marginal[j] = float(total);
+        total += rowSums[j];
     }
     if (!(total > 0.0) || !std::isfinite(total)) return false;
-    for (int j = 0; j < N; ++j) out->marginal[j] = float(double(out->marginal[j]) / total);
-    out->marginal[N - 1] = 1.0f;
+    // Cumulative sums in 16-bit units (see ProductRecord): a cell's probability is the difference
+    // of two rounded values, so what Sample draws and what Pdf reports stay the same numbers.
+    auto quantize = [](double cumulative, double sum) {
+        return uint16_t(std::lround(std::clamp(cumulative / sum, 0.0, 1.0) * ProductRecord::kOne));
+    };
+    double acc = 0.0;
+    for (int j = 0; j < N; ++j) {
+        acc += rowSums[j];
+        out->marginal[j] = quantize(acc, total);
+        double rowAcc = 0.0;
+        for (int i = 0; i < N; ++i) {
+            rowAcc += weights[j][i];
+            out->rows[j][i] = rowSums[j] > 0.0 ? quantize(rowAcc, rowSums[j])
+                                               : uint16_t((i + 1) * int(ProductRecord::kOne) / N);
+        }
+        out->rows[j][N - 1] = uint16_t(ProductRecord::kOne);
+    }
+    out->marginal[N - 1] = uint16_t(ProductRecord::kOne);
     out->valid = 1;
     return true;
 }

@@ -131,9 +131,8 @@ struct RenderOptions {
     TextureSpaceOptions texture;  ///< cached AO / diffuse indirect when texture.enabled
     bool progress = true;         ///< progress bar on stderr for renders longer than a second
     LightSampling lightSampling = LightSampling::Mis;
-    /// Cpis: the record cache's budget (its slot array: records + 16 bytes each). 16 MiB holds
-    /// about 14K records, several times the texels a 640x360 view of a cage needs at the default
-    /// LOD (figures in results/cpis.md).
+    /// Cpis: the record cache's budget (its slot array: 584 bytes a record). 16 MiB holds 28K
+    /// records; brushed.json at 256x192 builds ~3K at the default LOD (results/cpis.md).
     size_t psrCacheBytes = size_t(16) << 20;
     /// Cpis: mip levels above the pixel-sized texel (eq. 1) at which records are cached, before
     /// the lobe's own term (see product_sampling.h, RecordLevelBias).

@@ -61,7 +61,7 @@ int Cpis(const Setup& s) {
     // relMSE 0.01 at the full size).
     const Method methods[] = {{"mis", LightSampling::Mis, s.quick ? 64 : 1024},
                               {"pis", LightSampling::Pis, s.quick ? 8 : 128},
-                              {"cpis", LightSampling::Cpis, s.quick ? 64 : 1024}};
+                              {"cpis", LightSampling::Cpis, s.quick ? 64 : 512}};
     Table t({"method", "spp", "seconds", "rays", "relmse", "cpu_seconds", "psr_built", "psr_hits"});
     struct Curve {
         std::vector<double> seconds, rays, relmse;
