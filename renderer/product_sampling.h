@@ -141,11 +141,12 @@ struct ProductRecord {
 /// Share of the light samples that product sampling leaves to the map's own sampling (a
 /// defensive mixture, Hesterberg 1995): light from outside a record's window, e.g. a bright
 /// source in the far tail of a rough lobe, would otherwise be found by BSDF sampling alone.
-/// Measured at six single shading points of brushed.json's lobe (tests/product_sampling_test.cpp,
-/// EstimatorAgreesWithMis prints them): without it, variance 0.2-0.5x MIS's at four but 180x at
-/// one whose light came from outside the window; with it 0.16-0.53x and, at the two points lit
-/// from the far tail of the lobe's broad axis, 1.5x and 2.2x. Shares of 0.05 and 0.3 gave no
-/// better image (see the commit of this line).
+/// Measured at single shading points of brushed.json's lobe (tests/product_sampling_test.cpp,
+/// EstimatorAgreesWithMis prints them): without it, one point of six whose light came from
+/// outside the window had 180x MIS's variance; with it, that set gave 0.16-0.53x at four points
+/// and 1.5x and 2.2x at two lit from the far tail of the lobe's broad axis, and the test's
+/// current six points give 0.14-0.35x. Shares of 0.05 and 0.3 gave no better image (commit
+/// a8848ca).
 constexpr float kEnvShare = 0.15f;
 
 /// A light sample of product sampling: from `record` with probability 1 - kEnvShare, else from

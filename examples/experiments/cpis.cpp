@@ -65,6 +65,7 @@ int Cpis(const Setup& s) {
     Table t({"method", "spp", "seconds", "rays", "relmse", "cpu_seconds", "psr_built", "psr_hits"});
     struct Curve {
         std::vector<double> seconds, rays, relmse;
+        std::vector<std::vector<double>> rows;  // the CSV's numbers, written method by method
     };
     // The methods take turns at each sample count, so a change of the machine's load falls on
     // all three alike.
@@ -79,14 +80,20 @@ int Cpis(const Setup& s) {
             const Run r = TimedRender(ls, o, 1, spp == 1);
             const double e = RelMSE(r.image, ref);
             const double rays = double(r.stats.TotalRays());
-            t.Row().Add(m.name).Add(spp).Add(r.seconds).Add(rays).Add(e).Add(r.cpuSeconds);
-            t.Add(double(r.stats.psr.built)).Add(double(r.stats.psr.hits));
             Curve& c = curves[k];
+            c.rows.push_back({double(spp), r.seconds, rays, e, r.cpuSeconds,
+                              double(r.stats.psr.built), double(r.stats.psr.hits)});
             c.seconds.push_back(r.cpuSeconds), c.rays.push_back(rays), c.relmse.push_back(e);
             Say("[cpis] %s %4d spp: %.3f s CPU, %.3g rays, relMSE %.5f", m.name, spp, r.cpuSeconds,
                 rays, e);
             if (spp == m.maxSpp)
                 WriteImage((fs::path(s.outDir) / Format("cpis_%s.png", m.name)).string(), r.image);
+        }
+    // One method's rows together: gnuplot draws a series' line through consecutive rows only.
+    for (size_t k = 0; k < curves.size(); ++k)
+        for (const std::vector<double>& row : curves[k].rows) {
+            t.Row().Add(methods[k].name);
+            for (double v : row) t.Add(v);
         }
     const std::string csv = (fs::path(s.outDir) / "cpis.csv").string();
     t.Write(csv);
