@@ -36,6 +36,28 @@ double PowerLawCrossing(const std::vector<double>& xs, const std::vector<double>
     return std::exp((std::log(target) - a) / b);
 }
 
+/// A sweep's points from its third render (4 spp) on: the first renders carry fixed costs (e.g.
+/// the record cache's allocation) that a power law of the cost does not model.
+std::vector<double> FromFourSpp(const std::vector<double>& v) {
+    const size_t from = std::min<size_t>(2, v.size() - 2);
+    return std::vector<double>(v.begin() + long(from), v.end());
+}
+
+/// Where a convergence curve first reaches `target`: log-log interpolation between the two
+/// renders around it, or the power-law fit when no render reached it (`fitted` says so).
+double Crossing(const std::vector<double>& xs, const std::vector<double>& ys, double target,
+                bool* fitted) {
+    for (size_t i = 1; i < ys.size(); ++i)
+        if (ys[i] <= target && ys[i - 1] > target) {
+            bool extrapolated;
+            *fitted = false;
+            return InterpolateLogLog({ys[i], ys[i - 1]}, {xs[i], xs[i - 1]}, target, &extrapolated);
+        }
+    double slope;
+    *fitted = true;
+    return PowerLawCrossing(FromFourSpp(xs), FromFourSpp(ys), target, &slope);
+}
+
 struct Method {
     const char* name;
     LightSampling sampling;
@@ -113,8 +135,8 @@ int Cpis(const Setup& s) {
         Draw(p);
     }
 
-    // Time and rays to relMSE 0.01 (power-law fits of the points from 4 spp on: the first
-    // renders carry fixed costs, e.g. the record cache's allocation).
+    // Time and rays to relMSE 0.01: interpolated between the renders around it; beside it the
+    // power-law fit of the points from 4 spp on.
     std::string md = "# Cached product importance sampling\n\n";
     if (s.quick) md += "**Quick mode: test-size image; not for conclusions.**\n\n";
     md += Format(
@@ -125,20 +147,20 @@ int Cpis(const Setup& s) {
         "render CPU time (all threads), renders of 1, 2, 4, ... spp.\n\n",
         W, H, refSpp);
     md +=
-        "| method | CPU seconds to relMSE 0.01 | rays to relMSE 0.01 | fitted slope (time) | "
-        "last point |\n|---|---|---|---|---|\n";
+        "| method | CPU seconds to relMSE 0.01 | rays to relMSE 0.01 | power-law fit: seconds "
+        "(slope) | last point |\n|---|---|---|---|---|\n";
     std::vector<double> tTarget;
     for (size_t k = 0; k < curves.size(); ++k) {
         const Curve& c = curves[k];
-        auto tail = [&](const std::vector<double>& v) {
-            const size_t from = std::min<size_t>(2, v.size() - 2);
-            return std::vector<double>(v.begin() + long(from), v.end());
-        };
-        double slopeT, slopeR;
-        const double tt = PowerLawCrossing(tail(c.seconds), tail(c.relmse), kTarget, &slopeT);
-        const double rr = PowerLawCrossing(tail(c.rays), tail(c.relmse), kTarget, &slopeR);
+        double slopeT;
+        bool fitT, fitR;
+        const double tt = Crossing(c.seconds, c.relmse, kTarget, &fitT);
+        const double rr = Crossing(c.rays, c.relmse, kTarget, &fitR);
+        const double tFit =
+            PowerLawCrossing(FromFourSpp(c.seconds), FromFourSpp(c.relmse), kTarget, &slopeT);
         tTarget.push_back(tt);
-        md += Format("| %s | %.3g | %.3g | %.2f | %.3g s, relMSE %.4f |\n", methods[k].name, tt, rr,
+        md += Format("| %s | %.3g%s | %.3g%s | %.3g (%.2f) | %.3g s, relMSE %.4f |\n",
+                     methods[k].name, tt, fitT ? " (fit)" : "", rr, fitR ? " (fit)" : "", tFit,
                      slopeT, c.seconds.back(), c.relmse.back());
     }
     const double cpisVsPis = tTarget[1] / tTarget[2], cpisVsMis = tTarget[0] / tTarget[2];
