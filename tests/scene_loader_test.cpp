@@ -259,6 +259,9 @@ TEST(SceneLoader, BadInputNamesFileAndKey) {
         {"\"seed\": 3", "\"seed\": -3", "render.seed"},
         {"\"max_depth\": 3", "\"max_depth\": 3, \"maxdepth\": 3", "key 'render.maxdepth'"},
         {"\"roughness\": 0.3", "\"roughness\": 1.5", "key 'materials.red.roughness': value 1.5"},
+        {"\"roughness\": 0.3", "\"roughness\": [0.3, 0.2, 0.1]",
+         "key 'materials.red.roughness': expected a number or an array of 2 numbers"},
+        {"\"roughness\": 0.3", "\"roughness\": [0.3, -0.2]", "key 'materials.red.roughness[1]'"},
         {"\"albedo\": [0.8, 0.1, 0.1]", "\"albedo\": [0.8, 0.1, -0.1]",
          "key 'materials.red.albedo[2]'"},
         {"\"type\": \"ggx\"", "\"type\": \"plastic\"",
@@ -516,8 +519,17 @@ TEST(SceneLoader, WarnsAboutIgnoredValuesAndMissingLights) {
     EXPECT_TRUE(Contains(w[1], "no lights")) << w[1];
 }
 
+// "roughness": [along, across] makes an anisotropic GGX lobe (brushed metal).
+TEST(SceneLoader, AnisotropicRoughness) {
+    const Scene s = LoadScene(test::SceneDir() + "/brushed.json", nullptr);
+    ASSERT_EQ(s.materials.size(), 1u);
+    EXPECT_TRUE(s.materials[0].anisotropic);
+    EXPECT_FLOAT_EQ(s.materials[0].roughness.value, 0.6f);
+    EXPECT_FLOAT_EQ(s.materials[0].roughnessV, 0.25f);
+}
+
 TEST(SceneLoader, BundledScenesLoad) {
-    for (const char* name : {"car.json", "chess.json", "features.json"}) {
+    for (const char* name : {"car.json", "chess.json", "features.json", "brushed.json"}) {
         std::vector<std::string> w;
         const Scene s = LoadScene(test::SceneDir() + "/" + name, &w);
         EXPECT_FALSE(s.objects.empty()) << name;
