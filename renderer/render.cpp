@@ -95,7 +95,7 @@ Ray CameraRay(const Context& c, int x, int y, int s, Rng* rng, RayDifferentials*
 
 /// Differentials feed the cache's mip selection and the debug views; they are skipped otherwise.
 bool NeedsDifferentials(const Context& c) {
-    return c.tsc != nullptr || c.lightSampling != LightSampling::Mis ||
+    return c.tsc != nullptr || c.psrCache != nullptr ||
            c.opt.integrator == IntegratorKind::Normal || c.opt.integrator == IntegratorKind::Ptex ||
            c.opt.integrator == IntegratorKind::Uv;
 }
@@ -138,6 +138,10 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
 
     const IntegratorKind k = c.opt.integrator;
     if (k == IntegratorKind::Direct || k == IntegratorKind::Path) {
+        // Differentials tell LiPath that its first hit is a camera hit, which product sampling
+        // needs; otherwise none, so that MIS does not compute a footprint it never uses.
+        const RayDifferentials* productDiff =
+            c.lightSampling != LightSampling::Mis ? &diff : nullptr;
         if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
         if (c.tsc && k == IntegratorKind::Path) {
             // Diffuse indirect from the cache; glossy materials stay per hit (view-dependent).
@@ -156,7 +160,8 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
                 return all ? CachedTerm::All : CachedTerm::Indirect;
             };
             return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
-                return LiPath(c, ray, hit, found, r, c.opt.maxDepth, rays, true, cached, &diff);
+                return LiPath(c, ray, hit, found, r, c.opt.maxDepth, rays, true, cached,
+                              productDiff);
             });
         }
         if (c.tsc && k == IntegratorKind::Direct)
@@ -165,7 +170,7 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
             });
         return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
             return LiPath(c, ray, hit, found, r, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
-                          rays, true, NoCachedTerm(), &diff);
+                          rays, true, NoCachedTerm(), productDiff);
         });
     }
     if (!found) return glm::vec3(0.0f);
