@@ -57,6 +57,10 @@ public:
         return cache_.TexelAt({MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
                                si.dudx, si.dvdx, si.dudy, si.dvdy});
     }
+    /// TexelOf's result for a texel key of cache mesh `mesh` (see ShadingCache::RequestOf).
+    SampleRequest RequestOf(int mesh, const TexelKey& key) const {
+        return cache_.RequestOf(mesh, key);
+    }
     /// Starts fetching a texel's slot into the CPU cache (see ShadingCache::Prefetch): for a
     /// batch of texels before their lookups.
     void Prefetch(const SampleRequest& texel) const { cache_.Prefetch(texel); }

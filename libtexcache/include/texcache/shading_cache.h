@@ -252,6 +252,15 @@ public:
         return r;
     }
 
+    /// What TexelAt returned for `key` on mesh `mesh`, rebuilt from the key alone: for
+    /// renderers that keep a pass's texel keys (8 bytes) instead of its requests.
+    SampleRequest RequestOf(int mesh, const TexelKey& key) const {
+        const MeshGrids& g = *meshes_[mesh];
+        const int face = int(key.face - g.FaceOffset());
+        const int res = g.Res(face, key.mip);
+        return {mesh, face, key.mip, TexelCenter(key.iu, res), TexelCenter(key.iv, res), key};
+    }
+
     /// Whether a texel is in the texel cache right now (read-only: never shades, claims or
     /// counts anything), e.g. for a hit/miss heat map. Always false in reference mode.
     bool ContainsTexel(const SampleRequest& texel) const {
