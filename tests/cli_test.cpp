@@ -2,6 +2,7 @@
 // The `texcache` program end to end: outputs, exit codes, error messages, and that a failed run
 // never replaces a good output.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -467,6 +468,34 @@ TEST(Cli, BenchPeerSaysWhatItCannotRun) {
     EXPECT_NE(r.out.find("cannot render this cage: a face of 16 vertices"), std::string::npos)
         << r.out;
     EXPECT_FALSE(fs::exists(out));
+}
+
+// `bench peer` compares like with like: both sides' high-sample renders show the same light. The
+// peer's diffuse response is twice ours (cmd_bench_peer.cpp says how it was measured) and its
+// pixels clip at 1, so its scene takes half the albedo; without that the car's body was 1.0 on
+// its side against 0.5 on ours: relMSE ~0.1 between the references, where noise at 64 spp on
+// 48x48 pixels gives ~0.005. Needs Embree's pathtracer (scripts/setup.sh installs embree-tools).
+TEST(Cli, BenchPeerReferencesShowTheSameLight) {
+    ASSERT_EQ(::access("/usr/bin/pathtracer", X_OK), 0)
+        << "Embree's pathtracer is missing: scripts/setup.sh installs embree-tools";
+    const fs::path out = Dir() / "peer_light";
+    fs::remove_all(out);
+    const CliRun r = Texcache(
+        "bench peer --resolution 48x48 --spp 4 --reference-spp 64 --repeats 1 "
+        "--pathtracer /usr/bin/pathtracer --out " +
+        out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    const size_t at = r.out.find("references against each other: relMSE ");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    double relmse = -1.0, meanOurs = -1.0, meanPeer = -1.0;
+    ASSERT_EQ(std::sscanf(r.out.c_str() + at,
+                          "references against each other: relMSE %lf, mean value ours %lf, "
+                          "Embree %lf",
+                          &relmse, &meanOurs, &meanPeer),
+              3)
+        << r.out;
+    EXPECT_LT(relmse, 0.03) << r.out;
+    EXPECT_NEAR(meanOurs, meanPeer, 0.01) << r.out;
 }
 
 }  // namespace
