@@ -30,6 +30,7 @@
 #include "renderer/render_scene.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -310,6 +311,7 @@ struct RenderScene::Impl {
     using Mesh = EmbreeMesh;
     std::vector<Mesh> meshes;  // by Scene::meshes index; unused meshes stay empty
     TessellationStats tessellation;
+    BuildSeconds build;
 
     struct Instance {
         int mesh = -1;
@@ -370,6 +372,19 @@ struct RenderScene::Impl {
     }
 };
 
+/// Adds the seconds since the last call (or construction) to a stage of the scene build.
+class StageClock {
+public:
+    void Charge(double* stage) {
+        const auto now = std::chrono::steady_clock::now();
+        *stage += std::chrono::duration<double>(now - last_).count();
+        last_ = now;
+    }
+
+private:
+    std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
 static bool MaterialUsesTextures(const Material& m) {
     return m.albedo.texture >= 0 || m.roughness.texture >= 0;
 }
@@ -377,6 +392,7 @@ static bool MaterialUsesTextures(const Material& m) {
 RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     : scene_(scene), impl_(std::make_unique<Impl>()) {
     Impl& I = *impl_;
+    StageClock clock;
     std::string config = options.threads > 0 ? "threads=" + std::to_string(options.threads) : "";
     I.device = rtcNewDevice(config.c_str());
     if (!I.device) throw std::runtime_error("cannot create Embree device");
@@ -393,21 +409,22 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     }
 
     I.meshes.resize(numMeshes);
+    clock.Charge(&I.build.other);
     for (size_t m = 0; m < numMeshes; ++m) {
         if (!used[m]) continue;
         const ControlCage& cage = scene.meshes[m];
         Impl::Mesh& mesh = I.meshes[m];
         mesh.topo = std::make_unique<PtexTopology>(cage);
         mesh.regular = std::make_unique<RegularPatches>(cage);
-        mesh.scene = rtcNewScene(I.device);
         const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
+        clock.Charge(&I.build.opensubdiv);
+        mesh.scene = rtcNewScene(I.device);
         const bool wantUv = needUv[m] && !cage.uvs.empty();
-        RTCGeometry g = beyond > 0 || options.tessellateAll
-                            ? NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate,
-                                                   wantUv, &mesh)
-                            : NewSubdivisionGeometry(
-                                  I.device, cage, scene.settings.tessellationRate, wantUv, &mesh);
-        if (mesh.limit) {
+        RTCGeometry g;
+        if (beyond > 0 || options.tessellateAll) {
+            g = NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
+                                     &mesh);
+            clock.Charge(&I.build.opensubdiv);
             // Watertight quads: a ray through a shared vertex of the tessellation otherwise
             // may slip between its quads (measured: 15 of 1848 rays aimed at the limit points on
             // the n-gons' edges missed, all at cage vertices; ctest -R
@@ -416,12 +433,17 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             ++I.tessellation.meshes;
             I.tessellation.cageFaces += size_t(cage.numFaces());
             I.tessellation.beyondEmbree += beyond;
+        } else {
+            g = NewSubdivisionGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
+                                       &mesh);
         }
         rtcCommitGeometry(g);
         rtcAttachGeometry(mesh.scene, g);
         mesh.geom = g;  // owned by mesh.scene from here on
         rtcReleaseGeometry(g);
+        clock.Charge(&I.build.embreeGeometry);
         rtcCommitScene(mesh.scene);
+        clock.Charge(&I.build.embreeBvh);
     }
 
     // Objects become instances; only animated objects with an open shutter get motion steps.
@@ -450,6 +472,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         inst.normalMatrix = glm::transpose(glm::inverse(glm::mat3(inst.steps[0])));
         rtcReleaseGeometry(g);
     }
+    clock.Charge(&I.build.embreeGeometry);
 
     // Quad lights are real geometry so camera and BSDF rays see them (posed at the frame time).
     if (options.needLights) {
@@ -479,7 +502,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
                                   : EnvironmentMap::Shared(e.path, e.intensity, e.rotationDegrees);
         }
     }
+    clock.Charge(&I.build.other);
     rtcCommitScene(I.top);
+    clock.Charge(&I.build.embreeBvh);
 
     if (options.needTextures) {
         // Only textures some object's material references are loaded.
@@ -501,6 +526,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             }
         }
     }
+    clock.Charge(&I.build.other);
 }
 
 RenderScene::~RenderScene() = default;
@@ -515,6 +541,10 @@ const PtexTopology& RenderScene::Topology(int object) const {
 
 RenderScene::TessellationStats RenderScene::LimitTessellated() const {
     return impl_->tessellation;
+}
+
+RenderScene::BuildSeconds RenderScene::BuildTimes() const {
+    return impl_->build;
 }
 
 size_t RenderScene::NumPtexFaces() const {

@@ -123,6 +123,15 @@ public:
     };
     TessellationStats LimitTessellated() const;
 
+    /// Wall-clock seconds of each stage of the construction (where a scene build's time goes).
+    struct BuildSeconds {
+        double opensubdiv = 0.0;      ///< Ptex topology, regular patches, limit tessellation
+        double embreeGeometry = 0.0;  ///< filling and committing Embree's geometry buffers
+        double embreeBvh = 0.0;       ///< rtcCommitScene: Embree's tessellation and BVH build
+        double other = 0.0;           ///< Embree device, lights, environment, textures
+    };
+    BuildSeconds BuildTimes() const;
+
 private:
     struct Impl;
     const Scene& scene_;

@@ -443,7 +443,9 @@ void CheckCombinations(const RenderArgs& a, const RenderSettings& s, const Rende
 
 int RunRender(const RenderArgs& a) {
     std::vector<std::string> warnings;
+    const double tLoad = NowSeconds();
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    const double loadSeconds = NowSeconds() - tLoad;
     for (const std::string& w : warnings)
         std::fprintf(stderr, "texcache: warning: %s\n", internal::OneLine(w).c_str());
 
@@ -560,7 +562,9 @@ int RunRender(const RenderArgs& a) {
         referenceShaded = Render(rs, ref).stats.cache.samplesShaded;
     }
     std::unique_ptr<TextureSpaceCache> cache;
+    const double tCache = NowSeconds();
     if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
+    const double cacheSeconds = NowSeconds() - tCache;
     RenderResult r = Render(rs, opt, cache.get());
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
@@ -578,6 +582,12 @@ int RunRender(const RenderArgs& a) {
     std::printf("time: %.3f s render + %.3f s scene build; %.2f Mrays/s (%llu rays)\n",
                 r.stats.seconds, buildSeconds, double(r.stats.TotalRays()) / r.stats.seconds * 1e-6,
                 (unsigned long long)r.stats.TotalRays());
+    const RenderScene::BuildSeconds b = rs.BuildTimes();
+    std::printf(
+        "scene build: OpenSubdiv %.3f s, Embree geometry %.3f s, Embree BVH %.3f s, other %.3f s; "
+        "%.3f s reading the scene%s",
+        b.opensubdiv, b.embreeGeometry, b.embreeBvh, b.other, loadSeconds, cache ? "" : "\n");
+    if (cache) std::printf(", %.3f s making the texture-space cache\n", cacheSeconds);
     PrintSceneStats(rs);
     if (cache) {
         const CacheStats& c = r.stats.cache;
