@@ -30,6 +30,7 @@
 #include "renderer/render_scene.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -122,13 +123,30 @@ size_t FacesBeyondEmbree(const ControlCage& cage, const PtexTopology& topo) {
     return n;
 }
 
+/// Bytes Embree holds now, and at most so far, from its memory monitor callback (atomics: Embree's
+/// build threads allocate concurrently).
+struct EmbreeMemory {
+    std::atomic<int64_t> now{0}, peak{0};
+
+    static bool Count(void* self, ssize_t bytes, bool /*post*/) {
+        auto* m = static_cast<EmbreeMemory*>(self);
+        const int64_t n = m->now.fetch_add(bytes, std::memory_order_relaxed) + bytes;
+        int64_t p = m->peak.load(std::memory_order_relaxed);
+        while (n > p && !m->peak.compare_exchange_weak(p, n, std::memory_order_relaxed)) {
+        }
+        return true;  // never refuse an allocation
+    }
+    size_t Bytes() const { return size_t(std::max<int64_t>(now.load(), 0)); }
+    size_t PeakBytes() const { return size_t(std::max<int64_t>(peak.load(), 0)); }
+};
+
 /// One mesh's Embree geometry and how its hits map to Ptex faces: Embree's own subdivision
 /// surface, or quads on the limit surface tessellated with OpenSubdiv (`limit` set).
 struct EmbreeMesh {
     RTCScene scene = nullptr;
     RTCGeometry geom = nullptr;
-    std::unique_ptr<PtexTopology> topo;
-    std::unique_ptr<RegularPatches> regular;  // fast path for rtcInterpolate
+    std::shared_ptr<const PtexTopology> topo;  // shared with texture-space caches
+    std::unique_ptr<RegularPatches> regular;   // fast path for rtcInterpolate
     bool hasUv = false;
     std::vector<uint8_t> isHole;  // per coarse face, only for subdivision cages with holes
     // Limit tessellation only: the general evaluator, and per quad its Ptex square and uvs.
@@ -189,16 +207,16 @@ struct EmbreeMesh {
 RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, float rate,
                                    bool withUv, EmbreeMesh* mesh) {
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SUBDIVISION);
-    auto* faces = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0,
-                                                                 RTC_FORMAT_UINT, sizeof(unsigned),
-                                                                 cage.faceVertexCounts.size()));
-    for (size_t i = 0; i < cage.faceVertexCounts.size(); ++i)
-        faces[i] = unsigned(cage.faceVertexCounts[i]);
-    auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
-                                                               RTC_FORMAT_UINT, sizeof(unsigned),
-                                                               cage.faceVertexIndices.size()));
-    for (size_t i = 0; i < cage.faceVertexIndices.size(); ++i)
-        idx[i] = unsigned(cage.faceVertexIndices[i]);
+    // Face sizes and indices are the cage's own arrays, shared rather than copied (20 MB on a
+    // 1,000,000-quad cage): validated non-negative ints, bit for bit Embree's UINTs, and the
+    // Scene outlives its RenderScene.
+    static_assert(sizeof(int) == sizeof(unsigned));
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0, RTC_FORMAT_UINT,
+                               cage.faceVertexCounts.data(), 0, sizeof(unsigned),
+                               cage.faceVertexCounts.size());
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
+                               cage.faceVertexIndices.data(), 0, sizeof(unsigned),
+                               cage.faceVertexIndices.size());
     // 16-byte stride with w = 0: Embree loads vertices as 4-wide vectors, and garbage in the
     // 4th lane (the buffer's padding after the last vertex) made rtcInterpolate read
     // uninitialised memory and, at random, reject valid patches.
@@ -251,11 +269,9 @@ RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, fl
         // Face-varying uvs: a second topology (uv indices) with linear boundaries, as OBJ uvs
         // are authored on the cage.
         rtcSetGeometryTopologyCount(g, 2);
-        auto* uidx = static_cast<unsigned*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT, sizeof(unsigned),
-                                    cage.faceUvIndices.size()));
-        for (size_t i = 0; i < cage.faceUvIndices.size(); ++i)
-            uidx[i] = unsigned(cage.faceUvIndices[i]);
+        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT,
+                                   cage.faceUvIndices.data(), 0, sizeof(unsigned),
+                                   cage.faceUvIndices.size());
         rtcSetGeometrySubdivisionMode(g, 1, RTC_SUBDIVISION_MODE_PIN_BOUNDARY);
         rtcSetGeometryVertexAttributeCount(g, 1);
         rtcSetGeometryVertexAttributeTopology(g, 0, 1);
@@ -306,6 +322,7 @@ RTCGeometry NewLimitQuadGeometry(RTCDevice device, const ControlCage& cage, floa
 
 struct RenderScene::Impl {
     RTCDevice device = nullptr;
+    EmbreeMemory embreeMemory;
     RTCScene top = nullptr;
 
     using Mesh = EmbreeMesh;
@@ -397,6 +414,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     I.device = rtcNewDevice(config.c_str());
     if (!I.device) throw std::runtime_error("cannot create Embree device");
     rtcSetDeviceErrorFunction(I.device, EmbreeError, nullptr);
+    rtcSetDeviceMemoryMonitorFunction(I.device, EmbreeMemory::Count, &I.embreeMemory);
     I.top = rtcNewScene(I.device);
 
     // Which meshes are used, and which of them need face-varying uvs (textured materials only).
@@ -414,8 +432,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         if (!used[m]) continue;
         const ControlCage& cage = scene.meshes[m];
         Impl::Mesh& mesh = I.meshes[m];
-        mesh.topo = std::make_unique<PtexTopology>(cage);
-        mesh.regular = std::make_unique<RegularPatches>(cage);
+        CageTopology t = BuildCageTopology(cage);
+        mesh.topo = std::make_shared<const PtexTopology>(std::move(t.ptex));
+        mesh.regular = std::make_unique<RegularPatches>(std::move(t.regular));
         const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
         clock.Charge(&I.build.opensubdiv);
         mesh.scene = rtcNewScene(I.device);
@@ -539,12 +558,35 @@ const PtexTopology& RenderScene::Topology(int object) const {
     return *impl_->meshes[impl_->objects[object].mesh].topo;
 }
 
+std::shared_ptr<const PtexTopology> RenderScene::SharedTopology(int object) const {
+    return impl_->meshes[impl_->objects[object].mesh].topo;
+}
+
+size_t RenderScene::MeshBytes() const {
+    size_t n = 0;
+    for (const auto& m : impl_->meshes) {
+        if (!m.topo) continue;
+        n += m.topo->Bytes() + m.regular->Bytes() + m.isHole.capacity() +
+             m.squares.capacity() * sizeof(m.squares[0]) +
+             m.cornerUvs.capacity() * sizeof(m.cornerUvs[0]);
+    }
+    return n;
+}
+
 RenderScene::TessellationStats RenderScene::LimitTessellated() const {
     return impl_->tessellation;
 }
 
 RenderScene::BuildSeconds RenderScene::BuildTimes() const {
     return impl_->build;
+}
+
+size_t RenderScene::EmbreeBytes() const {
+    return impl_->embreeMemory.Bytes();
+}
+
+size_t RenderScene::EmbreePeakBytes() const {
+    return impl_->embreeMemory.PeakBytes();
 }
 
 size_t RenderScene::NumPtexFaces() const {

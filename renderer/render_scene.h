@@ -101,6 +101,15 @@ public:
 
     const Scene& scene() const { return scene_; }
     const PtexTopology& Topology(int object) const;
+    /// The same topology, for a texture-space cache to share rather than build again.
+    std::shared_ptr<const PtexTopology> SharedTopology(int object) const;
+    /// Bytes of our own per-mesh data (Ptex topology, regular patches, limit tessellation), not
+    /// counting Embree's.
+    size_t MeshBytes() const;
+    /// Bytes Embree holds (geometry buffers, subdivision topology, tessellation, BVH), and the
+    /// most it held while building.
+    size_t EmbreeBytes() const;
+    size_t EmbreePeakBytes() const;
     const EnvironmentMap* environment() const { return env_.get(); }
     /// Albedo at a shading point (constant or texture).
     glm::vec3 Albedo(const SurfaceInteraction& si) const;

@@ -74,13 +74,15 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
         }
         const float diag = glm::length(hi - lo);
         const float texel = std::max(diag * options.texelFraction, 1e-12f);
-        meshOf_.push_back(cache_.AddMesh(cage, texel));
+        // The scene's Ptex topology, shared: not built again (on a 1,000,000-quad cage it is
+        // 44 MB, and building it took an OpenSubdiv refinement of ~0.5 s and ~250 MB).
+        meshOf_.push_back(cache_.AddMesh(cage, texel, rs.SharedTopology(int(o))));
         meshObject_.push_back(int(o));
         meshIsBack_.push_back(0);
         // Open surfaces get a second set of grids for their back side (model only what is
         // needed: closed surfaces are never seen from inside).
         if (cache_.Mesh(meshOf_.back()).Topology().HasBoundary()) {
-            backMeshOf_.push_back(cache_.AddMesh(cage, texel));
+            backMeshOf_.push_back(cache_.AddMesh(cage, texel, rs.SharedTopology(int(o))));
             meshObject_.push_back(int(o));
             meshIsBack_.push_back(1);
         } else {

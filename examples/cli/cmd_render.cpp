@@ -588,6 +588,11 @@ int RunRender(const RenderArgs& a) {
         "%.3f s reading the scene%s",
         b.opensubdiv, b.embreeGeometry, b.embreeBvh, b.other, loadSeconds, cache ? "" : "\n");
     if (cache) std::printf(", %.3f s making the texture-space cache\n", cacheSeconds);
+    std::printf(
+        "scene memory: Embree %.1f MiB (%.1f MiB at most while building), Ptex topology and "
+        "patches %.1f MiB\n",
+        double(rs.EmbreeBytes()) / (1 << 20), double(rs.EmbreePeakBytes()) / (1 << 20),
+        double(rs.MeshBytes()) / (1 << 20));
     PrintSceneStats(rs);
     if (cache) {
         const CacheStats& c = r.stats.cache;
