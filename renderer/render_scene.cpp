@@ -577,6 +577,15 @@ RenderScene::TessellationStats RenderScene::LimitTessellated() const {
     return impl_->tessellation;
 }
 
+std::string RenderScene::Describe(const TessellationStats& t) {
+    std::string s = std::to_string(t.beyondEmbree) + " cage faces past Embree's limits";
+    if (t.meshes > 0)
+        s += " (" + std::to_string(t.meshes) + (t.meshes == 1 ? " mesh, " : " meshes, ") +
+             std::to_string(t.cageFaces) +
+             " cage faces tessellated from OpenSubdiv's limit surface)";
+    return s;
+}
+
 RenderScene::BuildSeconds RenderScene::BuildTimes() const {
     return impl_->build;
 }

@@ -131,6 +131,9 @@ public:
         size_t beyondEmbree = 0;
     };
     TessellationStats LimitTessellated() const;
+    /// The statistics in words, e.g. "2 cage faces past Embree's limits (1 mesh, 18 cage faces
+    /// tessellated from OpenSubdiv's limit surface)" (what `texcache render` and the preview say).
+    static std::string Describe(const TessellationStats& t);
 
     /// Wall-clock seconds of each stage of the construction (where a scene build's time goes).
     struct BuildSeconds {

@@ -118,7 +118,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     return t;
 }
 
-std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
+std::string StatsJson(const RenderStats& s, const RenderScene& rs, const TextureSpaceCache* cache,
                       const RenderOptions& opt, double overshading) {
     const CacheStats& c = s.cache;
     std::string json = "{\n";
@@ -149,21 +149,22 @@ std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
     if (overshading >= 0.0) add("overshading", overshading);
     add("sample_cache_bytes", cache ? double(cache->SampleCacheBytes()) : 0.0);
     add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
-    add("bytes_used", cache ? double(cache->BytesUsed()) : 0.0, true);
+    add("bytes_used", cache ? double(cache->BytesUsed()) : 0.0);
+    // The scene: its size and the meshes Embree could not take (render_scene.cpp's design note).
+    const RenderScene::TessellationStats t = rs.LimitTessellated();
+    add("ptex_faces", double(rs.NumPtexFaces()));
+    add("cage_faces_beyond_embree", double(t.beyondEmbree));
+    add("limit_tessellated_meshes", double(t.meshes));
+    add("limit_tessellated_cage_faces", double(t.cageFaces), true);
     json += "}\n";
     return json;
 }
 
 /// The scene's size, and the meshes Embree could not take (render_scene.cpp's design note).
 void PrintSceneStats(const RenderScene& rs) {
-    const RenderScene::TessellationStats t = rs.LimitTessellated();
     const size_t objects = rs.scene().objects.size();
-    std::printf("scene: %zu object%s, %zu Ptex faces; %zu cage faces past Embree's limits", objects,
-                objects == 1 ? "" : "s", rs.NumPtexFaces(), t.beyondEmbree);
-    if (t.meshes > 0)
-        std::printf(" (%d mesh%s, %zu cage faces tessellated from OpenSubdiv's limit surface)",
-                    t.meshes, t.meshes == 1 ? "" : "es", t.cageFaces);
-    std::printf("\n");
+    std::printf("scene: %zu object%s, %zu Ptex faces; %s\n", objects, objects == 1 ? "" : "s",
+                rs.NumPtexFaces(), RenderScene::Describe(rs.LimitTessellated()).c_str());
 }
 
 AovFlags ParseAovs(const std::vector<std::string>& names) {
@@ -572,7 +573,7 @@ int RunRender(const RenderArgs& a) {
     AtomicFiles group;
     WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
     if (!a.statsFile.empty()) {
-        WriteText(a.statsFile, StatsJson(r.stats, cache.get(), opt, overshading), group);
+        WriteText(a.statsFile, StatsJson(r.stats, rs, cache.get(), opt, overshading), group);
         out.written.push_back(a.statsFile);
     }
     group.Commit();
