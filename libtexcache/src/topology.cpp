@@ -282,10 +282,15 @@ void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu
                           float dPdv[3]) const {
     const int entry = index_[ptexFace], boundary = entry & 15;
     const int* idx = &cvs_[size_t(entry >> 4) * 16];
+    // Interior patches read the cage's points in place; boundary ones need a copy to mirror in.
+    const float* cv[16];
     float c[16][3];
-    for (int i = 0; i < 16; ++i)
-        for (int k = 0; k < 3; ++k) c[i][k] = positions_[idx[i]][k];
+    for (int i = 0; i < 16; ++i) cv[i] = positions_[idx[i]].data();
     if (boundary) {
+        for (int i = 0; i < 16; ++i) {
+            for (int k = 0; k < 3; ++k) c[i][k] = cv[i][k];
+            cv[i] = c[i];
+        }
         // Boundary patches use phantom points mirrored across the boundary (OpenSubdiv's
         // B-spline boundary rule, P0 = 2 P1 - P2), substituted here in the transposed order of
         // OSD's weight adjustment (left, top, right, bottom) so corners come out the same.
@@ -304,17 +309,19 @@ void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu
     float wu[4], du[4], wv[4], dv[4];
     BSpline(u, wu, du);
     BSpline(v, wv, dv);
-    for (int k = 0; k < 3; ++k) P[k] = dPdu[k] = dPdv[k] = 0.0f;
+    // Local sums: the outputs might alias the points as far as the compiler knows.
+    float sp[3] = {0, 0, 0}, su[3] = {0, 0, 0}, sv[3] = {0, 0, 0};
     for (int j = 0; j < 4; ++j)
         for (int i = 0; i < 4; ++i) {
-            const float* cp = c[4 * j + i];
+            const float* cp = cv[4 * j + i];
             const float w = wu[i] * wv[j], wdu = du[i] * wv[j], wdv = wu[i] * dv[j];
             for (int k = 0; k < 3; ++k) {
-                P[k] += w * cp[k];
-                dPdu[k] += wdu * cp[k];
-                dPdv[k] += wdv * cp[k];
+                sp[k] += w * cp[k];
+                su[k] += wdu * cp[k];
+                sv[k] += wdv * cp[k];
             }
         }
+    for (int k = 0; k < 3; ++k) P[k] = sp[k], dPdu[k] = su[k], dPdv[k] = sv[k];
 }
 
 float RegularPatches::Coverage() const {
