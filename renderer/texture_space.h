@@ -101,6 +101,10 @@ public:
     /// The object a cache mesh belongs to, and whether it is that object's back side.
     int ObjectOfMesh(int mesh) const { return meshObject_[mesh]; }
     bool IsBackMesh(int mesh) const { return meshIsBack_[mesh]; }
+    /// Whether a cache mesh's samples lie on the side opposite to the limit normal
+    /// cross(dPdu, dPdv): the back side of an open surface, or the outside of a closed one whose
+    /// limit normals point inward in world space (a cage wound inward, or a mirroring transform).
+    bool SamplesAgainstNormal(int mesh) const { return meshAgainstNormal_[mesh]; }
     /// The filter of an object's material (its override, else the render's default).
     TextureFilterKind FilterOf(int object) const { return filterOf_[object]; }
     /// Footprint radius of an object's material (its override, else the render's default), as
@@ -148,7 +152,7 @@ private:
     RenderShadingCache cache_;
     std::vector<int> meshOf_, backMeshOf_;
     std::vector<int> meshObject_;
-    std::vector<char> meshIsBack_;
+    std::vector<char> meshIsBack_, meshAgainstNormal_;
     std::vector<TextureFilterKind> filterOf_;
     std::vector<int> radiusOf_;
     std::vector<int> passRadiusOf_;  ///< radiusOf_ shrunk for the current pass

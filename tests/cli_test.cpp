@@ -69,6 +69,41 @@ TEST(Cli, RendersA16GonAndCountsTheFacesPastEmbreesLimits) {
     EXPECT_GT(lit, 64 * 32 / 10) << "the prism covers ~20% of the view";
 }
 
+// The value of a top-level number in --stats JSON (one "key": value per line); NaN when absent.
+double StatsValue(const std::string& json, const std::string& key) {
+    const size_t at = json.find("\"" + key + "\": ");
+    if (at == std::string::npos) return std::nan("");
+    return std::strtod(json.c_str() + at + key.size() + 4, nullptr);
+}
+
+// --stats says how many cage faces were past Embree's limits and how many were tessellated from
+// the limit surface, as the printed scene line does: the 16-gon prism (2 caps past the limit,
+// all 18 faces tessellated) and a cage Embree takes whole (none).
+TEST(Cli, StatsCountTheFacesPastEmbreesLimits) {
+    const fs::path prism = Dir() / "stats_prism16.obj";
+    test::WriteObj(test::PrismCage(16), prism.string());
+    struct Case {
+        std::string obj;
+        double ptex, beyond, meshes, tessellated;
+    };
+    for (const Case& c : {Case{prism.string(), 16 + 16 + 16, 2, 1, 18},
+                          Case{test::MeshPath("catmark_torus"), 32, 0, 0, 0}}) {
+        const fs::path stats = Dir() / "stats.json", out = Dir() / "stats.exr";
+        const CliRun r =
+            Texcache("render " + c.obj + " --spp 1 --resolution 16x16 --integrator ao " +
+                     "-q --no-png -o " + out.string() + " --stats " + stats.string());
+        ASSERT_EQ(r.code, 0) << r.out;
+        std::ifstream f(stats);
+        const std::string json((std::istreambuf_iterator<char>(f)), {});
+        SCOPED_TRACE(c.obj + "\n" + json);
+        EXPECT_EQ(StatsValue(json, "ptex_faces"), c.ptex);
+        EXPECT_EQ(StatsValue(json, "cage_faces_beyond_embree"), c.beyond);
+        EXPECT_EQ(StatsValue(json, "limit_tessellated_meshes"), c.meshes);
+        EXPECT_EQ(StatsValue(json, "limit_tessellated_cage_faces"), c.tessellated);
+        EXPECT_EQ(json.find(",\n}"), std::string::npos) << "no comma after the last value";
+    }
+}
+
 TEST(Cli, WritesRequestedAovLayers) {
     const fs::path out = Dir() / "aov.exr";
     const CliRun r =

@@ -231,8 +231,13 @@ public:
     }
 
     /// Registers a mesh with texels of about `texelSize` world units at mip 0; returns its id.
-    int AddMesh(const ControlCage& cage, float texelSize) {
-        meshes_.push_back(std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
+    /// With `topology` (the cage's, e.g. the renderer's or another mesh's of the same cage) the
+    /// mesh shares it instead of building its own.
+    int AddMesh(const ControlCage& cage, float texelSize,
+                std::shared_ptr<const PtexTopology> topology = nullptr) {
+        meshes_.push_back(
+            topology ? std::make_unique<MeshGrids>(cage, texelSize, nextFace_, std::move(topology))
+                     : std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
         nextFace_ += uint32_t(meshes_.back()->NumFaces());
         return int(meshes_.size()) - 1;
     }
