@@ -81,7 +81,8 @@ bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, gl
     const int object = c.tsc->ObjectOfMesh(r.mesh);
     if (!c.rs.EvalSurface(object, SamplePosition(c, r), 0.0f, ss)) return false;
     const glm::vec3 limitN = ss->N;
-    if (c.tsc->IsBackMesh(r.mesh)) ss->N = -ss->N;  // the back side of an open surface
+    // The back side of an open surface, or the outside of an inside-out closed one.
+    if (c.tsc->SamplesAgainstNormal(r.mesh)) ss->N = -ss->N;
     if (!std::isfinite(ss->P.x + ss->P.y + ss->P.z + ss->N.x + ss->N.y + ss->N.z)) return false;
     const float edge = std::max(glm::length(ss->dPdu), glm::length(ss->dPdv));
     const float scale = std::max({1.0f, std::abs(ss->P.x), std::abs(ss->P.y), std::abs(ss->P.z)});

@@ -301,16 +301,23 @@ private:
     /// Applies the tags to the finished face list. Tags that name missing edges, vertices or faces
     /// are skipped with a warning (Embree fails on creases of non-edges); malformed tags throw.
     void ResolveTags() {
+        // The sorted edge list only for crease tags to check against: on a 1,000,000-quad cage
+        // without creases it took 32 MB and ~0.35 s of sorting (5.6% of a 1-thread `texcache
+        // render` of it, perf).
         std::vector<uint64_t> edges;
-        edges.reserve(cage_.faceVertexIndices.size());
-        size_t off = 0;
-        for (const int n : cage_.faceVertexCounts) {
-            for (int i = 0; i < n; ++i)
-                edges.push_back(EdgeKey(cage_.faceVertexIndices[off + i],
-                                        cage_.faceVertexIndices[off + (i + 1) % n]));
-            off += size_t(n);
+        const bool creased = std::any_of(tags_.begin(), tags_.end(),
+                                         [](const PendingTag& t) { return t.name == "crease"; });
+        if (creased) {
+            edges.reserve(cage_.faceVertexIndices.size());
+            size_t off = 0;
+            for (const int n : cage_.faceVertexCounts) {
+                for (int i = 0; i < n; ++i)
+                    edges.push_back(EdgeKey(cage_.faceVertexIndices[off + i],
+                                            cage_.faceVertexIndices[off + (i + 1) % n]));
+                off += size_t(n);
+            }
+            std::sort(edges.begin(), edges.end());
         }
-        std::sort(edges.begin(), edges.end());
         const auto isEdge = [&](long a, long b) {
             return std::binary_search(edges.begin(), edges.end(), EdgeKey(a, b));
         };

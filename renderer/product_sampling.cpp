@@ -110,9 +110,12 @@ bool BuildProductRecord(const EnvironmentMap& env, const Bsdf& bsdf, glm::vec3 w
 ProductRecordCache::ProductRecordCache(const RenderScene& rs, size_t bytes, float lodBias)
     : rs_(rs), cache_(bytes), lodBias_(lodBias) {
     const Scene& scene = rs.scene();
-    for (const Object& o : scene.objects) {
-        const ControlCage& cage = scene.meshes[o.mesh];
-        meshOf_.push_back(cache_.AddMesh(cage, MipZeroTexelSize(cage)));
+    for (size_t o = 0; o < scene.objects.size(); ++o) {
+        const ControlCage& cage = scene.meshes[scene.objects[o].mesh];
+        glm::vec3 lo, hi;
+        CageBounds(cage, &lo, &hi);
+        meshOf_.push_back(
+            cache_.AddMesh(cage, MipZeroTexelSize(lo, hi), rs.SharedTopology(int(o))));
     }
 }
 

@@ -126,6 +126,26 @@ void IntersectCameraRays(const Context& c, CameraSampleT* samples, size_t n, Ray
     rays.camera += n;
 }
 
+/// (x, y, s) of a tile's samples [s0, s1) in the single-ray loop's order: pixels row by row,
+/// each pixel's samples in turn (stepped, not divided out of a flat index: three integer
+/// divisions per sample showed).
+struct Cursor {
+    int x, y, s;
+    Cursor(const tbb::blocked_range2d<int>& r, int s0)
+        : x(r.cols().begin()), y(r.rows().begin()), s(s0) {}
+    void Next(const tbb::blocked_range2d<int>& r, int s0, int s1) {
+        if (++s < s1) return;
+        s = s0;
+        if (++x < r.cols().end()) return;
+        x = r.cols().begin();
+        ++y;
+    }
+};
+
+/// Camera samples are traced in blocks of this many consecutive (pixel, sample) pairs, 16 rays
+/// at a time (IntersectCameraRays).
+constexpr size_t kCameraBlock = 64;
+
 /// What camera sample `cs` (pixel (x, y), sample s) sees, its ray already traced.
 glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample& cs, PixelAovs* aov,
                             RayCounts& rays) {
@@ -267,21 +287,88 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
     }
 }
 
+/// The texel each camera sample of a pass lands on, as the visibility prepass found it, for a
+/// shading pass that needs nothing else of its camera samples (texture-space AO): that pass
+/// then looks the texels up without tracing the camera rays and evaluating their hits again,
+/// which had made a warm-cache frame cost about twice a frame without lookups (`texcache bench
+/// cache`). kBytesPerSample (12) per camera sample of the pass.
+struct PassTexels {
+    static constexpr int32_t kMiss = -1;   ///< in `mesh`: the ray left the scene
+    static constexpr int32_t kLight = -2;  ///< in `mesh`: the ray hit a light
+    static constexpr size_t kBytesPerSample = sizeof(uint64_t) + sizeof(int32_t);
+    std::vector<uint64_t> key;  ///< TexelKey::Pack()
+    std::vector<int32_t> mesh;  ///< the texel's cache mesh, or kMiss / kLight
+    int width = 0, s0 = 0, s1 = 0;
+
+    void Resize(int w, int h, int samples) {
+        const size_t n = size_t(w) * size_t(h) * size_t(samples);
+        key.resize(n), mesh.resize(n), width = w;
+    }
+    size_t Index(int x, int y, int s) const {
+        return (size_t(y) * size_t(width) + size_t(x)) * size_t(s1 - s0) + size_t(s - s0);
+    }
+};
+
 /// The visibility prepass of a tile (see texcache/visible_texels.h): marks the texel each camera
-/// sample lands on, with the rays, differentials and texel selection of the shading pass.
-void MarkVisibleTexels(const Context& c, VisibleTexels& visible, int y0, int y1, int x0, int x1,
-                       int s0, int s1, RayCounts& rays) {
-    for (int y = y0; y < y1; ++y)
-        for (int x = x0; x < x1; ++x)
-            for (int s = s0; s < s1; ++s) {
-                Rng rng(0, 0);
-                RayDifferentials diff;
-                const Ray ray = CameraRay(c, x, y, s, &rng, &diff);
-                ++rays.camera;
-                Hit hit;
-                if (!c.rs.Intersect(ray, &hit) || hit.object < 0) continue;
-                visible.Mark(c.tsc->TexelOf(c.rs.Interact(ray, hit, &diff)).key);
+/// sample lands on, with the rays, differentials and texel selection of the shading pass (the
+/// same blocks of packets as ShadeTile), and keeps them in `out` if given.
+void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::blocked_range2d<int>& r,
+                       int s0, int s1, PassTexels* out, RayCounts& rays) {
+    const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
+    CameraSample block[kCameraBlock];
+    Cursor gen(r, s0), mark = gen;
+    for (size_t b = 0; b < total; b += kCameraBlock) {
+        const size_t n = std::min(kCameraBlock, total - b);
+        for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
+            block[i].ray = CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].diff);
+        IntersectCameraRays(c, block, n, rays);
+        for (size_t i = 0; i < n; ++i, mark.Next(r, s0, s1)) {
+            const CameraSample& cs = block[i];
+            int32_t mesh = !cs.found ? PassTexels::kMiss : PassTexels::kLight;
+            uint64_t key = TexelKey::kEmpty;
+            if (cs.found && cs.hit.object >= 0) {
+                const SampleRequest t = c.tsc->TexelOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff));
+                visible.Mark(t.key);
+                mesh = t.mesh, key = t.key.Pack();
             }
+            if (out) {
+                const size_t k = out->Index(mark.x, mark.y, mark.s);
+                out->key[k] = key, out->mesh[k] = mesh;
+            }
+        }
+    }
+}
+
+/// Texture-space AO for a tile from the texels its prepass kept: AoTileTwoPhase's lookups, in
+/// the same order, with the same texels, so the same image, without its camera rays.
+void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, const PassTexels& pt,
+                       std::vector<double>& sum, RayCounts& rays) {
+    // All texels first, prefetching their slots, then the lookups (as AoTileTwoPhase).
+    thread_local std::vector<SampleRequest> texels;
+    texels.resize(r.rows().size() * r.cols().size() * size_t(pt.s1 - pt.s0));
+    size_t i = 0;
+    for (Cursor at(r, pt.s0); i < texels.size(); ++i, at.Next(r, pt.s0, pt.s1)) {
+        const size_t k = pt.Index(at.x, at.y, at.s);
+        if (pt.mesh[k] < 0) continue;
+        texels[i] = c.tsc->RequestOf(pt.mesh[k], TexelKey::Unpack(pt.key[k]));
+        c.tsc->Prefetch(texels[i]);
+    }
+    CacheStats& stats = c.cacheStats->local();
+    i = 0;
+    for (Cursor at(r, pt.s0); i < texels.size(); ++i, at.Next(r, pt.s0, pt.s1)) {
+        const int32_t mesh = pt.mesh[pt.Index(at.x, at.y, at.s)];
+        const size_t pixel = size_t(at.y) * size_t(c.opt.width) + size_t(at.x);
+        const CacheSnapshot before = c.pixelCache ? CacheSnapshot(stats) : CacheSnapshot();
+        glm::vec3 L(mesh == PassTexels::kLight ? 1.0f : 0.0f);
+        if (mesh >= 0)
+            L = c.tsc->Lookup(
+                texels[i], c.tsc->ObjectOfMesh(mesh),
+                [&](const SampleRequest& req) { return ShadeAoSample(c, req, rays); },
+                c.opt.aoSamples, stats);
+        if (c.pixelCache) AddPixelCounts(&c.pixelCache[pixel], before, stats);
+        double* px = &sum[3 * pixel];
+        px[0] += L.x, px[1] += L.y, px[2] += L.z;
+    }
 }
 
 /// A frame's per-pixel sums while its passes run.
@@ -298,28 +385,15 @@ struct FrameSums {
 /// per-ray time (numbers with `texcache bench peer`).
 void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                FrameSums& sums, CacheStats* pixelStats, RayCounts& rays) {
-    // (x, y, s) in the single-ray loop's order: pixels row by row, each pixel's samples in turn
-    // (stepped, not divided out of a flat index: three integer divisions per sample showed).
-    struct Cursor {
-        int x, y, s;
-        void Next(const tbb::blocked_range2d<int>& r, int s0, int s1) {
-            if (++s < s1) return;
-            s = s0;
-            if (++x < r.cols().end()) return;
-            x = r.cols().begin();
-            ++y;
-        }
-    };
     const int W = c.opt.width;
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     const bool needDiff = NeedsDifferentials(c);
-    constexpr size_t kBlock = 64;
-    CameraSample block[kBlock];
-    Cursor gen{r.cols().begin(), r.rows().begin(), s0}, shade = gen;
+    CameraSample block[kCameraBlock];
+    Cursor gen(r, s0), shade = gen;
     glm::dvec3 acc(0.0);  // the current pixel's sum
     CacheSnapshot before;
-    for (size_t b = 0; b < total; b += kBlock) {
-        const size_t n = std::min(kBlock, total - b);
+    for (size_t b = 0; b < total; b += kCameraBlock) {
+        const size_t n = std::min(kCameraBlock, total - b);
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
             block[i].ray = CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng,
                                      needDiff ? &block[i].diff : nullptr);
@@ -385,19 +459,34 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         c.tsc && c.tsc->Progressive() && opt.texture.passSpp > 0 && opt.texture.constantTerm < 0.0f;
     int done = 0;
     int passSpp = progressive ? opt.texture.passSpp : opt.seconds > 0.0f ? 1 : sppCap;
+    // Texture-space AO with a prepass shades from the prepass's texels (see PassTexels), when a
+    // pass's texels fit in 128 MB (a pass of 4 spp at 1920x1080 takes 100 MB); a longer pass
+    // (a render without progressive passes, or a time budget's growing ones) traces its camera
+    // rays again instead.
+    const bool prepassAo = twoPhaseAo && fc.Visible() != nullptr;
+    constexpr size_t kMaxPassTexelBytes = size_t(128) << 20;
+    PassTexels passTexels;
     while (done < sppCap) {
         const int s0 = done, s1 = std::min(sppCap, done + passSpp);
+        const size_t passSamples = size_t(W) * size_t(H) * size_t(s1 - s0);
+        const bool fromPrepass =
+            prepassAo && passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
+        if (fromPrepass) {
+            if (passSamples > passTexels.key.size()) passTexels.Resize(W, H, s1 - s0);
+            passTexels.s0 = s0, passTexels.s1 = s1;
+        }
         const auto passStart = Clock::now();
         // The pass count saturates: a wrap to 0 would repeat pass 0's random numbers.
         if (progressive && done > 0 && c.tsc->Pass() < UINT32_MAX)
             c.tsc->BeginPass(c.tsc->Pass() + 1);
         if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-                MarkVisibleTexels(c, *visible, r.rows().begin(), r.rows().end(), r.cols().begin(),
-                                  r.cols().end(), s0, s1, rc);
+                MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
             });
         forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-            if (twoPhaseAo) {
+            if (fromPrepass) {
+                AoTileFromPrepass(c, r, passTexels, sums.rgb, rc);
+            } else if (twoPhaseAo) {
                 AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
                                r.cols().end(), s0, s1, sums.rgb, rc);
             } else {

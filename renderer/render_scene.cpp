@@ -30,6 +30,8 @@
 #include "renderer/render_scene.h"
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -121,13 +123,30 @@ size_t FacesBeyondEmbree(const ControlCage& cage, const PtexTopology& topo) {
     return n;
 }
 
+/// Bytes Embree holds now, and at most so far, from its memory monitor callback (atomics: Embree's
+/// build threads allocate concurrently).
+struct EmbreeMemory {
+    std::atomic<int64_t> now{0}, peak{0};
+
+    static bool Count(void* self, ssize_t bytes, bool /*post*/) {
+        auto* m = static_cast<EmbreeMemory*>(self);
+        const int64_t n = m->now.fetch_add(bytes, std::memory_order_relaxed) + bytes;
+        int64_t p = m->peak.load(std::memory_order_relaxed);
+        while (n > p && !m->peak.compare_exchange_weak(p, n, std::memory_order_relaxed)) {
+        }
+        return true;  // never refuse an allocation
+    }
+    size_t Bytes() const { return size_t(std::max<int64_t>(now.load(), 0)); }
+    size_t PeakBytes() const { return size_t(std::max<int64_t>(peak.load(), 0)); }
+};
+
 /// One mesh's Embree geometry and how its hits map to Ptex faces: Embree's own subdivision
 /// surface, or quads on the limit surface tessellated with OpenSubdiv (`limit` set).
 struct EmbreeMesh {
     RTCScene scene = nullptr;
     RTCGeometry geom = nullptr;
-    std::unique_ptr<PtexTopology> topo;
-    std::unique_ptr<RegularPatches> regular;  // fast path for rtcInterpolate
+    std::shared_ptr<const PtexTopology> topo;  // shared with texture-space caches
+    std::unique_ptr<RegularPatches> regular;   // fast path for rtcInterpolate
     bool hasUv = false;
     std::vector<uint8_t> isHole;  // per coarse face, only for subdivision cages with holes
     // Limit tessellation only: the general evaluator, and per quad its Ptex square and uvs.
@@ -188,16 +207,16 @@ struct EmbreeMesh {
 RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, float rate,
                                    bool withUv, EmbreeMesh* mesh) {
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SUBDIVISION);
-    auto* faces = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0,
-                                                                 RTC_FORMAT_UINT, sizeof(unsigned),
-                                                                 cage.faceVertexCounts.size()));
-    for (size_t i = 0; i < cage.faceVertexCounts.size(); ++i)
-        faces[i] = unsigned(cage.faceVertexCounts[i]);
-    auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
-                                                               RTC_FORMAT_UINT, sizeof(unsigned),
-                                                               cage.faceVertexIndices.size()));
-    for (size_t i = 0; i < cage.faceVertexIndices.size(); ++i)
-        idx[i] = unsigned(cage.faceVertexIndices[i]);
+    // Face sizes and indices are the cage's own arrays, shared rather than copied (20 MB on a
+    // 1,000,000-quad cage): validated non-negative ints, bit for bit Embree's UINTs, and the
+    // Scene outlives its RenderScene.
+    static_assert(sizeof(int) == sizeof(unsigned));
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0, RTC_FORMAT_UINT,
+                               cage.faceVertexCounts.data(), 0, sizeof(unsigned),
+                               cage.faceVertexCounts.size());
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
+                               cage.faceVertexIndices.data(), 0, sizeof(unsigned),
+                               cage.faceVertexIndices.size());
     // 16-byte stride with w = 0: Embree loads vertices as 4-wide vectors, and garbage in the
     // 4th lane (the buffer's padding after the last vertex) made rtcInterpolate read
     // uninitialised memory and, at random, reject valid patches.
@@ -250,11 +269,9 @@ RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, fl
         // Face-varying uvs: a second topology (uv indices) with linear boundaries, as OBJ uvs
         // are authored on the cage.
         rtcSetGeometryTopologyCount(g, 2);
-        auto* uidx = static_cast<unsigned*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT, sizeof(unsigned),
-                                    cage.faceUvIndices.size()));
-        for (size_t i = 0; i < cage.faceUvIndices.size(); ++i)
-            uidx[i] = unsigned(cage.faceUvIndices[i]);
+        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT,
+                                   cage.faceUvIndices.data(), 0, sizeof(unsigned),
+                                   cage.faceUvIndices.size());
         rtcSetGeometrySubdivisionMode(g, 1, RTC_SUBDIVISION_MODE_PIN_BOUNDARY);
         rtcSetGeometryVertexAttributeCount(g, 1);
         rtcSetGeometryVertexAttributeTopology(g, 0, 1);
@@ -305,11 +322,13 @@ RTCGeometry NewLimitQuadGeometry(RTCDevice device, const ControlCage& cage, floa
 
 struct RenderScene::Impl {
     RTCDevice device = nullptr;
+    EmbreeMemory embreeMemory;
     RTCScene top = nullptr;
 
     using Mesh = EmbreeMesh;
     std::vector<Mesh> meshes;  // by Scene::meshes index; unused meshes stay empty
     TessellationStats tessellation;
+    BuildSeconds build;
 
     struct Instance {
         int mesh = -1;
@@ -370,6 +389,19 @@ struct RenderScene::Impl {
     }
 };
 
+/// Adds the seconds since the last call (or construction) to a stage of the scene build.
+class StageClock {
+public:
+    void Charge(double* stage) {
+        const auto now = std::chrono::steady_clock::now();
+        *stage += std::chrono::duration<double>(now - last_).count();
+        last_ = now;
+    }
+
+private:
+    std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
 static bool MaterialUsesTextures(const Material& m) {
     return m.albedo.texture >= 0 || m.roughness.texture >= 0;
 }
@@ -377,10 +409,12 @@ static bool MaterialUsesTextures(const Material& m) {
 RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     : scene_(scene), impl_(std::make_unique<Impl>()) {
     Impl& I = *impl_;
+    StageClock clock;
     std::string config = options.threads > 0 ? "threads=" + std::to_string(options.threads) : "";
     I.device = rtcNewDevice(config.c_str());
     if (!I.device) throw std::runtime_error("cannot create Embree device");
     rtcSetDeviceErrorFunction(I.device, EmbreeError, nullptr);
+    rtcSetDeviceMemoryMonitorFunction(I.device, EmbreeMemory::Count, &I.embreeMemory);
     I.top = rtcNewScene(I.device);
 
     // Which meshes are used, and which of them need face-varying uvs (textured materials only).
@@ -393,21 +427,23 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     }
 
     I.meshes.resize(numMeshes);
+    clock.Charge(&I.build.other);
     for (size_t m = 0; m < numMeshes; ++m) {
         if (!used[m]) continue;
         const ControlCage& cage = scene.meshes[m];
         Impl::Mesh& mesh = I.meshes[m];
-        mesh.topo = std::make_unique<PtexTopology>(cage);
-        mesh.regular = std::make_unique<RegularPatches>(cage);
-        mesh.scene = rtcNewScene(I.device);
+        CageTopology t = BuildCageTopology(cage);
+        mesh.topo = std::make_shared<const PtexTopology>(std::move(t.ptex));
+        mesh.regular = std::make_unique<RegularPatches>(std::move(t.regular));
         const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
+        clock.Charge(&I.build.opensubdiv);
+        mesh.scene = rtcNewScene(I.device);
         const bool wantUv = needUv[m] && !cage.uvs.empty();
-        RTCGeometry g = beyond > 0 || options.tessellateAll
-                            ? NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate,
-                                                   wantUv, &mesh)
-                            : NewSubdivisionGeometry(
-                                  I.device, cage, scene.settings.tessellationRate, wantUv, &mesh);
-        if (mesh.limit) {
+        RTCGeometry g;
+        if (beyond > 0 || options.tessellateAll) {
+            g = NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
+                                     &mesh);
+            clock.Charge(&I.build.opensubdiv);
             // Watertight quads: a ray through a shared vertex of the tessellation otherwise
             // may slip between its quads (measured: 15 of 1848 rays aimed at the limit points on
             // the n-gons' edges missed, all at cage vertices; ctest -R
@@ -416,12 +452,17 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             ++I.tessellation.meshes;
             I.tessellation.cageFaces += size_t(cage.numFaces());
             I.tessellation.beyondEmbree += beyond;
+        } else {
+            g = NewSubdivisionGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
+                                       &mesh);
         }
         rtcCommitGeometry(g);
         rtcAttachGeometry(mesh.scene, g);
         mesh.geom = g;  // owned by mesh.scene from here on
         rtcReleaseGeometry(g);
+        clock.Charge(&I.build.embreeGeometry);
         rtcCommitScene(mesh.scene);
+        clock.Charge(&I.build.embreeBvh);
     }
 
     // Objects become instances; only animated objects with an open shutter get motion steps.
@@ -450,6 +491,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         inst.normalMatrix = glm::transpose(glm::inverse(glm::mat3(inst.steps[0])));
         rtcReleaseGeometry(g);
     }
+    clock.Charge(&I.build.embreeGeometry);
 
     // Quad lights are real geometry so camera and BSDF rays see them (posed at the frame time).
     if (options.needLights) {
@@ -479,7 +521,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
                                   : EnvironmentMap::Shared(e.path, e.intensity, e.rotationDegrees);
         }
     }
+    clock.Charge(&I.build.other);
     rtcCommitScene(I.top);
+    clock.Charge(&I.build.embreeBvh);
 
     if (options.needTextures) {
         // Only textures some object's material references are loaded.
@@ -501,6 +545,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             }
         }
     }
+    clock.Charge(&I.build.other);
 }
 
 RenderScene::~RenderScene() = default;
@@ -513,8 +558,44 @@ const PtexTopology& RenderScene::Topology(int object) const {
     return *impl_->meshes[impl_->objects[object].mesh].topo;
 }
 
+std::shared_ptr<const PtexTopology> RenderScene::SharedTopology(int object) const {
+    return impl_->meshes[impl_->objects[object].mesh].topo;
+}
+
+size_t RenderScene::MeshBytes() const {
+    size_t n = 0;
+    for (const auto& m : impl_->meshes) {
+        if (!m.topo) continue;
+        n += m.topo->Bytes() + m.regular->Bytes() + m.isHole.capacity() +
+             m.squares.capacity() * sizeof(m.squares[0]) +
+             m.cornerUvs.capacity() * sizeof(m.cornerUvs[0]);
+    }
+    return n;
+}
+
 RenderScene::TessellationStats RenderScene::LimitTessellated() const {
     return impl_->tessellation;
+}
+
+std::string RenderScene::Describe(const TessellationStats& t) {
+    std::string s = std::to_string(t.beyondEmbree) + " cage faces past Embree's limits";
+    if (t.meshes > 0)
+        s += " (" + std::to_string(t.meshes) + (t.meshes == 1 ? " mesh, " : " meshes, ") +
+             std::to_string(t.cageFaces) +
+             " cage faces tessellated from OpenSubdiv's limit surface)";
+    return s;
+}
+
+RenderScene::BuildSeconds RenderScene::BuildTimes() const {
+    return impl_->build;
+}
+
+size_t RenderScene::EmbreeBytes() const {
+    return impl_->embreeMemory.Bytes();
+}
+
+size_t RenderScene::EmbreePeakBytes() const {
+    return impl_->embreeMemory.PeakBytes();
 }
 
 size_t RenderScene::NumPtexFaces() const {

@@ -101,6 +101,15 @@ public:
 
     const Scene& scene() const { return scene_; }
     const PtexTopology& Topology(int object) const;
+    /// The same topology, for a texture-space cache to share rather than build again.
+    std::shared_ptr<const PtexTopology> SharedTopology(int object) const;
+    /// Bytes of our own per-mesh data (Ptex topology, regular patches, limit tessellation), not
+    /// counting Embree's.
+    size_t MeshBytes() const;
+    /// Bytes Embree holds (geometry buffers, subdivision topology, tessellation, BVH), and the
+    /// most it held while building.
+    size_t EmbreeBytes() const;
+    size_t EmbreePeakBytes() const;
     const EnvironmentMap* environment() const { return env_.get(); }
     /// Albedo at a shading point (constant or texture).
     glm::vec3 Albedo(const SurfaceInteraction& si) const;
@@ -122,6 +131,18 @@ public:
         size_t beyondEmbree = 0;
     };
     TessellationStats LimitTessellated() const;
+    /// The statistics in words, e.g. "2 cage faces past Embree's limits (1 mesh, 18 cage faces
+    /// tessellated from OpenSubdiv's limit surface)" (what `texcache render` and the preview say).
+    static std::string Describe(const TessellationStats& t);
+
+    /// Wall-clock seconds of each stage of the construction (where a scene build's time goes).
+    struct BuildSeconds {
+        double opensubdiv = 0.0;      ///< Ptex topology, regular patches, limit tessellation
+        double embreeGeometry = 0.0;  ///< filling and committing Embree's geometry buffers
+        double embreeBvh = 0.0;       ///< rtcCommitScene: Embree's tessellation and BVH build
+        double other = 0.0;           ///< Embree device, lights, environment, textures
+    };
+    BuildSeconds BuildTimes() const;
 
 private:
     struct Impl;

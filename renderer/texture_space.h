@@ -42,10 +42,12 @@ namespace texcache {
 
 using RenderShadingCache = ShadingCache<ShadedSample, glm::vec3>;
 
-/// Mip-0 texel size of a cage's shading grids: `texelFraction` of its bounding-box diagonal
-/// (TextureSpaceOptions::texelFraction; eq. 1 then picks the level whose texels are about a
-/// pixel).
-float MipZeroTexelSize(const ControlCage& cage, float texelFraction = 1.0f / 4096.0f);
+/// Bounding box of a cage's control points (object space).
+void CageBounds(const ControlCage& cage, glm::vec3* lo, glm::vec3* hi);
+/// Mip-0 texel size of the shading grids of a cage of bounds [lo, hi]: `texelFraction` of the
+/// box's diagonal (TextureSpaceOptions::texelFraction; eq. 1 then picks the level whose texels
+/// are about a pixel).
+float MipZeroTexelSize(glm::vec3 lo, glm::vec3 hi, float texelFraction = 1.0f / 4096.0f);
 
 /// A shading cache for a scene: lives as long as its owner wants (e.g. across frames). The one
 /// door between the renderer and libtexcache: it picks each hit's texel and each object's
@@ -61,6 +63,10 @@ public:
     SampleRequest TexelOf(const SurfaceInteraction& si) const {
         return cache_.TexelAt({MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
                                si.dudx, si.dvdx, si.dudy, si.dvdy});
+    }
+    /// TexelOf's result for a texel key of cache mesh `mesh` (see ShadingCache::RequestOf).
+    SampleRequest RequestOf(int mesh, const TexelKey& key) const {
+        return cache_.RequestOf(mesh, key);
     }
     /// Starts fetching a texel's slot into the CPU cache (see ShadingCache::Prefetch): for a
     /// batch of texels before their lookups.
@@ -102,6 +108,10 @@ public:
     /// The object a cache mesh belongs to, and whether it is that object's back side.
     int ObjectOfMesh(int mesh) const { return meshObject_[mesh]; }
     bool IsBackMesh(int mesh) const { return meshIsBack_[mesh]; }
+    /// Whether a cache mesh's samples lie on the side opposite to the limit normal
+    /// cross(dPdu, dPdv): the back side of an open surface, or the outside of a closed one whose
+    /// limit normals point inward in world space (a cage wound inward, or a mirroring transform).
+    bool SamplesAgainstNormal(int mesh) const { return meshAgainstNormal_[mesh]; }
     /// The filter of an object's material (its override, else the render's default).
     TextureFilterKind FilterOf(int object) const { return filterOf_[object]; }
     /// Footprint radius of an object's material (its override, else the render's default), as
@@ -149,7 +159,7 @@ private:
     RenderShadingCache cache_;
     std::vector<int> meshOf_, backMeshOf_;
     std::vector<int> meshObject_;
-    std::vector<char> meshIsBack_;
+    std::vector<char> meshIsBack_, meshAgainstNormal_;
     std::vector<TextureFilterKind> filterOf_;
     std::vector<int> radiusOf_;
     std::vector<int> passRadiusOf_;  ///< radiusOf_ shrunk for the current pass

@@ -2,6 +2,7 @@
 // The `texcache` program end to end: outputs, exit codes, error messages, and that a failed run
 // never replaces a good output.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -67,6 +68,41 @@ TEST(Cli, RendersA16GonAndCountsTheFacesPastEmbreesLimits) {
     int lit = 0;
     for (float x : img.data) lit += x > 0.1f;
     EXPECT_GT(lit, 64 * 32 / 10) << "the prism covers ~20% of the view";
+}
+
+// The value of a top-level number in --stats JSON (one "key": value per line); NaN when absent.
+double StatsValue(const std::string& json, const std::string& key) {
+    const size_t at = json.find("\"" + key + "\": ");
+    if (at == std::string::npos) return std::nan("");
+    return std::strtod(json.c_str() + at + key.size() + 4, nullptr);
+}
+
+// --stats says how many cage faces were past Embree's limits and how many were tessellated from
+// the limit surface, as the printed scene line does: the 16-gon prism (2 caps past the limit,
+// all 18 faces tessellated) and a cage Embree takes whole (none).
+TEST(Cli, StatsCountTheFacesPastEmbreesLimits) {
+    const fs::path prism = Dir() / "stats_prism16.obj";
+    test::WriteObj(test::PrismCage(16), prism.string());
+    struct Case {
+        std::string obj;
+        double ptex, beyond, meshes, tessellated;
+    };
+    for (const Case& c : {Case{prism.string(), 16 + 16 + 16, 2, 1, 18},
+                          Case{test::MeshPath("catmark_torus"), 32, 0, 0, 0}}) {
+        const fs::path stats = Dir() / "stats.json", out = Dir() / "stats.exr";
+        const CliRun r =
+            Texcache("render " + c.obj + " --spp 1 --resolution 16x16 --integrator ao " +
+                     "-q --no-png -o " + out.string() + " --stats " + stats.string());
+        ASSERT_EQ(r.code, 0) << r.out;
+        std::ifstream f(stats);
+        const std::string json((std::istreambuf_iterator<char>(f)), {});
+        SCOPED_TRACE(c.obj + "\n" + json);
+        EXPECT_EQ(StatsValue(json, "ptex_faces"), c.ptex);
+        EXPECT_EQ(StatsValue(json, "cage_faces_beyond_embree"), c.beyond);
+        EXPECT_EQ(StatsValue(json, "limit_tessellated_meshes"), c.meshes);
+        EXPECT_EQ(StatsValue(json, "limit_tessellated_cage_faces"), c.tessellated);
+        EXPECT_EQ(json.find(",\n}"), std::string::npos) << "no comma after the last value";
+    }
 }
 
 TEST(Cli, WritesRequestedAovLayers) {
@@ -501,6 +537,34 @@ TEST(Cli, LightSamplingCpisReportsRecordBytes) {
                                  "/sunlit.json --light-sampling cpis -q -o " + out.string());
     EXPECT_EQ(none.code, 2);
     EXPECT_EQ(std::count(none.out.begin(), none.out.end(), '\n'), 1) << none.out;
+}
+
+// `bench peer` compares like with like: both sides' high-sample renders show the same light. The
+// peer's diffuse response is twice ours (cmd_bench_peer.cpp says how it was measured) and its
+// pixels clip at 1, so its scene takes half the albedo; without that the car's body was 1.0 on
+// its side against 0.5 on ours: relMSE ~0.1 between the references, where noise at 64 spp on
+// 48x48 pixels gives ~0.005. Needs Embree's pathtracer (scripts/setup.sh installs embree-tools).
+TEST(Cli, BenchPeerReferencesShowTheSameLight) {
+    ASSERT_EQ(::access("/usr/bin/pathtracer", X_OK), 0)
+        << "Embree's pathtracer is missing: scripts/setup.sh installs embree-tools";
+    const fs::path out = Dir() / "peer_light";
+    fs::remove_all(out);
+    const CliRun r = Texcache(
+        "bench peer --resolution 48x48 --spp 4 --reference-spp 64 --repeats 1 "
+        "--pathtracer /usr/bin/pathtracer --out " +
+        out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    const size_t at = r.out.find("references against each other: relMSE ");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    double relmse = -1.0, meanOurs = -1.0, meanPeer = -1.0;
+    ASSERT_EQ(std::sscanf(r.out.c_str() + at,
+                          "references against each other: relMSE %lf, mean value ours %lf, "
+                          "Embree %lf",
+                          &relmse, &meanOurs, &meanPeer),
+              3)
+        << r.out;
+    EXPECT_LT(relmse, 0.03) << r.out;
+    EXPECT_NEAR(meanOurs, meanPeer, 0.01) << r.out;
 }
 
 }  // namespace

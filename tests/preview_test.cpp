@@ -507,6 +507,30 @@ TEST(Preview, ShowsACagePastEmbreesLimits) {
     fs::remove_all(dir);
 }
 
+// The panel's scene statistics (FrameStats, what the panel prints through
+// RenderScene::Describe): Ptex faces and the faces past Embree's limits of the 16-gon prism.
+TEST(Preview, StatsCountTheFacesPastEmbreesLimits) {
+    using namespace texcache::preview;
+    texcache::Scene scene = texcache::test::OneObjectScene(texcache::test::PrismCage(16));
+    scene.camera.pose.keys = {texcache::test::LookAt({0.0f, 1.5f, 3.0f}, {0.0f, 0.0f, 0.0f})};
+    PreviewSettings s;
+    s.width = 16, s.height = 16;
+    s.maxFrames = 1;
+    s.integrator = texcache::IntegratorKind::AO;
+    OrbitCamera cam;
+    cam.FromScene(scene, 0.0f);
+    ProgressiveRenderer r(std::move(scene), s, cam);
+    ASSERT_TRUE(r.WaitForFrame(r.Post(s, cam))) << r.Error();
+    const FrameStats st = r.Stats();
+    EXPECT_EQ(st.ptexFaces, 48u);
+    EXPECT_EQ(st.tessellation.beyondEmbree, 2u);
+    EXPECT_EQ(st.tessellation.meshes, 1);
+    EXPECT_EQ(st.tessellation.cageFaces, 18u);
+    EXPECT_EQ(texcache::RenderScene::Describe(st.tessellation),
+              "2 cage faces past Embree's limits (1 mesh, 18 cage faces tessellated from "
+              "OpenSubdiv's limit surface)");
+}
+
 TEST(Preview, WithoutADisplayFailsCleanly) {
     const ShellResult r = Shell("env -u DISPLAY -u WAYLAND_DISPLAY " + kBin + " preview " + kScene);
     EXPECT_EQ(r.exitCode, 2) << r.output;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <set>
 
 #include "libtexcache/topology_checks.h"
@@ -99,6 +100,55 @@ TEST_P(TopologyTest, FootprintsAtEveryCornerAreWellFormed) {
                 }
             }
         }
+}
+
+// One refinement for both (BuildCageTopology) gives what each constructor alone gives: the same
+// links across every edge and bit for bit the same regular-patch evaluation.
+TEST_P(TopologyTest, OneRefinerBuildsWhatTwoDid) {
+    const ControlCage cage = Cage(GetParam());
+    const CageTopology both = BuildCageTopology(cage);
+    const PtexTopology topo(cage);
+    const RegularPatches regular(cage);
+    ASSERT_EQ(both.ptex.NumPtexFaces(), topo.NumPtexFaces());
+    EXPECT_EQ(both.regular.Coverage(), regular.Coverage());
+    for (int f = 0; f < topo.NumPtexFaces(); ++f) {
+        for (int e = 0; e < 4; ++e) {
+            const PtexTopology::EdgeLink a = both.ptex.Edge(f, e), b = topo.Edge(f, e);
+            ASSERT_EQ(a.count, b.count);
+            for (int j = 0; j < a.count; ++j) {
+                EXPECT_EQ(a.face[j], b.face[j]);
+                EXPECT_EQ(a.edge[j], b.edge[j]);
+            }
+        }
+        ASSERT_EQ(both.regular.Has(f), regular.Has(f));
+        if (!regular.Has(f)) continue;
+        float p[2][3], du[2][3], dv[2][3];
+        both.regular.Eval(f, 0.3f, 0.8f, p[0], du[0], dv[0]);
+        regular.Eval(f, 0.3f, 0.8f, p[1], du[1], dv[1]);
+        for (int k = 0; k < 3; ++k) {
+            EXPECT_EQ(p[0][k], p[1][k]);
+            EXPECT_EQ(du[0][k], du[1][k]);
+            EXPECT_EQ(dv[0][k], dv[1][k]);
+        }
+    }
+}
+
+// Issue 18 item 6: what the topology of a large cage keeps. The Ptex adjacency is two packed
+// words per Ptex edge (whole EdgeLinks took 144 bytes per Ptex face: 144 MB for a 1,000,000-quad
+// cage) and a regular patch its 16 vertex indices (its 16 points took 192 bytes). Exact byte
+// counts the structures report, bounded per Ptex face and cage vertex.
+TEST(CageTopology, BytesPerFaceAreBounded) {
+    for (const ControlCage& cage : {test::GridCage(100), test::LoadMesh("catmark_car")}) {
+        const CageTopology t = BuildCageTopology(cage);
+        const size_t faces = size_t(t.ptex.NumPtexFaces()), coarse = size_t(cage.numFaces()),
+                     verts = size_t(cage.numVertices());
+        const size_t patches = size_t(std::lround(t.regular.Coverage() * float(faces)));
+        EXPECT_GT(patches, faces / 4) << cage.sourcePath;
+        // Ids and valences (4 bytes each) + 8 link words per Ptex face.
+        EXPECT_LE(t.ptex.Bytes(), 4 * (coarse + 1 + faces + verts) + 32 * faces) << cage.sourcePath;
+        // Patch index per Ptex face, 16 indices per patch, the cage's points.
+        EXPECT_LE(t.regular.Bytes(), 4 * faces + 64 * patches + 12 * verts) << cage.sourcePath;
+    }
 }
 
 INSTANTIATE_TEST_SUITE_P(BundledMeshes, TopologyTest, ::testing::ValuesIn(test::BundledMeshes()),

@@ -122,7 +122,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     return t;
 }
 
-std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
+std::string StatsJson(const RenderStats& s, const RenderScene& rs, const TextureSpaceCache* cache,
                       const RenderOptions& opt, double overshading) {
     const CacheStats& c = s.cache;
     std::string json = "{\n";
@@ -159,21 +159,22 @@ std::string StatsJson(const RenderStats& s, const TextureSpaceCache* cache,
     add("psr_cache_bytes", double(s.psrBytes));
     add("sample_cache_bytes", cache ? double(cache->SampleCacheBytes()) : 0.0);
     add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
-    add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes), true);
+    add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes));
+    // The scene: its size and the meshes Embree could not take (render_scene.cpp's design note).
+    const RenderScene::TessellationStats t = rs.LimitTessellated();
+    add("ptex_faces", double(rs.NumPtexFaces()));
+    add("cage_faces_beyond_embree", double(t.beyondEmbree));
+    add("limit_tessellated_meshes", double(t.meshes));
+    add("limit_tessellated_cage_faces", double(t.cageFaces), true);
     json += "}\n";
     return json;
 }
 
 /// The scene's size, and the meshes Embree could not take (render_scene.cpp's design note).
 void PrintSceneStats(const RenderScene& rs) {
-    const RenderScene::TessellationStats t = rs.LimitTessellated();
     const size_t objects = rs.scene().objects.size();
-    std::printf("scene: %zu object%s, %zu Ptex faces; %zu cage faces past Embree's limits", objects,
-                objects == 1 ? "" : "s", rs.NumPtexFaces(), t.beyondEmbree);
-    if (t.meshes > 0)
-        std::printf(" (%d mesh%s, %zu cage faces tessellated from OpenSubdiv's limit surface)",
-                    t.meshes, t.meshes == 1 ? "" : "es", t.cageFaces);
-    std::printf("\n");
+    std::printf("scene: %zu object%s, %zu Ptex faces; %s\n", objects, objects == 1 ? "" : "s",
+                rs.NumPtexFaces(), RenderScene::Describe(rs.LimitTessellated()).c_str());
 }
 
 AovFlags ParseAovs(const std::vector<std::string>& names) {
@@ -479,7 +480,9 @@ void CheckCombinations(const RenderArgs& a, const RenderSettings& s, const Rende
 
 int RunRender(const RenderArgs& a) {
     std::vector<std::string> warnings;
+    const double tLoad = NowSeconds();
     Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    const double loadSeconds = NowSeconds() - tLoad;
     for (const std::string& w : warnings)
         std::fprintf(stderr, "texcache: warning: %s\n", internal::OneLine(w).c_str());
 
@@ -597,7 +600,9 @@ int RunRender(const RenderArgs& a) {
         referenceShaded = Render(rs, ref).stats.cache.samplesShaded;
     }
     std::unique_ptr<TextureSpaceCache> cache;
+    const double tCache = NowSeconds();
     if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
+    const double cacheSeconds = NowSeconds() - tCache;
     RenderResult r = Render(rs, opt, cache.get());
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
@@ -605,7 +610,7 @@ int RunRender(const RenderArgs& a) {
     AtomicFiles group;
     WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
     if (!a.statsFile.empty()) {
-        WriteText(a.statsFile, StatsJson(r.stats, cache.get(), opt, overshading), group);
+        WriteText(a.statsFile, StatsJson(r.stats, rs, cache.get(), opt, overshading), group);
         out.written.push_back(a.statsFile);
     }
     group.Commit();
@@ -615,6 +620,17 @@ int RunRender(const RenderArgs& a) {
     std::printf("time: %.3f s render + %.3f s scene build; %.2f Mrays/s (%llu rays)\n",
                 r.stats.seconds, buildSeconds, double(r.stats.TotalRays()) / r.stats.seconds * 1e-6,
                 (unsigned long long)r.stats.TotalRays());
+    const RenderScene::BuildSeconds b = rs.BuildTimes();
+    std::printf(
+        "scene build: OpenSubdiv %.3f s, Embree geometry %.3f s, Embree BVH %.3f s, other %.3f s; "
+        "%.3f s reading the scene%s",
+        b.opensubdiv, b.embreeGeometry, b.embreeBvh, b.other, loadSeconds, cache ? "" : "\n");
+    if (cache) std::printf(", %.3f s making the texture-space cache\n", cacheSeconds);
+    std::printf(
+        "scene memory: Embree %.1f MiB (%.1f MiB at most while building), Ptex topology and "
+        "patches %.1f MiB\n",
+        double(rs.EmbreeBytes()) / (1 << 20), double(rs.EmbreePeakBytes()) / (1 << 20),
+        double(rs.MeshBytes()) / (1 << 20));
     PrintSceneStats(rs);
     if (cache) {
         const CacheStats& c = r.stats.cache;

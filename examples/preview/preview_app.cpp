@@ -413,6 +413,10 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         ImGui::TextDisabled("texture-space cache not in use");
     }
     ImGui::Text("cache memory %.1f MiB", double(st.cacheBytes) / (1 << 20));
+    if (r.Ready()) {
+        ImGui::Text("scene %zu Ptex faces", st.ptexFaces);
+        ImGui::TextWrapped("%s", RenderScene::Describe(st.tessellation).c_str());
+    }
     if (st.staged) DrawStageTimings(st);
     float maxMs = 1.0f;
     for (float v : ui.frameMs) maxMs = std::max(maxMs, v);

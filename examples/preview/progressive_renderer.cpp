@@ -596,6 +596,8 @@ void ProgressiveRenderer::Run() {
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
             frame.accumulated = accumulated == INT_MAX ? 1 : accumulated;
             frame.cacheBytes = cache ? cache->BytesUsed() : 0;
+            frame.ptexFaces = rs->NumPtexFaces();
+            frame.tessellation = rs->LimitTessellated();
             frame.time = frameTime;
             frame.cacheFrame = cacheFrame;
             publish(cur, version, &frame);

@@ -129,7 +129,9 @@ struct FrameStats {
     double texelHitRate = 0.0;
     uint64_t lookups = 0, samplesShaded = 0;
     size_t cacheBytes = 0;
-    float time = 0.0f;          ///< scene time of the frame
+    size_t ptexFaces = 0;                         ///< of the meshes the scene uses
+    RenderScene::TessellationStats tessellation;  ///< meshes past Embree's limits
+    float time = 0.0f;                            ///< scene time of the frame
     uint32_t cacheFrame = 0;    ///< cache frames begun so far (one per time change)
     uint32_t overshadeTop = 0;  ///< Overshading view: samples per pixel at the top of the scale
     // The screen-space stage (UsesStage), when it ran on this frame:

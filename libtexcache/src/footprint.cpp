@@ -11,15 +11,21 @@
 namespace texcache {
 
 MeshGrids::MeshGrids(const ControlCage& cage, float texelSize, uint32_t faceOffset)
-    : topo_(cage), faceOffset_(faceOffset) {
+    : MeshGrids(cage, texelSize, faceOffset, std::make_shared<const PtexTopology>(cage)) {}
+
+MeshGrids::MeshGrids(const ControlCage& cage, float texelSize, uint32_t faceOffset,
+                     std::shared_ptr<const PtexTopology> topology)
+    : topo_(std::move(topology)), faceOffset_(faceOffset) {
+    if (!topo_ || topo_->NumCoarseFaces() != cage.numFaces())
+        throw InputError(cage.sourcePath, "the shared Ptex topology is not this cage's");
     if (!(texelSize > 0.0f) || !std::isfinite(texelSize))
         throw InputError(cage.sourcePath, "texel size must be a positive number");
-    if (uint64_t(faceOffset) + uint64_t(topo_.NumPtexFaces()) > TexelKey::kMaxFaces)
+    if (uint64_t(faceOffset) + uint64_t(topo_->NumPtexFaces()) > TexelKey::kMaxFaces)
         throw InputError(cage.sourcePath,
-                         std::to_string(uint64_t(faceOffset) + topo_.NumPtexFaces()) +
+                         std::to_string(uint64_t(faceOffset) + topo_->NumPtexFaces()) +
                              " Ptex faces exceed the cache key's range of " +
                              std::to_string(TexelKey::kMaxFaces));
-    log2Res_ = ComputeFaceResolutions(cage, topo_, texelSize, TexelKey::kCoordBits - 1);
+    log2Res_ = ComputeFaceResolutions(cage, *topo_, texelSize, TexelKey::kCoordBits - 1);
 }
 
 namespace {

@@ -79,6 +79,13 @@ struct Segment {
     int ptex, edge;
     float start, length;
 };
+// Whether control point i (row-major in (v, u)) of a regular patch lies outside the boundary
+// edges `boundary` (OpenSubdiv's mask: 1 v=0, 2 u=1, 4 v=1, 8 u=0).
+bool OutsideBoundary(int boundary, int i) {
+    const int iu = i % 4, iv = i / 4;
+    return ((boundary & 1) && iv == 0) || ((boundary & 2) && iu == 3) ||
+           ((boundary & 4) && iv == 3) || ((boundary & 8) && iu == 0);
+}
 int SideSegments(int firstPtex, int numVerts, int a, Segment out[2]) {
     if (numVerts == 4) {
         out[0] = {firstPtex, a, 0.0f, 1.0f};
@@ -90,38 +97,57 @@ int SideSegments(int firstPtex, int numVerts, int a, Segment out[2]) {
 }
 }  // namespace
 
-PtexTopology::PtexTopology(const ControlCage& cage) {
-    auto refiner = internal::CreateRefiner(cage);
-    Far::PtexIndices ptex(*refiner);
-    const int nf = cage.numFaces();
-    firstPtex_.resize(nf + 1);
-    for (int f = 0; f < nf; ++f) firstPtex_[f] = ptex.GetFaceId(f);
-    firstPtex_[nf] = ptex.GetNumFaces();
-    ptexToCoarse_.resize(ptex.GetNumFaces());
-    for (int f = 0; f < nf; ++f)
-        for (int p = firstPtex_[f]; p < firstPtex_[f + 1]; ++p) ptexToCoarse_[p] = f;
+namespace internal {
 
-    const Far::TopologyLevel& level = refiner->GetLevel(0);
-    valence_.resize(level.GetNumVertices());
-    for (int v = 0; v < level.GetNumVertices(); ++v) valence_[v] = level.GetVertexEdges(v).size();
+struct TopologyBuilder {
+    static PtexTopology Ptex(const ControlCage& cage, const Far::TopologyRefiner& refiner);
+    static RegularPatches Regular(const ControlCage& cage, Far::TopologyRefiner& refiner);
+};
+
+PtexTopology TopologyBuilder::Ptex(const ControlCage& cage, const Far::TopologyRefiner& refiner) {
+    PtexTopology t;
+    Far::PtexIndices ptex(refiner);
+    const int nf = cage.numFaces();
+    if (uint64_t(ptex.GetNumFaces()) >= PtexTopology::kMaxPtexFaces)
+        throw InputError(cage.sourcePath, std::to_string(ptex.GetNumFaces()) +
+                                              " Ptex faces exceed the limit of " +
+                                              std::to_string(PtexTopology::kMaxPtexFaces - 1));
+    t.firstPtex_.resize(nf + 1);
+    for (int f = 0; f < nf; ++f) t.firstPtex_[f] = ptex.GetFaceId(f);
+    t.firstPtex_[nf] = ptex.GetNumFaces();
+    t.ptexToCoarse_.resize(ptex.GetNumFaces());
+    for (int f = 0; f < nf; ++f)
+        for (int p = t.firstPtex_[f]; p < t.firstPtex_[f + 1]; ++p) t.ptexToCoarse_[p] = f;
+
+    const Far::TopologyLevel& level = refiner.GetLevel(0);
+    t.valence_.resize(level.GetNumVertices());
+    for (int v = 0; v < level.GetNumVertices(); ++v) t.valence_[v] = level.GetVertexEdges(v).size();
     std::vector<char> hole(nf, 0);
     for (int h : cage.holes)
         if (h >= 0 && h < nf) hole[h] = 1;
 
-    edges_.assign(size_t(ptex.GetNumFaces()) * 4, EdgeLink{});
+    t.links_.assign(size_t(ptex.GetNumFaces()) * 8, PtexTopology::kNoLink);
+    // Appends a neighbour segment to edge `edge` of Ptex face `p`.
+    auto link = [&](int p, int edge, int nbFace, int nbEdge) {
+        uint32_t* w = &t.links_[(size_t(p) * 4 + size_t(edge)) * 2];
+        const int j = w[0] == PtexTopology::kNoLink ? 0 : 1;
+        w[j] = uint32_t(nbFace) << PtexTopology::kFaceShift |
+               (t.IsQuad(t.ptexToCoarse_[p]) ? 0u : PtexTopology::kIsSubFace) |
+               (t.IsQuad(t.ptexToCoarse_[nbFace]) ? 0u : PtexTopology::kNeighbourIsSubFace) |
+               uint32_t(nbEdge);
+    };
     for (int f = 0; f < nf; ++f) {
         if (hole[f]) continue;
         const auto fVerts = level.GetFaceVertices(f);
         const auto fEdges = level.GetFaceEdges(f);
         const int n = fVerts.size();
+        const int first = t.firstPtex_[f];
         // Edges inside an n-gon: sub-face i's edge 1 meets sub-face i+1's edge 2.
         if (n != 4) {
             for (int i = 0; i < n; ++i) {
-                const int a = firstPtex_[f] + i, b = firstPtex_[f] + (i + 1) % n;
-                EdgeLink& ab = edges_[size_t(a) * 4 + 1];
-                ab.count = 1, ab.face[0] = b, ab.edge[0] = 2;
-                EdgeLink& ba = edges_[size_t(b) * 4 + 2];
-                ba.count = 1, ba.face[0] = a, ba.edge[0] = 1;
+                const int a = first + i, b = first + (i + 1) % n;
+                link(a, 1, b, 2);
+                link(b, 2, a, 1);
             }
         }
         for (int a = 0; a < n; ++a) {
@@ -141,26 +167,30 @@ PtexTopology::PtexTopology(const ControlCage& cage) {
             if (b < 0 || gVerts[b] != fVerts[(a + 1) % n] || gVerts[(b + 1) % m] != fVerts[a])
                 continue;
             Segment mine[2], theirs[2];
-            const int nm = SideSegments(firstPtex_[f], n, a, mine);
-            const int nt = SideSegments(firstPtex_[g], m, b, theirs);
+            const int nm = SideSegments(first, n, a, mine);
+            const int nt = SideSegments(t.firstPtex_[g], m, b, theirs);
             for (int i = 0; i < nm; ++i) {
-                EdgeLink& link = edges_[size_t(mine[i].ptex) * 4 + mine[i].edge];
-                link.myStart = mine[i].start;
-                link.myLength = mine[i].length;
                 // Our segment [s, s+l] is [1-s-l, 1-s] in the neighbour's parameter.
                 const float lo = 1.0f - mine[i].start - mine[i].length, hi = 1.0f - mine[i].start;
                 for (int j = 0; j < nt; ++j) {
                     const float tlo = theirs[j].start, thi = theirs[j].start + theirs[j].length;
                     if (std::min(hi, thi) - std::max(lo, tlo) <= 1e-6f) continue;
-                    const int c = link.count++;
-                    link.face[c] = theirs[j].ptex;
-                    link.edge[c] = int8_t(theirs[j].edge);
-                    link.segStart[c] = theirs[j].start;
-                    link.segLength[c] = theirs[j].length;
+                    link(mine[i].ptex, mine[i].edge, theirs[j].ptex, theirs[j].edge);
                 }
             }
         }
     }
+    return t;
+}
+
+}  // namespace internal
+
+PtexTopology::PtexTopology(const ControlCage& cage)
+    : PtexTopology(internal::TopologyBuilder::Ptex(cage, *internal::CreateRefiner(cage))) {}
+
+size_t PtexTopology::Bytes() const {
+    return (firstPtex_.capacity() + ptexToCoarse_.capacity() + valence_.capacity()) * sizeof(int) +
+           links_.capacity() * sizeof(uint32_t);
 }
 
 bool PtexTopology::Cross(int ptexFace, int edge, float along, float outside, int* nbFace,
@@ -181,18 +211,20 @@ bool PtexTopology::Cross(int ptexFace, int edge, float along, float outside, int
     return true;
 }
 
-RegularPatches::RegularPatches(const ControlCage& cage) {
-    auto refiner = internal::CreateRefiner(cage);
+RegularPatches internal::TopologyBuilder::Regular(const ControlCage& cage,
+                                                  Far::TopologyRefiner& refiner) {
+    RegularPatches r;
     // One adaptive level is enough to tell regular faces (depth-0 regular patches) from the rest.
-    refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(1));
+    refiner.RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(1));
     Far::PatchTableFactory::Options options(1);
     options.endCapType = Far::PatchTableFactory::Options::ENDCAP_BILINEAR_BASIS;
-    std::unique_ptr<Far::PatchTable> table(Far::PatchTableFactory::Create(*refiner, options));
-    Far::PtexIndices ptex(*refiner);
-    index_.assign(ptex.GetNumFaces(), -1);
+    std::unique_ptr<Far::PatchTable> table(Far::PatchTableFactory::Create(refiner, options));
+    Far::PtexIndices ptex(refiner);
+    r.index_.assign(ptex.GetNumFaces(), -1);
     const int numCoarse = cage.numVertices();
     for (int a = 0; a < table->GetNumPatchArrays(); ++a) {
         if (table->GetPatchArrayDescriptor(a).GetType() != Far::PatchDescriptor::REGULAR) continue;
+        r.cvs_.reserve(r.cvs_.size() + size_t(table->GetNumPatches(a)) * 16);
         for (int p = 0; p < table->GetNumPatches(a); ++p) {
             const Far::PatchParam param = table->GetPatchParam(a, p);
             if (param.GetDepth() != 0 || param.NonQuadRoot()) continue;
@@ -200,38 +232,35 @@ RegularPatches::RegularPatches(const ControlCage& cage) {
             const int boundary = param.GetBoundary();
             // Control points outside a boundary are not part of the patch: only the others must
             // be coarse vertices.
-            auto outside = [boundary](int i) {
-                const int iu = i % 4, iv = i / 4;
-                return ((boundary & 1) && iv == 0) || ((boundary & 2) && iu == 3) ||
-                       ((boundary & 4) && iv == 3) || ((boundary & 8) && iu == 0);
-            };
             bool coarse = cv.size() == 16;
             for (int i = 0; i < cv.size() && coarse; ++i)
-                coarse = outside(i) || (cv[i] >= 0 && cv[i] < numCoarse);
+                coarse = OutsideBoundary(boundary, i) || (cv[i] >= 0 && cv[i] < numCoarse);
             const int face = param.GetFaceId();
-            if (!coarse || face < 0 || face >= int(index_.size())) continue;
-            float c[16][3];
-            for (int i = 0; i < 16; ++i)
-                for (int k = 0; k < 3; ++k) c[i][k] = outside(i) ? 0.0f : cage.positions[cv[i]][k];
-            // Boundary patches use phantom points mirrored across the boundary (OpenSubdiv's
-            // B-spline boundary rule, P0 = 2 P1 - P2), substituted here in the transposed order
-            // of OSD's weight adjustment (left, top, right, bottom) so corners come out the same.
-            auto mirror = [&](int dst, int p1, int p2) {
-                for (int k = 0; k < 3; ++k) c[dst][k] = 2.0f * c[p1][k] - c[p2][k];
-            };
-            if (boundary & 8)
-                for (int j = 0; j < 4; ++j) mirror(4 * j, 4 * j + 1, 4 * j + 2);
-            if (boundary & 4)
-                for (int i = 0; i < 4; ++i) mirror(12 + i, 8 + i, 4 + i);
-            if (boundary & 2)
-                for (int j = 0; j < 4; ++j) mirror(4 * j + 3, 4 * j + 2, 4 * j + 1);
-            if (boundary & 1)
-                for (int i = 0; i < 4; ++i) mirror(i, 4 + i, 8 + i);
-            index_[face] = int(cvs_.size() / 48);
-            for (int i = 0; i < 16; ++i)
-                for (int k = 0; k < 3; ++k) cvs_.push_back(c[i][k]);
+            if (!coarse || face < 0 || face >= int(r.index_.size())) continue;
+            if (r.cvs_.size() / 16 >= size_t(1) << 27)
+                throw InputError(cage.sourcePath, "more than 2^27 regular patches");
+            r.index_[face] = int(r.cvs_.size() / 16) << 4 | boundary;
+            for (int i = 0; i < 16; ++i) r.cvs_.push_back(OutsideBoundary(boundary, i) ? 0 : cv[i]);
         }
     }
+    r.cvs_.shrink_to_fit();
+    r.positions_ = cage.positions;
+    return r;
+}
+
+RegularPatches::RegularPatches(const ControlCage& cage)
+    : RegularPatches(internal::TopologyBuilder::Regular(cage, *internal::CreateRefiner(cage))) {}
+
+CageTopology BuildCageTopology(const ControlCage& cage) {
+    auto refiner = internal::CreateRefiner(cage);
+    // Ptex ids and adjacency read the base level, so they come before the adaptive refinement.
+    PtexTopology ptex = internal::TopologyBuilder::Ptex(cage, *refiner);
+    return {std::move(ptex), internal::TopologyBuilder::Regular(cage, *refiner)};
+}
+
+size_t RegularPatches::Bytes() const {
+    return index_.capacity() * sizeof(int) + cvs_.capacity() * sizeof(int) +
+           positions_.capacity() * sizeof(positions_[0]);
 }
 
 namespace {
@@ -251,21 +280,48 @@ inline void BSpline(float t, float w[4], float d[4]) {
 
 void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu[3],
                           float dPdv[3]) const {
-    const float* cv = &cvs_[size_t(index_[ptexFace]) * 48];
+    const int entry = index_[ptexFace], boundary = entry & 15;
+    const int* idx = &cvs_[size_t(entry >> 4) * 16];
+    // Interior patches read the cage's points in place; boundary ones need a copy to mirror in.
+    const float* cv[16];
+    float c[16][3];
+    for (int i = 0; i < 16; ++i) cv[i] = positions_[idx[i]].data();
+    if (boundary) {
+        for (int i = 0; i < 16; ++i) {
+            for (int k = 0; k < 3; ++k) c[i][k] = cv[i][k];
+            cv[i] = c[i];
+        }
+        // Boundary patches use phantom points mirrored across the boundary (OpenSubdiv's
+        // B-spline boundary rule, P0 = 2 P1 - P2), substituted here in the transposed order of
+        // OSD's weight adjustment (left, top, right, bottom) so corners come out the same.
+        auto mirror = [&](int dst, int p1, int p2) {
+            for (int k = 0; k < 3; ++k) c[dst][k] = 2.0f * c[p1][k] - c[p2][k];
+        };
+        if (boundary & 8)
+            for (int j = 0; j < 4; ++j) mirror(4 * j, 4 * j + 1, 4 * j + 2);
+        if (boundary & 4)
+            for (int i = 0; i < 4; ++i) mirror(12 + i, 8 + i, 4 + i);
+        if (boundary & 2)
+            for (int j = 0; j < 4; ++j) mirror(4 * j + 3, 4 * j + 2, 4 * j + 1);
+        if (boundary & 1)
+            for (int i = 0; i < 4; ++i) mirror(i, 4 + i, 8 + i);
+    }
     float wu[4], du[4], wv[4], dv[4];
     BSpline(u, wu, du);
     BSpline(v, wv, dv);
-    for (int k = 0; k < 3; ++k) P[k] = dPdu[k] = dPdv[k] = 0.0f;
+    // Local sums: the outputs might alias the points as far as the compiler knows.
+    float sp[3] = {0, 0, 0}, su[3] = {0, 0, 0}, sv[3] = {0, 0, 0};
     for (int j = 0; j < 4; ++j)
         for (int i = 0; i < 4; ++i) {
-            const float* c = cv + 3 * (4 * j + i);
+            const float* cp = cv[4 * j + i];
             const float w = wu[i] * wv[j], wdu = du[i] * wv[j], wdv = wu[i] * dv[j];
             for (int k = 0; k < 3; ++k) {
-                P[k] += w * c[k];
-                dPdu[k] += wdu * c[k];
-                dPdv[k] += wdv * c[k];
+                sp[k] += w * cp[k];
+                su[k] += wdu * cp[k];
+                sv[k] += wdv * cp[k];
             }
         }
+    for (int k = 0; k < 3; ++k) P[k] = sp[k], dPdu[k] = su[k], dPdv[k] = sv[k];
 }
 
 float RegularPatches::Coverage() const {
@@ -363,10 +419,9 @@ LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
     for (size_t i = 0; i < verts.size(); ++i)
         impl_->points[i] = {verts[i].p[0], verts[i].p[1], verts[i].p[2]};
 
-    PtexTopology topo(cage);
-    impl_->nonQuadPtex.resize(topo.NumPtexFaces());
-    for (int p = 0; p < topo.NumPtexFaces(); ++p)
-        impl_->nonQuadPtex[p] = !topo.IsQuad(topo.CoarseFace(p));
+    // Ptex ids as Far::PtexIndices numbers them: one per quad, n per n-gon, in face order.
+    for (int n : cage.faceVertexCounts)
+        impl_->nonQuadPtex.insert(impl_->nonQuadPtex.end(), n == 4 ? 1 : n, n != 4);
 }
 LimitSurface::~LimitSurface() = default;
 LimitSurface::LimitSurface(LimitSurface&&) noexcept = default;

@@ -4,6 +4,7 @@
 #pragma once
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "texcache/texel_key.h"
@@ -19,10 +20,16 @@ class MeshGrids {
 public:
     /// Builds topology and resolutions; throws InputError when the face ids would exceed the key.
     MeshGrids(const ControlCage& cage, float texelSize, uint32_t faceOffset);
+    /// The same over a topology already built for `cage` (a renderer's, or another MeshGrids'
+    /// of the same cage), shared rather than built again.
+    MeshGrids(const ControlCage& cage, float texelSize, uint32_t faceOffset,
+              std::shared_ptr<const PtexTopology> topology);
 
-    const PtexTopology& Topology() const { return topo_; }
+    const PtexTopology& Topology() const { return *topo_; }
+    /// The topology, for another MeshGrids or a renderer to share.
+    const std::shared_ptr<const PtexTopology>& SharedTopology() const { return topo_; }
     uint32_t FaceOffset() const { return faceOffset_; }
-    int NumFaces() const { return topo_.NumPtexFaces(); }
+    int NumFaces() const { return topo_->NumPtexFaces(); }
     /// log2 of the face's grid side at mip 0.
     int Log2Res(int face) const { return log2Res_[face]; }
     /// Number of mip levels of a face (mip 0 .. Log2Res).
@@ -33,7 +40,7 @@ public:
     int ClampMip(int face, int mip) const { return std::clamp(mip, 0, int(log2Res_[face])); }
 
 private:
-    PtexTopology topo_;
+    std::shared_ptr<const PtexTopology> topo_;
     std::vector<uint8_t> log2Res_;
     uint32_t faceOffset_;
 };

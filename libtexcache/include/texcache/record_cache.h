@@ -38,9 +38,13 @@ public:
     explicit RecordCache(size_t capacityBytes, bool twoChoices = true)
         : slots_(capacityBytes, twoChoices) {}
 
-    /// Registers a mesh with texels of about `texelSize` world units at mip 0; returns its id.
-    int AddMesh(const ControlCage& cage, float texelSize) {
-        meshes_.push_back(std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
+    /// Registers a mesh with texels of about `texelSize` world units at mip 0 (its Ptex
+    /// topology shared when given, as ShadingCache::AddMesh); returns its id.
+    int AddMesh(const ControlCage& cage, float texelSize,
+                std::shared_ptr<const PtexTopology> topology = nullptr) {
+        meshes_.push_back(
+            topology ? std::make_unique<MeshGrids>(cage, texelSize, nextFace_, std::move(topology))
+                     : std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
         nextFace_ += uint32_t(meshes_.back()->NumFaces());
         return int(meshes_.size()) - 1;
     }

@@ -251,8 +251,13 @@ public:
     }
 
     /// Registers a mesh with texels of about `texelSize` world units at mip 0; returns its id.
-    int AddMesh(const ControlCage& cage, float texelSize) {
-        meshes_.push_back(std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
+    /// With `topology` (the cage's, e.g. the renderer's or another mesh's of the same cage) the
+    /// mesh shares it instead of building its own.
+    int AddMesh(const ControlCage& cage, float texelSize,
+                std::shared_ptr<const PtexTopology> topology = nullptr) {
+        meshes_.push_back(
+            topology ? std::make_unique<MeshGrids>(cage, texelSize, nextFace_, std::move(topology))
+                     : std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
         nextFace_ += uint32_t(meshes_.back()->NumFaces());
         return int(meshes_.size()) - 1;
     }
@@ -263,6 +268,15 @@ public:
     /// The texel a hit maps to: eq. 1 (floored, plus the LOD bias) and eq. 2.
     SampleRequest TexelAt(const CacheHit& h) const {
         return TexelOfHit(*meshes_[h.mesh], h, settings_.lodBias);
+    }
+
+    /// What TexelAt returned for `key` on mesh `mesh`, rebuilt from the key alone: for
+    /// renderers that keep a pass's texel keys (8 bytes) instead of its requests.
+    SampleRequest RequestOf(int mesh, const TexelKey& key) const {
+        const MeshGrids& g = *meshes_[mesh];
+        const int face = int(key.face - g.FaceOffset());
+        const int res = g.Res(face, key.mip);
+        return {mesh, face, key.mip, TexelCenter(key.iu, res), TexelCenter(key.iv, res), key};
     }
 
     /// Whether a texel is in the texel cache right now (read-only: never shades, claims or
