@@ -45,6 +45,19 @@ private:
     uint32_t faceOffset_;
 };
 
+/// Appends grids for `cage` to `meshes`, numbering its faces after the last mesh's (keys hold
+/// global face ids), with `topology` shared when given; returns the new mesh's id. The mesh
+/// registry of ShadingCache and RecordCache.
+inline int AppendMeshGrids(std::vector<std::unique_ptr<MeshGrids>>& meshes, const ControlCage& cage,
+                           float texelSize, std::shared_ptr<const PtexTopology> topology) {
+    const uint32_t offset =
+        meshes.empty() ? 0u : meshes.back()->FaceOffset() + uint32_t(meshes.back()->NumFaces());
+    meshes.push_back(topology
+                         ? std::make_unique<MeshGrids>(cage, texelSize, offset, std::move(topology))
+                         : std::make_unique<MeshGrids>(cage, texelSize, offset));
+    return int(meshes.size()) - 1;
+}
+
 /// Which taps of a footprint a lookup keeps when the cache has a visibility set
 /// (ShadingCache::RestrictFootprints; without one every tap is kept).
 enum class FootprintTaps {

@@ -42,11 +42,7 @@ public:
     /// topology shared when given, as ShadingCache::AddMesh); returns its id.
     int AddMesh(const ControlCage& cage, float texelSize,
                 std::shared_ptr<const PtexTopology> topology = nullptr) {
-        meshes_.push_back(
-            topology ? std::make_unique<MeshGrids>(cage, texelSize, nextFace_, std::move(topology))
-                     : std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
-        nextFace_ += uint32_t(meshes_.back()->NumFaces());
-        return int(meshes_.size()) - 1;
+        return AppendMeshGrids(meshes_, cage, texelSize, std::move(topology));
     }
     const MeshGrids& Mesh(int mesh) const { return *meshes_[mesh]; }
 
@@ -90,7 +86,6 @@ public:
 private:
     DirectMappedCache<Record> slots_;
     std::vector<std::unique_ptr<MeshGrids>> meshes_;
-    uint32_t nextFace_ = 0;
 };
 
 }  // namespace texcache

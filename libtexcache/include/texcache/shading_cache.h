@@ -255,11 +255,7 @@ public:
     /// mesh shares it instead of building its own.
     int AddMesh(const ControlCage& cage, float texelSize,
                 std::shared_ptr<const PtexTopology> topology = nullptr) {
-        meshes_.push_back(
-            topology ? std::make_unique<MeshGrids>(cage, texelSize, nextFace_, std::move(topology))
-                     : std::make_unique<MeshGrids>(cage, texelSize, nextFace_));
-        nextFace_ += uint32_t(meshes_.back()->NumFaces());
-        return int(meshes_.size()) - 1;
+        return AppendMeshGrids(meshes_, cage, texelSize, std::move(topology));
     }
     const MeshGrids& Mesh(int mesh) const { return *meshes_[mesh]; }
     int NumMeshes() const { return int(meshes_.size()); }
@@ -540,7 +536,6 @@ private:
     std::atomic<uint64_t> epoch_{0};          ///< bumped by every invalidation (see Filter)
     const VisibleTexels* visible_ = nullptr;  ///< see RestrictFootprints
     std::vector<std::unique_ptr<MeshGrids>> meshes_;
-    uint32_t nextFace_ = 0;
     std::unique_ptr<DirectMappedCache<Stored>> samples_;
     std::unique_ptr<DirectMappedCache<Texel>> texels_;
     std::unique_ptr<internal::UnboundedCache<Stored>> refSamples_;
