@@ -357,15 +357,15 @@ TEST_P(Disocclusion, RevealedPixelsTakeNoHistoryFromTheOccluder) {
     // and with / without demodulation. At 128x80 the box's motion is fitted to all its pixels,
     // at 256x160 to a subsample of them (OcclusionMotion's kFitStep).
     const JumpScene js(128 * GetParam(), 80 * GetParam());
-    const FrameBuffers prev = SynthRender(js.before, 5, 1, 64);  // == still[5]
+    std::vector<FrameBuffers> still;
+    for (int fr = 0; fr < 6; ++fr) still.push_back(SynthRender(js.before, fr, 1, 64));
+    const FrameBuffers& prev = still[5];
     const FrameBuffers cur = SynthRender(js.after, 6, 1, 64);
     const auto exact = cur.Compose();
     std::vector<size_t> revealed;
     for (size_t i = 0; i < cur.NumPixels(); ++i)
         if (cur.objectId[i] == 0 && prev.objectId[i] == 1) revealed.push_back(i);
     ASSERT_GT(revealed.size(), 200u);
-    std::vector<FrameBuffers> still;
-    for (int fr = 0; fr < 6; ++fr) still.push_back(SynthRender(js.before, fr, 1, 64));
     for (Method m : kTemporal)
         for (Demodulation d : {Demodulation::Off, Demodulation::On}) {
             ScreenSpaceDenoiser dn(DenoiserSettings{}, SharedBrdf());
