@@ -9,16 +9,15 @@
 #include <map>
 #include <type_traits>
 
-#include <OpenImageIO/imageio.h>
-
 #include "renderer/atomic_files.h"
 #include "renderer/image.h"
+#include "renderer/image_file.h"
 #include "texcache/error.h"
 
 namespace texcache {
 
 namespace fs = std::filesystem;
-OIIO_NAMESPACE_USING
+using internal::ImageAttribute;
 
 namespace {
 
@@ -111,22 +110,24 @@ void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn
     const std::vector<glm::vec3> beauty = fb.Compose();
     const size_t n = fb.NumPixels();
 
-    ImageSpec spec(fb.width, fb.height, 0, TypeDesc::FLOAT);
-    spec.channelnames = {"R", "G", "B"};
+    internal::ImageFile f;
+    f.width = fb.width, f.height = fb.height;
+    f.channelNames = {"R", "G", "B"};
     for (const auto& l : layers)
         if (l.count > 0)
-            for (const std::string& ch : l.channels) spec.channelnames.push_back(l.name + "." + ch);
-    spec.nchannels = int(spec.channelnames.size());
-    spec.alpha_channel = -1;
-    spec.attribute("compression", "zip");
-    spec.attribute("texcache:worldToClip", TypeMatrix44, &fb.camera.worldToClip[0][0]);
-    spec.attribute("texcache:cameraPosition", TypeVector, &fb.camera.position.x);
-    spec.attribute("texcache:time", fb.time);
+            for (const std::string& ch : l.channels) f.channelNames.push_back(l.name + "." + ch);
+    f.channels = int(f.channelNames.size());
+    const float* m = &fb.camera.worldToClip[0][0];
+    const glm::vec3& cam = fb.camera.position;
+    f.attributes = {
+        {ImageAttribute::Kind::Matrix44, "texcache:worldToClip", {m, m + 16}, false},
+        {ImageAttribute::Kind::Vec3, "texcache:cameraPosition", {cam.x, cam.y, cam.z}, false},
+        {ImageAttribute::Kind::Float, "texcache:time", {fb.time}, false}};
 
-    const size_t total = size_t(spec.nchannels);
-    std::vector<float> px(n * total);
+    const size_t total = size_t(f.channels);
+    f.pixels.resize(n * total);
     for (size_t p = 0; p < n; ++p) {
-        float* o = &px[p * total];
+        float* o = &f.pixels[p * total];
         for (int k = 0; k < 3; ++k) *o++ = beauty[p][k];
         for (const auto& l : layers) {
             if (l.count == 0) continue;
@@ -139,14 +140,11 @@ void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn
     // never see a partial file.
     AtomicFiles own;
     const std::string tmp = (group ? *group : own).Stage(path);
-    auto out = ImageOutput::create("openexr");
-    if (!out) throw InputError(path, "cannot write frame buffers: " + OIIO::geterror());
-    if (!(out->open(tmp, spec) && out->write_image(TypeDesc::FLOAT, px.data()) && out->close())) {
-        const std::string err = out->geterror();
-        throw InputError(path,
-                         "cannot write frame buffers: " + (err.empty() ? "write failed" : err));
+    try {
+        internal::WriteImageFile(tmp, "openexr", f);
+    } catch (const std::exception& e) {
+        throw InputError(path, std::string("cannot write frame buffers: ") + e.what());
     }
-    out.reset();
     if (!group) own.Commit();
 }
 
@@ -154,37 +152,43 @@ screen::FrameBuffers ReadFrameBuffers(const std::string& path) {
     std::error_code ec;
     if (!fs::is_regular_file(path, ec))
         throw InputError(path, "cannot read frame buffers: no such file");
-    auto in = ImageInput::open(path);
-    if (!in) throw InputError(path, "cannot read frame buffers: " + OIIO::geterror());
-    const ImageSpec spec = in->spec();
+    std::vector<ImageAttribute> attrs(3);
+    attrs[0].kind = ImageAttribute::Kind::Matrix44, attrs[0].name = "texcache:worldToClip";
+    attrs[1].kind = ImageAttribute::Kind::Vec3, attrs[1].name = "texcache:cameraPosition";
+    attrs[2].kind = ImageAttribute::Kind::Float, attrs[2].name = "texcache:time";
     screen::FrameBuffers fb;
-    fb.width = spec.width;
-    fb.height = spec.height;
-    CheckImageSizeClaim(path, spec.width, spec.height, spec.nchannels, spec.image_bytes(true));
-    glm::mat4 m(1.0f);
-    glm::vec3 cam(0.0f);
-    float time = 0.0f;
-    if (!spec.getattribute("texcache:worldToClip", TypeMatrix44, &m[0][0]) ||
-        !spec.getattribute("texcache:cameraPosition", TypeVector, &cam.x) ||
-        !spec.getattribute("texcache:time", TypeFloat, &time))
-        throw InputError(path,
-                         "cannot read frame buffers: no texcache camera attributes (not "
-                         "written by WriteFrameBuffers?)");
-    fb.camera.worldToClip = m;
-    fb.camera.position = cam;
+    std::vector<float> px;
+    std::map<std::string, int> index;
+    int nchannels = 0;
+    try {
+        internal::ImageReader in(path, &attrs);
+        const internal::ImageHeader& h = in.Header();
+        CheckImageSizeClaim(path, h.width, h.height, h.channels, h.rawBytes);
+        for (const ImageAttribute& a : attrs)
+            if (!a.found)
+                throw InputError(path,
+                                 "cannot read frame buffers: no texcache camera attributes (not "
+                                 "written by WriteFrameBuffers?)");
+        fb.width = h.width;
+        fb.height = h.height;
+        nchannels = h.channels;
+        px.resize(fb.NumPixels() * size_t(nchannels));
+        in.Read(nchannels, px.data());
+        for (int c = 0; c < nchannels; ++c) index[h.channelNames[size_t(c)]] = c;
+    } catch (const InputError&) {
+        throw;
+    } catch (const std::exception& e) {
+        throw InputError(path, std::string("cannot read frame buffers: ") + e.what());
+    }
+    std::copy(attrs[0].values.begin(), attrs[0].values.end(), &fb.camera.worldToClip[0][0]);
+    fb.camera.position = {attrs[1].values[0], attrs[1].values[1], attrs[1].values[2]};
     fb.camera.width = fb.width;
     fb.camera.height = fb.height;
-    fb.time = time;
-
-    std::vector<float> px(fb.NumPixels() * size_t(spec.nchannels));
-    if (!in->read_image(0, 0, 0, spec.nchannels, TypeDesc::FLOAT, px.data()))
-        throw InputError(path, "cannot read frame buffers: " + in->geterror());
-    std::map<std::string, int> index;
-    for (int c = 0; c < spec.nchannels; ++c) index[spec.channelnames[c]] = c;
+    fb.time = attrs[2].values[0];
 
     std::vector<float> ids;
     const auto layers = Layers(fb, true, &ids);
-    const size_t n = fb.NumPixels(), total = size_t(spec.nchannels);
+    const size_t n = fb.NumPixels(), total = size_t(nchannels);
     // All columns first: a missing layer's buffer is emptied only after every copy (the cone
     // layers share one buffer).
     std::vector<std::vector<int>> cols(layers.size());

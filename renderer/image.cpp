@@ -7,15 +7,14 @@
 #include <filesystem>
 #include <memory>
 
-#include <OpenImageIO/imageio.h>
-
 #include "renderer/atomic_files.h"
+#include "renderer/image_file.h"
 #include "texcache/error.h"
 
 namespace texcache {
 
 namespace fs = std::filesystem;
-OIIO_NAMESPACE_USING
+using internal::ImageFile;
 
 namespace {
 
@@ -23,8 +22,8 @@ enum class Format { kExr, kPng, kHdr };
 
 struct FormatInfo {
     const char* ext;
-    const char* oiioName;  // the OIIO writer, named explicitly: the temporary file's name has no
-                           // image extension for OIIO to infer it from
+    const char* writer;  // WriteImageFile's format, named explicitly: the temporary file's name
+                         // has no image extension to infer it from
     Format format;
 };
 constexpr FormatInfo kFormats[] = {{".exr", "openexr", Format::kExr},
@@ -52,22 +51,21 @@ void CheckDirectory(const std::string& path) {
                          "cannot write image: directory '" + dir.string() + "' does not exist");
 }
 
-// Writes `pixels` with `spec` to the temporary file `group` stages for `path` (own group of one
-// when null, committed at once: rename within a directory is atomic, so readers see the old file
-// or the complete new one, never a partial one).
-void WriteAtomic(const std::string& path, const FormatInfo& fmt, const ImageSpec& spec,
-                 const void* pixels, TypeDesc type, AtomicFiles* group) {
+// Writes `file` to the temporary file `group` stages for `path` (own group of one when null,
+// committed at once: rename within a directory is atomic, so readers see the old file or the
+// complete new one, never a partial one).
+void WriteAtomic(const std::string& path, const FormatInfo& fmt, const ImageFile& file,
+                 AtomicFiles* group) {
     CheckDirectory(path);
     AtomicFiles own;
     AtomicFiles& files = group ? *group : own;
     const std::string tmp = files.Stage(path);
-    auto out = ImageOutput::create(fmt.oiioName);
-    if (!out) throw InputError(path, "cannot write image: " + OIIO::geterror());
-    if (!(out->open(tmp, spec) && out->write_image(type, pixels) && out->close())) {
-        const std::string err = out->geterror();
+    try {
+        internal::WriteImageFile(tmp, fmt.writer, file);
+    } catch (const std::exception& e) {
+        const std::string err = e.what();
         throw InputError(path, "cannot write image: " + (err.empty() ? "write failed" : err));
     }
-    out.reset();
     if (!group) own.Commit();
 }
 
@@ -99,16 +97,19 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
     const int bc = beauty.channels;
 
     if (fmt.format == Format::kPng) {
-        // OIIO would quantize linearly; the sRGB encode is done here. Fewer than 3 channels: grey.
+        // OpenImageIO would quantize linearly; the sRGB encode is done here. Fewer than 3 channels:
+        // grey.
         const int c = bc >= 3 ? 3 : 1;
         const float scale = std::exp2(exposure);
         std::vector<uint8_t> px(n * c);
         for (size_t p = 0; p < n; ++p)
             for (int k = 0; k < c; ++k)
                 px[p * c + k] = LinearToSrgb8(beauty.data[p * bc + k] * scale);
-        ImageSpec spec(beauty.width, beauty.height, c, TypeDesc::UINT8);
-        spec.attribute("oiio:ColorSpace", "sRGB");
-        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::UINT8, group);
+        ImageFile f;
+        f.width = beauty.width, f.height = beauty.height, f.channels = c;
+        f.bytes = std::move(px);
+        f.colorSpace = "sRGB";
+        WriteAtomic(path, fmt, f, group);
         return;
     }
 
@@ -117,8 +118,10 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
         std::vector<float> px(n * 3);
         for (size_t p = 0; p < n; ++p)
             for (int k = 0; k < 3; ++k) px[p * 3 + k] = beauty.data[p * bc + (bc >= 3 ? k : 0)];
-        ImageSpec spec(beauty.width, beauty.height, 3, TypeDesc::FLOAT);
-        WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT, group);
+        ImageFile f;
+        f.width = beauty.width, f.height = beauty.height, f.channels = 3;
+        f.pixels = std::move(px);
+        WriteAtomic(path, fmt, f, group);
         return;
     }
 
@@ -133,24 +136,23 @@ void WriteImage(const std::string& path, const Image& beauty, const std::vector<
                                        "' has inconsistent channels or channel names");
         total += l.image.channels;
     }
-    ImageSpec spec(beauty.width, beauty.height, total, TypeDesc::FLOAT);
-    spec.channelnames.clear();
+    ImageFile f;
+    f.width = beauty.width, f.height = beauty.height, f.channels = total;
     static const char* kBeauty[] = {"R", "G", "B", "A"};
     for (int k = 0; k < bc; ++k)
-        spec.channelnames.push_back(k < 4 ? kBeauty[k] : "C" + std::to_string(k));
+        f.channelNames.push_back(k < 4 ? kBeauty[k] : "C" + std::to_string(k));
     for (const ImageLayer& l : layers)
-        for (const std::string& ch : l.channelNames) spec.channelnames.push_back(l.name + "." + ch);
-    spec.alpha_channel = bc >= 4 ? 3 : -1;
-    spec.attribute("compression", "zip");  // lossless
-    std::vector<float> px(n * total);
+        for (const std::string& ch : l.channelNames) f.channelNames.push_back(l.name + "." + ch);
+    f.alphaChannel = bc >= 4 ? 3 : -1;
+    f.pixels.resize(n * total);
     for (size_t p = 0; p < n; ++p) {
-        float* o = &px[p * total];
+        float* o = &f.pixels[p * total];
         for (int k = 0; k < bc; ++k) *o++ = beauty.data[p * bc + k];
         for (const ImageLayer& l : layers)
             for (int k = 0; k < l.image.channels; ++k)
                 *o++ = l.image.data[p * l.image.channels + k];
     }
-    WriteAtomic(path, fmt, spec, px.data(), TypeDesc::FLOAT, group);
+    WriteAtomic(path, fmt, f, group);
 }
 
 void CheckImageSizeClaim(const std::string& path, int width, int height, int channels,
@@ -183,31 +185,30 @@ Image ReadChannels(const std::string& path, int maxChannels, ColorEncoding* enco
     if (!fs::is_regular_file(path, ec))
         throw InputError(path, fs::exists(path, ec) ? "cannot read image: not a regular file"
                                                     : "cannot read image: no such file");
-    auto in = ImageInput::open(path);
-    if (!in) {
-        const std::string err = OIIO::geterror();
-        throw InputError(path, "cannot read image: " + (err.empty() ? "unknown format" : err));
-    }
-    const ImageSpec& spec = in->spec();
-    CheckImageSizeClaim(path, spec.width, spec.height, spec.nchannels, spec.image_bytes(true));
-    const int channels = maxChannels > 0 ? std::min(spec.nchannels, maxChannels) : spec.nchannels;
-    if (encoding) {
-        // OIIO names the colour space it read (PNG: "sRGB" unless a gAMA chunk says otherwise);
-        // without one, integer pixels are display values and float pixels are linear.
-        std::string cs = spec.get_string_attribute("oiio:ColorSpace");
-        for (char& c : cs) c = char(std::tolower(static_cast<unsigned char>(c)));
-        const bool srgbName = cs.find("srgb") != std::string::npos && cs.find("lin") != 0;
-        *encoding = srgbName || (cs.empty() && !spec.format.is_floating_point())
-                        ? ColorEncoding::Srgb
-                        : ColorEncoding::Linear;
-    }
-    Image img(spec.width, spec.height, channels);
-    if (!in->read_image(0, 0, 0, channels, TypeDesc::FLOAT, img.data.data())) {
-        const std::string err = in->geterror();
+    try {
+        internal::ImageReader in(path);
+        const internal::ImageHeader& h = in.Header();
+        CheckImageSizeClaim(path, h.width, h.height, h.channels, h.rawBytes);
+        const int channels = maxChannels > 0 ? std::min(h.channels, maxChannels) : h.channels;
+        if (encoding) {
+            // OpenImageIO names the colour space it read (PNG: "sRGB" unless a gAMA chunk says
+            // otherwise); without one, integer pixels are display values and float pixels are
+            // linear.
+            std::string cs = h.colorSpace;
+            for (char& c : cs) c = char(std::tolower(static_cast<unsigned char>(c)));
+            const bool srgbName = cs.find("srgb") != std::string::npos && cs.find("lin") != 0;
+            *encoding = srgbName || (cs.empty() && !h.floatPixels) ? ColorEncoding::Srgb
+                                                                   : ColorEncoding::Linear;
+        }
+        Image img(h.width, h.height, channels);
+        in.Read(channels, img.data.data());
+        return img;
+    } catch (const InputError&) {
+        throw;
+    } catch (const std::exception& e) {
+        const std::string err = e.what();
         throw InputError(path, "cannot read image: " + (err.empty() ? "read failed" : err));
     }
-    in->close();
-    return img;
 }
 
 }  // namespace
