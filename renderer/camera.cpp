@@ -23,19 +23,8 @@ CameraModel::CameraModel(const Camera& cam, float time, int width, int height)
     dirY_ = R * glm::vec3(0.0f, -2.0f * tanHalfY_ / float(height_), 0.0f);
 }
 
-Ray CameraModel::Generate(float px, float py, glm::vec2 lens, RayDifferentials* diff) const {
-    if (lensRadius_ <= 0.0f) {
-        const glm::vec3 d = dirBase_ + px * dirX_ + py * dirY_;
-        Ray ray;
-        ray.org = eye_;
-        ray.dir = glm::normalize(d);
-        if (diff) {
-            diff->dOdx = diff->dOdy = glm::vec3(0.0f);
-            diff->dDdx = glm::normalize(d + dirX_) - ray.dir;
-            diff->dDdy = glm::normalize(d + dirY_) - ray.dir;
-        }
-        return ray;
-    }
+Ray CameraModel::GenerateThinLens(float px, float py, glm::vec2 lens,
+                                  RayDifferentials* diff) const {
     // Camera space: looking down -Z, +Y up; film plane at z = -1.
     const float sx = (2.0f * px / float(width_) - 1.0f) * tanHalfY_ * aspect_;
     const float sy = (1.0f - 2.0f * py / float(height_)) * tanHalfY_;

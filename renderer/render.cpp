@@ -75,22 +75,21 @@ glm::vec3 SplitAtHit(const Context& c, int x, int y, int s, Rng& rng, LiFn&& li)
 
 /// The camera ray of pixel sample (x, y, s); `rng` continues the sample's random stream after it.
 /// Every pass that traces a sample (the visibility prepass, the shading pass) gets the same ray.
-Ray CameraRay(const Context& c, int x, int y, int s, Rng* rng, RayDifferentials* diff) {
+void CameraRay(const Context& c, int x, int y, int s, Rng* rng, Ray* ray, RayDifferentials* diff) {
     *rng = Rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
     glm::vec2 jitter = rng->Next2D();
     if (c.opt.pixelCentre) jitter = glm::vec2(0.5f);  // drawn anyway: same streams either way
     const glm::vec2 lens = rng->Next2D();
     const float time = c.shutterLength > 0.0f ? rng->Next1D() : 0.0f;
-    Ray ray = c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, diff);
+    c.camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, ray, diff);
     if (c.cameraMoves) {
         // Camera motion blur: blend the rays of the open and close poses (rigid, short shutter).
         const Ray r1 =
             c.cameraClose->Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
-        ray.org = glm::mix(ray.org, r1.org, time);
-        ray.dir = glm::normalize(glm::mix(ray.dir, r1.dir, time));
+        ray->org = glm::mix(ray->org, r1.org, time);
+        ray->dir = glm::normalize(glm::mix(ray->dir, r1.dir, time));
     }
-    ray.time = time;
-    return ray;
+    ray->time = time;
 }
 
 /// Differentials feed the cache's mip selection and the debug views; they are skipped otherwise.
@@ -236,7 +235,7 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         for (int x = x0; x < x1; ++x)
             for (int s = s0; s < s1; ++s) {
                 Pending p{Ray{}, Hit{}, Rng(0, 0), y * c.opt.width + x, false, {}};
-                p.ray = CameraRay(c, x, y, s, &p.rng, c.tsc ? &p.diff : nullptr);
+                CameraRay(c, x, y, s, &p.rng, &p.ray, c.tsc ? &p.diff : nullptr);
                 queue.push_back(p);
             }
     IntersectCameraRays(c, queue.data(), queue.size(), rays);
@@ -320,7 +319,7 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
     for (size_t b = 0; b < total; b += kCameraBlock) {
         const size_t n = std::min(kCameraBlock, total - b);
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
-            block[i].ray = CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].diff);
+            CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray, &block[i].diff);
         IntersectCameraRays(c, block, n, rays);
         for (size_t i = 0; i < n; ++i, mark.Next(r, s0, s1)) {
             const CameraSample& cs = block[i];
@@ -395,8 +394,8 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     for (size_t b = 0; b < total; b += kCameraBlock) {
         const size_t n = std::min(kCameraBlock, total - b);
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
-            block[i].ray = CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng,
-                                     needDiff ? &block[i].diff : nullptr);
+            CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray,
+                      needDiff ? &block[i].diff : nullptr);
         IntersectCameraRays(c, block, n, rays);
         // Shade in the single-ray loop's order; a pixel's sum is added once, when its last
         // sample is done (its samples may span two blocks), so it does not depend on the tile.
