@@ -137,6 +137,13 @@ struct RenderOptions {
     /// Cpis: mip levels above the pixel-sized texel (eq. 1) at which records are cached, before
     /// the lobe's own term (see product_sampling.h, RecordLevelBias).
     float psrLodBias = 1.0f;
+    /// Stereo (renderer/stereo.h): this render is the eye `eyeOffset` along the camera's x axis
+    /// (0: the centred camera), its frustum converging at `eyeConvergence`.
+    float eyeOffset = 0.0f, eyeConvergence = 1.0f;
+    /// Renders samples [firstSample, spp) of each pixel (their random streams are those of a
+    /// whole render), without beginning a progressive pass itself: a caller interleaving
+    /// renders that share a cache pass by pass (stereo) begins the passes.
+    int firstSample = 0;
     /// When set, filled with width x height PixelCacheCounts of this frame's lookups (all zero
     /// without texture-space shading); null costs one predictable branch per lookup (the
     /// preview's cache heat maps).
