@@ -469,8 +469,8 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     while (done < sppCap) {
         const int s0 = done, s1 = std::min(sppCap, done + passSpp);
         const size_t passSamples = size_t(W) * size_t(H) * size_t(s1 - s0);
-        const bool fromPrepass =
-            prepassAo && passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
+        const bool fromPrepass = opt.visibilityPrepass != VisibilityPrepass::Only && prepassAo &&
+                                 passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
         if (fromPrepass) {
             if (passSamples > passTexels.key.size()) passTexels.Resize(W, H, s1 - s0);
             passTexels.s0 = s0, passTexels.s1 = s1;
@@ -483,19 +483,20 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
             });
-        forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-            if (fromPrepass) {
-                AoTileFromPrepass(c, r, passTexels, sums.rgb, rc);
-            } else if (twoPhaseAo) {
-                AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
-                               r.cols().end(), s0, s1, sums.rgb, rc);
-            } else {
-                // The thread's cache counters, read around each pixel for its heat-map counts.
-                CacheStats* pixelStats = c.pixelCache ? &fc.Stats().local() : nullptr;
-                ShadeTile(c, r, s0, s1, sums, pixelStats, rc);
-            }
-            pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
-        });
+        if (opt.visibilityPrepass != VisibilityPrepass::Only)
+            forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                if (fromPrepass) {
+                    AoTileFromPrepass(c, r, passTexels, sums.rgb, rc);
+                } else if (twoPhaseAo) {
+                    AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
+                                   r.cols().end(), s0, s1, sums.rgb, rc);
+                } else {
+                    // The thread's cache counters, read around each pixel for its heat-map counts.
+                    CacheStats* pixelStats = c.pixelCache ? &fc.Stats().local() : nullptr;
+                    ShadeTile(c, r, s0, s1, sums, pixelStats, rc);
+                }
+                pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+            });
         done = s1;
         if (opt.seconds > 0.0f) {
             const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();

@@ -12,27 +12,41 @@ namespace texcache {
 
 namespace {
 
+/// Adds the cost of `p` (time, rays, cache traffic) to `s`.
+void AddCost(RenderStats* s, const RenderStats& p) {
+    s->seconds += p.seconds;
+    s->cpuSeconds += p.cpuSeconds;
+    s->cameraRays += p.cameraRays;
+    s->shadowRays += p.shadowRays;
+    s->bounceRays += p.bounceRays;
+    s->cache.Merge(p.cache);
+    s->psr.Merge(p.psr);
+    s->psrBytes = std::max(s->psrBytes, p.psrBytes);
+}
+
 /// Adds a render of more samples of an eye into what that eye has so far (images weighted by
-/// their sample counts; statistics summed).
+/// their sample counts, AOVs from the first render only, costs summed).
 void AddSamples(RenderResult* eye, RenderResult&& part) {
     RenderStats& s = eye->stats;
-    const RenderStats& p = part.stats;
     if (s.sppDone == 0) {
+        const RenderStats before = s;  // a prepass may have been counted already
         *eye = std::move(part);
+        AddCost(&s, before);
         return;
     }
-    const float wOld = float(s.sppDone) / float(s.sppDone + p.sppDone);
+    const float wNew = float(part.stats.sppDone) / float(s.sppDone + part.stats.sppDone);
     for (size_t i = 0; i < eye->beauty.data.size(); ++i)
-        eye->beauty.data[i] += (part.beauty.data[i] - eye->beauty.data[i]) * (1.0f - wOld);
-    s.seconds += p.seconds;
-    s.cpuSeconds += p.cpuSeconds;
-    s.sppDone += p.sppDone;
-    s.cameraRays += p.cameraRays;
-    s.shadowRays += p.shadowRays;
-    s.bounceRays += p.bounceRays;
-    s.cache.Merge(p.cache);
-    s.psr.Merge(p.psr);
-    s.psrBytes = std::max(s.psrBytes, p.psrBytes);
+        eye->beauty.data[i] += (part.beauty.data[i] - eye->beauty.data[i]) * wNew;
+    s.sppDone += part.stats.sppDone;
+    AddCost(&s, part.stats);
+}
+
+/// Whether renders with these options restrict footprints to visible texels (as FrameCache).
+bool VisibleFootprints(const RenderOptions& o, const TextureSpaceCache& cache) {
+    const FootprintMode fm = o.texture.footprint;
+    return (fm == FootprintMode::Visible ||
+            (fm == FootprintMode::Auto && o.integrator == IntegratorKind::AO)) &&
+           o.texture.constantTerm < 0.0f && cache.AnyFootprint();
 }
 
 }  // namespace
@@ -60,25 +74,41 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
         cache = own.get();
     }
     if (!opt.texture.enabled) cache = nullptr;
+    const bool shareVisibility = cache && VisibleFootprints(opt, *cache);
+    if (shareVisibility) cache->Visibility(opt.width, opt.height);  // starts empty
+
     StereoResult out;
     RenderResult* eyes[2] = {&out.left, &out.right};
-    auto render = [&](int eye, int s0, int s1, float seconds) {
+    // Samples [s0, s1) of one eye (0 left, 1 right); see the note at the top.
+    auto render = [&](int eye, int s0, int s1, float seconds,
+                      VisibilityPrepass prepass = VisibilityPrepass::Keep) {
         RenderOptions o = opt;
         o.firstSample = s0;
         o.spp = s1;
         o.seconds = seconds;
         o.eyeOffset = (eye == 0 ? -0.5f : 0.5f) * rig.eyeSeparation;
         o.eyeConvergence = rig.convergence;
+        o.visibilityPrepass = shareVisibility ? prepass : VisibilityPrepass::Own;
         RenderResult r = Render(rs, o, cache);
+        if (prepass == VisibilityPrepass::Only) return AddCost(&eyes[eye]->stats, r.stats);
         if (eyes[eye]->stats.sppDone > 0) r.aovs.clear();
         AddSamples(eyes[eye], std::move(r));
     };
+    // Visible footprints: the right eye's texels are marked first (at its cost), so that the
+    // left eye's footprints also shade the samples the right eye will look up.
+    auto pair = [&](int s0, int s1, float leftSeconds) {
+        if (shareVisibility) render(1, s0, s1, 0.0f, VisibilityPrepass::Only);
+        const int before = out.left.stats.sppDone;
+        render(0, s0, s1, leftSeconds);
+        render(1, s0, s0 + (out.left.stats.sppDone - before), 0.0f);
+    };
+
     const int spp = std::max(opt.spp, 1);
     const bool progressive = cache && cache->Progressive() && opt.texture.passSpp > 0 &&
                              opt.texture.constantTerm < 0.0f && spp > opt.texture.passSpp;
     if (!progressive) {
-        render(0, 0, spp, opt.seconds > 0.0f ? 0.5f * opt.seconds : 0.0f);
-        render(1, 0, out.left.stats.sppDone, 0.0f);
+        // With a time budget the left eye's half of it sets the sample count of both.
+        pair(0, spp, opt.seconds > 0.0f ? 0.5f * opt.seconds : 0.0f);
         return out;
     }
     const auto start = Clock::now();
@@ -94,14 +124,12 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
                 std::chrono::duration<double>(Clock::now() - pairStart).count();
             out.left.stats.cpuSeconds += double(std::clock() - cpu0) / CLOCKS_PER_SEC;
         }
-        const int s1 = std::min(spp, s0 + passSpp);
-        render(0, s0, s1, 0.0f);
-        render(1, s0, s1, 0.0f);
+        pair(s0, std::min(spp, s0 + passSpp), 0.0f);
         if (opt.seconds > 0.0f) {
             const auto now = Clock::now();
-            const double pair = std::chrono::duration<double>(now - pairStart).count();
+            const double last = std::chrono::duration<double>(now - pairStart).count();
             const double left = opt.seconds - std::chrono::duration<double>(now - start).count();
-            if (left < pair) break;  // the next pair would not fit
+            if (left < last) break;  // the next pair would not fit
         }
     }
     return out;

@@ -65,12 +65,12 @@ bool TextureSpaceCache::AnyFootprint() const {
     return false;
 }
 
-VisibleTexels& TextureSpaceCache::Visibility(int width, int height) {
+VisibleTexels& TextureSpaceCache::Visibility(int width, int height, bool clear) {
     const size_t words = std::clamp<size_t>(std::bit_ceil(size_t(width) * size_t(height) / 4),
                                             size_t(1) << 12, size_t(1) << 21);
     if (!visible_ || visible_->Bytes() != words * sizeof(uint64_t))
         visible_ = std::make_unique<VisibleTexels>(words * sizeof(uint64_t));
-    else
+    else if (clear)
         visible_->Clear();
     return *visible_;
 }

@@ -123,8 +123,9 @@ public:
     bool AnyFootprint() const;
     /// The visibility set for a render of width x height pixels, empty: about a quarter of a
     /// word per pixel (see visible_texels.h), between 32 KB and 16 MB; kept from render to
-    /// render and only reallocated when the size changes.
-    VisibleTexels& Visibility(int width, int height);
+    /// render and only reallocated when the size changes. With `clear` false, the marks of the
+    /// previous render of this size are kept (stereo: both eyes mark one set).
+    VisibleTexels& Visibility(int width, int height, bool clear = true);
 
     /// Takes new options and starts empty, keeping the cache storage when its layout is the same
     /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
