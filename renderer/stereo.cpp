@@ -51,6 +51,26 @@ bool VisibleFootprints(const RenderOptions& o, const TextureSpaceCache& cache) {
 
 }  // namespace
 
+RenderStats BothEyes(const StereoResult& r) {
+    RenderStats s = r.left.stats;
+    AddCost(&s, r.right.stats);
+    return s;
+}
+
+Image SideBySide(const Image& left, const Image& right) {
+    Image out(left.width + right.width, std::max(left.height, right.height), 3);
+    for (int y = 0; y < out.height; ++y)
+        for (int x = 0; x < out.width; ++x) {
+            const Image& src = x < left.width ? left : right;
+            const int sx = x < left.width ? x : x - left.width;
+            if (y >= src.height) continue;
+            const float* p = src.At(sx, y);
+            float* q = out.At(x, y);
+            for (int k = 0; k < 3; ++k) q[k] = src.channels >= 3 ? p[k] : p[0];
+        }
+    return out;
+}
+
 StereoRig StereoRigOf(const Camera& camera) {
     return {camera.eyeSeparation, camera.convergence};
 }

@@ -50,6 +50,12 @@ struct StereoResult {
     RenderResult left, right;
 };
 
+/// The cost of both eyes together (times, rays and cache traffic summed; spp of one eye).
+RenderStats BothEyes(const StereoResult& r);
+
+/// The two eyes' images side by side (left | right), for a display or a montage.
+Image SideBySide(const Image& left, const Image& right);
+
 /// Renders the left eye, then the right eye through the same texture-space cache (`cache`, or
 /// one made for the pair when null and options.texture.enabled). See the note at the top.
 StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& options, const StereoRig& rig,

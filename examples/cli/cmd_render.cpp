@@ -557,15 +557,7 @@ int RunStereo(const RenderArgs& a, const Scene& scene, const RenderOptions& opt)
     WriteOutputs(outs[0], r.left.beauty, r.left.aovs, a.exposure, group);
     WriteOutputs(outs[1], r.right.beauty, r.right.aovs, a.exposure, group);
     if (!a.statsFile.empty()) {
-        RenderStats both = r.left.stats;
-        both.seconds += r.right.stats.seconds;
-        both.cpuSeconds += r.right.stats.cpuSeconds;
-        both.cameraRays += r.right.stats.cameraRays;
-        both.shadowRays += r.right.stats.shadowRays;
-        both.bounceRays += r.right.stats.bounceRays;
-        both.cache.Merge(r.right.stats.cache);
-        both.psr.Merge(r.right.stats.psr);
-        std::string json = StatsJson(both, rs, cache.get(), opt, -1.0);
+        std::string json = StatsJson(BothEyes(r), rs, cache.get(), opt, -1.0);
         json.resize(json.size() - 3);  // "\n}\n": the eyes follow
         char rigJson[160];
         std::snprintf(rigJson, sizeof rigJson,

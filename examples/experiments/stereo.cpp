@@ -138,9 +138,12 @@ int Stereo(const Setup& s) {
                     .Add(newTexels)
                     .Add(double(L.TotalRays()))
                     .Add(double(R.TotalRays()))
-                    .Add(alone)
-                    .Add(errStereo)
-                    .Add(errAlone);
+                    .Add(r == 1.0 ? Format("%.6g", alone) : std::string());
+                // Errors at the default separation only (the reference is of that eye).
+                if (r == 1.0)
+                    t.Add(errStereo).Add(errAlone);
+                else
+                    t.Add("").Add("");
                 md += Format(
                     "| %s | %d MiB | %.2f (%.3g) | %.3f | %.3f | %.1f%% | %.1f%% | %.1f%% | ",
                     c.label, mb, r, rig.eyeSeparation, L.cpuSeconds, R.cpuSeconds, cost, newSamples,
