@@ -75,6 +75,21 @@ VisibleTexels& TextureSpaceCache::Visibility(int width, int height, bool clear) 
     return *visible_;
 }
 
+bool TextureSpaceCache::FindNeighbourTexel(const SampleRequest& t, glm::vec3* value) const {
+    const int res = Resolution(t);
+    // The four beside it first, then the four diagonal ones.
+    constexpr int kSteps[8][2] = {{1, 0}, {-1, 0}, {0, 1},  {0, -1},
+                                  {1, 1}, {-1, 1}, {1, -1}, {-1, -1}};
+    for (const auto& step : kSteps) {
+        const int iu = int(t.key.iu) + step[0], iv = int(t.key.iv) + step[1];
+        if (iu < 0 || iv < 0 || iu >= res || iv >= res) continue;
+        TexelKey k = t.key;
+        k.iu = uint16_t(iu), k.iv = uint16_t(iv);
+        if (cache_.FindTexel(cache_.RequestOf(t.mesh, k), value)) return true;
+    }
+    return false;
+}
+
 void TextureSpaceCache::BeginFrame(uint32_t frame) {
     frame_ = frame;
     cache_.InvalidateAll();

@@ -86,6 +86,11 @@ public:
     /// Footprints keep only the texels of `visible` until the next call (null: every texel);
     /// see ShadingCache::RestrictFootprints. Never while lookups run.
     void RestrictFootprints(const VisibleTexels* visible) { cache_.RestrictFootprints(visible); }
+    /// Stereo's second eye (renderer/stereo.h): while on, a lookup whose texel is not cached
+    /// takes the value of a cached texel around it (same face and level, one of its 8
+    /// neighbours) before filtering anew; such a lookup counts as a texel hit. Never while
+    /// lookups run.
+    void ReuseNeighbourTexels(bool on) { neighbourReuse_ = on; }
     /// Evicts every sample and texel (not the temporal history): the next lookups shade anew.
     void Invalidate() { cache_.InvalidateAll(); }
 
@@ -155,6 +160,9 @@ public:
 
 private:
     void AssignFilters(const Scene& scene);
+    /// A cached texel among the 8 around `texel` on its face and level (see
+    /// ReuseNeighbourTexels).
+    bool FindNeighbourTexel(const SampleRequest& texel, glm::vec3* value) const;
 
     TextureSpaceOptions options_;
     RenderShadingCache cache_;
@@ -168,6 +176,7 @@ private:
     std::unique_ptr<VisibleTexels> visible_;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
+    bool neighbourReuse_ = false;
 };
 
 template <typename ShadeFn>
@@ -184,6 +193,14 @@ glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, Shad
             },
             stats, taps);
     };
+    if (neighbourReuse_) {
+        // A cached texel is read as is (a hit); a missing one tries its neighbours first.
+        glm::vec3 v;
+        if (cache_.FindTexel(texel, &v) || FindNeighbourTexel(texel, &v)) {
+            ++stats.lookups, ++stats.texelHits;
+            return v;
+        }
+    }
     const float cosThreshold = options_.cosThreshold;
     const int radius = passRadiusOf_[object];
     switch (filterOf_[object]) {

@@ -233,7 +233,7 @@ TEST(StereoExperiment, WritesCostsPerSeparation) {
     fs::remove_all(out);
     const CliRun r = Texcache("experiment stereo --quick --out " + out.string());
     ASSERT_EQ(r.code, 0) << r.out;
-    EXPECT_EQ(CheckCsv(out / "stereo.csv"), 4);
+    EXPECT_EQ(CheckCsv(out / "stereo.csv"), 8);  // 2 scenes x 2 reuse modes x 2 separations
     EXPECT_TRUE(fs::exists(out / "stereo.png"));
     EXPECT_TRUE(fs::exists(out / "stereo.md"));
     std::ifstream f(out / "stereo.csv");
@@ -246,9 +246,9 @@ TEST(StereoExperiment, WritesCostsPerSeparation) {
         std::vector<std::string> v;
         std::stringstream ss(line);
         for (std::string cell; std::getline(ss, cell, ',');) v.push_back(cell);
-        ASSERT_GE(v.size(), 13u) << line;
-        EXPECT_GT(std::stod(v[5]), 0.0) << line;                               // first eye seconds
-        if (std::stod(v[3]) == 0.0) EXPECT_LT(std::stod(v[12]), 1.0) << line;  // new samples %
+        ASSERT_GE(v.size(), 14u) << line;
+        EXPECT_GT(std::stod(v[6]), 0.0) << line;                               // first eye seconds
+        if (std::stod(v[4]) == 0.0) EXPECT_LT(std::stod(v[13]), 1.0) << line;  // new samples %
     }
 }
 

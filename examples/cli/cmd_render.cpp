@@ -84,6 +84,7 @@ struct RenderArgs {
     // Stereo: both eyes through one texture-space cache (renderer/stereo.h).
     bool stereo = false;
     float eyeSeparation = 0.0f, convergence = 0.0f;
+    std::string stereoReuse = "neighbour";
 };
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
@@ -503,7 +504,7 @@ StereoRig StereoRigFrom(const RenderArgs& a, const Camera& camera) {
 /// The options --stereo cannot honour (yet) are errors, as are the rig's options without it.
 void CheckStereoOptions(const RenderArgs& a) {
     if (!a.stereo) {
-        for (const char* o : {"--eye-separation", "--convergence"})
+        for (const char* o : {"--eye-separation", "--convergence", "--stereo-reuse"})
             if (a.Given(o)) throw InputError(o, "sets the stereo rig: give --stereo");
         return;
     }
@@ -513,6 +514,13 @@ void CheckStereoOptions(const RenderArgs& a) {
         throw InputError("--stereo", "cannot be combined with --denoise (not supported yet)");
     if (!a.frames.empty()) throw InputError("--stereo", "renders one frame: drop --frames");
     if (a.overshading) throw InputError("--stereo", "cannot be combined with --overshading");
+}
+
+StereoReuse ParseStereoReuse(const std::string& name) {
+    if (name == "texels") return StereoReuse::Texels;
+    if (name == "neighbour") return StereoReuse::Neighbour;
+    throw InputError("--stereo-reuse",
+                     "unknown value '" + Excerpt(name) + "' (valid: texels, neighbour)");
 }
 
 /// One eye's figures for --stats (the cache counters are what this eye shaded anew).
@@ -551,7 +559,7 @@ int RunStereo(const RenderArgs& a, const Scene& scene, const RenderOptions& opt)
     const RenderScene rs(scene, ro);
     std::unique_ptr<TextureSpaceCache> cache;
     if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
-    StereoResult r = RenderStereo(rs, opt, rig, cache.get());
+    StereoResult r = RenderStereo(rs, opt, rig, cache.get(), ParseStereoReuse(a.stereoReuse));
 
     AtomicFiles group;
     WriteOutputs(outs[0], r.left.beauty, r.left.aovs, a.exposure, group);
@@ -903,6 +911,10 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--convergence", args->convergence,
                     "--stereo: distance of the zero-parallax plane (default: the scene's, else "
                     "the distance to the look-at point)");
+    cmd->add_option("--stereo-reuse", args->stereoReuse,
+                    "--stereo: what the second eye takes from the first eye's cache: texels "
+                    "(those it looks up) or neighbour (also a cached texel beside a missing one)")
+        ->capture_default_str();
     cmd->callback([args, cmd, &exitCode] {
         for (const CLI::Option* o : cmd->get_options())
             if (o->count() > 0) args->given.insert(o->get_name());
