@@ -483,20 +483,20 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
             });
-        if (opt.visibilityPrepass != VisibilityPrepass::Only)
-            forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-                if (fromPrepass) {
-                    AoTileFromPrepass(c, r, passTexels, sums.rgb, rc);
-                } else if (twoPhaseAo) {
-                    AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
-                                   r.cols().end(), s0, s1, sums.rgb, rc);
-                } else {
-                    // The thread's cache counters, read around each pixel for its heat-map counts.
-                    CacheStats* pixelStats = c.pixelCache ? &fc.Stats().local() : nullptr;
-                    ShadeTile(c, r, s0, s1, sums, pixelStats, rc);
-                }
-                pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
-            });
+        forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+            if (opt.visibilityPrepass == VisibilityPrepass::Only) return;  // marks only
+            if (fromPrepass) {
+                AoTileFromPrepass(c, r, passTexels, sums.rgb, rc);
+            } else if (twoPhaseAo) {
+                AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
+                               r.cols().end(), s0, s1, sums.rgb, rc);
+            } else {
+                // The thread's cache counters, read around each pixel for its heat-map counts.
+                CacheStats* pixelStats = c.pixelCache ? &fc.Stats().local() : nullptr;
+                ShadeTile(c, r, s0, s1, sums, pixelStats, rc);
+            }
+            pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+        });
         done = s1;
         if (opt.seconds > 0.0f) {
             const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();

@@ -168,7 +168,10 @@ INSTANTIATE_TEST_SUITE_P(Stereo, StereoReuseModes,
 class StereoCli : public ::testing::Test {
 protected:
     void SetUp() override {
-        dir_ = fs::path(::testing::TempDir()) / "texcache_stereo_cli";
+        // One directory per test: ctest -j runs the tests of this fixture at once.
+        dir_ = fs::path(::testing::TempDir()) /
+               ("texcache_stereo_" +
+                std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
         fs::remove_all(dir_);
         fs::create_directories(dir_);
     }
