@@ -76,18 +76,22 @@ VisibleTexels& TextureSpaceCache::Visibility(int width, int height, bool clear) 
 }
 
 bool TextureSpaceCache::FindNeighbourTexel(const SampleRequest& t, glm::vec3* value) const {
+    // The mean, not the first found: a one-texel blur instead of a one-texel shift (stereo.h).
     const int res = Resolution(t);
-    // The four beside it first, then the four diagonal ones.
-    constexpr int kSteps[8][2] = {{1, 0}, {-1, 0}, {0, 1},  {0, -1},
-                                  {1, 1}, {-1, 1}, {1, -1}, {-1, -1}};
-    for (const auto& step : kSteps) {
-        const int iu = int(t.key.iu) + step[0], iv = int(t.key.iv) + step[1];
-        if (iu < 0 || iv < 0 || iu >= res || iv >= res) continue;
-        TexelKey k = t.key;
-        k.iu = uint16_t(iu), k.iv = uint16_t(iv);
-        if (cache_.FindTexel(cache_.RequestOf(t.mesh, k), value)) return true;
-    }
-    return false;
+    glm::vec3 sum(0.0f);
+    int n = 0;
+    for (int dv = -1; dv <= 1; ++dv)
+        for (int du = -1; du <= 1; ++du) {
+            const int iu = int(t.key.iu) + du, iv = int(t.key.iv) + dv;
+            if ((du == 0 && dv == 0) || iu < 0 || iv < 0 || iu >= res || iv >= res) continue;
+            TexelKey k = t.key;
+            k.iu = uint16_t(iu), k.iv = uint16_t(iv);
+            glm::vec3 v;
+            if (cache_.FindTexel(cache_.RequestOf(t.mesh, k), &v)) sum += v, ++n;
+        }
+    if (n == 0) return false;
+    *value = sum / float(n);
+    return true;
 }
 
 void TextureSpaceCache::BeginFrame(uint32_t frame) {

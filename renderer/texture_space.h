@@ -87,9 +87,8 @@ public:
     /// see ShadingCache::RestrictFootprints. Never while lookups run.
     void RestrictFootprints(const VisibleTexels* visible) { cache_.RestrictFootprints(visible); }
     /// Stereo's second eye (renderer/stereo.h): while on, a lookup whose texel is not cached
-    /// takes the value of a cached texel around it (same face and level, one of its 8
-    /// neighbours) before filtering anew; such a lookup counts as a texel hit. Never while
-    /// lookups run.
+    /// takes the mean of the cached texels among its 8 neighbours (same face and level) before
+    /// filtering anew; such a lookup counts as a texel hit. Never while lookups run.
     void ReuseNeighbourTexels(bool on) { neighbourReuse_ = on; }
     /// Evicts every sample and texel (not the temporal history): the next lookups shade anew.
     void Invalidate() { cache_.InvalidateAll(); }
@@ -160,8 +159,8 @@ public:
 
 private:
     void AssignFilters(const Scene& scene);
-    /// A cached texel among the 8 around `texel` on its face and level (see
-    /// ReuseNeighbourTexels).
+    /// The mean of the cached texels among the 8 around `texel` on its face and level; false
+    /// when none is cached (see ReuseNeighbourTexels).
     bool FindNeighbourTexel(const SampleRequest& texel, glm::vec3* value) const;
 
     TextureSpaceOptions options_;
