@@ -94,14 +94,20 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
         cache = own.get();
     }
     if (!opt.texture.enabled) cache = nullptr;
+    const int spp = std::max(opt.spp, 1);
+    const bool progressive = cache && cache->Progressive() && opt.texture.passSpp > 0 &&
+                             opt.texture.constantTerm < 0.0f && spp > opt.texture.passSpp;
     // Texels: the right eye's visible texels are marked before the left eye renders, so that
     // the left eye's footprints also shade the samples the right eye will look up. Neighbour
     // does without: the neighbours serve most of those texels, and the shared set would move
     // shading from the right eye into the left one rather than save it (car AO, 320x180,
     // 4 spp, 512 MiB: with it the right eye took 22-24% of a left eye of 0.90-1.38 s CPU;
     // without, 23% of 0.70-0.89 s, the left eye then being exactly the mono render).
-    const bool shareVisibility =
-        cache && reuse == StereoReuse::Texels && VisibleFootprints(opt, *cache);
+    // A single pass under a time budget does not know its sample count before the left eye
+    // renders: the right eye cannot mark its texels first, and the eyes keep their own sets.
+    const bool shareVisibility = cache && reuse == StereoReuse::Texels &&
+                                 VisibleFootprints(opt, *cache) &&
+                                 (progressive || opt.seconds <= 0.0f);
     if (shareVisibility) cache->Visibility(opt.width, opt.height);  // starts empty
 
     StereoResult out;
@@ -140,9 +146,6 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
         render(1, s0, s0 + (out.left.stats.sppDone - before), 0.0f);
     };
 
-    const int spp = std::max(opt.spp, 1);
-    const bool progressive = cache && cache->Progressive() && opt.texture.passSpp > 0 &&
-                             opt.texture.constantTerm < 0.0f && spp > opt.texture.passSpp;
     if (!progressive) {
         // With a time budget the left eye's half of it sets the sample count of both.
         pair(0, spp, opt.seconds > 0.0f ? 0.5f * opt.seconds : 0.0f);
