@@ -505,7 +505,7 @@ StereoRig StereoRigFrom(const RenderArgs& a, const Camera& camera) {
 void CheckStereoOptions(const RenderArgs& a) {
     if (!a.stereo) {
         for (const char* o : {"--eye-separation", "--convergence", "--stereo-reuse"})
-            if (a.Given(o)) throw InputError(o, "sets the stereo rig: give --stereo");
+            if (a.Given(o)) throw InputError(o, "applies to stereo renders: give --stereo");
         return;
     }
     if (!a.frameBuffers.empty())
