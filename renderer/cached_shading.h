@@ -95,7 +95,8 @@ public:
             fm == FootprintMode::Visible || (fm == FootprintMode::Auto && k == IntegratorKind::AO);
         if (prepass == Prepass::Allowed && visibleOnly && opt.texture.constantTerm < 0.0f &&
             cache->AnyFootprint()) {
-            visible_ = &cache->Visibility(opt.width, opt.height);
+            visible_ = &cache->Visibility(opt.width, opt.height,
+                                          opt.visibilityPrepass == VisibilityPrepass::Own);
             cache->RestrictFootprints(visible_);
         }
     }

@@ -26,13 +26,13 @@ CameraModel::CameraModel(const Camera& cam, float time, int width, int height)
 Ray CameraModel::GenerateThinLens(float px, float py, glm::vec2 lens,
                                   RayDifferentials* diff) const {
     // Camera space: looking down -Z, +Y up; film plane at z = -1.
-    const float sx = (2.0f * px / float(width_) - 1.0f) * tanHalfY_ * aspect_;
+    const float sx = (2.0f * px / float(width_) - 1.0f) * tanHalfY_ * aspect_ - eyeShear_;
     const float sy = (1.0f - 2.0f * py / float(height_)) * tanHalfY_;
     const glm::vec3 stepX(2.0f * tanHalfY_ * aspect_ / float(width_), 0.0f, 0.0f);
     const glm::vec3 stepY(0.0f, -2.0f * tanHalfY_ / float(height_), 0.0f);
     const glm::vec3 film(sx, sy, -1.0f);
     const glm::mat3 R(camToWorld_);
-    const glm::vec3 eye(camToWorld_[3]);
+    const glm::vec3 eye = eye_;
 
     Ray ray;
     glm::vec3 o(0.0f), d = film;
@@ -57,10 +57,20 @@ Ray CameraModel::GenerateThinLens(float px, float py, glm::vec2 lens,
     return ray;
 }
 
+void CameraModel::SetEye(float offset, float convergence) {
+    // The eye at x = offset sees the film point (sx, sy, -1) of the centred camera through
+    // convergence * (sx, sy, -1), i.e. along (sx - offset / convergence, sy, -1): a shear.
+    const glm::mat3 R(camToWorld_);
+    eyeOffset_ = offset;
+    eyeShear_ = offset / convergence;
+    eye_ = glm::vec3(camToWorld_[3]) + R * glm::vec3(offset, 0.0f, 0.0f);
+    dirBase_ = R * glm::vec3(-tanHalfY_ * aspect_ - eyeShear_, tanHalfY_, -1.0f);
+}
+
 bool CameraModel::Project(glm::vec3 world, glm::vec2* film) const {
     const glm::vec3 c = glm::vec3(worldToCam_ * glm::vec4(world, 1.0f));
     if (c.z >= -1e-6f) return false;
-    const float sx = c.x / -c.z, sy = c.y / -c.z;
+    const float sx = (c.x - eyeOffset_) / -c.z + eyeShear_, sy = c.y / -c.z;
     film->x = (sx / (tanHalfY_ * aspect_) + 1.0f) * 0.5f * float(width_);
     film->y = (1.0f - sy / tanHalfY_) * 0.5f * float(height_);
     return true;

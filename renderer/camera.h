@@ -44,7 +44,11 @@ public:
     /// World point -> film position in pixels (x right, y down); false when behind the camera.
     bool Project(glm::vec3 world, glm::vec2* film) const;
 
-    glm::vec3 Position() const { return glm::vec3(camToWorld_[3]); }
+    glm::vec3 Position() const { return eye_; }
+    /// Makes this one eye of a stereo pair (renderer/stereo.h): the eye moves `offset` along
+    /// the camera's x axis and the frustum is sheared (off-axis) so that the plane at distance
+    /// `convergence` projects as in the centred camera. Ray differentials do not change.
+    void SetEye(float offset, float convergence);
 
 private:
     Ray GenerateThinLens(float px, float py, glm::vec2 lens, RayDifferentials* diff) const;
@@ -57,6 +61,7 @@ private:
     float tanHalfY_, aspect_;
     int width_, height_;
     float lensRadius_, focusDistance_;
+    float eyeOffset_ = 0.0f, eyeShear_ = 0.0f;  // SetEye: x shift of the eye, of the film (z = -1)
 };
 
 }  // namespace texcache

@@ -15,6 +15,10 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
         cameraClose.emplace(scene.camera, o.frameTime + shutterLength, o.width, o.height);
         cameraMoves = scene.camera.pose.IsAnimated();
     }
+    if (o.eyeOffset != 0.0f)
+        for (CameraModel* m :
+             {&camera, cameraOpen ? &*cameraOpen : nullptr, cameraClose ? &*cameraClose : nullptr})
+            if (m) m->SetEye(o.eyeOffset, o.eyeConvergence);
     if (!IntegratorUsesLights(o.integrator)) return;
     for (const DistantLight& d : scene.distantLights) {
         const glm::mat3 M(d.transform.Eval(o.frameTime));

@@ -420,10 +420,10 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     }
 }
 
-/// Renders passes of whole sample indices until opt.spp samples are done or, with a time
-/// budget (counted from `start`), until the next pass would not fit in it; returns the samples per
-/// pixel done. A pixel's result depends only on its sample indices, so the image is the same for
-/// any thread count or pass split.
+/// Renders passes of whole sample indices from opt.firstSample until opt.spp samples are done
+/// or, with a time budget (counted from `start`), until the next pass would not fit in it;
+/// returns the sample index reached. A pixel's result depends only on its sample indices, so the
+/// image is the same for any thread count or pass split.
 int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
               tbb::enumerable_thread_specific<RayCounts>& counts,
               std::chrono::steady_clock::time_point start) {
@@ -435,7 +435,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const bool twoPhaseAo = opt.integrator == IntegratorKind::AO && sums.aovs.empty();
     const int sppCap = std::max(opt.spp, 1);
     std::atomic<uint64_t> pixelSamplesDone{0};
-    const double totalWork = double(W) * double(H) * sppCap;
+    const double totalWork = double(W) * double(H) * (sppCap - opt.firstSample);
     const Progress progress(opt.progress, [&] {
         if (opt.seconds > 0.0f)
             return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
@@ -456,7 +456,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     // footprints: see texture_space.h), whether the budget is samples or seconds.
     const bool progressive =
         c.tsc && c.tsc->Progressive() && opt.texture.passSpp > 0 && opt.texture.constantTerm < 0.0f;
-    int done = 0;
+    int done = opt.firstSample;
     int passSpp = progressive ? opt.texture.passSpp : opt.seconds > 0.0f ? 1 : sppCap;
     // Texture-space AO with a prepass shades from the prepass's texels (see PassTexels), when a
     // pass's texels fit in 128 MB (a pass of 4 spp at 1920x1080 takes 100 MB); a longer pass
@@ -468,21 +468,22 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     while (done < sppCap) {
         const int s0 = done, s1 = std::min(sppCap, done + passSpp);
         const size_t passSamples = size_t(W) * size_t(H) * size_t(s1 - s0);
-        const bool fromPrepass =
-            prepassAo && passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
+        const bool fromPrepass = opt.visibilityPrepass != VisibilityPrepass::Only && prepassAo &&
+                                 passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
         if (fromPrepass) {
             if (passSamples > passTexels.key.size()) passTexels.Resize(W, H, s1 - s0);
             passTexels.s0 = s0, passTexels.s1 = s1;
         }
         const auto passStart = Clock::now();
         // The pass count saturates: a wrap to 0 would repeat pass 0's random numbers.
-        if (progressive && done > 0 && c.tsc->Pass() < UINT32_MAX)
+        if (progressive && done > opt.firstSample && c.tsc->Pass() < UINT32_MAX)
             c.tsc->BeginPass(c.tsc->Pass() + 1);
         if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
             });
         forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+            if (opt.visibilityPrepass == VisibilityPrepass::Only) return;  // marks only
             if (fromPrepass) {
                 AoTileFromPrepass(c, r, passTexels, sums.rgb, rc);
             } else if (twoPhaseAo) {
@@ -579,7 +580,7 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     FrameSums sums{std::vector<double>(numPixels * 3, 0.0),
                    std::vector<PixelAovs>(opt.aovs.Any() ? numPixels : 0)};
     tbb::enumerable_thread_specific<RayCounts> counts;
-    const int done = RunPasses(ctx, frameCache, sums, counts, start);
+    const int done = RunPasses(ctx, frameCache, sums, counts, start) - opt.firstSample;
 
     RenderResult result;
     result.beauty = Image(W, H, 3);

@@ -110,6 +110,14 @@ struct PixelCacheCounts {
     uint32_t lookups = 0, texelHits = 0, samplesShaded = 0;
 };
 
+/// The visibility prepass of visible-only footprints (FootprintMode::Visible):
+///   Own   the set starts empty and holds this render's texels (a mono render);
+///   Keep  this render marks its texels on top of the set an earlier render left;
+///   Only  as Keep, and nothing is shaded (the image stays black): marks for a render to come.
+/// Stereo (renderer/stereo.h) marks the right eye's texels (Only), then renders the left eye
+/// (Keep), whose footprints then shade the samples the right eye will look up, then the right.
+enum class VisibilityPrepass { Own, Keep, Only };
+
 struct RenderOptions {
     IntegratorKind integrator = IntegratorKind::Path;
     int width = 640, height = 360;
@@ -137,6 +145,14 @@ struct RenderOptions {
     /// Cpis: mip levels above the pixel-sized texel (eq. 1) at which records are cached, before
     /// the lobe's own term (see product_sampling.h, RecordLevelBias).
     float psrLodBias = 1.0f;
+    /// Stereo (renderer/stereo.h): this render is the eye `eyeOffset` along the camera's x axis
+    /// (0: the centred camera), its frustum converging at `eyeConvergence`.
+    float eyeOffset = 0.0f, eyeConvergence = 1.0f;
+    /// Renders samples [firstSample, spp) of each pixel (their random streams are those of a
+    /// whole render), without beginning a progressive pass itself: a caller interleaving
+    /// renders that share a cache pass by pass (stereo) begins the passes.
+    int firstSample = 0;
+    VisibilityPrepass visibilityPrepass = VisibilityPrepass::Own;
     /// When set, filled with width x height PixelCacheCounts of this frame's lookups (all zero
     /// without texture-space shading); null costs one predictable branch per lookup (the
     /// preview's cache heat maps).

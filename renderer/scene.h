@@ -39,6 +39,11 @@ struct Camera {
     float focusDistance = 1.0f;  ///< used when lensRadius > 0
     float shutterOpen = 0.0f;    ///< times in the same units as keyframes (seconds)
     float shutterClose = 0.0f;   ///< == shutterOpen: no motion blur
+    /// Stereo rig ("stereo": {"eye_separation", "convergence"}; renderer/stereo.h): the eyes sit
+    /// eyeSeparation apart along the camera's x axis, looking parallel, their frustums sheared so
+    /// that the plane at `convergence` has zero parallax. Used by stereo renders only.
+    float eyeSeparation = 0.0f;
+    float convergence = 0.0f;  ///< 0: not given (the distance to the look-at point)
 };
 
 /// A 2D texture: an image file (sRGB-decoded for colours) or a procedural checker, looked up by

@@ -222,9 +222,16 @@ TransformTrack ParseTrack(const Node& owner) {
     return t;
 }
 
+/// "stereo": {"eye_separation": d >= 0, "convergence": c > 0} (renderer/stereo.h).
+void ParseStereo(const Node& n, Camera* cam) {
+    n.Keys({"eye_separation", "convergence"});
+    cam->eyeSeparation = n["eye_separation"].Number(0.0, kBig);
+    if (n.Has("convergence")) cam->convergence = n["convergence"].NumberOpen(0.0, kBig);
+}
+
 void ParseCamera(const Node& n, Camera* cam) {
     n.Keys({"position", "look_at", "up", "fov", "lens_radius", "focus_distance", "shutter",
-            "keyframes"});
+            "keyframes", "stereo"});
     if (n.Has("fov")) cam->fovYDegrees = n["fov"].NumberOpen(0.0f, 180.0f);
     if (n.Has("lens_radius")) cam->lensRadius = n["lens_radius"].Number(0.0f, 1e6f);
     if (n.Has("focus_distance")) cam->focusDistance = n["focus_distance"].NumberOpen(0.0f, kBig);
@@ -256,6 +263,10 @@ void ParseCamera(const Node& n, Camera* cam) {
         cam->pose.keys.push_back(
             CameraLookAt(n["position"].Vec3(), n["look_at"].Vec3(), up, n.Where()));
     }
+    // Stereo renders converge at the look-at point unless the rig says otherwise.
+    const Node at = n.Has("keyframes") ? n["keyframes"].At(0) : n;
+    cam->convergence = glm::length(at["look_at"].Vec3() - at["position"].Vec3());
+    if (n.Has("stereo")) ParseStereo(n["stereo"], cam);
 }
 
 /// TEXTURE: {"texture": "checker", "colors": [[..],[..]], "scale": s} or {"texture": "file"}.
@@ -553,6 +564,11 @@ void SceneBounds(const Scene& scene, float time, glm::vec3* lo, glm::vec3* hi) {
     }
 }
 
+/// A default camera looks at the box's centre: stereo renders converge there.
+void DefaultConvergence(glm::vec3 lo, glm::vec3 hi, Camera* cam) {
+    cam->convergence = glm::length(0.5f * (lo + hi) - cam->pose.keys.front().translation);
+}
+
 /// A camera pose that fits the box's bounding sphere into the narrower of the two fields of view
 /// with a 10% margin, seen from a 3/4 view above (+Y up). Objects placed beyond +-1e18 (OBJ
 /// coordinates are limited to that, transforms may move them further) cannot be framed in float:
@@ -678,6 +694,7 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         scene.camera.pose.keys.push_back(
             FrameBounds(lo, hi, scene.camera.fovYDegrees,
                         float(scene.settings.width) / float(scene.settings.height), scene.path));
+        DefaultConvergence(lo, hi, &scene.camera);
     }
     return scene;
 }
@@ -723,6 +740,7 @@ Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath
     scene.camera.pose.keys.push_back(
         FrameBounds(lo, hi, scene.camera.fovYDegrees,
                     float(scene.settings.width) / float(scene.settings.height), scene.path));
+    DefaultConvergence(lo, hi, &scene.camera);
     return scene;
 }
 

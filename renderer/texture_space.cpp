@@ -65,14 +65,33 @@ bool TextureSpaceCache::AnyFootprint() const {
     return false;
 }
 
-VisibleTexels& TextureSpaceCache::Visibility(int width, int height) {
+VisibleTexels& TextureSpaceCache::Visibility(int width, int height, bool clear) {
     const size_t words = std::clamp<size_t>(std::bit_ceil(size_t(width) * size_t(height) / 4),
                                             size_t(1) << 12, size_t(1) << 21);
     if (!visible_ || visible_->Bytes() != words * sizeof(uint64_t))
         visible_ = std::make_unique<VisibleTexels>(words * sizeof(uint64_t));
-    else
+    else if (clear)
         visible_->Clear();
     return *visible_;
+}
+
+bool TextureSpaceCache::FindNeighbourTexel(const SampleRequest& t, glm::vec3* value) const {
+    // The mean, not the first found: a one-texel blur instead of a one-texel shift (stereo.h).
+    const int res = Resolution(t);
+    glm::vec3 sum(0.0f);
+    int n = 0;
+    for (int dv = -1; dv <= 1; ++dv)
+        for (int du = -1; du <= 1; ++du) {
+            const int iu = int(t.key.iu) + du, iv = int(t.key.iv) + dv;
+            if ((du == 0 && dv == 0) || iu < 0 || iv < 0 || iu >= res || iv >= res) continue;
+            TexelKey k = t.key;
+            k.iu = uint16_t(iu), k.iv = uint16_t(iv);
+            glm::vec3 v;
+            if (cache_.FindTexel(cache_.RequestOf(t.mesh, k), &v)) sum += v, ++n;
+        }
+    if (n == 0) return false;
+    *value = sum / float(n);
+    return true;
 }
 
 void TextureSpaceCache::BeginFrame(uint32_t frame) {

@@ -86,6 +86,10 @@ public:
     /// Footprints keep only the texels of `visible` until the next call (null: every texel);
     /// see ShadingCache::RestrictFootprints. Never while lookups run.
     void RestrictFootprints(const VisibleTexels* visible) { cache_.RestrictFootprints(visible); }
+    /// Stereo's second eye (renderer/stereo.h): while on, a lookup whose texel is not cached
+    /// takes the mean of the cached texels among its 8 neighbours (same face and level) before
+    /// filtering anew; such a lookup counts as a texel hit. Never while lookups run.
+    void ReuseNeighbourTexels(bool on) { neighbourReuse_ = on; }
     /// Evicts every sample and texel (not the temporal history): the next lookups shade anew.
     void Invalidate() { cache_.InvalidateAll(); }
 
@@ -123,8 +127,9 @@ public:
     bool AnyFootprint() const;
     /// The visibility set for a render of width x height pixels, empty: about a quarter of a
     /// word per pixel (see visible_texels.h), between 32 KB and 16 MB; kept from render to
-    /// render and only reallocated when the size changes.
-    VisibleTexels& Visibility(int width, int height);
+    /// render and only reallocated when the size changes. With `clear` false, the marks of the
+    /// previous render of this size are kept (stereo: both eyes mark one set).
+    VisibleTexels& Visibility(int width, int height, bool clear = true);
 
     /// Takes new options and starts empty, keeping the cache storage when its layout is the same
     /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
@@ -154,6 +159,9 @@ public:
 
 private:
     void AssignFilters(const Scene& scene);
+    /// The mean of the cached texels among the 8 around `texel` on its face and level; false
+    /// when none is cached (see ReuseNeighbourTexels).
+    bool FindNeighbourTexel(const SampleRequest& texel, glm::vec3* value) const;
 
     TextureSpaceOptions options_;
     RenderShadingCache cache_;
@@ -167,6 +175,7 @@ private:
     std::unique_ptr<VisibleTexels> visible_;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
+    bool neighbourReuse_ = false;
 };
 
 template <typename ShadeFn>
@@ -183,6 +192,14 @@ glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, Shad
             },
             stats, taps);
     };
+    if (neighbourReuse_) {
+        // A cached texel is read as is (a hit); a missing one tries its neighbours first.
+        glm::vec3 v;
+        if (cache_.FindTexel(texel, &v) || FindNeighbourTexel(texel, &v)) {
+            ++stats.lookups, ++stats.texelHits;
+            return v;
+        }
+    }
     const float cosThreshold = options_.cosThreshold;
     const int radius = passRadiusOf_[object];
     switch (filterOf_[object]) {

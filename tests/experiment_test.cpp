@@ -226,6 +226,34 @@ TEST(DisocclusionExperiment, EveryRowHasPixelsAndFiniteRmse) {
     EXPECT_EQ(rows, 3) << r.out;
 }
 
+// `experiment stereo --quick`: a CSV with the columns and a row per case and separation,
+// the plot and the summary; at zero separation the second eye shades no new sample.
+TEST(StereoExperiment, WritesCostsPerSeparation) {
+    const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_stereo";
+    fs::remove_all(out);
+    const CliRun r = Texcache("experiment stereo --quick --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(CheckCsv(out / "stereo.csv"), 8);  // 2 scenes x 2 reuse modes x 2 separations
+    EXPECT_TRUE(fs::exists(out / "stereo.png"));
+    EXPECT_TRUE(fs::exists(out / "stereo.md"));
+    std::ifstream f(out / "stereo.csv");
+    std::string header, line;
+    std::getline(f, header);
+    for (const char* col : {"scene", "eye_separation", "first_eye_seconds", "second_eye_seconds",
+                            "second_eye_new_samples_pct"})
+        EXPECT_NE(header.find(col), std::string::npos) << col;
+    while (std::getline(f, line)) {
+        std::vector<std::string> v;
+        std::stringstream ss(line);
+        for (std::string cell; std::getline(ss, cell, ',');) v.push_back(cell);
+        ASSERT_GE(v.size(), 14u) << line;
+        EXPECT_GT(std::stod(v[6]), 0.0) << line;  // first eye seconds
+        if (std::stod(v[4]) == 0.0) {             // zero separation: (almost) no new samples
+            EXPECT_LT(std::stod(v[13]), 1.0) << line;
+        }
+    }
+}
+
 TEST(TemporalExperiment, UnknownSceneListsTheValidOnes) {
     const CliRun r =
         Texcache("experiment temporal --quick --only anim_shadow,teapot --out " +

@@ -531,6 +531,35 @@ TEST(Preview, StatsCountTheFacesPastEmbreesLimits) {
               "OpenSubdiv's limit surface)");
 }
 
+// --stereo: the image shown is both eyes side by side (twice the width), each half showing the
+// scene (bright AO on the prism in at least 5% of its pixels), and the frame's statistics are
+// both eyes' (two eyes' camera rays: lookups of 2 x 16 x 16 pixels).
+TEST(Preview, StereoShowsBothEyesSideBySide) {
+    using namespace texcache::preview;
+    texcache::Scene scene = texcache::test::OneObjectScene(texcache::test::PrismCage(6));
+    scene.camera.pose.keys = {texcache::test::LookAt({0.0f, 1.5f, 3.0f}, {0.0f, 0.0f, 0.0f})};
+    PreviewSettings s;
+    s.width = 16, s.height = 16;
+    s.maxFrames = 1;
+    s.stereo = true;
+    s.sampleCacheMb = s.texelCacheMb = 4.0f;
+    OrbitCamera cam;
+    cam.FromScene(scene, 0.0f);
+    ProgressiveRenderer r(std::move(scene), s, cam);
+    ASSERT_TRUE(r.WaitForFrame(r.Post(s, cam))) << r.Error();
+    const texcache::Image img = r.CopyImage();
+    ASSERT_EQ(img.width, 32);
+    ASSERT_EQ(img.height, 16);
+    for (int half = 0; half < 2; ++half) {
+        int bright = 0;
+        for (int y = 0; y < 16; ++y)
+            for (int x = 0; x < 16; ++x) bright += img.At(16 * half + x, y)[1] > 0.3f;
+        EXPECT_GT(bright, 16 * 16 / 20) << "half " << half;
+    }
+    EXPECT_EQ(r.Stats().lookups % 2, 0u);
+    EXPECT_GE(r.Stats().lookups, 2u * 16 * 16 / 20);
+}
+
 TEST(Preview, WithoutADisplayFailsCleanly) {
     const ShellResult r = Shell("env -u DISPLAY -u WAYLAND_DISPLAY " + kBin + " preview " + kScene);
     EXPECT_EQ(r.exitCode, 2) << r.output;

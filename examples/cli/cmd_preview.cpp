@@ -4,12 +4,14 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <optional>
 
 #include "cli_util.h"
 #include "commands.h"
 #include "preview.h"
 #include "renderer/render.h"
 #include "renderer/scene_loader.h"
+#include "renderer/stereo.h"
 #include "renderer/texture_space.h"
 
 namespace texcache::cli {
@@ -44,6 +46,8 @@ struct PreviewCliArgs {
     int benchFrames = 36;
     int referenceSpp = 0;  // 0: 32 (AO, x 16 rays) or 128 (--denoise: path traced)
     std::string benchOut = "out/preview_bench";
+    bool stereo = false;
+    std::optional<float> eyeSeparation;  // none: the scene camera's, else 1/30 of the orbit's
 };
 
 int RunPreview(const PreviewCliArgs& a) {
@@ -81,6 +85,17 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.demodulate && !s.denoise)
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
     s.motionKind = preview::ParseMotionKind(a.motion, "--motion");
+    s.stereo = a.stereo;
+    if (a.eyeSeparation) {
+        if (!a.stereo) throw InputError("--eye-separation", "sets the stereo rig: give --stereo");
+        CheckStereoRig({*a.eyeSeparation, 1.0f}, "--eye-separation");
+        s.eyeSeparation = *a.eyeSeparation;
+    } else if (scene.camera.eyeSeparation > 0.0f) {
+        s.eyeSeparation = scene.camera.eyeSeparation;
+    }
+    if (a.stereo && s.denoise)
+        throw InputError("--stereo", "cannot be combined with --denoise (not supported yet)");
+    if (a.stereo && a.bench) throw InputError("--stereo", "cannot be combined with --bench");
     if (!std::isnan(a.time)) scene.settings.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     // The scene's settings that the preview keeps (its size, spp and AO rays are its own).
     const RenderOptions fromScene = RenderOptionsFrom(scene.settings);
@@ -194,6 +209,12 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--reference-spp", a->referenceSpp,
                     "Bench: spp of the reference (default 32 per-hit AO x 16 rays; with --denoise "
                     "128 path traced)");
+    cmd->add_flag("--stereo", a->stereo,
+                  "Both eyes side by side, the right eye from the left eye's texture-space cache "
+                  "(converging at the orbit pivot)");
+    cmd->add_option("--eye-separation", a->eyeSeparation,
+                    "--stereo: distance between the eyes (default: the scene camera's, else 1/30 "
+                    "of the distance to the pivot)");
     cmd->add_option("--bench-out", a->benchOut, "Bench: prefix of the images written")
         ->capture_default_str();
     cmd->callback([a, &exitCode] { exitCode = RunPreview(*a); });

@@ -22,6 +22,7 @@
 #include "renderer/product_sampling.h"
 #include "renderer/render.h"
 #include "renderer/scene_loader.h"
+#include "renderer/stereo.h"
 #include "renderer/texture_space.h"
 #include "texcache/enum_names.h"
 #include "texcache/error.h"
@@ -80,6 +81,10 @@ struct RenderArgs {
     // Screen-space stage on the frame buffers, written as images.
     std::string denoise;
     bool demodulate = false;
+    // Stereo: both eyes through one texture-space cache (renderer/stereo.h).
+    bool stereo = false;
+    float eyeSeparation = 0.0f, convergence = 0.0f;
+    std::string stereoReuse = "neighbour";
 };
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
@@ -478,6 +483,128 @@ void CheckCombinations(const RenderArgs& a, const RenderSettings& s, const Rende
         throw InputError("--stats", "reports one frame: drop --frames");
 }
 
+/// --stereo's rig: the scene camera's, with --eye-separation / --convergence on top; without
+/// either, the eyes are 1/30 of the convergence distance apart (the stereographers' rule).
+StereoRig StereoRigFrom(const RenderArgs& a, const Camera& camera) {
+    StereoRig rig = StereoRigOf(camera);
+    if (a.Given("--convergence")) {
+        rig.convergence = a.convergence;
+        CheckStereoRig({0.0f, rig.convergence}, "--convergence");
+    }
+    if (a.Given("--eye-separation")) {
+        rig.eyeSeparation = a.eyeSeparation;
+        CheckStereoRig({rig.eyeSeparation, 1.0f}, "--eye-separation");
+    } else if (rig.eyeSeparation == 0.0f) {
+        rig.eyeSeparation = rig.convergence / 30.0f;
+    }
+    CheckStereoRig(rig, camera.convergence > 0.0f ? "camera.stereo" : "--convergence");
+    return rig;
+}
+
+/// The options --stereo cannot honour (yet) are errors, as are the rig's options without it.
+void CheckStereoOptions(const RenderArgs& a) {
+    if (!a.stereo) {
+        for (const char* o : {"--eye-separation", "--convergence", "--stereo-reuse"})
+            if (a.Given(o)) throw InputError(o, "applies to stereo renders: give --stereo");
+        return;
+    }
+    if (!a.frameBuffers.empty())
+        throw InputError("--stereo", "cannot be combined with --frame-buffers (not supported yet)");
+    if (!a.denoise.empty())
+        throw InputError("--stereo", "cannot be combined with --denoise (not supported yet)");
+    if (!a.frames.empty()) throw InputError("--stereo", "renders one frame: drop --frames");
+    if (a.overshading) throw InputError("--stereo", "cannot be combined with --overshading");
+}
+
+StereoReuse ParseStereoReuse(const std::string& name) {
+    if (name == "texels") return StereoReuse::Texels;
+    if (name == "neighbour") return StereoReuse::Neighbour;
+    throw InputError("--stereo-reuse",
+                     "unknown value '" + Excerpt(name) + "' (valid: texels, neighbour)");
+}
+
+/// One eye's figures for --stats (the cache counters are what this eye shaded anew).
+std::string EyeJson(const char* name, const RenderStats& s, bool last) {
+    const CacheStats& c = s.cache;
+    char buf[512];
+    std::snprintf(
+        buf, sizeof buf,
+        "    \"%s\": {\"seconds\": %.10g, \"cpu_seconds\": %.10g, \"spp\": %d, \"rays\": %llu, "
+        "\"camera_rays\": %llu, \"lookups\": %llu, \"texel_hit_rate\": %.10g, "
+        "\"texels_shaded\": %llu, \"samples_shaded\": %llu}%s\n",
+        name, s.seconds, s.cpuSeconds, s.sppDone, (unsigned long long)s.TotalRays(),
+        (unsigned long long)s.cameraRays, (unsigned long long)c.lookups, c.TexelHitRate(),
+        (unsigned long long)c.texelMisses, (unsigned long long)c.samplesShaded, last ? "" : ",");
+    return buf;
+}
+
+/// --stereo: NAME_left.exr and NAME_right.exr (+ PNGs), both eyes through one cache.
+int RunStereo(const RenderArgs& a, const Scene& scene, const RenderOptions& opt) {
+    const StereoRig rig = StereoRigFrom(a, scene.camera);
+    const std::filesystem::path o(a.output);
+    std::vector<OutputPaths> outs;
+    for (const char* eye : {"_left", "_right"})
+        outs.push_back(PlanOutputs(
+            (o.parent_path() / (o.stem().string() + eye + o.extension().string())).string(),
+            !a.noPng));
+    CheckCombinations(a, scene.settings, opt, outs.front());
+    CheckFiles(scene, outs, a.statsFile);
+    const std::unique_ptr<tbb::global_control> limit = ThreadLimit(a.threads);
+    RenderSceneOptions ro;
+    ro.frameTime = scene.settings.time;
+    ro.threads = a.threads;
+    ro.needLights = IntegratorUsesLights(opt.integrator);
+    ro.needEnvironment = ro.needLights;
+    ro.needTextures = true;
+    const RenderScene rs(scene, ro);
+    std::unique_ptr<TextureSpaceCache> cache;
+    if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
+    StereoResult r = RenderStereo(rs, opt, rig, cache.get(), ParseStereoReuse(a.stereoReuse));
+
+    AtomicFiles group;
+    WriteOutputs(outs[0], r.left.beauty, r.left.aovs, a.exposure, group);
+    WriteOutputs(outs[1], r.right.beauty, r.right.aovs, a.exposure, group);
+    if (!a.statsFile.empty()) {
+        std::string json = StatsJson(BothEyes(r), rs, cache.get(), opt, -1.0);
+        json.resize(json.size() - 3);  // "\n}\n": the eyes follow
+        char rigJson[160];
+        std::snprintf(rigJson, sizeof rigJson,
+                      ",\n  \"stereo\": {\"eye_separation\": %.10g, \"convergence\": %.10g,\n",
+                      rig.eyeSeparation, rig.convergence);
+        json += rigJson + EyeJson("left", r.left.stats, false) +
+                EyeJson("right", r.right.stats, true) + "  }\n}\n";
+        WriteText(a.statsFile, json, group);
+        outs[1].written.push_back(a.statsFile);
+    }
+    group.Commit();
+
+    std::printf(
+        "rendered %s in stereo: %dx%d per eye, %d spp, integrator %s, eye separation %g, "
+        "convergence %g\n",
+        scene.path.c_str(), opt.width, opt.height, r.left.stats.sppDone,
+        IntegratorName(opt.integrator), rig.eyeSeparation, rig.convergence);
+    const RenderStats& L = r.left.stats;
+    for (const auto& [name, st] : {std::pair{"left", &r.left.stats}, {"right", &r.right.stats}}) {
+        std::printf("%s eye: %.3f s (%.3f s cpu), %llu rays, %llu samples and %llu texels shaded",
+                    name, st->seconds, st->cpuSeconds, (unsigned long long)st->TotalRays(),
+                    (unsigned long long)st->cache.samplesShaded,
+                    (unsigned long long)st->cache.texelMisses);
+        if (st != &L)
+            std::printf(
+                " (%.1f%% of the left eye's time, %.1f%% of its samples, %.1f%% of its "
+                "texels)",
+                100.0 * st->seconds / std::max(L.seconds, 1e-9),
+                100.0 * double(st->cache.samplesShaded) /
+                    std::max(double(L.cache.samplesShaded), 1.0),
+                100.0 * double(st->cache.texelMisses) / std::max(double(L.cache.texelMisses), 1.0));
+        std::printf("\n");
+    }
+    std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
+    for (const OutputPaths& out : outs)
+        for (const std::string& f : out.written) std::printf("wrote %s\n", f.c_str());
+    return 0;
+}
+
 int RunRender(const RenderArgs& a) {
     std::vector<std::string> warnings;
     const double tLoad = NowSeconds();
@@ -506,6 +633,7 @@ int RunRender(const RenderArgs& a) {
 
     if (a.demodulate && a.denoise.empty())
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    CheckStereoOptions(a);
     const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
         // Frame buffers are always the path tracer's split, whatever the scene's integrator, and
@@ -538,6 +666,7 @@ int RunRender(const RenderArgs& a) {
         fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
         if (a.overshading) throw InputError("--overshading", "renders one frame: drop --frames");
     }
+    if (a.stereo) return RunStereo(a, scene, opt);
     // Plan and check every output first: a bad or dangerous name fails before anything renders.
     std::vector<OutputPaths> outs;
     if (a.frames.empty()) {
@@ -773,6 +902,19 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--demodulate", args->demodulate,
                   "With --denoise: filter glossy and diffuse indirect light divided by their "
                   "pre-integrated BRDF / albedo (Zhuang et al. 2021)");
+    cmd->add_flag("--stereo", args->stereo,
+                  "Both eyes of the camera's stereo rig (scene camera 'stereo'), sharing one "
+                  "texture-space cache: writes NAME_left and NAME_right (.exr + .png)");
+    cmd->add_option("--eye-separation", args->eyeSeparation,
+                    "--stereo: distance between the eyes (scene units; default: the scene's, "
+                    "else 1/30 of the convergence distance)");
+    cmd->add_option("--convergence", args->convergence,
+                    "--stereo: distance of the zero-parallax plane (default: the scene's, else "
+                    "the distance to the look-at point)");
+    cmd->add_option("--stereo-reuse", args->stereoReuse,
+                    "--stereo: what the second eye takes from the first eye's cache: texels "
+                    "(those it looks up) or neighbour (also a cached texel beside a missing one)")
+        ->capture_default_str();
     cmd->callback([args, cmd, &exitCode] {
         for (const CLI::Option* o : cmd->get_options())
             if (o->count() > 0) args->given.insert(o->get_name());

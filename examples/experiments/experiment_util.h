@@ -123,5 +123,6 @@ int LodBias(const Setup& s);
 int Temporal(const Setup& s);
 int Disocclusion(const Setup& s);
 int Cpis(const Setup& s);
+int Stereo(const Setup& s);
 
 }  // namespace texcache::experiments

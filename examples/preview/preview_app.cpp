@@ -509,6 +509,7 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         ImGui::SliderFloat("texel cache MiB", &s.texelCacheMb, 1.0f, 1024.0f, "%.0f",
                            ImGuiSliderFlags_Logarithmic);
         ImGui::Checkbox("re-shade while still", &s.refineCacheWhenStill);
+        ImGui::Checkbox("stereo (left | right eye)", &s.stereo);
         if (ImGui::TreeNode("per material")) {
             std::vector<std::string> choices = {"(default)"};
             choices.insert(choices.end(), ui.filters.begin(), ui.filters.end());
@@ -578,7 +579,7 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
     glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
     glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
     glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
-    const int winW = settings.width + int(kPanelWidth);
+    const int winW = settings.width * (settings.stereo ? 2 : 1) + int(kPanelWidth);
     const int winH = std::max(settings.height, 640);
     GLFWwindow* window = glfwCreateWindow(winW, winH, "texcache preview", nullptr, nullptr);
     if (!window) throw InputError("preview", "cannot create an OpenGL 3.3 window: " + g_glfwError);

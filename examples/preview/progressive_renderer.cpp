@@ -12,6 +12,7 @@
 #include "renderer/camera.h"
 #include "renderer/frame_buffers_render.h"
 #include "renderer/render_scene.h"
+#include "renderer/stereo.h"
 #include "renderer/texture_space.h"
 #include "texcache/enum_names.h"
 #include "texcache/error.h"
@@ -474,13 +475,15 @@ void ProgressiveRenderer::Run() {
                 built = eff;
             }
 
+            const bool stereo = cur.stereo && !cacheView && !heatView && !staged;
+            const int imageWidth = stereo ? 2 * cur.width : cur.width;
             if (imageChanged) {
                 accumulated = 0;
                 accumSettings = cur, accumCamera = cam;
-                accum_.assign(size_t(cur.width) * cur.height * 3, 0.0);
+                accum_.assign(size_t(imageWidth) * cur.height * 3, 0.0);
             }
-            if (mean.width != cur.width || mean.height != cur.height)
-                mean = Image(cur.width, cur.height, 3);
+            if (mean.width != imageWidth || mean.height != cur.height)
+                mean = Image(imageWidth, cur.height, 3);
             FrameStats frame;
             const auto t0 = std::chrono::steady_clock::now();
             if (cacheView) {
@@ -566,8 +569,19 @@ void ProgressiveRenderer::Run() {
                 // shading, jittered samples, smaller footprints; see texture_space.h).
                 if (cur.refineCacheWhenStill && accumulated > 0 && opt.texture.enabled)
                     cache->BeginPass(uint32_t(accumulated));
-                const RenderResult r =
-                    Render(*rs, opt, opt.texture.enabled ? cache.get() : nullptr);
+                TextureSpaceCache* tsc = opt.texture.enabled ? cache.get() : nullptr;
+                RenderResult r;
+                if (stereo) {
+                    const float convergence = glm::length(cam.Target() - cam.Position());
+                    const StereoRig rig{
+                        cur.eyeSeparation >= 0.0f ? cur.eyeSeparation : convergence / 30.0f,
+                        std::max(convergence, 1e-6f)};
+                    const StereoResult both = RenderStereo(*rs, opt, rig, tsc);
+                    r.beauty = SideBySide(both.left.beauty, both.right.beauty);
+                    r.stats = BothEyes(both);
+                } else {
+                    r = Render(*rs, opt, tsc);
+                }
                 if (heatView) {
                     // One frame per change: the map shows what the frame after a move looked up;
                     // further frames of a still view would only show a warm cache.

@@ -281,6 +281,10 @@ public:
         Texel t;
         return texels_ && texels_->Find(texel.key.Pack(), Hash(texel.key), &t);
     }
+    /// The texel's value when it is in the texel cache right now (read-only, like ContainsTexel).
+    bool FindTexel(const SampleRequest& texel, Texel* out) const {
+        return texels_ && texels_->Find(texel.key.Pack(), Hash(texel.key), out);
+    }
     /// Whether a sample is in the sample cache right now (read-only, like ContainsTexel).
     bool ContainsSample(const TexelKey& key) const {
         Stored s;
