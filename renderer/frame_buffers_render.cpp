@@ -330,6 +330,20 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
 
 }  // namespace
 
+std::string FrameBufferCameraProblem(const Camera& cam) {
+    // Only what a render would show: a lens or an open shutter the buffers would silently drop.
+    if (cam.lensRadius > 0.0f)
+        return "its camera has a lens (lens_radius " + std::to_string(cam.lensRadius) +
+               ") but frame buffers trace through the lens centre (no defocus blur): set "
+               "lens_radius 0 or render without the screen-space buffers";
+    if (cam.shutterClose > cam.shutterOpen)
+        return "its camera shutter is open for " +
+               std::to_string(cam.shutterClose - cam.shutterOpen) +
+               " s but frame buffers are traced at shutter open (no motion blur): close the "
+               "shutter or render without the screen-space buffers";
+    return "";
+}
+
 RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& options, float prevTime,
                                screen::FrameBuffers* out, TextureSpaceCache* cache) {
     using Clock = std::chrono::steady_clock;

@@ -23,6 +23,7 @@
 #include "renderer/render.h"
 #include "renderer/scene_loader.h"
 #include "renderer/texture_space.h"
+#include "renderer/visibility_pass.h"
 #include "texcache/enum_names.h"
 #include "texcache/error.h"
 
@@ -80,6 +81,7 @@ struct RenderArgs {
     // Screen-space stage on the frame buffers, written as images.
     std::string denoise;
     bool demodulate = false;
+    std::string visibilityFilter = "none";
 };
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
@@ -276,6 +278,8 @@ void CheckDecompositionOptions(const RenderArgs& a, const char* opt, const char*
     if (a.Given("--stats")) throw InputError(opt, "cannot be combined with --stats");
     if (a.Given("--light-sampling"))
         throw InputError(opt, "samples lights as MIS does: drop --light-sampling");
+    if (a.Given("--visibility-filter"))
+        throw InputError(opt, "cannot be combined with --visibility-filter");
 }
 
 /// --light-sampling and its record cache: product sampling needs an environment light and an
@@ -508,6 +512,9 @@ int RunRender(const RenderArgs& a) {
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
     const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
+        if (const std::string why = FrameBufferCameraProblem(scene.camera); !why.empty())
+            throw InputError(a.frameBuffers.empty() ? "--denoise" : "--frame-buffers",
+                             scene.path + ": " + why);
         // Frame buffers are always the path tracer's split, whatever the scene's integrator, and
         // exactly spp samples (no time budget).
         RenderOptions fbo = common;
@@ -527,6 +534,8 @@ int RunRender(const RenderArgs& a) {
     RenderOptions opt = common;
     opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
     opt.aovs = ParseAovs(a.aovs);
+    const VisibilityPass visibility(
+        ParseVisibilityFilter(a.visibilityFilter, "--visibility-filter"), &opt);
     opt.texture = ParseTextureOptions(a);
     CheckCacheMemory(a, opt.texture);
     ParseLightSamplingOptions(a, scene, &opt);
@@ -570,6 +579,7 @@ int RunRender(const RenderArgs& a) {
             RenderOptions& fo = frame.options;
             fo.progress = false;
             RenderResult r = Render(*frame.rs, fo, cache.get());
+            visibility.Apply(scene, fo, &r);
             OutputPaths& out = outs[size_t(f - first)];
             AtomicFiles group;
             WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
@@ -604,6 +614,7 @@ int RunRender(const RenderArgs& a) {
     if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
     const double cacheSeconds = NowSeconds() - tCache;
     RenderResult r = Render(rs, opt, cache.get());
+    const double visibilitySeconds = visibility.Apply(scene, opt, &r);
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
     // Every output into one group, renamed only once all are complete.
@@ -620,6 +631,7 @@ int RunRender(const RenderArgs& a) {
     std::printf("time: %.3f s render + %.3f s scene build; %.2f Mrays/s (%llu rays)\n",
                 r.stats.seconds, buildSeconds, double(r.stats.TotalRays()) / r.stats.seconds * 1e-6,
                 (unsigned long long)r.stats.TotalRays());
+    if (visibilitySeconds > 0.0) std::printf("visibility filter: %.3f s\n", visibilitySeconds);
     const RenderScene::BuildSeconds b = rs.BuildTimes();
     std::printf(
         "scene build: OpenSubdiv %.3f s, Embree geometry %.3f s, Embree BVH %.3f s, other %.3f s; "
@@ -773,6 +785,10 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--demodulate", args->demodulate,
                   "With --denoise: filter glossy and diffuse indirect light divided by their "
                   "pre-integrated BRDF / albedo (Zhuang et al. 2021)");
+    cmd->add_option("--visibility-filter", args->visibilityFilter,
+                    "Primary-visibility filter after shading, for the noise of defocus and "
+                    "motion blur: none or layered (filters/visibility_filter.h)")
+        ->capture_default_str();
     cmd->callback([args, cmd, &exitCode] {
         for (const CLI::Option* o : cmd->get_options())
             if (o->count() > 0) args->given.insert(o->get_name());
