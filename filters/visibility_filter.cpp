@@ -25,9 +25,13 @@ struct Kernel {
     int radius = 0;
 };
 
-/// Kernels this small (std under a quarter pixel along both axes) weigh their neighbours at
-/// exp(-8) or less: treated as sharp, so sharp pixels are copied, not re-weighted.
-constexpr float kSharpVariance = 1.0f / 16.0f;
+/// Kernels this small (std under half a pixel along both axes, i.e. a blur std under 0.83
+/// pixel at scale 0.6: a circle of confusion under 1.7 pixels) are treated as sharp: the pixel is
+/// copied. Their neighbours would weigh exp(-2) or less, and a pixel blurred this little is
+/// sampled well by its own 8-16 camera samples; averaging it only risks blurring what is in
+/// focus (on the car's in-focus crop, a threshold of a quarter pixel changed 41% of its pixels
+/// and raised its relMSE 2% at 16 spp).
+constexpr float kSharpVariance = 1.0f / 4.0f;
 /// Added to the covariance before inverting it: a motion blur is a segment (rank 1), whose
 /// Gaussian still needs a width across it (1/8 pixel std: neighbours across get exp(-32)).
 constexpr float kMinVariance = 1.0f / 64.0f;

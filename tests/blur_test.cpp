@@ -52,9 +52,9 @@ TEST(VisibilityFilter, NoBlurLeavesTheImageUnchanged) {
     for (size_t i = 0; i < out.size(); ++i) ASSERT_EQ(out[i], f.color[i]) << i;
 }
 
-// A render of a scene without lens or shutter through the whole pass (depth and motion layers,
-// blur from the camera): the beauty is unchanged within 1e-6 (it is copied: the tolerance only
-// allows for float formatting), and the layers the caller did not ask for are dropped again.
+// A render of a scene without lens or shutter through the whole pass (guide rays, blur from the
+// camera, filter): the beauty is unchanged within 1e-6 (sharp pixels are copied; the tolerance
+// only allows for the copy), and the guides see the object with no blur.
 TEST(VisibilityFilter, StaticRenderIsUnchanged) {
     Scene s = test::OneObjectScene(test::LoadMesh("catmark_torus"));
     s.camera.pose.keys.push_back(test::LookAt({0.0f, 2.0f, 3.0f}, {0.0f, 0.0f, 0.0f}));
@@ -63,15 +63,18 @@ TEST(VisibilityFilter, StaticRenderIsUnchanged) {
     o.integrator = IntegratorKind::AO;
     o.width = 32, o.height = 24, o.spp = 4, o.progress = false;
     const RenderResult plain = Render(rs, o);
-    const VisibilityPass pass(VisibilityFilterKind::Layered, &o);
-    ASSERT_TRUE(o.aovs.depth && o.aovs.motion);
-    RenderResult r = Render(rs, o);
-    ASSERT_EQ(r.aovs.size(), 2u);
-    pass.Apply(s, o, &r);
-    EXPECT_TRUE(r.aovs.empty());
-    ASSERT_EQ(r.beauty.data.size(), plain.beauty.data.size());
-    for (size_t i = 0; i < r.beauty.data.size(); ++i)
-        ASSERT_NEAR(r.beauty.data[i], plain.beauty.data[i], 1e-6f) << i;
+    Image filtered = plain.beauty;
+    ApplyVisibilityFilter(VisibilityFilterKind::Layered, rs, o, &filtered);
+    ASSERT_EQ(filtered.data.size(), plain.beauty.data.size());
+    for (size_t i = 0; i < filtered.data.size(); ++i)
+        ASSERT_NEAR(filtered.data[i], plain.beauty.data[i], 1e-6f) << i;
+    const VisibilityGuides g = TraceVisibilityGuides(rs, o);
+    int hits = 0;
+    for (size_t p = 0; p < g.depth.size(); ++p) {
+        hits += std::isfinite(g.depth[p]);
+        for (int k = 0; k < 3; ++k) ASSERT_EQ(g.blur[3 * p + k], 0.0f);
+    }
+    EXPECT_GT(hits, 50);
 }
 
 // Blurred pixels (circle of confusion 8 px) of a constant 0.5 plus uniform noise of std 0.115:

@@ -34,6 +34,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
         {"temporal", experiments::Temporal},
         {"disocclusion", experiments::Disocclusion},
         {"cpis", experiments::Cpis},
+        {"blur", experiments::Blur},
     };
     return m;
 }

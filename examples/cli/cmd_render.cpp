@@ -534,8 +534,8 @@ int RunRender(const RenderArgs& a) {
     RenderOptions opt = common;
     opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
     opt.aovs = ParseAovs(a.aovs);
-    const VisibilityPass visibility(
-        ParseVisibilityFilter(a.visibilityFilter, "--visibility-filter"), &opt);
+    const VisibilityFilterKind visibility =
+        ParseVisibilityFilter(a.visibilityFilter, "--visibility-filter");
     opt.texture = ParseTextureOptions(a);
     CheckCacheMemory(a, opt.texture);
     ParseLightSamplingOptions(a, scene, &opt);
@@ -579,7 +579,7 @@ int RunRender(const RenderArgs& a) {
             RenderOptions& fo = frame.options;
             fo.progress = false;
             RenderResult r = Render(*frame.rs, fo, cache.get());
-            visibility.Apply(scene, fo, &r);
+            ApplyVisibilityFilter(visibility, *frame.rs, fo, &r.beauty);
             OutputPaths& out = outs[size_t(f - first)];
             AtomicFiles group;
             WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
@@ -614,7 +614,7 @@ int RunRender(const RenderArgs& a) {
     if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
     const double cacheSeconds = NowSeconds() - tCache;
     RenderResult r = Render(rs, opt, cache.get());
-    const double visibilitySeconds = visibility.Apply(scene, opt, &r);
+    const double visibilitySeconds = ApplyVisibilityFilter(visibility, rs, opt, &r.beauty);
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
     // Every output into one group, renamed only once all are complete.
