@@ -9,8 +9,10 @@
 // frequency above the kernel's bandwidth (Egan et al. 2009; Mehta et al. 2014 size screen-space
 // Gaussians from the same bound). Averaging it with neighbours over a Gaussian a fraction
 // (`scale`) of that kernel's own covariance removes sampling noise and adds little bias; a pixel
-// with no blur keeps its value exactly, so focused, static regions are never blurred. Kernels are
-// anisotropic: motion blur smooths along the motion only, and edges across it stay sharp.
+// blurred by less than 0.83 pixel (std; a circle of confusion under 1.7 pixels) keeps its value
+// exactly unless a blurred surface in front of it spreads over it, so focused, static regions
+// are never blurred. Kernels are anisotropic: motion blur smooths along the motion only, and
+// edges across it stay sharp.
 // Occlusion follows the layered methods (Munkberg et al. 2014, Hasselgren et al. 2015, which split
 // a tile's samples into depth layers and composite them front to back) in a per-pixel form, the
 // classification of McGuire et al. 2012 ("A reconstruction filter for plausible motion blur"): a
@@ -18,7 +20,11 @@
 // foreground covers a sharp background), any other neighbour is gathered with the pixel's own
 // kernel (a sharp foreground takes nothing from the blurred background behind it). Inputs are
 // pixel buffers (colour, depth, blur covariance), as the GPU filter the paper uses takes colour,
-// depth and motion buffers; no per-sample storage.
+// depth and motion buffers; no per-sample storage. The full layered reconstruction filters the
+// samples themselves in the light field (lens position and time per sample), which the renderer
+// does not keep; once texture space has removed the shading noise, pixel buffers suffice here:
+// on the bundled blur scenes this filter lowers texture-space relMSE 1.2-1.8x and puts texture
+// space 4.1-6.3x below per hit at equal time (results/blur.md).
 //
 // Cost: windows reach a neighbourhood's largest kernel (McGuire's tile-max / neighbour-max with
 // tiles of the largest radius), capped at `maxRadius`; pixels no kernel reaches are copied. CPU,

@@ -1,10 +1,12 @@
 // SPDX-License-Identifier: Apache-2.0
 // The primary-visibility filter (filters/visibility_filter.h) on a render. Its guides (a depth
-// and a blur covariance per pixel) come from a pass of one ray per pixel through the pixel
-// centre, the lens centre and the middle of the shutter: the pinhole image at mid-shutter that
-// the layered classification needs (what the GPU filter the paper uses takes as its depth and
-// motion buffers), at the cost of one camera ray per pixel, and without asking the render for
-// AOV layers (which take texture-space AO off its prepass path: 1.4x the frame time).
+// and a blur covariance per pixel) come from 4 rays per pixel through the pixel centre, 4 points
+// of the lens and 4 times of the shutter (what the GPU filter the paper uses takes as its depth
+// and motion buffers), at the cost of 4 camera rays per pixel (0.1-0.2 CPU s at 480x270), and
+// without asking the render for AOV layers: those take texture-space AO off its prepass path (a
+// frame cost 1.4x as much with them: blur_motion.json, 16 spp, one pass, 4.2 -> 5.8 s). With one
+// ray through the lens centre at mid-shutter, the ground seen through a moving torus's hole read
+// as sharp and kept its noise (results/blur.md, attempts 2 and 3).
 #pragma once
 #include <vector>
 
@@ -19,10 +21,10 @@ struct VisibilityGuides {
     std::vector<float> blur;   ///< (xx, xy, yy) covariance in pixels^2 (BlurCovariance)
 };
 
-/// Traces the guide rays of a frame of `opt`'s size and time: the depth of the surface each
-/// pixel centre sees through the lens centre at mid-shutter, its motion over the shutter (the
-/// point carried by its object from shutter open to close, projected by the cameras there) and
-/// the thin lens's circle of confusion at that depth. Multithreaded (TBB).
+/// Traces the guide rays of a frame of `opt`'s size and time. A pixel takes the nearest surface
+/// its rays see and the widest blur among them: the surface's motion over the shutter (the point
+/// carried by its object from shutter open to close, projected by the cameras there) and the
+/// thin lens's circle of confusion at its distance. Multithreaded (TBB).
 VisibilityGuides TraceVisibilityGuides(const RenderScene& rs, const RenderOptions& opt);
 
 /// Filters `image` (RGB, opt.width x opt.height) in place with guides traced for it; returns
