@@ -53,16 +53,18 @@ const BlurCase kCases[] = {
 
 /// Texture-space settings: the cache as it stands (the scene's one AO ray per cached sample,
 /// progressive passes of 4 spp, texels of about a pixel), and one tuned for blur: 8 AO rays per
-/// cached sample and texels of about 2x2 pixels (LOD bias 1; blurred shading has no pixel-size
-/// detail to keep), whose samples cost less than the camera rays that reuse them.
+/// cached sample, texels of about 2x2 pixels (LOD bias 1; blurred shading has no pixel-size
+/// detail to keep) and passes of 8 spp (under blur, camera samples buy visibility, which a
+/// re-shade of the cache does not), so that shading costs less than the camera rays reusing it.
 struct TextureConfig {
     const char* name;
     int aoSamples;
     float lodBias;
+    int passSpp;
 };
 const TextureConfig kTextureConfigs[] = {
-    {"texture", 1, 0.0f},
-    {"texture ao8 lod1", 8, 1.0f},
+    {"texture", 1, 0.0f, TextureSpaceOptions{}.passSpp},
+    {"texture ao8 lod1", 8, 1.0f, 8},
 };
 
 /// One measured configuration.
@@ -109,9 +111,10 @@ int Blur(const Setup& s) {
     std::string md = Format(
         "# Motion and defocus blur: shading reused over the shutter and the lens\n\n"
         "`texcache experiment blur --out DIR%s`: %dx%d, ambient occlusion (one ray per camera "
-        "sample per hit; in texture space one (*texture*) or 8 (*texture ao8 lod1*, with texels "
-        "of 2x2 pixels) per cached sample, filtered by the default 13x13 normal filter; "
-        "progressive passes of 4 spp). relMSE (eps 0.001) against a %d-spp per-hit reference; "
+        "sample per hit; in texture space one (*texture*: progressive passes of 4 spp) or 8 "
+        "(*texture "
+        "ao8 lod1*: texels of 2x2 pixels, passes of 8 spp) per cached sample, filtered by the "
+        "default 13x13 normal filter). relMSE (eps 0.001) against a %d-spp per-hit reference; "
         "cost in CPU seconds of the process (2 threads on a shared machine; wall seconds in the "
         "CSV), best of %d. *per hit at equal time* is the per-hit relMSE interpolated (log-log) "
         "from per-hit renders at %d..%d spp at the row's CPU time (texture space + filter: "
@@ -160,6 +163,7 @@ int Blur(const Setup& s) {
                 t.texture.enabled = true;
                 t.aoSamples = tc.aoSamples;
                 t.texture.cache.lodBias = tc.lodBias;
+                t.texture.passSpp = tc.passSpp;
                 const std::string method = tc.name;
                 Run run = TimedRender(*ls, t, repeats, true);
                 Row plain{method, spp, run.seconds, run.cpuSeconds, 0.0, 0, 0, NAN, run.image};
