@@ -108,6 +108,48 @@ bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, gl
     return true;
 }
 
+/// Motion blur: what a texel holds (issue 19). A texel holds the shutter's average, not one
+/// instant: every ray a cache sample traces gets its own shutter time (stratified over the
+/// sample's n rays, random per sample), as a camera hit's rays do per hit. The scene's objects,
+/// occluders and receivers alike, are where they are at that time: the contact shadow of a
+/// moving object on a static ground is then smeared over the shutter as in the per-hit render
+/// (tests/blur_test.cpp). A sample of a moving object lives in its object's texture space (the
+/// texel key is the object's Ptex face and (u,v), not a world position), so camera hits at any
+/// time of the shutter share its texels; its rays start from the sample's point carried rigidly
+/// from shutter open (where SamplePoint finds it) to the ray's time. The cached shading is
+/// therefore the paper's "shading reused over the shutter", averaged like the reference's
+/// rather than frozen at shutter open, which had left moving shadows sharp. Without a shutter
+/// no extra random number is drawn: static renders keep their streams.
+class ShutterMotion {
+public:
+    ShutterMotion(const Context& c, int object)
+        : c_(c), object_(object), blur_(c.shutterLength > 0.0f) {
+        moves_ = blur_ && c.scene.objects[size_t(object)].transform.IsAnimated();
+        if (moves_) toObject_ = glm::inverse(c.rs.ObjectToWorld(object, 0.0f));
+    }
+    /// Shutter time of ray i of n (stratified), 0 without motion blur.
+    float Time(Rng& rng, int i, int n) const {
+        return blur_ ? (float(i) + rng.Next1D()) / float(n) : 0.0f;
+    }
+    /// `ray` (origin and direction where the sample is at shutter open) and the sample's normal
+    /// `n`, moved to where the sample is at `time`; the ray is stamped with the time.
+    void Pose(float time, Ray* ray, glm::vec3* n) const {
+        ray->time = time;
+        if (!moves_) return;
+        const glm::mat4 M = c_.rs.ObjectToWorld(object_, time) * toObject_;
+        const glm::mat3 R(M);  // rigid: keyframes animate rotation and translation only
+        ray->org = glm::vec3(M * glm::vec4(ray->org, 1.0f));
+        ray->dir = glm::normalize(R * ray->dir);
+        *n = glm::normalize(R * *n);
+    }
+
+private:
+    const Context& c_;
+    int object_;
+    bool blur_, moves_ = false;
+    glm::mat4 toObject_{1.0f};
+};
+
 /// Shades a cache sample with n cosine-distributed rays from its point; `trace(ray, rng, N)` gives
 /// each ray's value. Returns the mean, the sample's normal and the variance of the mean
 /// (luminance). Unreachable samples (holes, NaN surface) come back NaN: filters skip them.
@@ -119,13 +161,17 @@ ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, Ra
     if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
     Rng rng = SampleRng(c, r);
     const Frame frame = Frame::FromZ(ss.N);
+    const ShutterMotion motion(c, c.tsc->ObjectOfMesh(r.mesh));
     glm::vec3 sum(0.0f);
     float sum2 = 0.0f;
     for (int i = 0; i < n; ++i) {
+        const float time = motion.Time(rng, i, n);
         Ray ray;
         ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
         ray.org = origin;
-        const glm::vec3 L = trace(ray, rng, ss.N);
+        glm::vec3 N = ss.N;
+        motion.Pose(time, &ray, &N);
+        const glm::vec3 L = trace(ray, rng, N);
         sum += L;
         const float y = Luminance(L);
         sum2 += y * y;
@@ -187,18 +233,25 @@ ShadedSample ShadeShadowSample(const Context& c, const SampleRequest& r, RayCoun
         return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
     Rng rng = SampleRng(c, r);
     const int n = c.opt.texture.shadowSamples;
+    const ShutterMotion motion(c, c.tsc->ObjectOfMesh(r.mesh));
+    const glm::vec3 origin0 = origin, normal0 = ss.N;
     int open = 0, counted = 0;
     float blur = INFINITY;
     for (int i = 0; i < n; ++i) {
+        Ray ray;
+        ray.org = origin0;
+        ray.dir = normal0;
+        glm::vec3 N = normal0;
+        motion.Pose(motion.Time(rng, i, n), &ray, &N);
+        origin = ray.org;
         const int l = std::min(int(rng.Next1D() * float(c.quads.size())), int(c.quads.size()) - 1);
         const Context::Quad& q = c.quads[l];
         const glm::vec2 u = rng.Next2D();
         const glm::vec3 d = q.corner + u.x * q.e1 + u.y * q.e2 - origin;
         const float dist = glm::length(d);
         // Light points below the sample's tangent plane light nothing: not a visibility question.
-        if (!(dist > 0.0f) || glm::dot(d, ss.N) <= 0.0f) continue;
+        if (!(dist > 0.0f) || glm::dot(d, N) <= 0.0f) continue;
         ++counted;
-        Ray ray;
         ray.org = origin;
         ray.dir = d / dist;
         ray.tfar = dist * (1.0f - 1e-4f);

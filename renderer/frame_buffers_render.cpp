@@ -9,6 +9,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <memory>
 
@@ -329,6 +330,24 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
 }
 
 }  // namespace
+
+std::string FrameBufferCameraProblem(const Camera& cam) {
+    // Only what a render would show: a lens or an open shutter the buffers would silently drop.
+    char buf[64];
+    if (cam.lensRadius > 0.0f) {
+        std::snprintf(buf, sizeof buf, "%g", cam.lensRadius);
+        return std::string("its camera has a lens (lens_radius ") + buf +
+               ") but frame buffers trace through the lens centre (no defocus blur): set "
+               "lens_radius 0 or render without the screen-space buffers";
+    }
+    if (cam.shutterClose > cam.shutterOpen) {
+        std::snprintf(buf, sizeof buf, "%g", cam.shutterClose - cam.shutterOpen);
+        return std::string("its camera shutter is open for ") + buf +
+               " s but frame buffers are traced at shutter open (no motion blur): close the "
+               "shutter or render without the screen-space buffers";
+    }
+    return "";
+}
 
 RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& options, float prevTime,
                                screen::FrameBuffers* out, TextureSpaceCache* cache) {

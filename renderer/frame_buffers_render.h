@@ -88,6 +88,11 @@ RenderStats RenderFrameBuffers(const RenderScene& scene, const RenderOptions& op
                                float prevTime, screen::FrameBuffers* out,
                                TextureSpaceCache* cache = nullptr);
 
+/// Why frame buffers cannot honour `cam` (they trace every pixel through the lens centre at
+/// shutter open: exact guides for the screen-space stage), e.g. "its camera has a lens
+/// (lens_radius 0.05): ..."; empty when they can (pinhole, closed shutter).
+std::string FrameBufferCameraProblem(const Camera& cam);
+
 /// The screen-space camera of `cam` at scene time `time` for a width x height raster: the pinhole
 /// projection CameraModel traces (lens and shutter ignored).
 screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, int height);

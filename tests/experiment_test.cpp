@@ -91,8 +91,12 @@ INSTANTIATE_TEST_SUITE_P(
                  {"filter_size.png", "filter_size_all21.png", "filter_size_visible21.png"}},
         Expected{"threads", "threads", 6, {"threads.png"}},
         Expected{"lod-bias", "lod_bias", 4, {"lod_bias.png", "lod_bias_3.png"}},
-        Expected{
-            "cpis", "cpis", 7 + 4 + 7, {"cpis_seconds.png", "cpis_rays.png", "cpis_cpis.png"}}),
+        Expected{"cpis", "cpis", 7 + 4 + 7, {"cpis_seconds.png", "cpis_rays.png", "cpis_cpis.png"}},
+        Expected{"blur",
+                 "blur",
+                 2 * (3 + 2 * 2),
+                 {"blur_blur_motion.png", "blur_blur_defocus_blurred.png",
+                  "blur_blur_motion_focus.png"}}),
     [](const ::testing::TestParamInfo<Expected>& i) {
         std::string n = i.param.name;
         for (char& c : n)

@@ -230,6 +230,8 @@ TEST_F(StereoCli, NegativeSeparationInTheSceneAndFrameBuffersExitTwo) {
     ExpectOneLineError(negative + " --stereo", "camera.stereo.eye_separation", dir_ / "b.exr");
     const std::string plain = Scene("plain.json", "");
     ExpectOneLineError(plain + " --eye-separation 0.1", "give --stereo", dir_ / "b.exr");
+    ExpectOneLineError(plain + " --stereo --visibility-filter layered", "--visibility-filter",
+                       dir_ / "b.exr");
     const test::CliRun r =
         test::Texcache("render " + plain + " --stereo --frame-buffers " + (dir_ / "fb").string());
     EXPECT_EQ(r.code, 2) << r.out;

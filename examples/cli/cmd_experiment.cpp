@@ -35,6 +35,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
         {"disocclusion", experiments::Disocclusion},
         {"cpis", experiments::Cpis},
         {"stereo", experiments::Stereo},
+        {"blur", experiments::Blur},
     };
     return m;
 }

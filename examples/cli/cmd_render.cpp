@@ -24,6 +24,7 @@
 #include "renderer/scene_loader.h"
 #include "renderer/stereo.h"
 #include "renderer/texture_space.h"
+#include "renderer/visibility_pass.h"
 #include "texcache/enum_names.h"
 #include "texcache/error.h"
 
@@ -85,6 +86,7 @@ struct RenderArgs {
     bool stereo = false;
     float eyeSeparation = 0.0f, convergence = 0.0f;
     std::string stereoReuse = "neighbour";
+    std::string visibilityFilter = "none";
 };
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
@@ -281,6 +283,8 @@ void CheckDecompositionOptions(const RenderArgs& a, const char* opt, const char*
     if (a.Given("--stats")) throw InputError(opt, "cannot be combined with --stats");
     if (a.Given("--light-sampling"))
         throw InputError(opt, "samples lights as MIS does: drop --light-sampling");
+    if (a.Given("--visibility-filter"))
+        throw InputError(opt, "cannot be combined with --visibility-filter");
 }
 
 /// --light-sampling and its record cache: product sampling needs an environment light and an
@@ -636,6 +640,9 @@ int RunRender(const RenderArgs& a) {
     CheckStereoOptions(a);
     const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
+        if (const std::string why = FrameBufferCameraProblem(scene.camera); !why.empty())
+            throw InputError(a.frameBuffers.empty() ? "--denoise" : "--frame-buffers",
+                             scene.path + ": " + why);
         // Frame buffers are always the path tracer's split, whatever the scene's integrator, and
         // exactly spp samples (no time budget).
         RenderOptions fbo = common;
@@ -655,6 +662,8 @@ int RunRender(const RenderArgs& a) {
     RenderOptions opt = common;
     opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
     opt.aovs = ParseAovs(a.aovs);
+    const VisibilityFilterKind visibility =
+        ParseVisibilityFilter(a.visibilityFilter, "--visibility-filter");
     opt.texture = ParseTextureOptions(a);
     CheckCacheMemory(a, opt.texture);
     ParseLightSamplingOptions(a, scene, &opt);
@@ -666,7 +675,11 @@ int RunRender(const RenderArgs& a) {
         fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
         if (a.overshading) throw InputError("--overshading", "renders one frame: drop --frames");
     }
-    if (a.stereo) return RunStereo(a, scene, opt);
+    if (a.stereo) {
+        if (visibility != VisibilityFilterKind::None)
+            throw InputError("--visibility-filter", "not with --stereo (yet): drop one of them");
+        return RunStereo(a, scene, opt);
+    }
     // Plan and check every output first: a bad or dangerous name fails before anything renders.
     std::vector<OutputPaths> outs;
     if (a.frames.empty()) {
@@ -699,6 +712,7 @@ int RunRender(const RenderArgs& a) {
             RenderOptions& fo = frame.options;
             fo.progress = false;
             RenderResult r = Render(*frame.rs, fo, cache.get());
+            ApplyVisibilityFilter(visibility, *frame.rs, fo, &r.beauty);
             OutputPaths& out = outs[size_t(f - first)];
             AtomicFiles group;
             WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
@@ -733,6 +747,7 @@ int RunRender(const RenderArgs& a) {
     if (opt.texture.enabled) cache = MakeCache(rs, opt.texture);
     const double cacheSeconds = NowSeconds() - tCache;
     RenderResult r = Render(rs, opt, cache.get());
+    const double visibilitySeconds = ApplyVisibilityFilter(visibility, rs, opt, &r.beauty);
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
     // Every output into one group, renamed only once all are complete.
@@ -749,6 +764,7 @@ int RunRender(const RenderArgs& a) {
     std::printf("time: %.3f s render + %.3f s scene build; %.2f Mrays/s (%llu rays)\n",
                 r.stats.seconds, buildSeconds, double(r.stats.TotalRays()) / r.stats.seconds * 1e-6,
                 (unsigned long long)r.stats.TotalRays());
+    if (visibilitySeconds > 0.0) std::printf("visibility filter: %.3f s\n", visibilitySeconds);
     const RenderScene::BuildSeconds b = rs.BuildTimes();
     std::printf(
         "scene build: OpenSubdiv %.3f s, Embree geometry %.3f s, Embree BVH %.3f s, other %.3f s; "
@@ -914,6 +930,10 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--stereo-reuse", args->stereoReuse,
                     "--stereo: what the second eye takes from the first eye's cache: texels "
                     "(those it looks up) or neighbour (also a cached texel beside a missing one)")
+        ->capture_default_str();
+    cmd->add_option("--visibility-filter", args->visibilityFilter,
+                    "Primary-visibility filter after shading, for the noise of defocus and "
+                    "motion blur: none or layered (filters/visibility_filter.h)")
         ->capture_default_str();
     cmd->callback([args, cmd, &exitCode] {
         for (const CLI::Option* o : cmd->get_options())

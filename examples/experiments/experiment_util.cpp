@@ -242,4 +242,27 @@ double InterpolateLogLog(const std::vector<double>& xs, const std::vector<double
     return std::exp(ly0 + t * (ly1 - ly0));
 }
 
+Image SideBySide(const std::vector<const Image*>& images, Rect r, int scale) {
+    constexpr int kGap = 2;
+    const int pw = r.w * scale, ph = r.h * scale;
+    const int n = int(images.size());
+    Image out(n * pw + (n - 1) * kGap, ph, 3, 1.0f);
+    for (int i = 0; i < n; ++i)
+        for (int y = 0; y < ph; ++y)
+            for (int x = 0; x < pw; ++x) {
+                const float* src = images[i]->At(r.x + x / scale, r.y + y / scale);
+                float* dst = out.At(i * (pw + kGap) + x, y);
+                for (int k = 0; k < 3; ++k) dst[k] = src[k];
+            }
+    return out;
+}
+
+Image Crop(const Image& img, Rect r) {
+    Image out(r.w, r.h, img.channels);
+    for (int y = 0; y < r.h; ++y)
+        for (int x = 0; x < r.w; ++x)
+            for (int k = 0; k < img.channels; ++k) out.At(x, y)[k] = img.At(r.x + x, r.y + y)[k];
+    return out;
+}
+
 }  // namespace texcache::experiments

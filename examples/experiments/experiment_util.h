@@ -114,6 +114,16 @@ void Say(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 double InterpolateLogLog(const std::vector<double>& xs, const std::vector<double>& ys, double x,
                          bool* extrapolated);
 
+/// A pixel rectangle of an image.
+struct Rect {
+    int x = 0, y = 0, w = 0, h = 0;
+};
+/// The crop `r` of each image, magnified `scale` times (nearest neighbour: pixels stay visible),
+/// side by side with a white 2-pixel gap.
+Image SideBySide(const std::vector<const Image*>& images, Rect r, int scale);
+/// The crop `r` of an image.
+Image Crop(const Image& img, Rect r);
+
 // The experiments (each returns a process exit code).
 int SpeedVsError(const Setup& s);
 int CacheSize(const Setup& s);
@@ -124,5 +134,6 @@ int Temporal(const Setup& s);
 int Disocclusion(const Setup& s);
 int Cpis(const Setup& s);
 int Stereo(const Setup& s);
+int Blur(const Setup& s);
 
 }  // namespace texcache::experiments

@@ -139,10 +139,6 @@ void AddRows(Table* t, const std::string& scene, const std::string& method,
             .Add(cell(v.part[2], f));
 }
 
-struct Rect {
-    int x = 0, y = 0, w = 0, h = 0;
-};
-
 /// The w x h window where |a - b| (luminance) sums highest: where two methods disagree most.
 Rect MostDifferent(const Image& a, const Image& b, int w, int h) {
     const std::vector<float> ya = Luminance(a), yb = Luminance(b);
@@ -166,23 +162,6 @@ Rect MostDifferent(const Image& a, const Image& b, int w, int h) {
             if (s > bestSum) bestSum = s, best = {x, y, w, h};
         }
     return best;
-}
-
-/// The crop `r` of each image, magnified `scale` times (nearest neighbour: pixels stay visible),
-/// side by side with a white 2-pixel gap.
-Image SideBySide(const std::vector<const Image*>& images, Rect r, int scale) {
-    constexpr int kGap = 2;
-    const int pw = r.w * scale, ph = r.h * scale;
-    const int n = int(images.size());
-    Image out(n * pw + (n - 1) * kGap, ph, 3, 1.0f);
-    for (int i = 0; i < n; ++i)
-        for (int y = 0; y < ph; ++y)
-            for (int x = 0; x < pw; ++x) {
-                const float* src = images[i]->At(r.x + x / scale, r.y + y / scale);
-                float* dst = out.At(i * (pw + kGap) + x, y);
-                for (int k = 0; k < 3; ++k) dst[k] = src[k];
-            }
-    return out;
 }
 
 std::vector<std::string> SelectedScenes(const Setup& s) {
