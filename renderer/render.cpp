@@ -65,6 +65,7 @@ template <typename LiFn>
 glm::vec3 SplitAtHit(const Context& c, int x, int y, int s, Rng& rng, LiFn&& li) {
     const int n = std::max(c.opt.hitSamples, 1);
     glm::vec3 sum = li(rng);
+    if (n == 1) return sum;  // the common case: no division on every camera sample
     for (int h = 1; h < n; ++h) {
         Rng split(MixBits(PixelSeed(c.opt.seed, x, y, c.opt.width) ^ (uint64_t(h) << 40)),
                   uint64_t(s));
