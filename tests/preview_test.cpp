@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <string>
 
@@ -507,21 +508,33 @@ TEST(Preview, ShowsACagePastEmbreesLimits) {
     fs::remove_all(dir);
 }
 
+// One 16x16 frame of the preview's renderer with settings `s` (size and frame count set here)
+// on a prism of `sides` sides seen from (0, 1.5, 3); *framed says whether the frame came (if not,
+// Error() says why).
+std::unique_ptr<texcache::preview::ProgressiveRenderer> PrismFrame(
+    int sides, texcache::preview::PreviewSettings s, bool* framed) {
+    using namespace texcache::preview;
+    texcache::Scene scene = texcache::test::OneObjectScene(texcache::test::PrismCage(sides));
+    scene.camera.pose.keys = {texcache::test::LookAt({0.0f, 1.5f, 3.0f}, {0.0f, 0.0f, 0.0f})};
+    s.width = 16, s.height = 16;
+    s.maxFrames = 1;
+    OrbitCamera cam;
+    cam.FromScene(scene, 0.0f);
+    auto r = std::make_unique<ProgressiveRenderer>(std::move(scene), s, cam);
+    *framed = r->WaitForFrame(r->Post(s, cam));
+    return r;
+}
+
 // The panel's scene statistics (FrameStats, what the panel prints through
 // RenderScene::Describe): Ptex faces and the faces past Embree's limits of the 16-gon prism.
 TEST(Preview, StatsCountTheFacesPastEmbreesLimits) {
     using namespace texcache::preview;
-    texcache::Scene scene = texcache::test::OneObjectScene(texcache::test::PrismCage(16));
-    scene.camera.pose.keys = {texcache::test::LookAt({0.0f, 1.5f, 3.0f}, {0.0f, 0.0f, 0.0f})};
     PreviewSettings s;
-    s.width = 16, s.height = 16;
-    s.maxFrames = 1;
     s.integrator = texcache::IntegratorKind::AO;
-    OrbitCamera cam;
-    cam.FromScene(scene, 0.0f);
-    ProgressiveRenderer r(std::move(scene), s, cam);
-    ASSERT_TRUE(r.WaitForFrame(r.Post(s, cam))) << r.Error();
-    const FrameStats st = r.Stats();
+    bool framed = false;
+    const auto r = PrismFrame(16, s, &framed);
+    ASSERT_TRUE(framed) << r->Error();
+    const FrameStats st = r->Stats();
     EXPECT_EQ(st.ptexFaces, 48u);
     EXPECT_EQ(st.tessellation.beyondEmbree, 2u);
     EXPECT_EQ(st.tessellation.meshes, 1);
@@ -536,18 +549,13 @@ TEST(Preview, StatsCountTheFacesPastEmbreesLimits) {
 // both eyes' (two eyes' camera rays: lookups of 2 x 16 x 16 pixels).
 TEST(Preview, StereoShowsBothEyesSideBySide) {
     using namespace texcache::preview;
-    texcache::Scene scene = texcache::test::OneObjectScene(texcache::test::PrismCage(6));
-    scene.camera.pose.keys = {texcache::test::LookAt({0.0f, 1.5f, 3.0f}, {0.0f, 0.0f, 0.0f})};
     PreviewSettings s;
-    s.width = 16, s.height = 16;
-    s.maxFrames = 1;
     s.stereo = true;
     s.sampleCacheMb = s.texelCacheMb = 4.0f;
-    OrbitCamera cam;
-    cam.FromScene(scene, 0.0f);
-    ProgressiveRenderer r(std::move(scene), s, cam);
-    ASSERT_TRUE(r.WaitForFrame(r.Post(s, cam))) << r.Error();
-    const texcache::Image img = r.CopyImage();
+    bool framed = false;
+    const auto r = PrismFrame(6, s, &framed);
+    ASSERT_TRUE(framed) << r->Error();
+    const texcache::Image img = r->CopyImage();
     ASSERT_EQ(img.width, 32);
     ASSERT_EQ(img.height, 16);
     for (int half = 0; half < 2; ++half) {
@@ -556,8 +564,8 @@ TEST(Preview, StereoShowsBothEyesSideBySide) {
             for (int x = 0; x < 16; ++x) bright += img.At(16 * half + x, y)[1] > 0.3f;
         EXPECT_GT(bright, 16 * 16 / 20) << "half " << half;
     }
-    EXPECT_EQ(r.Stats().lookups % 2, 0u);
-    EXPECT_GE(r.Stats().lookups, 2u * 16 * 16 / 20);
+    EXPECT_EQ(r->Stats().lookups % 2, 0u);
+    EXPECT_GE(r->Stats().lookups, 2u * 16 * 16 / 20);
 }
 
 TEST(Preview, WithoutADisplayFailsCleanly) {
