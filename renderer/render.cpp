@@ -20,6 +20,7 @@
 #include "renderer/cached_shading.h"
 #include "renderer/path_tracer.h"
 #include "renderer/progress.h"
+#include "texcache/error.h"
 
 namespace texcache {
 
@@ -430,20 +431,20 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
               std::chrono::steady_clock::time_point start) {
     using Clock = std::chrono::steady_clock;
     const RenderOptions& opt = c.opt;
-    const int W = opt.width, H = opt.height;
+    const int W = opt.width, y0 = opt.rowBegin, y1 = opt.rowEnd > 0 ? opt.rowEnd : opt.height;
     auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
     // Per-hit AO traces a tile's camera rays first, then its AO rays (see AoTileTwoPhase).
     const bool twoPhaseAo = opt.integrator == IntegratorKind::AO && sums.aovs.empty();
     const int sppCap = std::max(opt.spp, 1);
     std::atomic<uint64_t> pixelSamplesDone{0};
-    const double totalWork = double(W) * double(H) * (sppCap - opt.firstSample);
+    const double totalWork = double(W) * double(y1 - y0) * (sppCap - opt.firstSample);
     const Progress progress(opt.progress, [&] {
         if (opt.seconds > 0.0f)
             return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
         return double(pixelSamplesDone.load()) / totalWork;
     });
     auto forTiles = [&](auto&& tile) {
-        tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
+        tbb::parallel_for(tbb::blocked_range2d<int>(y0, y1, 8, 0, W, 8),
                           [&](const tbb::blocked_range2d<int>& r) {
                               // Denormals off in every worker: Embree wants it and it saves
                               // stalls in shading.
@@ -468,11 +469,11 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     PassTexels passTexels;
     while (done < sppCap) {
         const int s0 = done, s1 = std::min(sppCap, done + passSpp);
-        const size_t passSamples = size_t(W) * size_t(H) * size_t(s1 - s0);
+        const size_t passSamples = size_t(W) * size_t(opt.height) * size_t(s1 - s0);
         const bool fromPrepass = opt.visibilityPrepass != VisibilityPrepass::Only && prepassAo &&
                                  passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
         if (fromPrepass) {
-            if (passSamples > passTexels.key.size()) passTexels.Resize(W, H, s1 - s0);
+            if (passSamples > passTexels.key.size()) passTexels.Resize(W, opt.height, s1 - s0);
             passTexels.s0 = s0, passTexels.s1 = s1;
         }
         const auto passStart = Clock::now();
@@ -561,6 +562,12 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     using Clock = std::chrono::steady_clock;
     const auto start = Clock::now();
     const std::clock_t cpuStart = std::clock();
+    const int rowEnd = opt.rowEnd > 0 ? opt.rowEnd : opt.height;
+    if (opt.rowBegin < 0 || opt.rowEnd < 0 || opt.rowBegin >= rowEnd || rowEnd > opt.height)
+        throw InputError("render options", "rows [" + std::to_string(opt.rowBegin) + ", " +
+                                               std::to_string(opt.rowEnd) +
+                                               ") are not a band of an image of " +
+                                               std::to_string(opt.height) + " rows");
     Context ctx(rs, opt);
     FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::Allowed);
     // Cached product sampling: the records of this frame (none unless asked for).

@@ -152,6 +152,9 @@ struct RenderOptions {
     /// whole render), without beginning a progressive pass itself: a caller interleaving
     /// renders that share a cache pass by pass (stereo) begins the passes.
     int firstSample = 0;
+    /// Renders only rows [rowBegin, rowEnd) of the image (rowEnd 0: to the last row); the other
+    /// rows stay black. Stereo takes turns band by band (renderer/stereo.h).
+    int rowBegin = 0, rowEnd = 0;
     VisibilityPrepass visibilityPrepass = VisibilityPrepass::Own;
     /// When set, filled with width x height PixelCacheCounts of this frame's lookups (all zero
     /// without texture-space shading); null costs one predictable branch per lookup (the

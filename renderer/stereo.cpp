@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "renderer/stereo.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <ctime>
@@ -39,6 +40,25 @@ void AddSamples(RenderResult* eye, RenderResult&& part) {
         eye->beauty.data[i] += (part.beauty.data[i] - eye->beauty.data[i]) * wNew;
     s.sppDone += part.stats.sppDone;
     AddCost(&s, part.stats);
+}
+
+/// Pastes rows [y0, y1) of a band's render (beauty and AOVs) into `into`, the render of the same
+/// samples of the other rows so far (empty before the first band), and adds the band's cost.
+void PasteRows(RenderResult* into, RenderResult&& band, int y0, int y1) {
+    if (into->beauty.data.empty()) {
+        *into = std::move(band);
+        return;
+    }
+    auto paste = [&](Image& dst, const Image& src) {
+        const size_t row = size_t(src.width) * size_t(src.channels);
+        std::copy(src.data.begin() + ptrdiff_t(row * size_t(y0)),
+                  src.data.begin() + ptrdiff_t(row * size_t(y1)),
+                  dst.data.begin() + ptrdiff_t(row * size_t(y0)));
+    };
+    paste(into->beauty, band.beauty);
+    for (size_t l = 0; l < into->aovs.size() && l < band.aovs.size(); ++l)
+        paste(into->aovs[l].image, band.aovs[l].image);
+    AddCost(&into->stats, band.stats);
 }
 
 /// Whether renders with these options restrict footprints to visible texels (as FrameCache).
@@ -85,7 +105,7 @@ void CheckStereoRig(const StereoRig& rig, const std::string& where) {
 }
 
 StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const StereoRig& rig,
-                          TextureSpaceCache* cache, StereoReuse reuse) {
+                          TextureSpaceCache* cache, StereoReuse reuse, StereoOrder order) {
     using Clock = std::chrono::steady_clock;
     CheckStereoRig(rig, "stereo rig");
     std::unique_ptr<TextureSpaceCache> own;
@@ -110,15 +130,24 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
                                  (progressive || opt.seconds <= 0.0f);
     if (shareVisibility) cache->Visibility(opt.width, opt.height);  // starts empty
 
+    // Bands (see the note at the top): the eyes take turns band of rows by band of rows, so the
+    // second eye finds the first eye's samples of a band before later bands evict them. Not
+    // with visible footprints (each eye's footprints need its whole frame's visible texels
+    // marked first) nor for a single pass under a time budget (the left eye's time sets the
+    // sample count).
+    const bool banded = order == StereoOrder::Bands && cache && !VisibleFootprints(opt, *cache) &&
+                        !shareVisibility && (progressive || opt.seconds <= 0.0f);
+
     StereoResult out;
     RenderResult* eyes[2] = {&out.left, &out.right};
-    // Samples [s0, s1) of one eye (0 left, 1 right); see the note at the top.
-    auto render = [&](int eye, int s0, int s1, float seconds,
-                      VisibilityPrepass prepass = VisibilityPrepass::Keep) {
+    // Samples [s0, s1) of rows [y0, y1) (y1 0: to the last row) of one eye (0 left, 1 right).
+    auto renderRows = [&](int eye, int s0, int s1, float seconds, VisibilityPrepass prepass, int y0,
+                          int y1) {
         RenderOptions o = opt;
         o.firstSample = s0;
         o.spp = s1;
         o.seconds = seconds;
+        o.rowBegin = y0, o.rowEnd = y1;
         o.eyeOffset = (eye == 0 ? -0.5f : 0.5f) * rig.eyeSeparation;
         o.eyeConvergence = rig.convergence;
         o.visibilityPrepass = shareVisibility ? prepass : VisibilityPrepass::Own;
@@ -132,14 +161,46 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
                 if (c) c->ReuseNeighbourTexels(false);
             }
         } guard(eye == 1 && reuse == StereoReuse::Neighbour ? cache : nullptr);
-        RenderResult r = Render(rs, o, cache);
-        if (prepass == VisibilityPrepass::Only) return AddCost(&eyes[eye]->stats, r.stats);
+        return Render(rs, o, cache);
+    };
+    // Adds a render of samples [s0, s1) of every row to an eye.
+    auto add = [&](int eye, RenderResult&& r) {
         if (eyes[eye]->stats.sppDone > 0) r.aovs.clear();
         AddSamples(eyes[eye], std::move(r));
+    };
+    auto render = [&](int eye, int s0, int s1, float seconds,
+                      VisibilityPrepass prepass = VisibilityPrepass::Keep) {
+        RenderResult r = renderRows(eye, s0, s1, seconds, prepass, 0, 0);
+        if (prepass == VisibilityPrepass::Only) return AddCost(&eyes[eye]->stats, r.stats);
+        add(eye, std::move(r));
+    };
+    // Band by band. A band holds about an eighth of the sample cache's slots of the left eye's
+    // shading (at its rate over the bands so far): inserting n samples into m direct-mapped slots
+    // evicts about n^2 / 2m of them, 1/16 of the band's own at n = m / 8.
+    auto pairBands = [&](int s0, int s1) {
+        const int H = opt.height;
+        const double bandSamples = double(cache->SampleSlots()) / 16.0;
+        RenderResult part[2];
+        for (int y = 0, rows = std::min(H, 16); y < H;) {
+            const int y1 = std::min(H, y + rows);
+            uint64_t leftShaded = 0;
+            for (int eye : {0, 1}) {
+                RenderResult r = renderRows(eye, s0, s1, 0.0f, VisibilityPrepass::Own, y, y1);
+                if (eye == 0) leftShaded = r.stats.cache.samplesShaded;
+                PasteRows(&part[eye], std::move(r), y, y1);
+            }
+            // The next band at this band's rate, growing at most twofold: the rate changes down
+            // the frame (sky above, the object below).
+            const double perRow = std::max(double(leftShaded) / double(y1 - y), 1.0);
+            rows = std::clamp(int(std::min(bandSamples / perRow, 2.0 * rows)) / 8 * 8, 8, H);
+            y = y1;
+        }
+        for (int eye : {0, 1}) add(eye, std::move(part[eye]));
     };
     // Visible footprints: the right eye's texels are marked first (at its cost), so that the
     // left eye's footprints also shade the samples the right eye will look up.
     auto pair = [&](int s0, int s1, float leftSeconds) {
+        if (banded) return pairBands(s0, s1);
         if (shareVisibility) render(1, s0, s1, 0.0f, VisibilityPrepass::Only);
         const int before = out.left.stats.sppDone;
         render(0, s0, s1, leftSeconds);

@@ -16,6 +16,18 @@
 //     in the cache. Each eye renders its camera with the samples and random streams of a mono
 //     render (RenderOptions::firstSample); with zero separation the right eye equals the left
 //     and shades nothing.
+//   * Bands. The second eye reuses the first eye's samples only while they are still in the
+//     sample cache; when the left eye rendered its whole frame first, its later tiles evicted
+//     much of what the right eye then looked up (sunlit, path traced, 320x180: 24% of the left
+//     eye's samples shaded again by the right eye with the default 64 MiB, 8.6% with 512 MiB,
+//     and more at 640x360: its working set is four times larger). So the eyes take turns band
+//     of rows by band of rows (RenderOptions::rowBegin/rowEnd): the left eye's band, then the
+//     same rows of the right eye (the rig has no vertical parallax, so they see the same
+//     surfaces). A band holds about an eighth of the sample cache's slots worth of shading,
+//     sized from the left eye's rate over the bands so far: the reuse no longer depends on the
+//     cache size or the resolution, and a cache that holds the whole frame gets one band (the
+//     whole-frame order). Visible footprints (texture-space AO by default) keep the whole-frame
+//     order: each eye's footprints need its whole frame's visible texels marked first.
 //   * What the second eye misses. Disocclusions and the strip beside the frame are few; most
 //     misses are texels of surfaces both eyes see. eq. 1 makes a texel at most a pixel across
 //     the footprint's narrow axis (less along the long one at grazing angles), so a few jittered
@@ -71,6 +83,12 @@ void CheckStereoRig(const StereoRig& rig, const std::string& where);
 ///              filters at the price of a one-texel blur of the filtered shading.
 enum class StereoReuse { Texels, Neighbour };
 
+/// The order in which the eyes render (see Bands in the note at the top):
+///   Bands   band of rows by band of rows (the default where it applies);
+///   Frames  the left eye's whole frame, then the right eye's (the order of visible footprints
+///           and single-pass time budgets; kept selectable for experiments and tests).
+enum class StereoOrder { Bands, Frames };
+
 /// Both eyes of a stereo render: images, AOVs and each eye's own statistics.
 struct StereoResult {
     RenderResult left, right;
@@ -86,6 +104,7 @@ Image SideBySide(const Image& left, const Image& right);
 /// one made for the pair when null and options.texture.enabled). See the note at the top.
 StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& options, const StereoRig& rig,
                           TextureSpaceCache* cache = nullptr,
-                          StereoReuse reuse = StereoReuse::Neighbour);
+                          StereoReuse reuse = StereoReuse::Neighbour,
+                          StereoOrder order = StereoOrder::Bands);
 
 }  // namespace texcache

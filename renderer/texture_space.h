@@ -156,6 +156,7 @@ public:
     }
     size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
     size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
+    size_t SampleSlots() const { return cache_.SampleSlots(); }
 
 private:
     void AssignFilters(const Scene& scene);

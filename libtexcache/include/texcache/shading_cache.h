@@ -383,6 +383,8 @@ public:
     }
     size_t SampleCacheBytes() const { return samples_ ? samples_->BytesUsed() : 0; }
     size_t TexelCacheBytes() const { return texels_ ? texels_->BytesUsed() : 0; }
+    /// Samples the sample cache can hold at once (SIZE_MAX in reference mode: unbounded).
+    size_t SampleSlots() const { return samples_ ? samples_->NumSlots() : SIZE_MAX; }
 
 private:
     uint64_t Hash(const TexelKey& k) const { return internal::TexelSlotHash(k); }
