@@ -150,6 +150,55 @@ private:
     glm::mat4 toObject_{1.0f};
 };
 
+/// The n cosine-distributed rays of a cache sample, in order: each with its shutter time and
+/// posed (ShutterMotion), drawn from the sample's own random stream.
+class CosineRays {
+public:
+    CosineRays(const Context& c, const SampleRequest& r, const SurfaceSample& ss, glm::vec3 origin,
+               int n)
+        : rng_(SampleRng(c, r)),
+          frame_(Frame::FromZ(ss.N)),
+          motion_(c, c.tsc->ObjectOfMesh(r.mesh)),
+          origin_(origin),
+          normal_(ss.N),
+          n_(n) {}
+    /// Ray i (in order), and the sample's normal at its time in `N`.
+    Ray Next(int i, glm::vec3* N) {
+        const float time = motion_.Time(rng_, i, n_);
+        Ray ray;
+        ray.dir = frame_.FromLocal(SampleCosineHemisphere(rng_.Next2D()));
+        ray.org = origin_;
+        *N = normal_;
+        motion_.Pose(time, &ray, N);
+        return ray;
+    }
+    Rng& rng() { return rng_; }
+
+private:
+    Rng rng_;
+    Frame frame_;
+    ShutterMotion motion_;
+    glm::vec3 origin_, normal_;
+    int n_;
+};
+
+/// The mean of a sample's ray values and the variance of that mean (luminance).
+struct RayMean {
+    glm::vec3 sum{0.0f};
+    float sum2 = 0.0f;
+    void Add(glm::vec3 L) {
+        sum += L;
+        const float y = Luminance(L);
+        sum2 += y * y;
+    }
+    ShadedSample Sample(glm::vec3 normal, int n) const {
+        const glm::vec3 mean = sum / float(n);
+        const float ym = Luminance(mean);
+        return {mean, normal,
+                std::max(0.0f, sum2 / float(n) - ym * ym) / float(std::max(n - 1, 1))};
+    }
+};
+
 /// Shades a cache sample with n cosine-distributed rays from its point; `trace(ray, rng, N)` gives
 /// each ray's value. Returns the mean, the sample's normal and the variance of the mean
 /// (luminance). Unreachable samples (holes, NaN surface) come back NaN: filters skip them.
@@ -159,36 +208,44 @@ ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, Ra
     SurfaceSample ss;
     glm::vec3 origin;
     if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
-    Rng rng = SampleRng(c, r);
-    const Frame frame = Frame::FromZ(ss.N);
-    const ShutterMotion motion(c, c.tsc->ObjectOfMesh(r.mesh));
-    glm::vec3 sum(0.0f);
-    float sum2 = 0.0f;
+    CosineRays gen(c, r, ss, origin, n);
+    RayMean mean;
     for (int i = 0; i < n; ++i) {
-        const float time = motion.Time(rng, i, n);
-        Ray ray;
-        ray.dir = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
-        ray.org = origin;
-        glm::vec3 N = ss.N;
-        motion.Pose(time, &ray, &N);
-        const glm::vec3 L = trace(ray, rng, N);
-        sum += L;
-        const float y = Luminance(L);
-        sum2 += y * y;
+        glm::vec3 N;
+        Ray ray = gen.Next(i, &N);
+        mean.Add(trace(ray, gen.rng(), N));
     }
-    const glm::vec3 mean = sum / float(n);
-    const float ym = Luminance(mean);
-    return {mean, ss.N, std::max(0.0f, sum2 / float(n) - ym * ym) / float(std::max(n - 1, 1))};
+    return mean.Sample(ss.N, n);
 }
 
 }  // namespace
 
 ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& rays) {
-    return ShadeCosineRays(c, r, c.opt.aoSamples, rays, [&](Ray& ray, Rng&, glm::vec3) {
-        ray.tfar = c.opt.aoDistance;
-        ++rays.shadow;
-        return glm::vec3(c.rs.Occluded(ray) ? 0.0f : 1.0f);
-    });
+    SurfaceSample ss;
+    glm::vec3 origin;
+    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
+    // The rays leave one point: traced as packets of up to 16 (RenderScene::Occluded16), with
+    // the random numbers and in the order of one ray at a time (the same sample).
+    const int n = c.opt.aoSamples;
+    CosineRays gen(c, r, ss, origin, n);
+    RayMean mean;
+    Ray batch[16];
+    bool blocked[16];
+    int queued = 0;
+    auto flush = [&] {
+        c.rs.Occluded16(batch, queued, blocked);
+        for (int k = 0; k < queued; ++k) mean.Add(glm::vec3(blocked[k] ? 0.0f : 1.0f));
+        rays.shadow += uint64_t(queued);
+        queued = 0;
+    };
+    for (int i = 0; i < n; ++i) {
+        glm::vec3 N;
+        batch[queued] = gen.Next(i, &N);
+        batch[queued++].tfar = c.opt.aoDistance;
+        if (queued == 16) flush();
+    }
+    flush();
+    return mean.Sample(ss.N, n);
 }
 
 /// Diffuse light at a cache sample, as (1/pi) * integral of L cos (the hit multiplies it by its

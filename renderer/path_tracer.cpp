@@ -45,19 +45,29 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
 glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
                RayCounts& rays) {
     const Frame frame = Frame::FromZ(si.N);
-    int open = 0;
+    // The rays leave one point: traced as packets of up to 16 (RenderScene::Occluded16).
+    Ray batch[16];
+    bool blocked[16];
+    int open = 0, queued = 0;
+    auto flush = [&] {
+        c.rs.Occluded16(batch, queued, blocked);
+        for (int k = 0; k < queued; ++k) open += !blocked[k];
+        rays.shadow += uint64_t(queued);
+        queued = 0;
+    };
     for (int i = 0; i < c.opt.aoSamples; ++i) {
         const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
         // Directions below the tessellated surface are blocked by it.
         if (glm::dot(wi, si.Ng) <= 0.0f) continue;
-        Ray r;
+        Ray& r = batch[queued++];
+        r = Ray{};
         r.org = OffsetOrigin(si.P, si.Ng, wi);
         r.dir = wi;
         r.tfar = c.opt.aoDistance;
         r.time = ray.time;
-        ++rays.shadow;
-        if (!c.rs.Occluded(r)) ++open;
+        if (queued == 16) flush();
     }
+    flush();
     return glm::vec3(float(open) / float(c.opt.aoSamples));
 }
 

@@ -694,6 +694,40 @@ bool RenderScene::Occluded(const Ray& ray) const {
 }
 
 namespace {
+/// rtcOccluded4/8/16 (`occludedN`) on rays[0, n), n <= N; idle lanes are masked off.
+template <int N, typename RayN, typename OccludedN>
+void OccludedPacket(RTCScene top, const Ray* rays, int n, bool* occluded, OccludedN occludedN) {
+    alignas(64) int valid[N];
+    alignas(64) RayN r;
+    for (int i = 0; i < N; ++i) {
+        valid[i] = i < n ? -1 : 0;
+        const Ray& q = rays[i < n ? i : 0];
+        r.org_x[i] = q.org.x, r.org_y[i] = q.org.y, r.org_z[i] = q.org.z;
+        r.dir_x[i] = q.dir.x, r.dir_y[i] = q.dir.y, r.dir_z[i] = q.dir.z;
+        r.tnear[i] = q.tnear, r.tfar[i] = q.tfar, r.time[i] = q.time;
+        r.mask[i] = 0xFFFFFFFFu, r.id[i] = unsigned(i), r.flags[i] = 0;
+    }
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    occludedN(valid, top, &ctx, &r);
+    for (int i = 0; i < n; ++i) occluded[i] = r.tfar[i] < 0.0f;
+}
+}  // namespace
+
+void RenderScene::Occluded16(const Ray* rays, int n, bool* occluded) const {
+    if (n <= 0) return;
+    if (n == 1) {
+        occluded[0] = Occluded(rays[0]);
+    } else if (n <= 4) {
+        OccludedPacket<4, RTCRay4>(impl_->top, rays, n, occluded, rtcOccluded4);
+    } else if (n <= 8) {
+        OccludedPacket<8, RTCRay8>(impl_->top, rays, n, occluded, rtcOccluded8);
+    } else {
+        OccludedPacket<16, RTCRay16>(impl_->top, rays, std::min(n, 16), occluded, rtcOccluded16);
+    }
+}
+
+namespace {
 // Least-squares (a, b) with a*X + b*Y ~= D (the normal equations of a 3x2 system).
 void SolveTangent(glm::vec3 X, glm::vec3 Y, glm::vec3 D, float* a, float* b) {
     const float xx = glm::dot(X, X), xy = glm::dot(X, Y), yy = glm::dot(Y, Y);

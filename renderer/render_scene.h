@@ -87,6 +87,10 @@ public:
     void Intersect16(const Ray* rays, int n, Hit* hits, bool* found) const;
     /// True when anything blocks the segment (tnear, tfar) along the ray.
     bool Occluded(const Ray& ray) const;
+    /// Occluded() for up to 16 rays at once (`occluded[i]` for rays[i]), through Embree's packet
+    /// traversal (rtcOccluded4/8/16, the narrowest that holds n): for rays that leave one point,
+    /// such as a shading point's AO rays, which then share the BVH nodes near it.
+    void Occluded16(const Ray* rays, int n, bool* occluded) const;
     /// Closest hit along a world-space ray against one object only (other objects are ignored);
     /// false on a miss.
     bool IntersectObject(int object, const Ray& ray, Hit* hit) const;
