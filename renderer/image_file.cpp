@@ -2,6 +2,7 @@
 #include "renderer/image_file.h"
 
 #include <dlfcn.h>
+#include <png.h>
 
 #include <algorithm>
 #include <cstring>
@@ -124,6 +125,51 @@ void WriteExr(const std::string& path, const ImageFile& f) {
     out.writePixels(f.height);
 }
 
+/// 8-bit grey or RGB(A) PNG with libpng. Every render writes one beside its EXR by default:
+/// through OpenImageIO that cost each process ~0.3 s of CPU loading its libraries (a 64x36
+/// render: 0.33 s of CPU with its PNG, 0.04 s without), libpng costs nothing measurable.
+void WritePng(const std::string& path, const ImageFile& f) {
+    const int colorType = f.channels == 1   ? PNG_COLOR_TYPE_GRAY
+                          : f.channels == 2 ? PNG_COLOR_TYPE_GRAY_ALPHA
+                          : f.channels == 3 ? PNG_COLOR_TYPE_RGB
+                          : f.channels == 4 ? PNG_COLOR_TYPE_RGB_ALPHA
+                                            : -1;
+    if (colorType < 0 || f.bytes.size() != size_t(f.width) * size_t(f.height) * size_t(f.channels))
+        throw std::runtime_error("PNG: " + std::to_string(f.channels) +
+                                 " channels of 8-bit pixels cannot be written");
+    std::FILE* file = std::fopen(path.c_str(), "wb");
+    if (!file) throw std::runtime_error("cannot open " + path + " for writing");
+    // libpng reports errors through longjmp; the message is kept and thrown after cleanup.
+    std::string error;
+    png_structp png = png_create_write_struct(
+        PNG_LIBPNG_VER_STRING, &error,
+        [](png_structp p, png_const_charp msg) {
+            *static_cast<std::string*>(png_get_error_ptr(p)) = msg;
+            png_longjmp(p, 1);
+        },
+        nullptr);
+    png_infop info = png ? png_create_info_struct(png) : nullptr;
+    std::vector<png_bytep> rows(size_t(f.height));
+    if (png && info && !setjmp(png_jmpbuf(png))) {
+        png_init_io(png, file);
+        png_set_IHDR(png, info, png_uint_32(f.width), png_uint_32(f.height), 8, colorType,
+                     PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+        if (f.colorSpace == "sRGB")
+            png_set_sRGB_gAMA_and_cHRM(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
+        for (int y = 0; y < f.height; ++y)
+            rows[size_t(y)] = const_cast<png_bytep>(f.bytes.data()) +
+                              size_t(y) * size_t(f.width) * size_t(f.channels);
+        png_set_rows(png, info, rows.data());
+        png_write_png(png, info, PNG_TRANSFORM_IDENTITY, nullptr);
+    } else if (error.empty()) {
+        error = "out of memory";
+    }
+    png_destroy_write_struct(png ? &png : nullptr, info ? &info : nullptr);
+    const bool closed = std::fclose(file) == 0;
+    if (!error.empty()) throw std::runtime_error("PNG: " + error);
+    if (!closed) throw std::runtime_error("cannot finish writing " + path);
+}
+
 }  // namespace
 
 void WriteImageFile(const std::string& path, const char* format, const ImageFile& file) {
@@ -135,6 +181,7 @@ void WriteImageFile(const std::string& path, const char* format, const ImageFile
         }
         return;
     }
+    if (std::strcmp(format, "png") == 0 && !file.bytes.empty()) return WritePng(path, file);
     std::string error;
     if (!Module().write(path, format, file, &error)) throw std::runtime_error(error);
 }

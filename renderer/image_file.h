@@ -8,9 +8,10 @@
 // against 0.00 s for the cache library's tests, which link no OpenImageIO). So:
 //   - EXR, the renderer's own format (every render's output, the environment maps, the frame
 //     buffers), is read and written with OpenEXR directly (a handful of libraries);
-//   - every other format goes through OpenImageIO in the module texcache_oiio
-//     (image_file_oiio.cpp), opened with dlopen by the first such read or write.
-// A render that writes only EXR never loads OpenImageIO; one that writes a PNG loads it then.
+//   - 8-bit PNG, the picture beside every render's EXR, is written with libpng;
+//   - every other read or write (PNG and other textures read, HDR) goes through OpenImageIO in
+//     the module texcache_oiio (image_file_oiio.cpp), opened with dlopen on first use.
+// A render never loads OpenImageIO unless its scene reads such a texture.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -38,9 +39,10 @@ struct ImageFile {
     std::vector<ImageAttribute> attributes;
 };
 
-/// Writes `file` to `path` as `format` ("openexr": zip-compressed float EXR; "png", "hdr": through
-/// the module). Throws std::runtime_error with the library's message; a partial file may be left
-/// behind (callers write temporaries).
+/// Writes `file` to `path` as `format` ("openexr": zip-compressed float EXR; "png": 8-bit
+/// `bytes` with libpng, float pixels through the module; "hdr": through the module). Throws
+/// std::runtime_error with the library's message; a partial file may be left behind (callers write
+/// temporaries).
 void WriteImageFile(const std::string& path, const char* format, const ImageFile& file);
 
 /// What a file's header says.

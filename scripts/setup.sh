@@ -7,7 +7,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${BUILD_DIR:-$root/build}"
 
 pkgs=(build-essential cmake pkg-config
-      libembree-dev libosd-dev libopenimageio-dev libopenexr-dev libglm-dev libtbb-dev
+      libembree-dev libosd-dev libopenimageio-dev libopenexr-dev libpng-dev libglm-dev libtbb-dev
       libeigen3-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev gnuplot-nox
       libglfw3-dev libimgui-dev xvfb xauth libgl1-mesa-dri
       clang-format    # scripts/check_format.sh

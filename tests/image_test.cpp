@@ -153,6 +153,20 @@ TEST(ImageFiles, PngIsSrgbEncodedWithExposureAndSurvivesNonFinite) {
     ExpectNoTemporaries(dir);
 }
 
+// The PNG beside every render's EXR is written with libpng: writing it loads none of
+// OpenImageIO's libraries (~0.3 s of CPU per process; renderer/image_file.h). CTest runs each
+// test in a process of its own, so nothing else here has loaded them.
+TEST(ImageFiles, WritingAPngLoadsNoOpenImageIO) {
+    const fs::path dir = TempDir();
+    WriteImage((dir / "plain.png").string(), Image(8, 4, 3, 0.5f));
+    ASSERT_TRUE(fs::exists(dir / "plain.png"));
+    std::ifstream maps("/proc/self/maps");
+    std::string line;
+    int mapped = 0;
+    while (std::getline(maps, line)) mapped += line.find("OpenImageIO") != std::string::npos;
+    EXPECT_EQ(mapped, 0);
+}
+
 TEST(ImageFiles, HdrIsClose) {
     const fs::path dir = TempDir();
     Image img(5, 3, 3);
