@@ -7,6 +7,7 @@
 #include <pmmintrin.h>
 #include <xmmintrin.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -582,7 +583,12 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     const int W = opt.width, H = opt.height;
     const size_t numPixels = size_t(W) * H;
     if (opt.pixelCache) {
-        opt.pixelCache->assign(numPixels, PixelCacheCounts{});
+        // Only this render's rows start from zero: a band (stereo) keeps the other bands' counts.
+        if (opt.pixelCache->size() != numPixels)
+            opt.pixelCache->assign(numPixels, PixelCacheCounts{});
+        else
+            std::fill(opt.pixelCache->begin() + ptrdiff_t(size_t(opt.rowBegin) * W),
+                      opt.pixelCache->begin() + ptrdiff_t(size_t(rowEnd) * W), PixelCacheCounts{});
         if (ctx.tsc) ctx.pixelCache = opt.pixelCache->data();
     }
     FrameSums sums{std::vector<double>(numPixels * 3, 0.0),
