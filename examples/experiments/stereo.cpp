@@ -8,9 +8,10 @@
 // AO), visible footprints; sunlit-indirect: the clay car under a sun, path traced, diffuse
 // indirect light cached (full footprints), direct light per hit. Each at the default sample
 // cache (64 MiB) and at 512 MiB: the sample cache's collisions evict samples the second eye
-// would have reused. Cost is CPU seconds per eye (best of the repeats by the pair's CPU time);
-// error is relMSE (eps 0.001) of the right eye against a per-hit reference of the right eye,
-// beside the right eye rendered alone through a fresh cache with the same camera samples.
+// would have reused (the eyes' band order, renderer/stereo.h, keeps them for path tracing). Cost is
+// CPU seconds per eye (best of the repeats by the pair's CPU time); error is relMSE (eps 0.001) of
+// the right eye against a per-hit reference of the right eye, beside the right eye rendered alone
+// through a fresh cache with the same camera samples.
 #include <cmath>
 #include <filesystem>
 
@@ -49,18 +50,24 @@ int Stereo(const Setup& s) {
     const std::vector<double> rel =
         s.quick ? std::vector<double>{0.0, 1.0} : std::vector<double>{0.0, 0.25, 0.5, 1.0, 2.0};
     // Sample cache MiB and what the second eye reuses.
+    // "neighbour-frames": the whole-frame order (StereoOrder::Frames) where the renderer takes
+    // turns band by band, to show what the bands save (path tracing only: AO's visible
+    // footprints always render whole frames).
     struct Variant {
         int mb;
         StereoReuse reuse;
         const char* name;
+        StereoOrder order = StereoOrder::Bands;
     };
     const std::vector<Variant> variants =
         s.quick ? std::vector<Variant>{{64, StereoReuse::Texels, "texels"},
                                        {64, StereoReuse::Neighbour, "neighbour"}}
-                : std::vector<Variant>{{64, StereoReuse::Texels, "texels"},
-                                       {512, StereoReuse::Texels, "texels"},
-                                       {64, StereoReuse::Neighbour, "neighbour"},
-                                       {512, StereoReuse::Neighbour, "neighbour"}};
+                : std::vector<Variant>{
+                      {64, StereoReuse::Texels, "texels"},
+                      {512, StereoReuse::Texels, "texels"},
+                      {64, StereoReuse::Neighbour, "neighbour"},
+                      {512, StereoReuse::Neighbour, "neighbour"},
+                      {64, StereoReuse::Neighbour, "neighbour-frames", StereoOrder::Frames}};
     Table t({"scene",
              "case",
              "sample_cache_mb",
@@ -120,13 +127,15 @@ int Stereo(const Setup& s) {
         const Image ref = Reference(s, Format("stereo_%s_right_%dx%d", c.label, W, H), *ls->rs, ro);
         Render(*ls->rs, o, FreshCache(*ls, o));  // warm-up: Embree tessellates lazily
         for (const Variant& v : variants) {
+            if (v.order == StereoOrder::Frames && c.integrator == IntegratorKind::AO) continue;
             const int mb = v.mb;
             o.texture.cache.sampleCacheBytes = size_t(mb) << 20;
             for (double r : rel) {
                 rig.eyeSeparation = float(r) * unit;
                 StereoResult best;
                 for (int i = 0; i < repeats; ++i) {
-                    StereoResult res = RenderStereo(*ls->rs, o, rig, FreshCache(*ls, o), v.reuse);
+                    StereoResult res =
+                        RenderStereo(*ls->rs, o, rig, FreshCache(*ls, o), v.reuse, v.order);
                     const auto cpu = [](const StereoResult& x) {
                         return x.left.stats.cpuSeconds + x.right.stats.cpuSeconds;
                     };
@@ -198,11 +207,13 @@ int Stereo(const Setup& s) {
         p.yLabel = texels ? "texels the second eye filters anew, % of the first eye's"
                           : "second eye CPU time, % of the first eye's";
         for (const Case& c : cases)
-            for (const Variant& v : variants)
+            for (const Variant& v : variants) {
+                if (v.order == StereoOrder::Frames && c.integrator == IntegratorKind::AO) continue;
                 p.series.push_back(
                     {Format("%s, %d MiB, %s", c.label, v.mb, v.name), csv, 5, texels ? 15 : 9,
                      Format("strcol(2) eq '%s' && column(3) == %d && strcol(4) eq '%s'", c.label,
                             v.mb, v.name)});
+            }
         p.extra = {Format("set arrow from graph 0, first %g to graph 1, first %g nohead dt 2",
                           texels ? 8.9 : 25.0, texels ? 8.9 : 25.0),
                    "set key outside below"};
