@@ -14,6 +14,7 @@
 #include <random>
 #include <set>
 #include <thread>
+#include <tuple>
 #include <unordered_map>
 
 #include "libtexcache/topology_checks.h"
@@ -305,6 +306,92 @@ TEST(Footprint, AroundExtraordinaryVerticesEachSampleOnce) {
     const MeshGrids pent(test::PentagonCage(), 0.05f, 0);
     for (int f = 0; f < pent.NumFaces(); ++f)
         for (int r : {1, 4, 8}) ExpectWellFormedFootprint(pent, f, 0, 0, 0, r);
+}
+
+// Pads (footprint.cpp) continue a window past its face as a walk from the centre would when the
+// neighbours' grids have the face's size: then both policies give the same taps, offsets and
+// unseen counts, with and without a visible set, around valence-3 corners and mesh boundaries.
+TEST(Footprint, PadsMatchTheWalkOnGridsOfOneSize) {
+    for (const ControlCage& c : {test::CubeCage(), test::GridCage(3)}) {
+        const MeshGrids g(c, 0.1f, 7);
+        VisibleTexels vis(1 << 14);
+        std::mt19937 rng(3);
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            ASSERT_EQ(g.Log2Res(f), g.Log2Res(0)) << "the comparison needs one grid size";
+            for (int mip = 0; mip < g.NumLevels(f); ++mip)
+                for (int v = 0; v < g.Res(f, mip); ++v)
+                    for (int u = 0; u < g.Res(f, mip); ++u)
+                        if (rng() % 3 != 0)
+                            vis.Mark({g.FaceOffset() + uint32_t(f), uint8_t(mip), uint16_t(u),
+                                      uint16_t(v)});
+        }
+        std::vector<FootprintSample> padded, walked;
+        auto sorted = [](const std::vector<FootprintSample>& fp) {
+            std::vector<std::tuple<uint64_t, int, int, float, float>> t;
+            for (const FootprintSample& s : fp) t.emplace_back(s.key.Pack(), s.dx, s.dy, s.u, s.v);
+            std::sort(t.begin(), t.end());
+            return t;
+        };
+        int compared = 0;
+        for (int f = 0; f < g.NumFaces(); ++f)
+            for (int mip = 0; mip < g.NumLevels(f); ++mip) {
+                const int res = g.Res(f, mip);
+                for (int r : {1, 3, 10})
+                    for (int iv = 0; iv < res; iv += 3)
+                        for (int iu = 0; iu < res; iu += 2)
+                            for (const VisibleTexels* visible : {(VisibleTexels*)nullptr, &vis})
+                                for (bool symmetric : {false, true}) {
+                                    const int a = internal::GatherFootprint(
+                                        g, f, mip, iu, iv, r, &padded, visible, symmetric, true);
+                                    const int b = internal::GatherFootprint(
+                                        g, f, mip, iu, iv, r, &walked, visible, symmetric, false);
+                                    ASSERT_EQ(a, b) << "face " << f << " mip " << mip;
+                                    ASSERT_EQ(sorted(padded), sorted(walked))
+                                        << "face " << f << " mip " << mip << " texel " << iu << ","
+                                        << iv << " r " << r;
+                                    ++compared;
+                                }
+            }
+        EXPECT_GT(compared, 1000);
+    }
+}
+
+// Where neighbours' grids differ (n-gon sub-faces beside a quad, at two texel sizes), pads keep the
+// footprint's promises: each texel once (a coarser neighbour's texel under several positions
+// counts once), valid keys, the centre, and only visible taps whose mirrored offset is kept.
+TEST(Footprint, PadsOnMixedGridsAreWellFormed) {
+    for (float texelSize : {0.03f, 0.011f}) {
+        const MeshGrids g(test::PentagonCage(), texelSize, 0);
+        VisibleTexels vis(1 << 14);
+        std::mt19937 rng(5);
+        bool mixed = false;
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            mixed |= g.Log2Res(f) != g.Log2Res(0);
+            for (int v = 0; v < g.Res(f, 1); ++v)
+                for (int u = 0; u < g.Res(f, 1); ++u)
+                    if (rng() & 1) vis.Mark({uint32_t(f), 1, uint16_t(u), uint16_t(v)});
+        }
+        EXPECT_TRUE(mixed) << "the mesh should have grids of several sizes";
+        std::vector<FootprintSample> fp;
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            const int res = g.Res(f, 1);
+            for (int r : {2, 10})
+                for (auto [iu, iv] : {std::pair{0, 0}, {res - 1, res / 2}, {res / 2, res - 1}}) {
+                    GatherFootprint(g, f, 1, iu, iv, r, &fp, &vis, true);
+                    std::set<uint64_t> keys;
+                    std::set<std::pair<int, int>> offsets;
+                    for (const FootprintSample& t : fp) {
+                        EXPECT_TRUE(keys.insert(t.key.Pack()).second) << "texel twice";
+                        offsets.insert({t.dx, t.dy});
+                        EXPECT_TRUE((t.dx == 0 && t.dy == 0) || vis.Contains(t.key));
+                        EXPECT_LT(t.key.face, uint32_t(g.NumFaces()));
+                        EXPECT_LT(t.key.iu, g.Res(int(t.key.face), t.key.mip));
+                    }
+                    EXPECT_TRUE(offsets.count({0, 0}));
+                    for (auto [dx, dy] : offsets) EXPECT_TRUE(offsets.count({-dx, -dy}));
+                }
+        }
+    }
 }
 
 // ---- Visible texels (visible_texels.h) ----

@@ -38,11 +38,15 @@ public:
     int Res(int face, int mip) const { return 1 << std::max(0, log2Res_[face] - mip); }
     /// Clamps a mip to the face's chain.
     int ClampMip(int face, int mip) const { return std::clamp(mip, 0, int(log2Res_[face])); }
+    /// Unique per instance (never reused): tags what is derived from these grids, e.g. the
+    /// footprint pads GatherFootprint keeps per thread.
+    uint64_t Id() const { return id_; }
 
 private:
     std::shared_ptr<const PtexTopology> topo_;
     std::vector<uint8_t> log2Res_;
     uint32_t faceOffset_;
+    uint64_t id_;
 };
 
 /// Appends grids for `cage` to `meshes`, numbering its faces after the last mesh's (keys hold
@@ -76,16 +80,28 @@ struct FootprintSample {
 
 /// Collects the footprint of radius r around texel (face, mip, iu, iv) into `out` (cleared
 /// first; reuse the vector to avoid allocation). Faces are the mesh's local Ptex ids; keys carry
-/// global ids. Policy: a sample at offset (dx, dy) is reached by walking dx texels along u, then
-/// dy texels along the (possibly rotated) v axis, one texel at a time; crossing an edge lands in
-/// the first texel row of the neighbour, whose frame is turned to continue the same direction.
-/// Boundary and non-manifold edges end the walk (that sample is left out). Around extraordinary
-/// vertices two walks can reach the same texel; each sample is returned once (the walk with the
-/// smallest |dx| + |dy|). With `visible`, only the samples it contains are returned (and the
-/// centre, always), and with `symmetric` only those whose mirrored offset (-dx, -dy) is returned
-/// too (see visible_texels.h): the return value is how many it left out.
-int GatherFootprint(const MeshGrids& grids, int face, int mip, int iu, int iv, int radius,
+/// global ids. Policy: the window is the (2r+1)^2 block of the face's grid around the texel,
+/// continued past the face's edges by its pad: position (x, y) outside the face is the texel
+/// reached from the nearest face texel by walking along u first, then along the (possibly
+/// rotated) v axis, one texel at a time; crossing an edge lands in the first texel row of the
+/// neighbour, whose frame is turned to continue the same direction (with neighbours of the same
+/// grid size, the texels a walk from the centre reaches). Boundary and non-manifold edges end
+/// the walk (that sample is left out). Around extraordinary vertices two positions can hold the
+/// same texel; each sample is returned once (at the smallest |dx| + |dy|). With `visible`, only
+/// the samples it contains are returned (and the centre, always), and with `symmetric` only
+/// those whose mirrored offset (-dx, -dy) is returned too (see visible_texels.h): the return
+/// value is how many it left out. Pads are built once per thread, face, mip and radius (see
+/// footprint.cpp for their memory bound); faces too large for one are walked per window.
+int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
                     std::vector<FootprintSample>* out, const VisibleTexels* visible = nullptr,
                     bool symmetric = true);
+
+namespace internal {
+/// GatherFootprint, with `pads` false walking every window from its centre (the policy before
+/// pads, and still the one for faces too large for a pad): for tests comparing the two.
+int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
+                    std::vector<FootprintSample>* out, const VisibleTexels* visible, bool symmetric,
+                    bool pads);
+}  // namespace internal
 
 }  // namespace texcache
