@@ -71,6 +71,7 @@ struct CacheStats {
     uint64_t deferrals = 0, waits = 0, samplesUncached = 0;
     uint64_t sampleMemoHits = 0;  ///< sample hits served by the thread's tap memo (see Filter)
     uint64_t tapsUnseen = 0;      ///< footprint taps left out as not visible (RestrictFootprints)
+    uint64_t texelsPrefiltered = 0;  ///< texels a miss reconstructed besides its own (SampleTile)
 
     void Merge(const CacheStats& o) {
         lookups += o.lookups, texelHits += o.texelHits, texelMisses += o.texelMisses;
@@ -79,6 +80,7 @@ struct CacheStats {
         samplesShaded += o.samplesShaded, sampleEvictions += o.sampleEvictions;
         deferrals += o.deferrals, waits += o.waits, samplesUncached += o.samplesUncached;
         sampleMemoHits += o.sampleMemoHits, tapsUnseen += o.tapsUnseen;
+        texelsPrefiltered += o.texelsPrefiltered;
     }
     double TexelHitRate() const { return lookups ? double(texelHits) / double(lookups) : 0.0; }
 };
@@ -119,6 +121,23 @@ struct FilterInput {
     std::span<const Sample> samples;
     int centre;  ///< index of the centre texel in taps/samples (always present)
     SampleRequest request;
+};
+
+/// What a block filter gets (see ShadingCache::LookupTexel): the samples of a w x h window of
+/// one face grid, row-major, and which of them footprints use (`seen`: the visible texels; the
+/// others hold no sample). A filter that also has
+///   Texel operator()(const SampleTile<Sample>& tile, int cx, int cy, int radius,
+///                    const SampleRequest& texel) const
+/// reconstructs texel (cx, cy) of the tile, whose (2r+1)^2 window lies inside the tile, from it;
+/// it must return what the FilterInput overload returns for that texel's footprint: the seen
+/// taps of the window (and the centre), row by row, those whose mirror is seen too when
+/// `symmetric`.
+template <typename Sample>
+struct SampleTile {
+    int w, h;
+    const Sample* samples;
+    const uint8_t* seen;
+    bool symmetric;
 };
 
 namespace internal {
@@ -327,7 +346,8 @@ public:
             return Filter(centre, radius, shade, filter, st, taps);
         }
         if (ticket.evicted) ++st.texelEvictions;
-        texel = Filter(centre, radius, shade, filter, st, taps);
+        if (!FilterBlock(centre, radius, shade, filter, st, taps, &texel))
+            texel = Filter(centre, radius, shade, filter, st, taps);
         if (refTexels_)
             refTexels_->Publish(key, texel);
         else
@@ -403,27 +423,41 @@ private:
                  CacheStats& st, FootprintTaps keep) {
         thread_local std::vector<FootprintSample> taps;
         thread_local std::vector<Sample> values;
-        thread_local std::vector<int> missing, deferred;
-        internal::TapMemo<Sample>& memo = ThreadMemo();
-        const uint64_t epoch = epoch_.load(std::memory_order_relaxed);
-        if (memo.owner != id_ || memo.epoch != epoch) memo.Reset(id_, epoch);
-
         const MeshGrids& g = *meshes_[centre.mesh];
         st.tapsUnseen +=
             uint64_t(GatherFootprint(g, centre.face, centre.mip, centre.key.iu, centre.key.iv,
                                      radius, &taps, keep == FootprintTaps::All ? nullptr : visible_,
                                      keep == FootprintTaps::VisibleSymmetric));
+        FetchTaps(centre.mesh, taps, &values, shade, st);
+        int centreIndex = 0;
+        for (size_t i = 0; i < taps.size(); ++i)
+            if (taps[i].key == centre.key) centreIndex = int(i);
+        FilterInput<Sample> in{std::span<const FootprintSample>(taps.data(), taps.size()),
+                               std::span<const Sample>(values.data(), values.size()), centreIndex,
+                               centre};
+        return filter(in);
+    }
+
+    // The samples of `taps` into `values` (same order): from the tap memo, else the sample cache,
+    // shading what is missing (deferring samples other threads are shading, revisiting them after
+    // the rest).
+    template <typename ShadeFn>
+    void FetchTaps(int mesh, const std::vector<FootprintSample>& taps, std::vector<Sample>* out,
+                   ShadeFn& shade, CacheStats& st) {
+        thread_local std::vector<int> missing, deferred;
+        internal::TapMemo<Sample>& memo = ThreadMemo();
+        const uint64_t epoch = epoch_.load(std::memory_order_relaxed);
+        if (memo.owner != id_ || memo.epoch != epoch) memo.Reset(id_, epoch);
+        std::vector<Sample>& values = *out;
         values.resize(taps.size());
         missing.clear();
         deferred.clear();
-        int centreIndex = 0;
         // Taps come face by face: the face/mip part of the memo slot is computed once per run.
         uint32_t runFace = ~0u;
         uint8_t runMip = 0xff;
         uint64_t runBase = 0;
         for (size_t i = 0; i < taps.size(); ++i) {
             const TexelKey k = taps[i].key;
-            if (k == centre.key) centreIndex = int(i);
             if (k.face != runFace || k.mip != runMip)
                 runFace = k.face, runMip = k.mip, runBase = internal::MixFaceMip(k.face, k.mip);
             const size_t m = MemoSlot(runBase, k);
@@ -445,7 +479,7 @@ private:
             memo.values[m] = values[i];
         };
         for (int i : missing) {
-            if (!FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/false)) {
+            if (!FetchOrShade(mesh, taps[i], &values[i], shade, st, /*wait=*/false)) {
                 deferred.push_back(i);
                 ++st.deferrals;
                 continue;
@@ -453,13 +487,79 @@ private:
             remember(i);
         }
         for (int i : deferred) {
-            FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/true);
+            FetchOrShade(mesh, taps[i], &values[i], shade, st, /*wait=*/true);
             remember(i);
         }
-        FilterInput<Sample> in{std::span<const FootprintSample>(taps.data(), taps.size()),
-                               std::span<const Sample>(values.data(), values.size()), centreIndex,
-                               centre};
-        return filter(in);
+    }
+
+    // Block reconstruction: a miss whose filter takes a SampleTile (see there) reconstructs, from
+    // one gather, every visible texel of its 8x8 block (the visible set's block) whose window
+    // lies inside the face, and puts those nobody holds into the texel cache. Why: neighbouring
+    // windows share all but 2r+1 of their taps, and the visible texels of a block are looked up
+    // soon (the prepass marked them from this frame's camera rays), so gathering, fetching and
+    // testing each window's taps again per texel was most of a 21x21 render (perf, car AO,
+    // `texcache experiment filter-size`). The tile is at most (8 + 2r)^2 samples per thread
+    // (r = 10: 784, 28 KiB with ShadedSample). Texels are reconstructed from the samples they
+    // would have been filtered with, so their values are the per-texel path's. False (nothing
+    // done) when the block path does not apply: no tile overload, no visible set, reference
+    // mode, an unseen centre, or a window crossing the face's edge.
+    template <typename ShadeFn, typename FilterFn>
+    bool FilterBlock(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter,
+                     CacheStats& st, FootprintTaps keep, Texel* out) {
+        if constexpr (!requires(const SampleTile<Sample>& t) { filter(t, 0, 0, 0, centre); }) {
+            return false;
+        } else {
+            if (!visible_ || keep == FootprintTaps::All || !texels_ || radius <= 0) return false;
+            const MeshGrids& g = *meshes_[centre.mesh];
+            const int res = g.Res(centre.face, centre.mip), iu = centre.key.iu, iv = centre.key.iv;
+            // Block texels whose window is inside the face, and the tile their windows cover.
+            const int xlo = std::max(iu & ~7, radius), xhi = std::min(iu | 7, res - 1 - radius);
+            const int ylo = std::max(iv & ~7, radius), yhi = std::min(iv | 7, res - 1 - radius);
+            if (iu < xlo || iu > xhi || iv < ylo || iv > yhi || !visible_->Contains(centre.key))
+                return false;
+            const int x0 = xlo - radius, y0 = ylo - radius;
+            const int w = xhi - xlo + 1 + 2 * radius, h = yhi - ylo + 1 + 2 * radius;
+            thread_local std::vector<FootprintSample> taps;
+            thread_local std::vector<Sample> values, tile;
+            thread_local std::vector<uint8_t> seen;
+            thread_local std::vector<int> at;
+            taps.clear();
+            at.clear();
+            seen.assign(size_t(w) * size_t(h), 0);
+            tile.resize(seen.size());
+            const float inv = 1.0f / float(res);  // exact: res is a power of two
+            TexelKey k = centre.key;
+            for (int y = y0; y < y0 + h; ++y)
+                for (int x = x0; x < x0 + w; ++x) {
+                    k.iu = uint16_t(x), k.iv = uint16_t(y);
+                    if (!visible_->Contains(k)) continue;
+                    taps.push_back({k, 0, 0, (float(x) + 0.5f) * inv, (float(y) + 0.5f) * inv});
+                    at.push_back((y - y0) * w + (x - x0));
+                }
+            FetchTaps(centre.mesh, taps, &values, shade, st);
+            for (size_t i = 0; i < taps.size(); ++i) {
+                tile[size_t(at[i])] = values[i];
+                seen[size_t(at[i])] = 1;
+            }
+            const SampleTile<Sample> t{w, h, tile.data(), seen.data(),
+                                       keep == FootprintTaps::VisibleSymmetric};
+            for (int y = ylo; y <= yhi; ++y)
+                for (int x = xlo; x <= xhi; ++x) {
+                    if ((x == iu && y == iv) || !seen[size_t((y - y0) * w + (x - x0))]) continue;
+                    k.iu = uint16_t(x), k.iv = uint16_t(y);
+                    const uint64_t key = k.Pack(), hash = Hash(k);
+                    Texel texel;
+                    SlotTicket ticket;
+                    if (texels_->Acquire(key, hash, &texel, &ticket) != AcquireResult::Claimed)
+                        continue;  // cached already, or another thread's
+                    if (ticket.evicted) ++st.texelEvictions;
+                    const SampleRequest r = RequestOf(centre.mesh, k);
+                    texels_->Publish(ticket, filter(t, x - x0, y - y0, radius, r));
+                    ++st.texelsPrefiltered;
+                }
+            *out = filter(t, iu - x0, iv - y0, radius, centre);
+            return true;
+        }
     }
 
     // One memo per thread for all caches of this Sample type (whatever their shaders and
