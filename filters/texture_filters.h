@@ -103,12 +103,8 @@ struct NormalWeightedFilter {
                          const SampleRequest&) const {
         const int c = cy * t.w + cx;
         Sum sum(*this, t.samples[c].normal);
-        for (int dy = -radius; dy <= radius; ++dy)
-            for (int dx = -radius; dx <= radius; ++dx) {
-                const int i = c + dy * t.w + dx;
-                if (!t.seen[i] || (t.symmetric && !t.seen[c - dy * t.w - dx])) continue;
-                sum.Add(t.samples[i], i == c, dx, dy);
-            }
+        t.ForEachTap(cx, cy, radius,
+                     [&](int i, int dx, int dy) { sum.Add(t.samples[i], i == c, dx, dy); });
         return sum.Result();
     }
 

@@ -97,6 +97,22 @@ int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int r
                     bool symmetric = true);
 
 namespace internal {
+/// One position of a face's pad (see footprint.cpp): the texel a footprint reaches there.
+struct PaddedTexel {
+    static constexpr uint8_t kReached = 1;    ///< else a boundary ended the walk: no texel
+    static constexpr uint8_t kDuplicate = 2;  ///< the pad or the face holds this texel elsewhere
+    uint64_t key;                             ///< packed TexelKey
+    float u, v;                               ///< texel centre in its face
+    uint32_t probe;                           ///< VisibleTexels::Probe(key)
+    uint8_t bit;                              ///< VisibleTexels::Bit(key), as a bit index
+    uint8_t flags;
+};
+/// The pad texel at (x, y) of (face, mip)'s grid, a position outside the face within `radius`
+/// of it; the next positions of row y follow while x stays on the same side of the face. Null
+/// when the face has no pad at this radius (too large). Valid until this thread's next call
+/// (or GatherFootprint) for another face.
+const PaddedTexel* PaddedRun(const MeshGrids& g, int face, int mip, int radius, int x, int y);
+
 /// GatherFootprint, with `pads` false walking every window from its centre (the policy before
 /// pads, and still the one for faces too large for a pad): for tests comparing the two.
 int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,

@@ -12,6 +12,7 @@
 #pragma once
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -138,6 +139,35 @@ struct SampleTile {
     const Sample* samples;
     const uint8_t* seen;
     bool symmetric;
+    /// Optional (w <= 64): `seen` as bits, bit x of rows[y] and bit w-1-x of reversed[y].
+    const uint64_t* rows = nullptr;
+    const uint64_t* reversed = nullptr;
+
+    /// Calls f(i, dx, dy) for the taps a footprint of texel (cx, cy) keeps, row by row: i indexes
+    /// `samples`, and the tap is seen (the centre always is) and, when `symmetric`, so is its
+    /// mirror. With the bit rows, a window row costs a few shifts and one call per kept tap.
+    template <typename F>
+    void ForEachTap(int cx, int cy, int r, F&& f) const {
+        const int c = cy * w + cx;
+        if (rows) {
+            const int side = 2 * r + 1;
+            const uint64_t window = side >= 64 ? ~uint64_t(0) : (uint64_t(1) << side) - 1;
+            for (int dy = -r; dy <= r; ++dy) {
+                uint64_t m = (rows[cy + dy] >> (cx - r)) & window;
+                if (symmetric) m &= reversed[cy - dy] >> (w - 1 - cx - r);
+                for (; m; m &= m - 1) {
+                    const int dx = std::countr_zero(m) - r;
+                    f(c + dy * w + dx, dx, dy);
+                }
+            }
+            return;
+        }
+        for (int dy = -r; dy <= r; ++dy)
+            for (int dx = -r; dx <= r; ++dx) {
+                const int i = c + dy * w + dx;
+                if (seen[i] && (!symmetric || seen[c - dy * w - dx])) f(i, dx, dy);
+            }
+    }
 };
 
 namespace internal {
@@ -493,16 +523,19 @@ private:
     }
 
     // Block reconstruction: a miss whose filter takes a SampleTile (see there) reconstructs, from
-    // one gather, every visible texel of its 8x8 block (the visible set's block) whose window
-    // lies inside the face, and puts those nobody holds into the texel cache. Why: neighbouring
+    // one gather, every visible texel of its 8x8 block (the visible set's block), and puts those
+    // nobody holds into the texel cache. Why: neighbouring
     // windows share all but 2r+1 of their taps, and the visible texels of a block are looked up
     // soon (the prepass marked them from this frame's camera rays), so gathering, fetching and
     // testing each window's taps again per texel was most of a 21x21 render (perf, car AO,
     // `texcache experiment filter-size`). The tile is at most (8 + 2r)^2 samples per thread
-    // (r = 10: 784, 28 KiB with ShadedSample). Texels are reconstructed from the samples they
-    // would have been filtered with, so their values are the per-texel path's. False (nothing
-    // done) when the block path does not apply: no tile overload, no visible set, reference
-    // mode, an unseen centre, or a window crossing the face's edge.
+    // (r = 10: 784, 28 KiB with ShadedSample). Past the face's edges the tile reads the face's
+    // pad, which gives every window there the taps GatherFootprint gives it, except windows
+    // holding a texel twice (they take the per-texel path). Texels are reconstructed from the
+    // samples they would have been filtered with, so their values are the per-texel path's.
+    // False when the block path does not apply to the centre: no tile overload, no visible set,
+    // reference mode, an unseen centre, a window holding a texel twice, or a tile past the
+    // face's edges that is wider than 64 texels or whose face is too large for a pad.
     template <typename ShadeFn, typename FilterFn>
     bool FilterBlock(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter,
                      CacheStats& st, FootprintTaps keep, Texel* out) {
@@ -511,41 +544,106 @@ private:
         } else {
             if (!visible_ || keep == FootprintTaps::All || !texels_ || radius <= 0) return false;
             const MeshGrids& g = *meshes_[centre.mesh];
-            const int res = g.Res(centre.face, centre.mip), iu = centre.key.iu, iv = centre.key.iv;
-            // Block texels whose window is inside the face, and the tile their windows cover.
-            const int xlo = std::max(iu & ~7, radius), xhi = std::min(iu | 7, res - 1 - radius);
-            const int ylo = std::max(iv & ~7, radius), yhi = std::min(iv | 7, res - 1 - radius);
-            if (iu < xlo || iu > xhi || iv < ylo || iv > yhi || !visible_->Contains(centre.key))
-                return false;
+            const int face = centre.face, mip = centre.mip, res = g.Res(face, mip);
+            const int iu = centre.key.iu, iv = centre.key.iv;
+            if (!visible_->Contains(centre.key)) return false;
+            // The block's texels and the tile their windows cover; where it passes the face's
+            // edges, the face's pad (footprint.h) continues it as GatherFootprint does.
+            const int xlo = iu & ~7, xhi = std::min(iu | 7, res - 1);
+            const int ylo = iv & ~7, yhi = std::min(iv | 7, res - 1);
             const int x0 = xlo - radius, y0 = ylo - radius;
             const int w = xhi - xlo + 1 + 2 * radius, h = yhi - ylo + 1 + 2 * radius;
+            const bool padded = x0 < 0 || y0 < 0 || x0 + w > res || y0 + h > res;
+            if (padded && (w > 64 || !internal::PaddedRun(g, face, mip, radius, -1, -1)))
+                return false;
             thread_local std::vector<FootprintSample> taps;
             thread_local std::vector<Sample> values, tile;
             thread_local std::vector<uint8_t> seen;
             thread_local std::vector<int> at;
+            thread_local std::vector<uint64_t> rows, reversed, duplicates;
             taps.clear();
             at.clear();
             seen.assign(size_t(w) * size_t(h), 0);
             tile.resize(seen.size());
+            const bool bits = w <= 64;
+            rows.assign(size_t(h), 0);
+            reversed.assign(size_t(h), 0);
+            duplicates.assign(size_t(h), 0);
+            bool anyDuplicate = false;
+            auto add = [&](const TexelKey& key, float u, float v, int tx, int ty) {
+                taps.push_back({key, 0, 0, u, v});
+                at.push_back(ty * w + tx);
+                seen[size_t(ty * w + tx)] = 1;
+                if (bits) {
+                    rows[size_t(ty)] |= uint64_t(1) << tx;
+                    reversed[size_t(ty)] |= uint64_t(1) << (w - 1 - tx);
+                }
+            };
+            // The tile's visible texels: inside the face a word of the visible set per 8 texels
+            // of a row, outside it the pad's texels, each with its stored probe.
             const float inv = 1.0f / float(res);  // exact: res is a power of two
             TexelKey k = centre.key;
-            for (int y = y0; y < y0 + h; ++y)
-                for (int x = x0; x < x0 + w; ++x) {
-                    k.iu = uint16_t(x), k.iv = uint16_t(y);
-                    if (!visible_->Contains(k)) continue;
-                    taps.push_back({k, 0, 0, (float(x) + 0.5f) * inv, (float(y) + 0.5f) * inv});
-                    at.push_back((y - y0) * w + (x - x0));
+            for (int y = y0; y < y0 + h; ++y) {
+                const int ty = y - y0;
+                auto padRun = [&](int xa, int xb) {
+                    const internal::PaddedTexel* p =
+                        internal::PaddedRun(g, face, mip, radius, xa, y);
+                    for (int x = xa; x <= xb; ++x, ++p) {
+                        if (!(p->flags & internal::PaddedTexel::kReached) ||
+                            !visible_->ContainsAt(p->probe, uint64_t(1) << p->bit))
+                            continue;
+                        if (p->flags & internal::PaddedTexel::kDuplicate) {
+                            duplicates[size_t(ty)] |= uint64_t(1) << (x - x0);
+                            anyDuplicate = true;
+                        }
+                        add(TexelKey::Unpack(p->key), p->u, p->v, x - x0, ty);
+                    }
+                };
+                if (y < 0 || y >= res) {
+                    padRun(x0, x0 + w - 1);
+                    continue;
                 }
-            FetchTaps(centre.mesh, taps, &values, shade, st);
-            for (size_t i = 0; i < taps.size(); ++i) {
-                tile[size_t(at[i])] = values[i];
-                seen[size_t(at[i])] = 1;
+                if (x0 < 0) padRun(x0, -1);
+                const int a = std::max(x0, 0), b = std::min(x0 + w - 1, res - 1);
+                k.iv = uint16_t(y);
+                for (int blk = a >> 3; blk <= b >> 3; ++blk) {
+                    k.iu = uint16_t(blk << 3);
+                    uint32_t m = uint32_t(visible_->BlockBits(k) >> ((y & 7) * 8)) & 0xFFu;
+                    const int lo = std::max(a - (blk << 3), 0), hi = std::min(b - (blk << 3), 7);
+                    m &= (0xFFu << lo) & (0xFFu >> (7 - hi));
+                    for (; m; m &= m - 1) {
+                        const int x = (blk << 3) + std::countr_zero(m);
+                        k.iu = uint16_t(x);
+                        add(k, (float(x) + 0.5f) * inv, (float(y) + 0.5f) * inv, x - x0, ty);
+                    }
+                }
+                if (x0 + w - 1 >= res) padRun(res, x0 + w - 1);
             }
-            const SampleTile<Sample> t{w, h, tile.data(), seen.data(),
-                                       keep == FootprintTaps::VisibleSymmetric};
+            // A window holding a texel twice keeps the closest (GatherFootprint): those texels
+            // take the per-texel path.
+            const uint64_t window =
+                2 * radius + 1 >= 64 ? ~uint64_t(0) : (uint64_t(1) << (2 * radius + 1)) - 1;
+            auto single = [&](int tx, int ty) {
+                if (!anyDuplicate) return true;
+                for (int j = ty - radius; j <= ty + radius; ++j)
+                    if ((duplicates[size_t(j)] >> (tx - radius)) & window) return false;
+                return true;
+            };
+            FetchTaps(centre.mesh, taps, &values, shade, st);
+            for (size_t i = 0; i < taps.size(); ++i) tile[size_t(at[i])] = values[i];
+            const SampleTile<Sample> t{w,
+                                       h,
+                                       tile.data(),
+                                       seen.data(),
+                                       keep == FootprintTaps::VisibleSymmetric,
+                                       bits ? rows.data() : nullptr,
+                                       bits ? reversed.data() : nullptr};
+            k = centre.key;
             for (int y = ylo; y <= yhi; ++y)
                 for (int x = xlo; x <= xhi; ++x) {
-                    if ((x == iu && y == iv) || !seen[size_t((y - y0) * w + (x - x0))]) continue;
+                    if ((x == iu && y == iv) || !seen[size_t((y - y0) * w + (x - x0))] ||
+                        !single(x - x0, y - y0))
+                        continue;
                     k.iu = uint16_t(x), k.iv = uint16_t(y);
                     const uint64_t key = k.Pack(), hash = Hash(k);
                     Texel texel;
@@ -557,6 +655,7 @@ private:
                     texels_->Publish(ticket, filter(t, x - x0, y - y0, radius, r));
                     ++st.texelsPrefiltered;
                 }
+            if (!single(iu - x0, iv - y0)) return false;
             *out = filter(t, iu - x0, iv - y0, radius, centre);
             return true;
         }
