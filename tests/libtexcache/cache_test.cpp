@@ -309,10 +309,11 @@ TEST(Footprint, AroundExtraordinaryVerticesEachSampleOnce) {
 }
 
 // Pads (footprint.cpp) continue a window past its face as a walk from the centre would when the
-// neighbours' grids have the face's size: then both policies give the same taps, offsets and
-// unseen counts, with and without a visible set, around valence-3 corners and mesh boundaries.
+// neighbours' grids have the face's size: then both give the same taps, offsets and unseen
+// counts, with and without a visible set, around valence-3 and valence-5 vertices and mesh
+// boundaries.
 TEST(Footprint, PadsMatchTheWalkOnGridsOfOneSize) {
-    for (const ControlCage& c : {test::CubeCage(), test::GridCage(3)}) {
+    for (const ControlCage& c : {test::CubeCage(), test::GridCage(3), test::FanCage(5)}) {
         const MeshGrids g(c, 0.1f, 7);
         VisibleTexels vis(1 << 14);
         std::mt19937 rng(3);
@@ -359,7 +360,7 @@ TEST(Footprint, PadsMatchTheWalkOnGridsOfOneSize) {
 // Where neighbours' grids differ (n-gon sub-faces beside a quad, at two texel sizes), pads keep the
 // footprint's promises: each texel once (a coarser neighbour's texel under several positions
 // counts once), valid keys, the centre, and only visible taps whose mirrored offset is kept.
-TEST(Footprint, PadsOnMixedGridsAreWellFormed) {
+TEST(Footprint, MixedGridsAreWalked) {
     for (float texelSize : {0.03f, 0.011f}) {
         const MeshGrids g(test::PentagonCage(), texelSize, 0);
         VisibleTexels vis(1 << 14);
@@ -378,6 +379,9 @@ TEST(Footprint, PadsOnMixedGridsAreWellFormed) {
             for (int r : {2, 10})
                 for (auto [iu, iv] : {std::pair{0, 0}, {res - 1, res / 2}, {res / 2, res - 1}}) {
                     GatherFootprint(g, f, 1, iu, iv, r, &fp, &vis, true);
+                    std::vector<FootprintSample> walked;
+                    internal::GatherFootprint(g, f, 1, iu, iv, r, &walked, &vis, true, false);
+                    ASSERT_EQ(fp.size(), walked.size());
                     std::set<uint64_t> keys;
                     std::set<std::pair<int, int>> offsets;
                     for (const FootprintSample& t : fp) {
@@ -627,7 +631,7 @@ TEST(ShadingCache, BlockReconstructionGivesThePerTexelValues) {
                         << k.iv << " r " << radius;
                 }
                 EXPECT_EQ(a.texelsPrefiltered, 0u);
-                EXPECT_GT(b.texelsPrefiltered, seen.size() / 2) << c.cage.sourcePath;
+                EXPECT_GT(b.texelsPrefiltered, seen.size() / 4) << c.cage.sourcePath;
                 EXPECT_GT(b.texelHits, a.texelHits);
                 // The same samples (the visible ones); how often each is shaded again after an
                 // eviction depends on the order of fetches, which differs.
@@ -691,6 +695,24 @@ TEST(ShadingCache, ReferenceModeShadesEachSampleOnce) {
     for (const auto& [key, count] : shadeCount) ASSERT_EQ(count, 1) << "sample shaded twice";
 }
 
+// Four threads call check(i, their stats) for i = 0..n-1, each in its own order, `passes`
+// times; returns how many calls returned false, the threads' statistics merged into `total`.
+template <typename Check>
+int MismatchesInThreads(size_t n, int passes, CacheStats* total, Check check) {
+    std::atomic<int> mismatches{0};
+    std::vector<CacheStats> stats(4);
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+        threads.emplace_back([&, t] {
+            for (int pass = 0; pass < passes; ++pass)
+                for (size_t k = 0; k < n; ++k)
+                    if (!check((k * (2 * t + 1) + size_t(t) * 997) % n, stats[t])) ++mismatches;
+        });
+    for (auto& th : threads) th.join();
+    for (const auto& st : stats) total->Merge(st);
+    return mismatches.load();
+}
+
 // Threads filter overlapping footprints through small bounded caches (evictions, deferrals,
 // conflicts all happen): every result equals the single-threaded answer. Run under
 // ThreadSanitizer by scripts/test.sh (label `cache`).
@@ -725,22 +747,13 @@ TEST(ShadingCache, ConcurrentOverlappingFootprintsMatchSingleThreaded) {
         s.texelTwoChoices = twoChoices;
         ShadingCache<AoSample, float> cache(s);
         cache.AddMesh(test::GridCage(4), 0.02f);
-        std::atomic<int> mismatches{0};
-        std::vector<std::thread> threads;
-        std::vector<CacheStats> stats(4);
-        for (int t = 0; t < 4; ++t)
-            threads.emplace_back([&, t] {
-                for (int pass = 0; pass < 3; ++pass)
-                    for (size_t k = 0; k < hits.size(); ++k) {
-                        const size_t i = (k * (2 * t + 1) + size_t(t) * 997) % hits.size();
-                        if (cache.Lookup(hits[i], 3, shade, mean, stats[t]) != expected[i])
-                            ++mismatches;
-                    }
-            });
-        for (auto& th : threads) th.join();
-        EXPECT_EQ(mismatches.load(), 0);
         CacheStats total;
-        for (const auto& st : stats) total.Merge(st);
+        EXPECT_EQ(MismatchesInThreads(hits.size(), 3, &total,
+                                      [&](size_t i, CacheStats& st) {
+                                          return cache.Lookup(hits[i], 3, shade, mean, st) ==
+                                                 expected[i];
+                                      }),
+                  0);
         EXPECT_GT(total.sampleEvictions, 0u);
         EXPECT_GT(total.texelHits, 0u);
         EXPECT_LE(cache.BytesUsed(), s.sampleCacheBytes + s.texelCacheBytes);
@@ -809,22 +822,14 @@ TEST(ShadingCache, ConcurrentBlockReconstructionMatchesPerTexel) {
     ShadingCache<AoSample, float> cache(s);
     cache.AddMesh(cage, texelSize);
     cache.RestrictFootprints(&vis);
-    std::atomic<int> mismatches{0};
-    std::vector<CacheStats> stats(4);
-    std::vector<std::thread> threads;
-    for (int t = 0; t < 4; ++t)
-        threads.emplace_back([&, t] {
-            for (size_t n = 0; n < keys.size(); ++n) {
-                const size_t i = (n * (2 * t + 1) + size_t(t) * 997) % keys.size();
-                if (cache.LookupTexel(cache.RequestOf(0, keys[i]), 4, shade,
-                                      OffsetWeightedMeanWithTiles{}, stats[t]) != expected[i])
-                    ++mismatches;
-            }
-        });
-    for (auto& th : threads) th.join();
-    EXPECT_EQ(mismatches.load(), 0);
     CacheStats total;
-    for (const auto& st : stats) total.Merge(st);
+    EXPECT_EQ(MismatchesInThreads(keys.size(), 1, &total,
+                                  [&](size_t i, CacheStats& st) {
+                                      return cache.LookupTexel(cache.RequestOf(0, keys[i]), 4,
+                                                               shade, OffsetWeightedMeanWithTiles{},
+                                                               st) == expected[i];
+                                  }),
+              0);
     EXPECT_GT(total.texelsPrefiltered, 0u);
     EXPECT_GT(total.sampleEvictions, 0u);
     // No allocation once warm: the same lookups again after an invalidation.
