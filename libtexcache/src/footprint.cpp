@@ -357,11 +357,13 @@ struct WindowBits {
     bool Test(int j, int p) const {
         return (bits[size_t(j) * size_t(words) + size_t(p >> 6)] >> (p & 63)) & 1;
     }
-    // ORs the bits of m (at most 8) in at position p.
+    // ORs the bits of m (at most 8, all within the row) in at position p >= 0.
     void SetByte(int j, int p, uint32_t m) {
         uint64_t* row = Row(j);
         row[p >> 6] |= uint64_t(m) << (p & 63);
-        if ((p & 63) > 56) row[(p >> 6) + 1] |= uint64_t(m) >> (64 - (p & 63));
+        // The next word only when bits spill into it (it exists then; past the last word not).
+        if ((p & 63) > 56 && (uint64_t(m) >> (64 - (p & 63))) != 0)
+            row[(p >> 6) + 1] |= uint64_t(m) >> (64 - (p & 63));
     }
     // Calls f(j, p) for every set bit, row by row.
     template <typename F>
@@ -504,7 +506,9 @@ int internal::GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int
                     m &= (0xFFu << lo) & (0xFFu >> (7 - hi));
                     if (y == iv && blk == iu >> 3) m |= 1u << (iu & 7);  // the centre, always
                     seen += kBitCount[m];
-                    taps.SetByte(j, (blk << 3) - x0, m);
+                    // The block may start left of the window (its bits there are clear).
+                    const int p = (blk << 3) - x0;
+                    taps.SetByte(j, std::max(p, 0), p < 0 ? m >> -p : m);
                 }
                 unseen += b - a + 1 - seen;
             } else {
