@@ -91,24 +91,48 @@ struct NormalWeightedFilter {
     float sigma = 0.0f;  ///< 0: box window; > 0: Gaussian weights exp(-d^2 / (2 sigma^2)) in texels
 
     glm::vec3 operator()(const FilterInput<ShadedSample>& in) const {
-        const glm::vec3 nc = in.samples[in.centre].normal;
-        const float inv2s2 = sigma > 0.0f ? 1.0f / (2.0f * sigma * sigma) : 0.0f;
-        glm::vec3 sum(0.0f), any(0.0f);
-        float wsum = 0.0f;
+        Sum sum(*this, in.samples[in.centre].normal);
+        for (size_t i = 0; i < in.samples.size(); ++i)
+            sum.Add(in.samples[i], int(i) == in.centre, in.taps[i].dx, in.taps[i].dy);
+        return sum.Result();
+    }
+
+    /// The same for texel (cx, cy) of a block's tile (ShadingCache's block reconstruction): the
+    /// window's seen taps row by row, as the footprint lists them, so the sum is the same.
+    glm::vec3 operator()(const SampleTile<ShadedSample>& t, int cx, int cy, int radius,
+                         const SampleRequest&) const {
+        const int c = cy * t.w + cx;
+        Sum sum(*this, t.samples[c].normal);
+        t.ForEachTap(cx, cy, radius,
+                     [&](int i, int dx, int dy) { sum.Add(t.samples[i], i == c, dx, dy); });
+        return sum.Result();
+    }
+
+private:
+    // The weighted mean of the taps that pass the normal test, with its fallbacks.
+    struct Sum {
+        const NormalWeightedFilter& f;
+        glm::vec3 nc, sum{0.0f}, any{0.0f};
+        float inv2s2, wsum = 0.0f;
         int finite = 0;
-        for (size_t i = 0; i < in.samples.size(); ++i) {
-            const ShadedSample& s = in.samples[i];
-            if (!std::isfinite(s.value.x + s.value.y + s.value.z)) continue;
+
+        Sum(const NormalWeightedFilter& filter, glm::vec3 centreNormal)
+            : f(filter),
+              nc(centreNormal),
+              inv2s2(f.sigma > 0.0f ? 1.0f / (2.0f * f.sigma * f.sigma) : 0.0f) {}
+        void Add(const ShadedSample& s, bool centre, int dx, int dy) {
+            if (!std::isfinite(s.value.x + s.value.y + s.value.z)) return;
             any += s.value, ++finite;
-            if (int(i) != in.centre && !(glm::dot(s.normal, nc) > cosThreshold)) continue;
-            const float d2 = float(in.taps[i].dx * in.taps[i].dx + in.taps[i].dy * in.taps[i].dy);
-            const float w = sigma > 0.0f ? std::exp(-d2 * inv2s2) : 1.0f;
+            if (!centre && !(glm::dot(s.normal, nc) > f.cosThreshold)) return;
+            const float w = f.sigma > 0.0f ? std::exp(-float(dx * dx + dy * dy) * inv2s2) : 1.0f;
             sum += w * s.value;
             wsum += w;
         }
-        if (wsum > 0.0f) return sum / wsum;
-        return finite ? any / float(finite) : glm::vec3(0.0f);
-    }
+        glm::vec3 Result() const {
+            if (wsum > 0.0f) return sum / wsum;
+            return finite ? any / float(finite) : glm::vec3(0.0f);
+        }
+    };
 };
 
 /// The 1x1 "filter": the centre sample as shaded.

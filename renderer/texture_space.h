@@ -179,19 +179,34 @@ private:
     bool neighbourReuse_ = false;
 };
 
+namespace internal {
+/// A texture filter whose results pass through the temporal blend; it offers the block (tile)
+/// form of ShadingCache::LookupTexel exactly when the filter does.
+template <typename Filter>
+struct Accumulating {
+    TextureSpaceCache* cache;
+    const Filter& filter;
+
+    glm::vec3 operator()(const FilterInput<ShadedSample>& in) const {
+        return cache->Accumulate(in.request.key, filter(in));
+    }
+    glm::vec3 operator()(const SampleTile<ShadedSample>& t, int cx, int cy, int radius,
+                         const SampleRequest& texel) const requires requires {
+        filter(t, cx, cy, radius, texel);
+    }
+    { return cache->Accumulate(texel.key, filter(t, cx, cy, radius, texel)); }
+};
+}  // namespace internal
+
 template <typename ShadeFn>
 glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, ShadeFn&& shade,
                                     int raysPerSample, CacheStats& stats) {
     // One branch per lookup picks the material's filter; the filters themselves are inlined. The
     // temporal blend runs once per reconstructed texel, not per lookup.
-    auto lookup = [&](int radius, const auto& filter,
-                      FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
-        return cache_.LookupTexel(
-            texel, radius, shade,
-            [&](const FilterInput<ShadedSample>& in) {
-                return Accumulate(in.request.key, filter(in));
-            },
-            stats, taps);
+    auto lookup = [&]<typename Filter>(int radius, const Filter& filter,
+                                       FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
+        return cache_.LookupTexel(texel, radius, shade,
+                                  internal::Accumulating<Filter>{this, filter}, stats, taps);
     };
     if (neighbourReuse_) {
         // A cached texel is read as is (a hit); a missing one tries its neighbours first.

@@ -262,6 +262,63 @@ TEST(NormalWeightedFilter, AllTapsRejectedFallsBackToTheMean) {
     EXPECT_TRUE(Finite(NormalWeightedFilter{}(f.Input())));
 }
 
+// The block (tile) form of the normal filter gives what the footprint form gives for the same
+// taps, bit for bit (same taps in the same order: ShadingCache relies on it), from seen bytes and
+// from bit rows, with and without mirrored taps, for box and Gaussian weights, with holes (NaN and
+// inf samples), rejected normals and unseen taps.
+TEST(NormalWeightedFilter, TileFormEqualsFootprintForm) {
+    const int w = 15, h = 13, R = 4;
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    std::vector<ShadedSample> tile(size_t(w * h));
+    std::vector<uint8_t> seen(tile.size());
+    for (size_t i = 0; i < tile.size(); ++i) {
+        tile[i] = ShadedSample(glm::vec3(u(rng) + 1.0f, u(rng) + 1.0f, u(rng) + 1.0f),
+                               glm::normalize(glm::vec3(0.4f * u(rng), 0.4f * u(rng), 1.0f)), 0.0f);
+        seen[i] = (rng() % 3) != 0;
+    }
+    tile[20].value = glm::vec3(NAN), tile[33].value = glm::vec3(INFINITY);
+    tile[47].normal = glm::vec3(NAN);
+    std::vector<uint64_t> rows(size_t(h), 0), reversed(size_t(h), 0);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            if (seen[size_t(y * w + x)])
+                rows[size_t(y)] |= uint64_t(1) << x, reversed[size_t(y)] |= uint64_t(1)
+                                                                            << (w - 1 - x);
+    int compared = 0;
+    for (bool withBits : {false, true})
+        for (bool symmetric : {false, true})
+            for (float sigma : {0.0f, 2.0f})
+                for (int cy = R; cy < h - R; ++cy)
+                    for (int cx = R; cx < w - R; ++cx) {
+                        const int c = cy * w + cx;
+                        if (!seen[size_t(c)]) continue;
+                        Footprint f;
+                        for (int dy = -R; dy <= R; ++dy)
+                            for (int dx = -R; dx <= R; ++dx) {
+                                const int i = c + dy * w + dx, m = c - dy * w - dx;
+                                if (!seen[size_t(i)] || (symmetric && !seen[size_t(m)])) continue;
+                                if (i == c) f.centre = int(f.taps.size());
+                                FootprintSample t{};
+                                t.dx = int16_t(dx), t.dy = int16_t(dy);
+                                f.taps.push_back(t);
+                                f.samples.push_back(tile[size_t(i)]);
+                            }
+                        const NormalWeightedFilter filter{0.9f, sigma};
+                        const SampleTile<ShadedSample> t{w,
+                                                         h,
+                                                         tile.data(),
+                                                         seen.data(),
+                                                         symmetric,
+                                                         withBits ? rows.data() : nullptr,
+                                                         withBits ? reversed.data() : nullptr};
+                        const glm::vec3 a = filter(f.Input()), b = filter(t, cx, cy, R, {});
+                        ASSERT_EQ(a, b) << cx << "," << cy << " sigma " << sigma;
+                        ++compared;
+                    }
+    EXPECT_GT(compared, 100);
+}
+
 // Soft shadows: the blur follows the occluder slope. A contact shadow (tiny blur radius) keeps
 // the centre's visibility; no occluder around gives the wide average; NaN radii are ignored.
 TEST(SoftShadowFilter, WidthFollowsTheOccluderDistance) {

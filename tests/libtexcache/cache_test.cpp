@@ -14,6 +14,7 @@
 #include <random>
 #include <set>
 #include <thread>
+#include <tuple>
 #include <unordered_map>
 
 #include "libtexcache/topology_checks.h"
@@ -338,6 +339,96 @@ TEST(Footprint, AroundExtraordinaryVerticesEachSampleOnce) {
         for (int r : {1, 4, 8}) ExpectWellFormedFootprint(pent, f, 0, 0, 0, r);
 }
 
+// Pads (footprint.cpp) continue a window past its face as a walk from the centre would when the
+// neighbours' grids have the face's size: then both give the same taps, offsets and unseen
+// counts, with and without a visible set, around valence-3 and valence-5 vertices and mesh
+// boundaries.
+TEST(Footprint, PadsMatchTheWalkOnGridsOfOneSize) {
+    for (const ControlCage& c : {test::CubeCage(), test::GridCage(3), test::FanCage(5)}) {
+        const MeshGrids g(c, 0.1f, 7);
+        VisibleTexels vis(1 << 14);
+        std::mt19937 rng(3);
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            ASSERT_EQ(g.Log2Res(f), g.Log2Res(0)) << "the comparison needs one grid size";
+            for (int mip = 0; mip < g.NumLevels(f); ++mip)
+                for (int v = 0; v < g.Res(f, mip); ++v)
+                    for (int u = 0; u < g.Res(f, mip); ++u)
+                        if (rng() % 3 != 0)
+                            vis.Mark({g.FaceOffset() + uint32_t(f), uint8_t(mip), uint16_t(u),
+                                      uint16_t(v)});
+        }
+        std::vector<FootprintSample> padded, walked;
+        auto sorted = [](const std::vector<FootprintSample>& fp) {
+            std::vector<std::tuple<uint64_t, int, int, float, float>> t;
+            for (const FootprintSample& s : fp) t.emplace_back(s.key.Pack(), s.dx, s.dy, s.u, s.v);
+            std::sort(t.begin(), t.end());
+            return t;
+        };
+        int compared = 0;
+        for (int f = 0; f < g.NumFaces(); ++f)
+            for (int mip = 0; mip < g.NumLevels(f); ++mip) {
+                const int res = g.Res(f, mip);
+                for (int r : {1, 3, 10})
+                    for (int iv = 0; iv < res; iv += 3)
+                        for (int iu = 0; iu < res; iu += 2)
+                            for (const VisibleTexels* visible : {(VisibleTexels*)nullptr, &vis})
+                                for (bool symmetric : {false, true}) {
+                                    const int a = internal::GatherFootprint(
+                                        g, f, mip, iu, iv, r, &padded, visible, symmetric, true);
+                                    const int b = internal::GatherFootprint(
+                                        g, f, mip, iu, iv, r, &walked, visible, symmetric, false);
+                                    ASSERT_EQ(a, b) << "face " << f << " mip " << mip;
+                                    ASSERT_EQ(sorted(padded), sorted(walked))
+                                        << "face " << f << " mip " << mip << " texel " << iu << ","
+                                        << iv << " r " << r;
+                                    ++compared;
+                                }
+            }
+        EXPECT_GT(compared, 1000);
+    }
+}
+
+// Where neighbours' grids differ (n-gon sub-faces beside a quad, at two texel sizes), pads keep the
+// footprint's promises: each texel once (a coarser neighbour's texel under several positions
+// counts once), valid keys, the centre, and only visible taps whose mirrored offset is kept.
+TEST(Footprint, MixedGridsAreWalked) {
+    for (float texelSize : {0.03f, 0.011f}) {
+        const MeshGrids g(test::PentagonCage(), texelSize, 0);
+        VisibleTexels vis(1 << 14);
+        std::mt19937 rng(5);
+        bool mixed = false;
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            mixed |= g.Log2Res(f) != g.Log2Res(0);
+            for (int v = 0; v < g.Res(f, 1); ++v)
+                for (int u = 0; u < g.Res(f, 1); ++u)
+                    if (rng() & 1) vis.Mark({uint32_t(f), 1, uint16_t(u), uint16_t(v)});
+        }
+        EXPECT_TRUE(mixed) << "the mesh should have grids of several sizes";
+        std::vector<FootprintSample> fp;
+        for (int f = 0; f < g.NumFaces(); ++f) {
+            const int res = g.Res(f, 1);
+            for (int r : {2, 10})
+                for (auto [iu, iv] : {std::pair{0, 0}, {res - 1, res / 2}, {res / 2, res - 1}}) {
+                    GatherFootprint(g, f, 1, iu, iv, r, &fp, &vis, true);
+                    std::vector<FootprintSample> walked;
+                    internal::GatherFootprint(g, f, 1, iu, iv, r, &walked, &vis, true, false);
+                    ASSERT_EQ(fp.size(), walked.size());
+                    std::set<uint64_t> keys;
+                    std::set<std::pair<int, int>> offsets;
+                    for (const FootprintSample& t : fp) {
+                        EXPECT_TRUE(keys.insert(t.key.Pack()).second) << "texel twice";
+                        offsets.insert({t.dx, t.dy});
+                        EXPECT_TRUE((t.dx == 0 && t.dy == 0) || vis.Contains(t.key));
+                        EXPECT_LT(t.key.face, uint32_t(g.NumFaces()));
+                        EXPECT_LT(t.key.iu, g.Res(int(t.key.face), t.key.mip));
+                    }
+                    EXPECT_TRUE(offsets.count({0, 0}));
+                    for (auto [dx, dy] : offsets) EXPECT_TRUE(offsets.count({-dx, -dy}));
+                }
+        }
+    }
+}
+
 // ---- Visible texels (visible_texels.h) ----
 
 TEST(VisibleTexels, NeverMissesAMarkAndRarelyInventsOne) {
@@ -490,6 +581,96 @@ TEST(ShadingCache, RestrictedFootprintsShadeOnlyVisibleSamples) {
     EXPECT_EQ(shaded.size(), 169u);
 }
 
+// A filter with a block (tile) form: a miss reconstructs the visible texels of its 8x8 block
+// (its windows continued past the face by its pad), and every texel gets the value per-texel
+// filtering gives it (same samples, same taps). Both caches look up every visible texel of a
+// mesh in the same order.
+struct OffsetWeightedMean {
+    float operator()(const FilterInput<AoSample>& in) const {
+        float sum = 0.0f, wsum = 0.0f;
+        for (size_t i = 0; i < in.samples.size(); ++i) {
+            const float w = 1.0f + 0.03f * float(in.taps[i].dx) + 0.01f * float(in.taps[i].dy);
+            sum += w * in.samples[i].value, wsum += w;
+        }
+        return sum / wsum;
+    }
+};
+struct OffsetWeightedMeanWithTiles : OffsetWeightedMean {
+    using OffsetWeightedMean::operator();
+    float operator()(const SampleTile<AoSample>& t, int cx, int cy, int r,
+                     const SampleRequest&) const {
+        float sum = 0.0f, wsum = 0.0f;
+        t.ForEachTap(cx, cy, r, [&](int i, int dx, int dy) {
+            const float w = 1.0f + 0.03f * float(dx) + 0.01f * float(dy);
+            sum += w * t.samples[i].value, wsum += w;
+        });
+        return sum / wsum;
+    }
+};
+
+TEST(ShadingCache, BlockReconstructionGivesThePerTexelValues) {
+    struct Case {
+        ControlCage cage;
+        float texelSize;
+    };
+    // A grid (boundaries), the cube (valence-3 corners: windows holding a texel twice) and the
+    // pentagon (n-gon sub-faces, grids of several sizes).
+    for (const Case& c :
+         {Case{test::GridCage(3), 1.0f / 32.0f}, Case{test::CubeCage(), 1.0f / 24.0f},
+          Case{test::PentagonCage(), 0.03f}}) {
+        CacheSettings settings;
+        settings.sampleCacheBytes = settings.texelCacheBytes = size_t(1) << 20;
+        ShadingCache<AoSample, float> perTexel(settings), blocks(settings);
+        const int mesh = perTexel.AddMesh(c.cage, c.texelSize);
+        blocks.AddMesh(c.cage, c.texelSize);
+        const MeshGrids& g = perTexel.Mesh(mesh);
+        VisibleTexels vis(1 << 14);
+        std::mt19937 rng(7);
+        std::vector<TexelKey> seen;
+        for (int f = 0; f < g.NumFaces(); ++f)
+            for (int v = 0; v < g.Res(f, 0); ++v)
+                for (int u = 0; u < g.Res(f, 0); ++u)
+                    if (rng() % 5 < 3) {
+                        seen.push_back({g.FaceOffset() + uint32_t(f), 0, uint16_t(u), uint16_t(v)});
+                        vis.Mark(seen.back());
+                    }
+        std::set<uint64_t> shadedA, shadedB;
+        auto shader = [](std::set<uint64_t>* shaded) {
+            return [shaded](const SampleRequest& r) {
+                shaded->insert(r.key.Pack());
+                return AoSample{float(r.key.Pack() * 0x9E3779B97F4A7C15ull >> 40) / float(1 << 24),
+                                {}};
+            };
+        };
+        auto shadeA = shader(&shadedA), shadeB = shader(&shadedB);
+        perTexel.RestrictFootprints(&vis);
+        blocks.RestrictFootprints(&vis);
+        for (FootprintTaps taps : {FootprintTaps::VisibleSymmetric, FootprintTaps::Visible})
+            for (int radius : {2, 6}) {
+                perTexel.InvalidateAll();
+                blocks.InvalidateAll();
+                shadedA.clear();
+                shadedB.clear();
+                CacheStats a, b;
+                for (const TexelKey& k : seen) {
+                    const SampleRequest r = perTexel.RequestOf(mesh, k);
+                    ASSERT_EQ(
+                        perTexel.LookupTexel(r, radius, shadeA, OffsetWeightedMean{}, a, taps),
+                        blocks.LookupTexel(r, radius, shadeB, OffsetWeightedMeanWithTiles{}, b,
+                                           taps))
+                        << c.cage.sourcePath << " face " << k.face << " texel " << k.iu << ","
+                        << k.iv << " r " << radius;
+                }
+                EXPECT_EQ(a.texelsPrefiltered, 0u);
+                EXPECT_GT(b.texelsPrefiltered, seen.size() / 4) << c.cage.sourcePath;
+                EXPECT_GT(b.texelHits, a.texelHits);
+                // The same samples (the visible ones); how often each is shaded again after an
+                // eviction depends on the order of fetches, which differs.
+                EXPECT_EQ(shadedA, shadedB);
+            }
+    }
+}
+
 TEST(ShadingCache, RejectsImpossibleSettings) {
     CacheSettings s;
     s.sampleCacheBytes = 0;
@@ -545,6 +726,24 @@ TEST(ShadingCache, ReferenceModeShadesEachSampleOnce) {
     for (const auto& [key, count] : shadeCount) ASSERT_EQ(count, 1) << "sample shaded twice";
 }
 
+// Four threads call check(i, their stats) for i = 0..n-1, each in its own order, `passes`
+// times; returns how many calls returned false, the threads' statistics merged into `total`.
+template <typename Check>
+int MismatchesInThreads(size_t n, int passes, CacheStats* total, Check check) {
+    std::atomic<int> mismatches{0};
+    std::vector<CacheStats> stats(4);
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+        threads.emplace_back([&, t] {
+            for (int pass = 0; pass < passes; ++pass)
+                for (size_t k = 0; k < n; ++k)
+                    if (!check((k * (2 * t + 1) + size_t(t) * 997) % n, stats[t])) ++mismatches;
+        });
+    for (auto& th : threads) th.join();
+    for (const auto& st : stats) total->Merge(st);
+    return mismatches.load();
+}
+
 // Threads filter overlapping footprints through small bounded caches (evictions, deferrals,
 // conflicts all happen): every result equals the single-threaded answer. Run under
 // ThreadSanitizer by scripts/test.sh (label `cache`).
@@ -579,22 +778,13 @@ TEST(ShadingCache, ConcurrentOverlappingFootprintsMatchSingleThreaded) {
         s.texelTwoChoices = twoChoices;
         ShadingCache<AoSample, float> cache(s);
         cache.AddMesh(test::GridCage(4), 0.02f);
-        std::atomic<int> mismatches{0};
-        std::vector<std::thread> threads;
-        std::vector<CacheStats> stats(4);
-        for (int t = 0; t < 4; ++t)
-            threads.emplace_back([&, t] {
-                for (int pass = 0; pass < 3; ++pass)
-                    for (size_t k = 0; k < hits.size(); ++k) {
-                        const size_t i = (k * (2 * t + 1) + size_t(t) * 997) % hits.size();
-                        if (cache.Lookup(hits[i], 3, shade, mean, stats[t]) != expected[i])
-                            ++mismatches;
-                    }
-            });
-        for (auto& th : threads) th.join();
-        EXPECT_EQ(mismatches.load(), 0);
         CacheStats total;
-        for (const auto& st : stats) total.Merge(st);
+        EXPECT_EQ(MismatchesInThreads(hits.size(), 3, &total,
+                                      [&](size_t i, CacheStats& st) {
+                                          return cache.Lookup(hits[i], 3, shade, mean, st) ==
+                                                 expected[i];
+                                      }),
+                  0);
         EXPECT_GT(total.sampleEvictions, 0u);
         EXPECT_GT(total.texelHits, 0u);
         EXPECT_LE(cache.BytesUsed(), s.sampleCacheBytes + s.texelCacheBytes);
@@ -622,6 +812,70 @@ TEST(ShadingCache, LookupsDoNotAllocate) {
             sink += cache.Lookup({mesh, f, u, 0.02f, 0.05f, 0, 0, 0.05f}, 6, shade, mean, st);
     EXPECT_EQ(gAllocations.load(), before);
     EXPECT_GT(st.texelMisses, 5u);
+    EXPECT_TRUE(std::isfinite(sink));
+}
+
+// Block reconstruction under threads: four threads look up the visible texels of two cube faces
+// (and their windows across the edges and corners) in different orders through small caches (texel
+// slots busy with another thread's claim, samples evicted and deferred), and every result equals
+// the single-threaded per-texel one. After a warm-up the block path allocates nothing either (its
+// scratch and the pads are per thread). Run under ThreadSanitizer by scripts/test.sh (label
+// `cache`).
+TEST(ShadingCache, ConcurrentBlockReconstructionMatchesPerTexel) {
+    const ControlCage cage = test::CubeCage();
+    const float texelSize = 1.0f / 24.0f;
+    VisibleTexels vis(1 << 14);
+    std::vector<TexelKey> keys;
+    std::vector<float> expected;
+    auto shade = [](const SampleRequest& r) {
+        return AoSample{float(r.key.Pack() % 1009) / 1009.0f, {0, 1, 0}};
+    };
+    {
+        ShadingCache<AoSample, float> ref(CacheSettings{});
+        const MeshGrids& g = ref.Mesh(ref.AddMesh(cage, texelSize));
+        std::mt19937 rng(9);
+        for (int f = 0; f < g.NumFaces(); ++f)
+            for (int v = 0; v < g.Res(f, 0); ++v)
+                for (int u = 0; u < g.Res(f, 0); ++u)
+                    if (rng() % 4 != 0) {
+                        vis.Mark({uint32_t(f), 0, uint16_t(u), uint16_t(v)});
+                        if (f < 2) keys.push_back({uint32_t(f), 0, uint16_t(u), uint16_t(v)});
+                    }
+        ref.RestrictFootprints(&vis);
+        CacheStats st;
+        for (const TexelKey& k : keys)
+            expected.push_back(
+                ref.LookupTexel(ref.RequestOf(0, k), 4, shade, OffsetWeightedMean{}, st));
+    }
+    CacheSettings s;
+    s.sampleCacheBytes = 64 * 1024;
+    s.texelCacheBytes = 8 * 1024;
+    ShadingCache<AoSample, float> cache(s);
+    cache.AddMesh(cage, texelSize);
+    cache.RestrictFootprints(&vis);
+    CacheStats total;
+    EXPECT_EQ(MismatchesInThreads(keys.size(), 1, &total,
+                                  [&](size_t i, CacheStats& st) {
+                                      return cache.LookupTexel(cache.RequestOf(0, keys[i]), 4,
+                                                               shade, OffsetWeightedMeanWithTiles{},
+                                                               st) == expected[i];
+                                  }),
+              0);
+    EXPECT_GT(total.texelsPrefiltered, 0u);
+    EXPECT_GT(total.sampleEvictions, 0u);
+    // No allocation once warm: the same lookups again after an invalidation.
+    cache.InvalidateAll();
+    CacheStats st;
+    for (size_t i = 0; i < 64; ++i)
+        cache.LookupTexel(cache.RequestOf(0, keys[i]), 4, shade, OffsetWeightedMeanWithTiles{}, st);
+    cache.InvalidateAll();
+    const uint64_t before = gAllocations.load();
+    float sink = 0.0f;
+    for (size_t i = 0; i < 64; ++i)
+        sink += cache.LookupTexel(cache.RequestOf(0, keys[i]), 4, shade,
+                                  OffsetWeightedMeanWithTiles{}, st);
+    EXPECT_EQ(gAllocations.load(), before);
+    EXPECT_GT(st.texelsPrefiltered, 0u);
     EXPECT_TRUE(std::isfinite(sink));
 }
 

@@ -38,11 +38,15 @@ public:
     int Res(int face, int mip) const { return 1 << std::max(0, log2Res_[face] - mip); }
     /// Clamps a mip to the face's chain.
     int ClampMip(int face, int mip) const { return std::clamp(mip, 0, int(log2Res_[face])); }
+    /// Unique per instance (never reused): tags what is derived from these grids, e.g. the
+    /// footprint pads GatherFootprint keeps per thread.
+    uint64_t Id() const { return id_; }
 
 private:
     std::shared_ptr<const PtexTopology> topo_;
     std::vector<uint8_t> log2Res_;
     uint32_t faceOffset_;
+    uint64_t id_;
 };
 
 /// Appends grids for `cage` to `meshes`, numbering its faces after the last mesh's (keys hold
@@ -81,11 +85,38 @@ struct FootprintSample {
 /// the first texel row of the neighbour, whose frame is turned to continue the same direction.
 /// Boundary and non-manifold edges end the walk (that sample is left out). Around extraordinary
 /// vertices two walks can reach the same texel; each sample is returned once (the walk with the
-/// smallest |dx| + |dy|). With `visible`, only the samples it contains are returned (and the
-/// centre, always), and with `symmetric` only those whose mirrored offset (-dx, -dy) is returned
-/// too (see visible_texels.h): the return value is how many it left out.
-int GatherFootprint(const MeshGrids& grids, int face, int mip, int iu, int iv, int radius,
+/// smallest |dx| + |dy|). Where the neighbourhood's grids have the face's size, the walks are
+/// read from the face's pad (built once per thread, face, mip and radius: see footprint.cpp for
+/// its memory bound) instead of walked per window, with the same result. With `visible`, only
+/// the samples it contains are returned (and the centre, always), and with `symmetric` only
+/// those whose mirrored offset (-dx, -dy) is returned too (see visible_texels.h): the return
+/// value is how many it left out.
+int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
                     std::vector<FootprintSample>* out, const VisibleTexels* visible = nullptr,
                     bool symmetric = true);
+
+namespace internal {
+/// One position of a face's pad (see footprint.cpp): the texel a footprint reaches there.
+struct PaddedTexel {
+    static constexpr uint8_t kReached = 1;    ///< else a boundary ended the walk: no texel
+    static constexpr uint8_t kDuplicate = 2;  ///< the pad or the face holds this texel elsewhere
+    uint64_t key;                             ///< packed TexelKey
+    float u, v;                               ///< texel centre in its face
+    uint32_t probe;                           ///< VisibleTexels::Probe(key)
+    uint8_t bit;                              ///< VisibleTexels::Bit(key), as a bit index
+    uint8_t flags;
+};
+/// The pad texel at (x, y) of (face, mip)'s grid, a position outside the face within `radius`
+/// of it; the next positions of row y follow while x stays on the same side of the face. Null
+/// when the face has no pad at this radius (too large, or grids of other sizes around it). Valid
+/// until this thread's next call (or GatherFootprint) for another face.
+const PaddedTexel* PaddedRun(const MeshGrids& g, int face, int mip, int radius, int x, int y);
+
+/// GatherFootprint, with `pads` false walking every window from its centre (what faces without a
+/// pad get): for tests comparing the two.
+int GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
+                    std::vector<FootprintSample>* out, const VisibleTexels* visible, bool symmetric,
+                    bool pads);
+}  // namespace internal
 
 }  // namespace texcache

@@ -12,6 +12,7 @@
 #pragma once
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -71,6 +72,7 @@ struct CacheStats {
     uint64_t deferrals = 0, waits = 0, samplesUncached = 0;
     uint64_t sampleMemoHits = 0;  ///< sample hits served by the thread's tap memo (see Filter)
     uint64_t tapsUnseen = 0;      ///< footprint taps left out as not visible (RestrictFootprints)
+    uint64_t texelsPrefiltered = 0;  ///< texels a miss reconstructed besides its own (SampleTile)
 
     void Merge(const CacheStats& o) {
         lookups += o.lookups, texelHits += o.texelHits, texelMisses += o.texelMisses;
@@ -79,6 +81,7 @@ struct CacheStats {
         samplesShaded += o.samplesShaded, sampleEvictions += o.sampleEvictions;
         deferrals += o.deferrals, waits += o.waits, samplesUncached += o.samplesUncached;
         sampleMemoHits += o.sampleMemoHits, tapsUnseen += o.tapsUnseen;
+        texelsPrefiltered += o.texelsPrefiltered;
     }
     double TexelHitRate() const { return lookups ? double(texelHits) / double(lookups) : 0.0; }
 };
@@ -119,6 +122,52 @@ struct FilterInput {
     std::span<const Sample> samples;
     int centre;  ///< index of the centre texel in taps/samples (always present)
     SampleRequest request;
+};
+
+/// What a block filter gets (see ShadingCache::LookupTexel): the samples of a w x h window of
+/// one face grid, row-major, and which of them footprints use (`seen`: the visible texels; the
+/// others hold no sample). A filter that also has
+///   Texel operator()(const SampleTile<Sample>& tile, int cx, int cy, int radius,
+///                    const SampleRequest& texel) const
+/// reconstructs texel (cx, cy) of the tile, whose (2r+1)^2 window lies inside the tile, from it;
+/// it must return what the FilterInput overload returns for that texel's footprint: the seen
+/// taps of the window (and the centre), row by row, those whose mirror is seen too when
+/// `symmetric`.
+template <typename Sample>
+struct SampleTile {
+    int w, h;
+    const Sample* samples;
+    const uint8_t* seen;
+    bool symmetric;
+    /// Optional (w <= 64): `seen` as bits, bit x of rows[y] and bit w-1-x of reversed[y].
+    const uint64_t* rows = nullptr;
+    const uint64_t* reversed = nullptr;
+
+    /// Calls f(i, dx, dy) for the taps a footprint of texel (cx, cy) keeps, row by row: i indexes
+    /// `samples`, and the tap is seen (the centre always is) and, when `symmetric`, so is its
+    /// mirror. With the bit rows, a window row costs a few shifts and one call per kept tap.
+    template <typename F>
+    void ForEachTap(int cx, int cy, int r, F&& f) const {
+        const int c = cy * w + cx;
+        if (rows) {
+            const int side = 2 * r + 1;
+            const uint64_t window = side >= 64 ? ~uint64_t(0) : (uint64_t(1) << side) - 1;
+            for (int dy = -r; dy <= r; ++dy) {
+                uint64_t m = (rows[cy + dy] >> (cx - r)) & window;
+                if (symmetric) m &= reversed[cy - dy] >> (w - 1 - cx - r);
+                for (; m; m &= m - 1) {
+                    const int dx = std::countr_zero(m) - r;
+                    f(c + dy * w + dx, dx, dy);
+                }
+            }
+            return;
+        }
+        for (int dy = -r; dy <= r; ++dy)
+            for (int dx = -r; dx <= r; ++dx) {
+                const int i = c + dy * w + dx;
+                if (seen[i] && (!symmetric || seen[c - dy * w - dx])) f(i, dx, dy);
+            }
+    }
 };
 
 namespace internal {
@@ -327,7 +376,8 @@ public:
             return Filter(centre, radius, shade, filter, st, taps);
         }
         if (ticket.evicted) ++st.texelEvictions;
-        texel = Filter(centre, radius, shade, filter, st, taps);
+        if (!FilterBlock(centre, radius, shade, filter, st, taps, &texel))
+            texel = Filter(centre, radius, shade, filter, st, taps);
         if (refTexels_)
             refTexels_->Publish(key, texel);
         else
@@ -405,27 +455,41 @@ private:
                  CacheStats& st, FootprintTaps keep) {
         thread_local std::vector<FootprintSample> taps;
         thread_local std::vector<Sample> values;
-        thread_local std::vector<int> missing, deferred;
-        internal::TapMemo<Sample>& memo = ThreadMemo();
-        const uint64_t epoch = epoch_.load(std::memory_order_relaxed);
-        if (memo.owner != id_ || memo.epoch != epoch) memo.Reset(id_, epoch);
-
         const MeshGrids& g = *meshes_[centre.mesh];
         st.tapsUnseen +=
             uint64_t(GatherFootprint(g, centre.face, centre.mip, centre.key.iu, centre.key.iv,
                                      radius, &taps, keep == FootprintTaps::All ? nullptr : visible_,
                                      keep == FootprintTaps::VisibleSymmetric));
+        FetchTaps(centre.mesh, taps, &values, shade, st);
+        int centreIndex = 0;
+        for (size_t i = 0; i < taps.size(); ++i)
+            if (taps[i].key == centre.key) centreIndex = int(i);
+        FilterInput<Sample> in{std::span<const FootprintSample>(taps.data(), taps.size()),
+                               std::span<const Sample>(values.data(), values.size()), centreIndex,
+                               centre};
+        return filter(in);
+    }
+
+    // The samples of `taps` into `values` (same order): from the tap memo, else the sample cache,
+    // shading what is missing (deferring samples other threads are shading, revisiting them after
+    // the rest).
+    template <typename ShadeFn>
+    void FetchTaps(int mesh, const std::vector<FootprintSample>& taps, std::vector<Sample>* out,
+                   ShadeFn& shade, CacheStats& st) {
+        thread_local std::vector<int> missing, deferred;
+        internal::TapMemo<Sample>& memo = ThreadMemo();
+        const uint64_t epoch = epoch_.load(std::memory_order_relaxed);
+        if (memo.owner != id_ || memo.epoch != epoch) memo.Reset(id_, epoch);
+        std::vector<Sample>& values = *out;
         values.resize(taps.size());
         missing.clear();
         deferred.clear();
-        int centreIndex = 0;
         // Taps come face by face: the face/mip part of the memo slot is computed once per run.
         uint32_t runFace = ~0u;
         uint8_t runMip = 0xff;
         uint64_t runBase = 0;
         for (size_t i = 0; i < taps.size(); ++i) {
             const TexelKey k = taps[i].key;
-            if (k == centre.key) centreIndex = int(i);
             if (k.face != runFace || k.mip != runMip)
                 runFace = k.face, runMip = k.mip, runBase = internal::MixFaceMip(k.face, k.mip);
             const size_t m = MemoSlot(runBase, k);
@@ -447,7 +511,7 @@ private:
             memo.values[m] = values[i];
         };
         for (int i : missing) {
-            if (!FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/false)) {
+            if (!FetchOrShade(mesh, taps[i], &values[i], shade, st, /*wait=*/false)) {
                 deferred.push_back(i);
                 ++st.deferrals;
                 continue;
@@ -455,13 +519,148 @@ private:
             remember(i);
         }
         for (int i : deferred) {
-            FetchOrShade(centre.mesh, taps[i], &values[i], shade, st, /*wait=*/true);
+            FetchOrShade(mesh, taps[i], &values[i], shade, st, /*wait=*/true);
             remember(i);
         }
-        FilterInput<Sample> in{std::span<const FootprintSample>(taps.data(), taps.size()),
-                               std::span<const Sample>(values.data(), values.size()), centreIndex,
-                               centre};
-        return filter(in);
+    }
+
+    // Block reconstruction: a miss whose filter takes a SampleTile (see there) reconstructs, from
+    // one gather, every visible texel of its 8x8 block (the visible set's block), and puts those
+    // nobody holds into the texel cache. Why: neighbouring
+    // windows share all but 2r+1 of their taps, and the visible texels of a block are looked up
+    // soon (the prepass marked them from this frame's camera rays), so gathering, fetching and
+    // testing each window's taps again per texel was most of a 21x21 render (perf, car AO,
+    // `texcache experiment filter-size`). The tile is at most (8 + 2r)^2 samples per thread
+    // (r = 10: 784, 28 KiB with ShadedSample). Past the face's edges the tile reads the face's
+    // pad, which gives every window there the taps GatherFootprint gives it, except windows
+    // holding a texel twice (they take the per-texel path). Texels are reconstructed from the
+    // samples they would have been filtered with, so their values are the per-texel path's.
+    // False when the block path does not apply to the centre: no tile overload, no visible set,
+    // reference mode, an unseen centre, a window holding a texel twice, or a tile past the
+    // face's edges that is wider than 64 texels or whose face is too large for a pad.
+    template <typename ShadeFn, typename FilterFn>
+    bool FilterBlock(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter,
+                     CacheStats& st, FootprintTaps keep, Texel* out) {
+        if constexpr (!requires(const SampleTile<Sample>& t) { filter(t, 0, 0, 0, centre); }) {
+            return false;
+        } else {
+            if (!visible_ || keep == FootprintTaps::All || !texels_ || radius <= 0) return false;
+            const MeshGrids& g = *meshes_[centre.mesh];
+            const int face = centre.face, mip = centre.mip, res = g.Res(face, mip);
+            const int iu = centre.key.iu, iv = centre.key.iv;
+            if (!visible_->Contains(centre.key)) return false;
+            // The block's texels and the tile their windows cover; where it passes the face's
+            // edges, the face's pad (footprint.h) continues it as GatherFootprint does.
+            const int xlo = iu & ~7, xhi = std::min(iu | 7, res - 1);
+            const int ylo = iv & ~7, yhi = std::min(iv | 7, res - 1);
+            const int x0 = xlo - radius, y0 = ylo - radius;
+            const int w = xhi - xlo + 1 + 2 * radius, h = yhi - ylo + 1 + 2 * radius;
+            const bool padded = x0 < 0 || y0 < 0 || x0 + w > res || y0 + h > res;
+            if (padded && (w > 64 || !internal::PaddedRun(g, face, mip, radius, -1, -1)))
+                return false;
+            thread_local std::vector<FootprintSample> taps;
+            thread_local std::vector<Sample> values, tile;
+            thread_local std::vector<uint8_t> seen;
+            thread_local std::vector<int> at;
+            thread_local std::vector<uint64_t> rows, reversed, duplicates;
+            taps.clear();
+            at.clear();
+            seen.assign(size_t(w) * size_t(h), 0);
+            tile.resize(seen.size());
+            const bool bits = w <= 64;
+            rows.assign(size_t(h), 0);
+            reversed.assign(size_t(h), 0);
+            duplicates.assign(size_t(h), 0);
+            bool anyDuplicate = false;
+            auto add = [&](const TexelKey& key, float u, float v, int tx, int ty) {
+                taps.push_back({key, 0, 0, u, v});
+                at.push_back(ty * w + tx);
+                seen[size_t(ty * w + tx)] = 1;
+                if (bits) {
+                    rows[size_t(ty)] |= uint64_t(1) << tx;
+                    reversed[size_t(ty)] |= uint64_t(1) << (w - 1 - tx);
+                }
+            };
+            // The tile's visible texels: inside the face a word of the visible set per 8 texels
+            // of a row, outside it the pad's texels, each with its stored probe.
+            const float inv = 1.0f / float(res);  // exact: res is a power of two
+            TexelKey k = centre.key;
+            for (int y = y0; y < y0 + h; ++y) {
+                const int ty = y - y0;
+                auto padRun = [&](int xa, int xb) {
+                    const internal::PaddedTexel* p =
+                        internal::PaddedRun(g, face, mip, radius, xa, y);
+                    for (int x = xa; x <= xb; ++x, ++p) {
+                        if (!(p->flags & internal::PaddedTexel::kReached) ||
+                            !visible_->ContainsAt(p->probe, uint64_t(1) << p->bit))
+                            continue;
+                        if (p->flags & internal::PaddedTexel::kDuplicate) {
+                            duplicates[size_t(ty)] |= uint64_t(1) << (x - x0);
+                            anyDuplicate = true;
+                        }
+                        add(TexelKey::Unpack(p->key), p->u, p->v, x - x0, ty);
+                    }
+                };
+                if (y < 0 || y >= res) {
+                    padRun(x0, x0 + w - 1);
+                    continue;
+                }
+                if (x0 < 0) padRun(x0, -1);
+                const int a = std::max(x0, 0), b = std::min(x0 + w - 1, res - 1);
+                k.iv = uint16_t(y);
+                for (int blk = a >> 3; blk <= b >> 3; ++blk) {
+                    k.iu = uint16_t(blk << 3);
+                    uint32_t m = uint32_t(visible_->BlockBits(k) >> ((y & 7) * 8)) & 0xFFu;
+                    const int lo = std::max(a - (blk << 3), 0), hi = std::min(b - (blk << 3), 7);
+                    m &= (0xFFu << lo) & (0xFFu >> (7 - hi));
+                    for (; m; m &= m - 1) {
+                        const int x = (blk << 3) + std::countr_zero(m);
+                        k.iu = uint16_t(x);
+                        add(k, (float(x) + 0.5f) * inv, (float(y) + 0.5f) * inv, x - x0, ty);
+                    }
+                }
+                if (x0 + w - 1 >= res) padRun(res, x0 + w - 1);
+            }
+            // A window holding a texel twice keeps the closest (GatherFootprint): those texels
+            // take the per-texel path.
+            const uint64_t window =
+                2 * radius + 1 >= 64 ? ~uint64_t(0) : (uint64_t(1) << (2 * radius + 1)) - 1;
+            auto single = [&](int tx, int ty) {
+                if (!anyDuplicate) return true;
+                for (int j = ty - radius; j <= ty + radius; ++j)
+                    if ((duplicates[size_t(j)] >> (tx - radius)) & window) return false;
+                return true;
+            };
+            FetchTaps(centre.mesh, taps, &values, shade, st);
+            for (size_t i = 0; i < taps.size(); ++i) tile[size_t(at[i])] = values[i];
+            const SampleTile<Sample> t{w,
+                                       h,
+                                       tile.data(),
+                                       seen.data(),
+                                       keep == FootprintTaps::VisibleSymmetric,
+                                       bits ? rows.data() : nullptr,
+                                       bits ? reversed.data() : nullptr};
+            k = centre.key;
+            for (int y = ylo; y <= yhi; ++y)
+                for (int x = xlo; x <= xhi; ++x) {
+                    if ((x == iu && y == iv) || !seen[size_t((y - y0) * w + (x - x0))] ||
+                        !single(x - x0, y - y0))
+                        continue;
+                    k.iu = uint16_t(x), k.iv = uint16_t(y);
+                    const uint64_t key = k.Pack(), hash = Hash(k);
+                    Texel texel;
+                    SlotTicket ticket;
+                    if (texels_->Acquire(key, hash, &texel, &ticket) != AcquireResult::Claimed)
+                        continue;  // cached already, or another thread's
+                    if (ticket.evicted) ++st.texelEvictions;
+                    const SampleRequest r = RequestOf(centre.mesh, k);
+                    texels_->Publish(ticket, filter(t, x - x0, y - y0, radius, r));
+                    ++st.texelsPrefiltered;
+                }
+            if (!single(iu - x0, iv - y0)) return false;
+            *out = filter(t, iu - x0, iv - y0, radius, centre);
+            return true;
+        }
     }
 
     // One memo per thread for all caches of this Sample type (whatever their shaders and

@@ -35,9 +35,10 @@ namespace texcache {
 
 class VisibleTexels {
 public:
-    /// A table of `bytes` rounded down to a power of two words (at least 8: one cache line).
+    /// A table of `bytes` rounded down to a power of two words (at least 8: one cache line, at
+    /// most 2^32: a Probe's low 32 bits then address every word).
     explicit VisibleTexels(size_t bytes)
-        : words_(std::bit_floor(std::max<size_t>(bytes / sizeof(uint64_t), 8))),
+        : words_(std::bit_floor(std::clamp<size_t>(bytes / sizeof(uint64_t), 8, size_t(1) << 32))),
           bits_(std::make_unique<std::atomic<uint64_t>[]>(words_)) {
         Clear();
     }
@@ -58,16 +59,25 @@ public:
     static uint64_t Bit(const TexelKey& k) { return uint64_t(1) << ((k.iv & 7) * 8 + (k.iu & 7)); }
     size_t Bytes() const { return words_ * sizeof(uint64_t); }
 
-private:
-    // The 8 blocks of a 64-texel run along u share a cache line (8 words); runs are scattered.
-    // A footprint row then reads one or two lines, and the rows of a block row the same ones.
-    size_t Word(const TexelKey& k) const {
+    /// Where texel k's mark lives, independent of the table's size: a caller that tests the same
+    /// texels often (the footprint pads of footprint.cpp) keeps it instead of hashing again.
+    static uint32_t Probe(const TexelKey& k) {
+        // The 8 blocks of a 64-texel run along u share a cache line (8 words); runs are
+        // scattered. A footprint row then reads one or two lines, and the rows of a block row
+        // the same ones.
         uint64_t x = (uint64_t(k.face) << 4 | k.mip) * 0x9E3779B97F4A7C15ull;
         x ^= (uint64_t(k.iv >> 3) << 32 | uint64_t(k.iu >> 6)) * 0xC2B2AE3D27D4EB4Full;
         x ^= x >> 29;
         const uint64_t line = x * 0xBF58476D1CE4E5B9ull >> 20;
-        return size_t(line << 3 | uint64_t((k.iu >> 3) & 7)) & (words_ - 1);
+        return uint32_t(line << 3 | uint64_t((k.iu >> 3) & 7));
     }
+    /// Contains() for a texel given by its Probe and Bit.
+    bool ContainsAt(uint32_t probe, uint64_t bit) const {
+        return (bits_[probe & (words_ - 1)].load(std::memory_order_relaxed) & bit) != 0;
+    }
+
+private:
+    size_t Word(const TexelKey& k) const { return size_t(Probe(k)) & (words_ - 1); }
 
     size_t words_;
     std::unique_ptr<std::atomic<uint64_t>[]> bits_;
