@@ -87,8 +87,9 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
                     "speed-vs-error: camera samples per pixel, the same rays for every render "
                     "(default 4; Munkberg et al. Fig. 7 use 16)");
     cmd->add_flag("--ablation", args->ablation,
-                  "temporal: also Reliable (demodulation on) with alpha 0.1 (the paper's), the "
-                  "glossy jitter cap at 0 and 16 px, and without clamping, summarised in "
+                  "temporal: also Reliable (demodulation on) with issue 5's defaults (glossy "
+                  "and indirect clamped, indirect in cones), alpha 0.1 (the paper's), the glossy "
+                  "jitter cap at 0 and 16 px, and without clamping, summarised in "
                   "temporal_ablation.md");
     cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
         ->capture_default_str();

@@ -240,24 +240,42 @@ int Temporal(const Setup& s) {
                 v.denoiser =
                     std::make_unique<screen::ScreenSpaceDenoiser>(screen::DenoiserSettings{}, brdf);
             }
-        // Ablation: Reliable with one setting changed at a time (and both), demodulation on.
+        // Ablation: Reliable with one setting changed at a time, demodulation on; the first
+        // three are issue 5's defaults (every history clamped at 3 sigma, indirect in cones) and
+        // its two halves, so that issue 21's change is measured against them in the same run.
         std::vector<Variant> ablation;
         if (s.ablation) {
             struct Change {
                 const char* label;
-                float alpha, jitter, clampK;
+                void (*apply)(screen::DenoiserSettings*);
             };
-            const screen::DenoiserSettings def;
-            const float a = def.alpha, j = def.maxGlossyJitter, k = def.reliableClampK;
-            // k = 1000: no clamping in practice (history within 1000 sigma of the 3x3 mean).
-            for (const Change& c : {Change{"reliable, alpha 0.1", 0.1f, j, k},
-                                    Change{"reliable, glossy jitter 0", a, 0.0f, k},
-                                    Change{"reliable, glossy jitter 16", a, 16.0f, k},
-                                    Change{"reliable, no clamping", a, j, 1000.0f}}) {
+            const Change changes[] = {
+                {"reliable, issue 5 defaults (glossy and indirect clamped, cones)",
+                 [](screen::DenoiserSettings* d) {
+                     d->reliableGlossyClampK = d->reliableIndirectClampK = 3.0f;
+                     d->indirectCones = true;
+                 }},
+                {"reliable, glossy clamped (3 sigma)",
+                 [](screen::DenoiserSettings* d) { d->reliableGlossyClampK = 3.0f; }},
+                {"reliable, indirect in cones, clamped (3 sigma)",
+                 [](screen::DenoiserSettings* d) {
+                     d->reliableIndirectClampK = 3.0f, d->indirectCones = true;
+                 }},
+                {"reliable, indirect colour clamped (3 sigma)",
+                 [](screen::DenoiserSettings* d) { d->reliableIndirectClampK = 3.0f; }},
+                {"reliable, alpha 0.1", [](screen::DenoiserSettings* d) { d->alpha = 0.1f; }},
+                {"reliable, glossy jitter 0",
+                 [](screen::DenoiserSettings* d) { d->maxGlossyJitter = 0.0f; }},
+                {"reliable, glossy jitter 16",
+                 [](screen::DenoiserSettings* d) { d->maxGlossyJitter = 16.0f; }},
+                // k = 1000: no clamping in practice (history within 1000 sigma of the 3x3 mean).
+                {"reliable, no clamping (visibility too)",
+                 [](screen::DenoiserSettings* d) { d->reliableClampK = 1000.0f; }}};
+            for (const Change& c : changes) {
                 Variant& v = ablation.emplace_back();
                 v.method = Method::Reliable, v.demod = Demodulation::On, v.label = c.label;
                 screen::DenoiserSettings set;
-                set.alpha = c.alpha, set.maxGlossyJitter = c.jitter, set.reliableClampK = c.clampK;
+                c.apply(&set);
                 v.denoiser = std::make_unique<screen::ScreenSpaceDenoiser>(set, brdf);
             }
         }

@@ -28,11 +28,16 @@
 // was 0.026, against 0.017 accumulating first, which lets the a-trous sharpen as the temporal
 // variance drops; the scene of ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges, glossy
 // RMSE: figure from 6a7cb45); Zeng et al. use a BRDF-lobe-sized glossy filter we do not have.
-// The glossy component keeps the stochastic glossy vectors and the 3-sigma clamp; its a-trous,
-// which runs after the blend, takes the clean-up's place.
+// The glossy component keeps the stochastic glossy vectors; its a-trous, which runs after the
+// blend, takes the clean-up's place. Glossy and indirect histories are not clamped by default:
+// in this order the clamp is against 1-spp samples, not against Zeng's filtered c~_i, and it
+// made Reliable worse than the unclamped baseline where the vectors are right (issue 21,
+// results/temporal.md; reliableGlossyClampK / reliableIndirectClampK turn it back on).
 // All a-trous work of a frame runs as one pass per level over every component that needs it, so
-// the depth/normal weights are computed once per tap. The Reliable indirect keeps incident
-// radiance in 6 cones per pixel as its history (Sec. 4.3): history cones are moved into the
+// the depth/normal weights are computed once per tap. With indirectCones (off by default: its
+// raw cone history was noisier than SVGF's filtered colour history on every scene of the
+// temporal experiment, issue 21) the Reliable indirect keeps incident radiance in 6 cones per
+// pixel as its history (Sec. 4.3): history cones are moved into the
 // current pixel's cone frame with Mazonka overlap weights and blended per cone; the a-trous then
 // runs on their diffuse shading (ShadeCones), 3 channels instead of 18 (filtering every cone
 // spatially would cost about as much as the whole stage's filtering at 1080p).
@@ -172,6 +177,8 @@ void CheckSettings(const DenoiserSettings& s) {
         fail("alpha must be in (0, 1], got " + std::to_string(s.alpha));
     if (!(s.baselineClampK > 0.0f) || !(s.reliableClampK > 0.0f))
         fail("clamping k must be positive");
+    if (!(s.reliableGlossyClampK >= 0.0f) || !(s.reliableIndirectClampK >= 0.0f))
+        fail("reliableGlossyClampK and reliableIndirectClampK must be non-negative (0: none)");
     if (s.atrousLevels < 1 || s.atrousLevels > 5)
         fail("atrousLevels must be in 1..5 (steps up to 16), got " +
              std::to_string(s.atrousLevels));
@@ -725,7 +732,8 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     s.comp[kVis].nc = 1, s.comp[kVis].present = true;
     s.comp[kGlossy].nc = 3, s.comp[kGlossy].present = !frame.glossy.empty();
     s.comp[kIndirect].nc = 3, s.comp[kIndirect].present = !frame.indirect.empty();
-    s.conesPath = reliable && !frame.indirect.empty() && !frame.cones.empty();
+    s.conesPath =
+        reliable && s.set.indirectCones && !frame.indirect.empty() && !frame.cones.empty();
     // The indirect history's format (cones or colour) must match this frame's path.
     if (s.conesPath != s.prevConesPath) s.hist[kIndirect][s.cur ^ 1].valid = false;
     s.prevConesPath = s.conesPath;
@@ -785,7 +793,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
             if (s.conesPath) {
                 ConesTemporal(s, frame, occl);
             } else {
-                SvgfTemporal(s, kIndirect, occl, s.set.reliableClampK);
+                SvgfTemporal(s, kIndirect, occl, s.set.reliableIndirectClampK);
                 for (int k3 = 0; k3 < 3; ++k3)
                     jobs[njobs].feedback[k3] = &s.hist[kIndirect][s.cur].c[k3];
             }
@@ -794,7 +802,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         }
         // Glossy: temporal first too, along the stochastic glossy vectors (see the design note).
         if (hasGl) {
-            SvgfTemporal(s, kGlossy, temporal ? &s.glossy : nullptr, s.set.reliableClampK);
+            SvgfTemporal(s, kGlossy, temporal ? &s.glossy : nullptr, s.set.reliableGlossyClampK);
             for (int k3 = 0; k3 < 3; ++k3) jobs[njobs].feedback[k3] = &s.hist[kGlossy][s.cur].c[k3];
             jobs[njobs++].ci = kGlossy;
             s.hist[kGlossy][s.cur].valid = true;

@@ -21,8 +21,9 @@
 //                  min(w_A + w_C, 5) (eqs. 7-8); glossy follows stochastic glossy motion vectors
 //                  (eq. 5); diffuse indirect follows dual motion vectors (eq. 6) where the
 //                  traditional ones fail and is reused as incident radiance per cone with overlap
-//                  weights (eqs. 9-11); glossy and indirect histories are clamped to mu +- 3 sigma
-//                  and accumulate before their a-trous filter (why: screen_denoiser.cpp).
+//                  weights (eqs. 9-11) when indirectCones; glossy and indirect accumulate before
+//                  their a-trous filter, unclamped by default (why: screen_denoiser.cpp and
+//                  DenoiserSettings).
 // Demodulation::On divides glossy by the pre-integrated GGX + Schlick albedo F_beta and diffuse
 // indirect by the albedo before filtering and multiplies them back after (Zhuang et al.).
 //
@@ -69,7 +70,20 @@ enum class MotionKind {
 struct DenoiserSettings {
     float alpha = 0.2f;           ///< weight of the current frame in the temporal blend (eq. 2)
     float baselineClampK = 1.0f;  ///< BaselineClamp: history in mu +- k sigma (3x3)
-    float reliableClampK = 3.0f;  ///< Reliable: history in mu +- k sigma (3x3; Sec. 5)
+    float reliableClampK = 3.0f;  ///< Reliable visibility: history in mu +- k sigma (Sec. 5)
+    /// Reliable glossy and diffuse indirect: history in mu +- k sigma of the current 3x3, 0 for
+    /// none. Zeng et al. clamp every component at 3 sigma, but their clamp is against a spatially
+    /// filtered frame; ours (accumulate first, see screen_denoiser.cpp) is against 1-spp samples,
+    /// whose 3x3 sigma is often 0 where the light is sparse, so the clamp throws valid history
+    /// away where the vectors are right and made Reliable worse than the unclamped baseline
+    /// (issue 21; `texcache experiment temporal --ablation --out DIR`, results/temporal.md).
+    float reliableGlossyClampK = 0.0f;
+    float reliableIndirectClampK = 0.0f;  ///< (see reliableGlossyClampK)
+    /// Reliable: keep diffuse indirect as incident radiance in 6 cones (Sec. 4.3) when the frame
+    /// has cones. Off by default: the cone history is the blend of raw 1-spp cones, where SVGF's
+    /// colour history is the first a-trous level's output, and it was the noisier of the two on
+    /// every scene of the temporal experiment (issue 21, results/temporal.md).
+    bool indirectCones = false;
     int atrousLevels = 4;         ///< a-trous iterations, steps 1, 2, 4, 8 (1..5)
     float sigmaLuminance = 4.0f;  ///< SVGF's sigma_l
     float sigmaDepth = 1.0f;      ///< SVGF's sigma_z (relative to the local depth slope)

@@ -548,8 +548,8 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
                 for (int c = 0; c < 3; ++c)
                     for (int j = 0; j < kNumCones; ++j) hc[c] += tr->col[j] * raw[c][j];
                 // Clamp the history's shading to mu +- k sigma of the current shading; the
-                // cones are scaled alike.
-                for (int c = 0; c < 3; ++c) {
+                // cones are scaled alike (k = 0: no clamping).
+                for (int c = 0; c < 3 && a.clampK > 0.0f; ++c) {
                     const float sh = Sum6(hc[c], shade);
                     const float cl = std::clamp(sh, mu[c][i] - a.clampK * sg[c][i],
                                                 mu[c][i] + a.clampK * sg[c][i]);
@@ -628,7 +628,7 @@ void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const M
             a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
             a.table = &s.coneTable;
             a.same = &same;
-            a.alpha = s.set.alpha, a.clampK = s.set.reliableClampK;
+            a.alpha = s.set.alpha, a.clampK = s.set.reliableIndirectClampK;
             for (int c = 0; c < 3; ++c) a.out[c] = sc.t[c].Row(y);
             a.outVar = sc.tVar.Row(y);
             a.m1 = hc.m1.Row(y), a.m2 = hc.m2.Row(y), a.len = hc.len.Row(y);
