@@ -196,6 +196,20 @@ struct Accumulating {
     }
     { return cache->Accumulate(texel.key, filter(t, cx, cy, radius, texel)); }
 };
+
+/// Accumulating without the tile form: the cache then filters the missed texel alone instead of
+/// reconstructing its block. For stereo's second eye (ReuseNeighbourTexels), whose misses are
+/// mostly served by neighbours: reconstructing the blocks around its few true misses shaded
+/// their samples too (car AO, 320x180: its new samples rose from 21% to 31% of the first eye's).
+template <typename Filter>
+struct AccumulatingPerTexel {
+    TextureSpaceCache* cache;
+    const Filter& filter;
+
+    glm::vec3 operator()(const FilterInput<ShadedSample>& in) const {
+        return cache->Accumulate(in.request.key, filter(in));
+    }
+};
 }  // namespace internal
 
 template <typename ShadeFn>
@@ -205,6 +219,10 @@ glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, Shad
     // temporal blend runs once per reconstructed texel, not per lookup.
     auto lookup = [&]<typename Filter>(int radius, const Filter& filter,
                                        FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
+        if (neighbourReuse_)
+            return cache_.LookupTexel(texel, radius, shade,
+                                      internal::AccumulatingPerTexel<Filter>{this, filter}, stats,
+                                      taps);
         return cache_.LookupTexel(texel, radius, shade,
                                   internal::Accumulating<Filter>{this, filter}, stats, taps);
     };
