@@ -293,19 +293,17 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
 /// shading pass that needs nothing else of its camera samples (texture-space AO): that pass
 /// then looks the texels up without tracing the camera rays and evaluating their hits again,
 /// which had made a warm-cache frame cost about twice a frame without lookups (`texcache bench
-/// cache`). kBytesPerSample (12) per camera sample of the pass.
+/// cache`). sizeof(PassTexel) (24 bytes) per camera sample of the pass, in storage the texture
+/// space cache keeps between renders.
 struct PassTexels {
     static constexpr int32_t kMiss = -1;   ///< in `mesh`: the ray left the scene
     static constexpr int32_t kLight = -2;  ///< in `mesh`: the ray hit a light
-    static constexpr size_t kBytesPerSample = sizeof(uint64_t) + sizeof(int32_t);
-    std::vector<uint64_t> key;  ///< TexelKey::Pack()
-    std::vector<int32_t> mesh;  ///< the texel's cache mesh, or kMiss / kLight
+    static constexpr int32_t kFound = -3;  ///< in `mesh`: the prepass found the texel cached
+    static constexpr size_t kBytesPerSample = sizeof(PassTexel);
+    PassTexel* at = nullptr;
     int width = 0, s0 = 0, s1 = 0;
 
-    void Resize(int w, int h, int samples) {
-        const size_t n = size_t(w) * size_t(h) * size_t(samples);
-        key.resize(n), mesh.resize(n), width = w;
-    }
+    PassTexel& operator[](size_t k) const { return at[k]; }
     size_t Index(int x, int y, int s) const {
         return (size_t(y) * size_t(width) + size_t(x)) * size_t(s1 - s0) + size_t(s - s0);
     }
@@ -314,29 +312,53 @@ struct PassTexels {
 /// The visibility prepass of a tile (see texcache/visible_texels.h): marks the texel each camera
 /// sample lands on, with the rays, differentials and texel selection of the shading pass (the
 /// same blocks of packets as ShadeTile), and keeps them in `out` if given.
+///
+/// With `out`, texels the texel cache holds already are looked up here (kFound), and only the
+/// others wait for the shading pass, whose misses need the whole visible set. In a warm frame
+/// that is nearly every sample, which the shading pass then only adds up: the second walk over
+/// the pass's texels (unpack, address, prefetch, look up) had been most of what a warm frame
+/// cost beyond a frame without lookups (`texcache bench cache --warm-only`). A texel's value
+/// does not depend on when it is read (a hit returns what a miss would filter from the same
+/// samples and visible set), so the image is the one of the lookups in the shading pass.
 void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::blocked_range2d<int>& r,
                        int s0, int s1, PassTexels* out, RayCounts& rays) {
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     CameraSample block[kCameraBlock];
+    SampleRequest texels[kCameraBlock];
+    CacheStats* stats = out ? &c.cacheStats->local() : nullptr;
     Cursor gen(r, s0), mark = gen;
     for (size_t b = 0; b < total; b += kCameraBlock) {
         const size_t n = std::min(kCameraBlock, total - b);
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
             CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray, &block[i].diff);
         IntersectCameraRays(c, block, n, rays);
+        // The block's texels first, their slots prefetched, then the marks and lookups.
+        for (size_t i = 0; i < n; ++i) {
+            const CameraSample& cs = block[i];
+            if (!cs.found || cs.hit.object < 0) continue;
+            texels[i] = c.tsc->TexelOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff));
+            if (out) c.tsc->Prefetch(texels[i]);
+        }
         for (size_t i = 0; i < n; ++i, mark.Next(r, s0, s1)) {
             const CameraSample& cs = block[i];
             int32_t mesh = !cs.found ? PassTexels::kMiss : PassTexels::kLight;
             uint64_t key = TexelKey::kEmpty;
             if (cs.found && cs.hit.object >= 0) {
-                const SampleRequest t = c.tsc->TexelOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff));
-                visible.Mark(t.key);
-                mesh = t.mesh, key = t.key.Pack();
+                visible.Mark(texels[i].key);
+                mesh = texels[i].mesh, key = texels[i].key.Pack();
             }
-            if (out) {
-                const size_t k = out->Index(mark.x, mark.y, mark.s);
-                out->key[k] = key, out->mesh[k] = mesh;
+            if (!out) continue;
+            PassTexel& t = (*out)[out->Index(mark.x, mark.y, mark.s)];
+            if (mesh >= 0 && c.tsc->FindTexel(texels[i], &t.found)) {
+                mesh = PassTexels::kFound;
+                ++stats->lookups, ++stats->texelHits;
+                if (c.pixelCache) {
+                    PixelCacheCounts& px =
+                        c.pixelCache[size_t(mark.y) * size_t(c.opt.width) + size_t(mark.x)];
+                    ++px.lookups, ++px.texelHits;
+                }
             }
+            t.key = key, t.mesh = mesh;
         }
     }
 }
@@ -350,18 +372,20 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
     texels.resize(r.rows().size() * r.cols().size() * size_t(pt.s1 - pt.s0));
     size_t i = 0;
     for (Cursor at(r, pt.s0); i < texels.size(); ++i, at.Next(r, pt.s0, pt.s1)) {
-        const size_t k = pt.Index(at.x, at.y, at.s);
-        if (pt.mesh[k] < 0) continue;
-        texels[i] = c.tsc->RequestOf(pt.mesh[k], TexelKey::Unpack(pt.key[k]));
+        const PassTexel& t = pt[pt.Index(at.x, at.y, at.s)];
+        if (t.mesh < 0) continue;
+        texels[i] = c.tsc->RequestOf(t.mesh, TexelKey::Unpack(t.key));
         c.tsc->Prefetch(texels[i]);
     }
     CacheStats& stats = c.cacheStats->local();
     i = 0;
     for (Cursor at(r, pt.s0); i < texels.size(); ++i, at.Next(r, pt.s0, pt.s1)) {
-        const int32_t mesh = pt.mesh[pt.Index(at.x, at.y, at.s)];
+        const PassTexel& t = pt[pt.Index(at.x, at.y, at.s)];
+        const int32_t mesh = t.mesh;
         const size_t pixel = size_t(at.y) * size_t(c.opt.width) + size_t(at.x);
         const CacheSnapshot before = c.pixelCache ? CacheSnapshot(stats) : CacheSnapshot();
         glm::vec3 L(mesh == PassTexels::kLight ? 1.0f : 0.0f);
+        if (mesh == PassTexels::kFound) L = t.found;
         if (mesh >= 0)
             L = c.tsc->Lookup(
                 texels[i], c.tsc->ObjectOfMesh(mesh),
@@ -462,11 +486,11 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     int done = opt.firstSample;
     int passSpp = progressive ? opt.texture.passSpp : opt.seconds > 0.0f ? 1 : sppCap;
     // Texture-space AO with a prepass shades from the prepass's texels (see PassTexels), when a
-    // pass's texels fit in 128 MB (a pass of 4 spp at 1920x1080 takes 100 MB); a longer pass
+    // pass's texels fit in 256 MB (a pass of 4 spp at 1920x1080 takes 200 MB); a longer pass
     // (a render without progressive passes, or a time budget's growing ones) traces its camera
     // rays again instead.
     const bool prepassAo = twoPhaseAo && fc.Visible() != nullptr;
-    constexpr size_t kMaxPassTexelBytes = size_t(128) << 20;
+    constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
     while (done < sppCap) {
         const int s0 = done, s1 = std::min(sppCap, done + passSpp);
@@ -474,7 +498,9 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         const bool fromPrepass = opt.visibilityPrepass != VisibilityPrepass::Only && prepassAo &&
                                  passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
         if (fromPrepass) {
-            if (passSamples > passTexels.key.size()) passTexels.Resize(W, opt.height, s1 - s0);
+            std::vector<PassTexel>& store = c.tsc->PassTexelScratch();
+            if (passSamples > store.size()) store.resize(passSamples);
+            passTexels.at = store.data(), passTexels.width = W;
             passTexels.s0 = s0, passTexels.s1 = s1;
         }
         const auto passStart = Clock::now();

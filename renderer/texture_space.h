@@ -52,6 +52,15 @@ float MipZeroTexelSize(glm::vec3 lo, glm::vec3 hi, float texelFraction = 1.0f / 
 /// A shading cache for a scene: lives as long as its owner wants (e.g. across frames). The one
 /// door between the renderer and libtexcache: it picks each hit's texel and each object's
 /// filter, and blends texels over frames; nothing else touches the ShadingCache inside.
+namespace internal {
+/// A camera sample of a pass as the visibility prepass saw it (see render.cpp's PassTexels).
+struct PassTexel {
+    uint64_t key;     ///< TexelKey::Pack()
+    int32_t mesh;     ///< the texel's cache mesh, or a PassTexels marker (< 0)
+    glm::vec3 found;  ///< the texel's value, when the prepass found it cached
+};
+}  // namespace internal
+
 class TextureSpaceCache {
 public:
     /// Registers every object of the scene; throws InputError on impossible settings.
@@ -71,6 +80,11 @@ public:
     /// Starts fetching a texel's slot into the CPU cache (see ShadingCache::Prefetch): for a
     /// batch of texels before their lookups.
     void Prefetch(const SampleRequest& texel) const { cache_.Prefetch(texel); }
+    /// The texel's value when the texel cache holds it right now: read-only (never shades,
+    /// claims or counts), and the value a Lookup hit would return.
+    bool FindTexel(const SampleRequest& texel, glm::vec3* value) const {
+        return cache_.FindTexel(texel, value);
+    }
 
     /// The cached term of scene object `object` at `texel` (from TexelOf): a texel-cache hit,
     /// or on a miss the object's filter over its footprint, with the missing samples shaded by
@@ -130,6 +144,10 @@ public:
     /// render and only reallocated when the size changes. With `clear` false, the marks of the
     /// previous render of this size are kept (stereo: both eyes mark one set).
     VisibleTexels& Visibility(int width, int height, bool clear = true);
+    /// What the visibility prepass found for each camera sample of a pass (render.cpp), kept
+    /// here from render to render like the visibility set: a warm frame then reuses its pages
+    /// instead of faulting in 24 bytes per camera sample again. Empty until a render uses it.
+    std::vector<internal::PassTexel>& PassTexelScratch() { return passTexels_; }
 
     /// Takes new options and starts empty, keeping the cache storage when its layout is the same
     /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
@@ -152,7 +170,7 @@ public:
     /// Bytes of all cache storage (sample and texel caches, temporal history, visibility set).
     size_t BytesUsed() const {
         return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0) +
-               (visible_ ? visible_->Bytes() : 0);
+               (visible_ ? visible_->Bytes() : 0) + passTexels_.capacity() * sizeof(passTexels_[0]);
     }
     size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
     size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
@@ -174,6 +192,7 @@ private:
     std::vector<int> passRadiusOf_;  ///< radiusOf_ shrunk for the current pass
     std::unique_ptr<TemporalHistory<glm::vec3>> history_;
     std::unique_ptr<VisibleTexels> visible_;
+    std::vector<internal::PassTexel> passTexels_;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
     bool neighbourReuse_ = false;

@@ -119,7 +119,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     t.cache.texelCacheBytes = bytes("--texel-cache-mb", a.texelCacheMb);
     t.cache.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
     t.cache.referenceMode = a.referenceCache;
-    t.cache.texelTwoChoices = !a.directMapped;
+    t.cache.texelTwoChoices = t.cache.sampleTwoChoices = !a.directMapped;
     t.indirectSamples = CheckRange("--indirect-samples", a.indirectSamples, 1, 1 << 16);
     if (a.cachedLight != "all" && a.cachedLight != "indirect")
         throw InputError("--cached-light",
@@ -885,7 +885,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                   "Unbounded caches (the overshading baseline)");
     cmd->add_flag(
         "--direct-mapped", args->directMapped,
-        "Strictly direct-mapped texel cache (the paper's; default: two choices per texel)");
+        "Strictly direct-mapped texel and sample caches (the paper's; default: two choices per "
+        "entry)");
     cmd->add_flag(
         "--overshading", args->overshading,
         "Also render with unbounded caches and report the extra shading of the bounded ones");

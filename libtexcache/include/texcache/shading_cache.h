@@ -41,12 +41,14 @@ struct CacheSettings {
     /// frame of `texcache bench cache`; ~91% with this false, which has no flag there: figure
     /// from 5a67a7b); false is the paper's strictly direct-mapped texel cache.
     bool texelTwoChoices = true;
-    /// The same for samples. Off by default: measured on the car at 4096x2304 with a 16 MB
-    /// sample cache, two choices re-shaded 15.8% against 14.4% direct-mapped (a sample's reuse is
-    /// short-lived, so keeping older keys helps little), and the paper's cache is direct-mapped.
-    /// (`texcache experiment cache-size --out DIR`, its 4096x2304 / 16 MB cell, with this set in
-    /// code; figure from 4728839, before packed samples.)
-    bool sampleTwoChoices = false;
+    /// The same for samples. On by default: in the steady state of a still or slowly moving
+    /// view (the preview, an animation, the warm frame of `texcache bench cache`), the texels
+    /// that miss need samples shaded frames ago, and direct mapping had evicted many of them:
+    /// car AO 640x360 with the default 64 MB, a warm frame shaded 39781 samples direct-mapped
+    /// and 1760 with two choices. In an overfull cache it is slightly worse: at 4096x2304 with
+    /// 16 MB, two choices re-shaded 15.8% against 14.4% (`texcache experiment cache-size`,
+    /// figure from 4728839, before packed samples). The paper's cache is direct-mapped.
+    bool sampleTwoChoices = true;
 
     /// Throws InputError naming the setting when a value is out of range.
     void Validate() const {

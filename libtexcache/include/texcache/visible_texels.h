@@ -48,7 +48,13 @@ public:
         for (size_t i = 0; i < words_; ++i) bits_[i].store(0, std::memory_order_relaxed);
     }
     /// Marks a texel as seen (thread-safe).
-    void Mark(const TexelKey& k) { bits_[Word(k)].fetch_or(Bit(k), std::memory_order_relaxed); }
+    void Mark(const TexelKey& k) {
+        // Read first: a pixel's camera samples mostly land on one texel, and a locked RMW on a
+        // line the other threads read too costs far more than a load.
+        std::atomic<uint64_t>& w = bits_[Word(k)];
+        const uint64_t bit = Bit(k);
+        if (!(w.load(std::memory_order_relaxed) & bit)) w.fetch_or(bit, std::memory_order_relaxed);
+    }
     /// Whether a texel was marked (or shares its word with a marked texel of another block).
     bool Contains(const TexelKey& k) const { return (BlockBits(k) & Bit(k)) != 0; }
     /// The marks of the 8x8 block holding texel k (bit Bit(k) is k's): a caller testing the
