@@ -104,15 +104,53 @@ Table& Table::Add(double v) {
     rows_.back().push_back(std::isfinite(v) ? Format("%.6g", v) : std::string("nan"));
     return *this;
 }
+namespace {
+// RFC 4180: a value holding a comma, quote or line break is quoted, its quotes doubled (an
+// ablation label such as "reliable, no clamping" had split into two columns).
+std::string CsvField(const std::string& v) {
+    if (v.find_first_of(",\"\n\r") == std::string::npos) return v;
+    std::string q = "\"";
+    for (char ch : v) q += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+    return q + "\"";
+}
+
+// The values of one CSV line as CsvField wrote them; false on an unterminated quote.
+bool SplitCsvLine(const std::string& line, std::vector<std::string>* out) {
+    out->clear();
+    std::string v;
+    bool quoted = false;
+    for (size_t i = 0; i < line.size(); ++i) {
+        const char ch = line[i];
+        if (quoted) {
+            if (ch != '"') {
+                v += ch;
+            } else if (i + 1 < line.size() && line[i + 1] == '"') {
+                v += '"', ++i;
+            } else {
+                quoted = false;
+            }
+        } else if (ch == '"') {
+            quoted = true;
+        } else if (ch == ',') {
+            out->push_back(v), v.clear();
+        } else {
+            v += ch;
+        }
+    }
+    out->push_back(v);
+    return !quoted;
+}
+}  // namespace
+
 void Table::Write(const std::string& path) const {
     std::string text;
-    for (size_t i = 0; i < columns_.size(); ++i) text += (i ? "," : "") + columns_[i];
+    for (size_t i = 0; i < columns_.size(); ++i) text += (i ? "," : "") + CsvField(columns_[i]);
     text += "\n";
     for (const auto& row : rows_) {
         if (row.size() != columns_.size())
             throw std::logic_error("table row of " + std::to_string(row.size()) + " values for " +
                                    std::to_string(columns_.size()) + " columns in " + path);
-        for (size_t i = 0; i < row.size(); ++i) text += (i ? "," : "") + row[i];
+        for (size_t i = 0; i < row.size(); ++i) text += (i ? "," : "") + CsvField(row[i]);
         text += "\n";
     }
     WriteText(path, text);
@@ -123,7 +161,8 @@ Table Table::Read(const std::string& path, std::vector<std::string> columns) {
     if (!in) throw InputError(path, "cannot be read");
     Table t(std::move(columns));
     std::string header;
-    for (size_t i = 0; i < t.columns_.size(); ++i) header += (i ? "," : "") + t.columns_[i];
+    for (size_t i = 0; i < t.columns_.size(); ++i)
+        header += (i ? "," : "") + CsvField(t.columns_[i]);
     std::string line;
     int number = 0;
     while (std::getline(in, line)) {
@@ -136,9 +175,10 @@ Table Table::Read(const std::string& path, std::vector<std::string> columns) {
         }
         if (line.empty()) continue;
         t.Row();
-        std::stringstream fields(line);
-        std::string v;
-        while (std::getline(fields, v, ',')) t.Add(v);
+        std::vector<std::string> values;
+        if (!SplitCsvLine(line, &values))
+            throw InputError(path + ":" + std::to_string(number), "unterminated quoted value");
+        for (const std::string& v : values) t.Add(v);
         if (t.rows_.back().size() != t.columns_.size())
             throw InputError(path + ":" + std::to_string(number),
                              std::to_string(t.rows_.back().size()) + " values, expected " +
