@@ -334,6 +334,7 @@ struct RenderScene::Impl {
         int mesh = -1;
         std::vector<glm::mat4> steps;  // 1 (static) or kMotionSteps over the shutter
         glm::mat3 normalMatrix{1.0f};  // of steps[0]
+        glm::mat4 inverse{1.0f};       // of steps[0]
     };
     std::vector<Instance> objects;  // by Scene::objects index
     // Top-level geomID -> object or quad light (-1: not that kind); geomIDs are small and dense.
@@ -489,6 +490,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         Impl::Map(I.geomToObject, rtcAttachGeometry(I.top, g), int(o));
         // Static instances keep their normal matrix (a 3x3 inverse per hit otherwise).
         inst.normalMatrix = glm::transpose(glm::inverse(glm::mat3(inst.steps[0])));
+        inst.inverse = glm::inverse(inst.steps[0]);
         rtcReleaseGeometry(g);
     }
     clock.Charge(&I.build.embreeGeometry);
@@ -663,7 +665,10 @@ void RenderScene::Intersect16(const Ray* rays, int n, Hit* hits, bool* found) co
 
 bool RenderScene::IntersectObject(int object, const Ray& ray, Hit* hit) const {
     const Impl& I = *impl_;
-    const glm::mat4 inv = glm::inverse(I.Transform(object, ray.time));
+    // Static instances keep their inverse: every cached sample's snap ray comes here.
+    const glm::mat4 inv = I.objects[object].steps.size() == 1
+                              ? I.objects[object].inverse
+                              : glm::inverse(I.Transform(object, ray.time));
     Ray local = ray;
     local.org = glm::vec3(inv * glm::vec4(ray.org, 1.0f));
     local.dir = glm::mat3(inv) * ray.dir;  // not normalized: t stays the world-space parameter
