@@ -459,8 +459,8 @@ TEST(Footprint, MixedGridsReadTheirColumnsFromThePad) {
                 const int res = g.Res(f, mip);
                 for (int r : {1, 10}) {
                     const bool oneSize = internal::PaddedRun(g, f, mip, r, -1, -1);
-                    for (int iv = 0; iv < res; iv += 5)
-                        for (int iu = 0; iu < res; iu += 3)
+                    for (int iv = 0; iv < res; iv += std::max(3, res / 5))
+                        for (int iu = 0; iu < res; iu += std::max(2, res / 7))
                             for (const VisibleTexels* visible : {(VisibleTexels*)nullptr, &vis})
                                 for (bool symmetric : {false, true}) {
                                     const bool inside =
