@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <algorithm>
+#include <vector>
 
 #include <glm/gtc/packing.hpp>
 
@@ -27,6 +28,40 @@ TextureFilterKind ParseTextureFilter(const std::string& name, const std::string&
 
 std::string TextureFilterNames() {
     return EnumNames(kFilterNames);
+}
+
+NormalWeightedFilter::Tile NormalWeightedFilter::Prepare(const SampleTile<ShadedSample>& t,
+                                                         int radius) const {
+    Tile tile(*this, t, radius);
+    // Gaussian weights differ per tap, and tiles wider than 64 texels have no bit rows.
+    if (sigma > 0.0f || !t.rows || !t.reversed || t.w > 64) return tile;
+    // The least d (see Tile) that passes: 2 d^2 - 1 > cosThreshold + 1e-3, d > 0 (NaN: none).
+    const float need = std::sqrt(0.5f * (cosThreshold + 1e-3f + 1.0f));
+    if (!(need >= 0.0f && need < 1.0f)) return tile;
+    thread_local std::vector<uint64_t> finite;
+    finite.assign(size_t(t.h), 0);
+    // The seen taps' mean normal; a normal off unit length (NaN, zero) makes the tile take the
+    // test.
+    auto unit = [](glm::vec3 n) { return std::abs(glm::dot(n, n) - 1.0f) <= 1e-4f; };
+    glm::vec3 mean(0.0f);
+    for (int y = 0; y < t.h; ++y)
+        for (int x = 0; x < t.w; ++x) {
+            const size_t i = size_t(y * t.w + x);
+            if (!t.seen[i]) continue;
+            const ShadedSample& s = t.samples[i];
+            if (std::isfinite(s.value.x + s.value.y + s.value.z))  // as Sum::Add tests it
+                finite[size_t(y)] |= uint64_t(1) << x;
+            if (!unit(s.normal)) return tile;
+            mean += s.normal;
+        }
+    const float length = glm::length(mean);
+    if (!(length > 0.0f)) return tile;
+    mean /= length;
+    for (size_t i = 0, n = size_t(t.w) * size_t(t.h); i < n; ++i)
+        if (t.seen[i] && !(glm::dot(t.samples[i].normal, mean) > need)) return tile;
+    tile.smooth_ = true;
+    tile.finite_ = finite.data();
+    return tile;
 }
 
 namespace {

@@ -2,6 +2,8 @@
 // Texture-space reconstruction filters over a footprint of cached samples (Munkberg et al. 2016,
 // Sec. 6.1): plug into ShadingCache::Lookup as the `filter` callable.
 #pragma once
+#include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -108,6 +110,10 @@ struct NormalWeightedFilter {
         return sum.Result();
     }
 
+    class Tile;
+    /// The tile form with per-tile tables (ShadingCache's block reconstruction): see Tile.
+    Tile Prepare(const SampleTile<ShadedSample>& t, int radius) const;
+
 private:
     // The weighted mean of the taps that pass the normal test, with its fallbacks.
     struct Sum {
@@ -133,6 +139,48 @@ private:
             return finite ? any / float(finite) : glm::vec3(0.0f);
         }
     };
+};
+
+/// The normal filter over one tile, texel by texel, with what its windows share computed once.
+/// Why: a block's 64 windows each test and sum up to (2r+1)^2 taps, and most tiles lie on a
+/// smooth patch where every tap passes the normal test. Per tile: the mean normal m of the seen
+/// taps and the least d = dot(n, m) over them. When d > 0 and 2 d^2 - 1 > cosThreshold + 1e-3,
+/// every tap is within acos(d) of m, so any two are within 2 acos(d) and every tap passes
+/// against any centre (the margin covers float rounding and normals off unit length by up to
+/// 1e-4; taps further off make the tile take the test). A window's result is then the plain
+/// mean of its finite taps, summed in the tile form's order: the same floats. Other tiles
+/// (creases, NaN normals, Gaussian weights, no bit rows) take the tile form. Valid until the
+/// thread's next Prepare.
+class NormalWeightedFilter::Tile {
+public:
+    glm::vec3 operator()(int cx, int cy, const SampleRequest& texel) const {
+        if (!smooth_) return filter_(t_, cx, cy, radius_, texel);
+        // ForEachTap's taps less the non-finite values.
+        const int r = radius_, w = t_.w, side = 2 * r + 1;
+        const uint64_t window = side >= 64 ? ~uint64_t(0) : (uint64_t(1) << side) - 1;
+        glm::vec3 sum(0.0f);
+        int n = 0;
+        for (int dy = -r; dy <= r; ++dy) {
+            uint64_t m = ((t_.rows[cy + dy] & finite_[cy + dy]) >> (cx - r)) & window;
+            if (t_.symmetric) m &= t_.reversed[cy - dy] >> (w - 1 - cx - r);
+            for (const ShadedSample* row = t_.samples + (cy + dy) * w + cx - r; m; m &= m - 1, ++n)
+                sum += row[std::countr_zero(m)].value;
+        }
+        return n > 0 ? sum / float(n) : glm::vec3(0.0f);
+    }
+    /// Whether the tile's windows skip the normal test (tests check both paths).
+    bool Smooth() const { return smooth_; }
+
+private:
+    friend struct NormalWeightedFilter;
+    Tile(const NormalWeightedFilter& f, const SampleTile<ShadedSample>& t, int radius)
+        : filter_(f), t_(t), radius_(radius) {}
+
+    NormalWeightedFilter filter_;
+    SampleTile<ShadedSample> t_;
+    int radius_;
+    bool smooth_ = false;
+    const uint64_t* finite_ = nullptr;  // per row: bit x set when sample x's value is finite
 };
 
 /// The 1x1 "filter": the centre sample as shaded.

@@ -215,6 +215,13 @@ struct Accumulating {
         requires(Blocks&& requires { filter(t, cx, cy, radius, texel); }) {
         return cache->Accumulate(texel.key, filter(t, cx, cy, radius, texel));
     }
+    auto Prepare(const SampleTile<ShadedSample>& t, int radius) const
+        requires(Blocks&& requires { filter.Prepare(t, radius); }) {
+        return
+            [c = cache, p = filter.Prepare(t, radius)](int cx, int cy, const SampleRequest& texel) {
+                return c->Accumulate(texel.key, p(cx, cy, texel));
+            };
+    }
 };
 
 }  // namespace internal

@@ -262,61 +262,134 @@ TEST(NormalWeightedFilter, AllTapsRejectedFallsBackToTheMean) {
     EXPECT_TRUE(Finite(NormalWeightedFilter{}(f.Input())));
 }
 
+// A w x h tile of samples with its seen bytes and bit rows, and the footprint a window of it
+// gives GatherFootprint's way (its seen taps row by row, mirrored ones only when symmetric).
+struct TestTile {
+    int w, h;
+    std::vector<ShadedSample> samples;
+    std::vector<uint8_t> seen;
+    std::vector<uint64_t> rows, reversed;
+
+    TestTile(int width, int height, std::mt19937& rng, float normalSpread, float seenFraction)
+        : w(width), h(height), samples(size_t(w * h)), seen(samples.size()) {
+        std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+        for (size_t i = 0; i < samples.size(); ++i) {
+            const glm::vec3 n(normalSpread * u(rng), normalSpread * u(rng), 1.0f);
+            samples[i] = ShadedSample(glm::vec3(u(rng) + 1.0f, u(rng) + 1.0f, u(rng) + 1.0f),
+                                      glm::normalize(n), 0.0f);
+            seen[i] = u(rng) * 0.5f + 0.5f < seenFraction;
+        }
+    }
+    void MakeBits() {
+        rows.assign(size_t(h), 0), reversed.assign(size_t(h), 0);
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x)
+                if (seen[size_t(y * w + x)]) {
+                    rows[size_t(y)] |= uint64_t(1) << x;
+                    reversed[size_t(y)] |= uint64_t(1) << (w - 1 - x);
+                }
+    }
+    SampleTile<ShadedSample> View(bool symmetric, bool bits) const {
+        return {w,
+                h,
+                samples.data(),
+                seen.data(),
+                symmetric,
+                bits ? rows.data() : nullptr,
+                bits ? reversed.data() : nullptr};
+    }
+    Footprint Window(int cx, int cy, int R, bool symmetric) const {
+        const int c = cy * w + cx;
+        Footprint f;
+        for (int dy = -R; dy <= R; ++dy)
+            for (int dx = -R; dx <= R; ++dx) {
+                const int i = c + dy * w + dx, m = c - dy * w - dx;
+                if (!seen[size_t(i)] || (symmetric && !seen[size_t(m)])) continue;
+                if (i == c) f.centre = int(f.taps.size());
+                FootprintSample t{};
+                t.dx = int16_t(dx), t.dy = int16_t(dy);
+                f.taps.push_back(t);
+                f.samples.push_back(samples[size_t(i)]);
+            }
+        return f;
+    }
+};
+
 // The block (tile) form of the normal filter gives what the footprint form gives for the same
 // taps, bit for bit (same taps in the same order: ShadingCache relies on it), from seen bytes and
 // from bit rows, with and without mirrored taps, for box and Gaussian weights, with holes (NaN and
 // inf samples), rejected normals and unseen taps.
 TEST(NormalWeightedFilter, TileFormEqualsFootprintForm) {
-    const int w = 15, h = 13, R = 4;
+    const int R = 4;
     std::mt19937 rng(11);
-    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-    std::vector<ShadedSample> tile(size_t(w * h));
-    std::vector<uint8_t> seen(tile.size());
-    for (size_t i = 0; i < tile.size(); ++i) {
-        tile[i] = ShadedSample(glm::vec3(u(rng) + 1.0f, u(rng) + 1.0f, u(rng) + 1.0f),
-                               glm::normalize(glm::vec3(0.4f * u(rng), 0.4f * u(rng), 1.0f)), 0.0f);
-        seen[i] = (rng() % 3) != 0;
-    }
-    tile[20].value = glm::vec3(NAN), tile[33].value = glm::vec3(INFINITY);
-    tile[47].normal = glm::vec3(NAN);
-    std::vector<uint64_t> rows(size_t(h), 0), reversed(size_t(h), 0);
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x)
-            if (seen[size_t(y * w + x)])
-                rows[size_t(y)] |= uint64_t(1) << x, reversed[size_t(y)] |= uint64_t(1)
-                                                                            << (w - 1 - x);
+    TestTile tile(15, 13, rng, 0.4f, 2.0f / 3.0f);
+    tile.samples[20].value = glm::vec3(NAN), tile.samples[33].value = glm::vec3(INFINITY);
+    tile.samples[47].normal = glm::vec3(NAN);
+    tile.MakeBits();
     int compared = 0;
     for (bool withBits : {false, true})
         for (bool symmetric : {false, true})
             for (float sigma : {0.0f, 2.0f})
-                for (int cy = R; cy < h - R; ++cy)
-                    for (int cx = R; cx < w - R; ++cx) {
-                        const int c = cy * w + cx;
-                        if (!seen[size_t(c)]) continue;
-                        Footprint f;
-                        for (int dy = -R; dy <= R; ++dy)
-                            for (int dx = -R; dx <= R; ++dx) {
-                                const int i = c + dy * w + dx, m = c - dy * w - dx;
-                                if (!seen[size_t(i)] || (symmetric && !seen[size_t(m)])) continue;
-                                if (i == c) f.centre = int(f.taps.size());
-                                FootprintSample t{};
-                                t.dx = int16_t(dx), t.dy = int16_t(dy);
-                                f.taps.push_back(t);
-                                f.samples.push_back(tile[size_t(i)]);
-                            }
+                for (int cy = R; cy < tile.h - R; ++cy)
+                    for (int cx = R; cx < tile.w - R; ++cx) {
+                        if (!tile.seen[size_t(cy * tile.w + cx)]) continue;
                         const NormalWeightedFilter filter{0.9f, sigma};
-                        const SampleTile<ShadedSample> t{w,
-                                                         h,
-                                                         tile.data(),
-                                                         seen.data(),
-                                                         symmetric,
-                                                         withBits ? rows.data() : nullptr,
-                                                         withBits ? reversed.data() : nullptr};
-                        const glm::vec3 a = filter(f.Input()), b = filter(t, cx, cy, R, {});
+                        const glm::vec3 a = filter(tile.Window(cx, cy, R, symmetric).Input()),
+                                        b = filter(tile.View(symmetric, withBits), cx, cy, R, {});
                         ASSERT_EQ(a, b) << cx << "," << cy << " sigma " << sigma;
                         ++compared;
                     }
     EXPECT_GT(compared, 100);
+}
+
+// The prepared tile (block reconstruction's form) gives the tile form's values bit for bit (the
+// same finite taps summed in the same order; the stated tolerance is 0), whether its windows skip
+// the normal test (smooth tiles) or take it: radius 0, 3 and 10, windows at the tile's borders,
+// NaN and inf values (and finite components whose sum overflows), a non-finite centre, unseen
+// taps, NaN and non-unit normals, creases (normals 40 degrees apart), Gaussian weights, and a
+// spread of normals just inside the bound (+-8 degrees: any two within 23, cos 0.92).
+TEST(NormalWeightedFilter, PreparedTileEqualsTileForm) {
+    std::mt19937 rng(5);
+    int smooth = 0, tested = 0, compared = 0;
+    for (int R : {0, 3, 10})
+        for (int variant = 0; variant < 7; ++variant) {
+            const float spread = variant == 1 ? std::tan(0.14f) / std::sqrt(2.0f) : 0.03f;
+            TestTile tile(2 * R + 9, 2 * R + 11, rng, spread, variant == 0 ? 1.0f : 0.6f);
+            const int centre = (tile.h / 2) * tile.w + tile.w / 2;
+            tile.seen[size_t(centre)] = tile.seen[size_t(centre - 1)] = 1;
+            tile.seen[size_t(centre + 1)] = 1;
+            tile.samples[3].value = glm::vec3(NAN);
+            tile.samples[size_t(tile.w + 4)].value = glm::vec3(1.0f, -INFINITY, 0.0f);
+            tile.samples[size_t(2 * tile.w + 2)].value = glm::vec3(3e38f);  // sum overflows
+            tile.samples[size_t(centre)].value.y = variant == 2 ? NAN : 1.5f;
+            if (variant == 3) tile.samples[size_t(centre + 1)].normal = glm::vec3(NAN);
+            if (variant == 4) tile.samples[size_t(centre - 1)].normal *= 1.01f;
+            if (variant == 5)  // a crease down the middle
+                for (int y = 0; y < tile.h; ++y)
+                    for (int x = tile.w / 2; x < tile.w; ++x)
+                        tile.samples[size_t(y * tile.w + x)].normal =
+                            glm::vec3(std::sin(0.7f), 0.0f, std::cos(0.7f));
+            tile.MakeBits();
+            for (bool symmetric : {false, true}) {
+                const float sigma = variant == 6 ? 0.5f * float(R) + 0.5f : 0.0f;
+                const NormalWeightedFilter filter{0.9f, sigma};
+                const SampleTile<ShadedSample> t = tile.View(symmetric, true);
+                const NormalWeightedFilter::Tile prepared = filter.Prepare(t, R);
+                ++tested, smooth += prepared.Smooth();
+                EXPECT_EQ(prepared.Smooth(), variant <= 2) << "variant " << variant << " r " << R;
+                for (int cy = R; cy < tile.h - R; ++cy)
+                    for (int cx = R; cx < tile.w - R; ++cx) {
+                        if (!tile.seen[size_t(cy * tile.w + cx)]) continue;
+                        const glm::vec3 a = filter(t, cx, cy, R, {}), b = prepared(cx, cy, {});
+                        ASSERT_EQ(a, b) << "variant " << variant << " r " << R << " texel " << cx
+                                        << "," << cy << " symmetric " << symmetric;
+                        ++compared;
+                    }
+            }
+        }
+    EXPECT_GT(smooth, 0);
+    EXPECT_LT(smooth, tested);
+    EXPECT_GT(compared, 1000);
 }
 
 // Soft shadows: the blur follows the occluder slope. A contact shadow (tiny blur radius) keeps

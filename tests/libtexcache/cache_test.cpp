@@ -429,6 +429,63 @@ TEST(Footprint, MixedGridsAreWalked) {
     }
 }
 
+// Faces among grids of other sizes: a window whose columns stay on the face reads the texels
+// past its lower and upper edges from the face's pad, row by row as pads of one grid size are
+// read; one that crosses the face's sides is walked from its centre, but its columns on the face
+// read the pad too, in the walk's order. Both give the walk's taps, u, v and unseen counts (in
+// its order when walked: the filters sum in tap order), with and without a visible set, around
+// the pentagon's n-gon sub-faces and its boundary.
+TEST(Footprint, MixedGridsReadTheirColumnsFromThePad) {
+    for (float texelSize : {0.03f, 0.011f}) {
+        const MeshGrids g(test::PentagonCage(), texelSize, 0);
+        VisibleTexels vis(1 << 14);
+        std::mt19937 rng(9);
+        for (int f = 0; f < g.NumFaces(); ++f)
+            for (int mip = 0; mip < g.NumLevels(f); ++mip)
+                for (int v = 0; v < g.Res(f, mip); ++v)
+                    for (int u = 0; u < g.Res(f, mip); ++u)
+                        if (rng() % 3 != 0)
+                            vis.Mark({uint32_t(f), uint8_t(mip), uint16_t(u), uint16_t(v)});
+        auto fields = [](const std::vector<FootprintSample>& fp, bool sort) {
+            std::vector<std::tuple<uint64_t, int, int, float, float>> t;
+            for (const FootprintSample& s : fp) t.emplace_back(s.key.Pack(), s.dx, s.dy, s.u, s.v);
+            if (sort) std::sort(t.begin(), t.end());
+            return t;
+        };
+        std::vector<FootprintSample> read, walked;
+        int compared = 0, mixedRows = 0, mixedWalks = 0;
+        for (int f = 0; f < g.NumFaces(); ++f)
+            for (int mip = 0; mip < g.NumLevels(f); ++mip) {
+                const int res = g.Res(f, mip);
+                for (int r : {1, 10}) {
+                    const bool oneSize = internal::PaddedRun(g, f, mip, r, -1, -1);
+                    for (int iv = 0; iv < res; iv += std::max(3, res / 5))
+                        for (int iu = 0; iu < res; iu += std::max(2, res / 7))
+                            for (const VisibleTexels* visible : {(VisibleTexels*)nullptr, &vis})
+                                for (bool symmetric : {false, true}) {
+                                    const bool inside =
+                                        iu >= r && iu + r < res && iv >= r && iv + r < res;
+                                    const bool rows = oneSize || (iu >= r && iu + r < res);
+                                    mixedRows += !oneSize && rows && !inside;
+                                    mixedWalks += !rows;
+                                    const int a = internal::GatherFootprint(
+                                        g, f, mip, iu, iv, r, &read, visible, symmetric, true);
+                                    const int b = internal::GatherFootprint(
+                                        g, f, mip, iu, iv, r, &walked, visible, symmetric, false);
+                                    ASSERT_EQ(a, b) << "face " << f << " mip " << mip;
+                                    ASSERT_EQ(fields(read, rows), fields(walked, rows))
+                                        << "face " << f << " mip " << mip << " texel " << iu << ","
+                                        << iv << " r " << r;
+                                    ++compared;
+                                }
+                }
+            }
+        EXPECT_GT(mixedRows, 50) << "windows of faces among other grid sizes, read row by row";
+        EXPECT_GT(mixedWalks, 500) << "windows of faces among other grid sizes, walked";
+        EXPECT_GT(compared, 1000);
+    }
+}
+
 // ---- Visible texels (visible_texels.h) ----
 
 TEST(VisibleTexels, NeverMissesAMarkAndRarelyInventsOne) {

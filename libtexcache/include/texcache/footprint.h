@@ -108,9 +108,11 @@ struct PaddedTexel {
 };
 /// The pad texel at (x, y) of (face, mip)'s grid, a position outside the face within `radius`
 /// of it; the next positions of row y follow while x stays on the same side of the face. Null
-/// when the face has no pad at this radius (too large, or grids of other sizes around it). Valid
-/// until this thread's next call (or GatherFootprint) for another face.
-const PaddedTexel* PaddedRun(const MeshGrids& g, int face, int mip, int radius, int x, int y);
+/// when the face has no pad at this radius (too large, or grids of other sizes around it, unless
+/// `anySize`: then only positions below and above the face, x in 0..res-1, are a window's taps).
+/// Valid until this thread's next call (or GatherFootprint) for another face.
+const PaddedTexel* PaddedRun(const MeshGrids& g, int face, int mip, int radius, int x, int y,
+                             bool anySize = false);
 
 /// GatherFootprint, with `pads` false walking every window from its centre (what faces without a
 /// pad get): for tests comparing the two.

@@ -134,7 +134,11 @@ struct FilterInput {
 /// reconstructs texel (cx, cy) of the tile, whose (2r+1)^2 window lies inside the tile, from it;
 /// it must return what the FilterInput overload returns for that texel's footprint: the seen
 /// taps of the window (and the centre), row by row, those whose mirror is seen too when
-/// `symmetric`.
+/// `symmetric`. A filter may also have
+///   P Prepare(const SampleTile<Sample>& tile, int radius) const
+/// returning a callable p(cx, cy, texel) with the same results as the tile form, built once per
+/// tile (per-tile tables); p may use storage of the thread that stays valid until its next
+/// Prepare.
 template <typename Sample>
 struct SampleTile {
     int w, h;
@@ -173,6 +177,18 @@ struct SampleTile {
 };
 
 namespace internal {
+
+/// The block filter of a tile: the filter's Prepare(tile, radius) when it has one, else its tile
+/// form called texel by texel.
+template <typename Sample, typename FilterFn>
+auto PrepareTile(const FilterFn& filter, const SampleTile<Sample>& t, int radius) {
+    if constexpr (requires { filter.Prepare(t, radius); })
+        return filter.Prepare(t, radius);
+    else
+        return [&filter, &t, radius](int cx, int cy, const SampleRequest& texel) {
+            return filter(t, cx, cy, radius, texel);
+        };
+}
 
 /// The reference-mode store: unbounded, sharded hash maps under mutexes. Slow on purpose-free
 /// paths only; it exists to count how much the bounded caches re-shade.
@@ -558,7 +574,10 @@ private:
             const int x0 = xlo - radius, y0 = ylo - radius;
             const int w = xhi - xlo + 1 + 2 * radius, h = yhi - ylo + 1 + 2 * radius;
             const bool padded = x0 < 0 || y0 < 0 || x0 + w > res || y0 + h > res;
-            if (padded && (w > 64 || !internal::PaddedRun(g, face, mip, radius, -1, -1)))
+            // Columns on the face take the pad's rows below and above it whatever the grids
+            // around (footprint.h); past its sides only a pad of one grid size is every window's.
+            const bool anySize = x0 >= 0 && x0 + w <= res;
+            if (padded && (w > 64 || !internal::PaddedRun(g, face, mip, radius, -1, -1, anySize)))
                 return false;
             thread_local std::vector<FootprintSample> taps;
             thread_local std::vector<Sample> values, tile;
@@ -591,7 +610,7 @@ private:
                 const int ty = y - y0;
                 auto padRun = [&](int xa, int xb) {
                     const internal::PaddedTexel* p =
-                        internal::PaddedRun(g, face, mip, radius, xa, y);
+                        internal::PaddedRun(g, face, mip, radius, xa, y, anySize);
                     for (int x = xa; x <= xb; ++x, ++p) {
                         if (!(p->flags & internal::PaddedTexel::kReached) ||
                             !visible_->ContainsAt(p->probe, uint64_t(1) << p->bit))
@@ -642,6 +661,7 @@ private:
                                        keep == FootprintTaps::VisibleSymmetric,
                                        bits ? rows.data() : nullptr,
                                        bits ? reversed.data() : nullptr};
+            const auto reconstruct = internal::PrepareTile(filter, t, radius);
             k = centre.key;
             for (int y = ylo; y <= yhi; ++y)
                 for (int x = xlo; x <= xhi; ++x) {
@@ -656,11 +676,11 @@ private:
                         continue;  // cached already, or another thread's
                     if (ticket.evicted) ++st.texelEvictions;
                     const SampleRequest r = RequestOf(centre.mesh, k);
-                    texels_->Publish(ticket, filter(t, x - x0, y - y0, radius, r));
+                    texels_->Publish(ticket, reconstruct(x - x0, y - y0, r));
                     ++st.texelsPrefiltered;
                 }
             if (!single(iu - x0, iv - y0)) return false;
-            *out = filter(t, iu - x0, iv - y0, radius, centre);
+            *out = reconstruct(iu - x0, iv - y0, centre);
             return true;
         }
     }
