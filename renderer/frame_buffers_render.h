@@ -52,7 +52,8 @@
 //   environment) get the point 1e4 scene extents from the blocker along the light direction.
 //   prevBlocker / prevLightSample: moved to `prevTime` by the blocker's object (or light) and by
 //   the light's keyframes (distant lights: the direction rotated; the environment does not move).
-// * glossy: GGX materials only (0 elsewhere): the specular lobe's visible-normal-sampled ray,
+// * glossy: GGX materials only (0 elsewhere; empty, with glossyHit and prevGlossyHit, when the
+//   scene has no GGX material): the specular lobe's visible-normal-sampled ray,
 //   path-traced below (light hit directly MIS-weighted, see above). glossyHit: its first hit (a
 //   surface or a quad light; NaN when it left the scene or there is no specular lobe), of the
 //   first sample that hit something; prevGlossyHit: moved by that hit's object or light.
