@@ -117,6 +117,17 @@ TEST(Distribution, PdfIntegratesAndMatchesSamples) {
     }
     const Distribution1D zero({0.0f, 0.0f});  // all zero: uniform
     EXPECT_FLOAT_EQ(zero.Pdf(0.3f), 1.0f);
+    // The inverse CDF's bin at and between its steps (CDF 0, 1/8, 1/8, 1/2, 1/2, 1/2, 1: exact
+    // in float), with empty bins on either side of a step, for the branch-free search.
+    const Distribution1D steps({1.0f, 0.0f, 3.0f, 0.0f, 0.0f, 4.0f});
+    const std::pair<float, int> expected[] = {{0.0f, 0},  {0.1249f, 0},       {0.125f, 2},
+                                              {0.3f, 2},  {0.4999f, 2},       {0.5f, 5},
+                                              {0.75f, 5}, {0x1.fffffep-1f, 5}};
+    for (const auto& [u, bin] : expected) {
+        int off = -1;
+        steps.Sample(u, nullptr, &off);
+        EXPECT_EQ(off, bin) << "u = " << u;
+    }
 }
 
 std::string WriteEnv(int w, int h, int bx, int by, float bright) {
