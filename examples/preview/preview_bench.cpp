@@ -81,7 +81,7 @@ struct StageRun {
     const char* name;
     bool textureSpace;
     std::unique_ptr<TextureSpaceCache> cache;
-    screen::ScreenSpaceDenoiser denoiser;
+    screen::ScreenSpaceDenoiser denoiser;  // the preview's settings (StageSettingsFor)
     screen::FrameBuffers fb;
     std::vector<glm::vec3> image;
     double renderWall = 0.0, renderCpu = 0.0, stageWall = 0.0, stageCpu = 0.0;
@@ -89,7 +89,8 @@ struct StageRun {
     screen::StageTimings passCpu;  ///< each pass's CPU ms, summed over the timed frames
     CacheStats cacheStats;
 
-    StageRun(const char* n, bool tex) : name(n), textureSpace(tex) {}
+    StageRun(const char* n, bool tex, int height)
+        : name(n), textureSpace(tex), denoiser(StageSettingsFor(height)) {}
     double Fps(int frames) const { return double(frames) / (renderWall + 1e-3 * stageWall); }
 };
 
@@ -129,7 +130,8 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     const RenderResult ref = Render(rs, refOpt);
     std::printf("reference       : path traced, %d spp, %.1f s\n", refOpt.spp, ref.stats.seconds);
 
-    StageRun runs[2] = {StageRun("texture space", true), StageRun("per hit", false)};
+    StageRun runs[2] = {StageRun("texture space", true, s.height),
+                        StageRun("per hit", false, s.height)};
     TextureSpaceOptions tex = TextureOptionsOf(s);
     tex.enabled = true;
     runs[0].cache = std::make_unique<TextureSpaceCache>(rs, tex);
