@@ -124,15 +124,15 @@ glm::vec3 FiniteOrZero(glm::vec3 v) {
 }
 
 /// The unshadowed direct light of every light, integrated in closed form, or false when some
-/// light and lobe have none here: an environment map, or a GGX lobe under an area light (quad or
-/// environment; LTCs would give one). The diffuse lobe under a quad light is Lambert's polygon
-/// formula (clipped to the shading normal's hemisphere), under a constant environment albedo *
-/// radiance; a distant light's term is the BSDF times its irradiance. Unlike the light samples it
-/// ignores the geometric normal's cut-off (the BSDF's ng test): the visibility ratio below
-/// absorbs that difference in expectation.
+/// light and lobe have none here: a GGX lobe under an area light (quad or environment; LTCs and
+/// prefiltered maps would give one). The diffuse lobe under a quad light is Lambert's polygon
+/// formula (clipped to the shading normal's hemisphere), under the environment albedo / pi times
+/// its irradiance (exact for a constant one, degree-2 spherical harmonics for a map); a distant
+/// light's term is the BSDF times its irradiance. Unlike the light samples it ignores the
+/// geometric normal's cut-off (the BSDF's ng test) and, for a map, the harmonics' error: the
+/// visibility ratio below absorbs both in expectation.
 bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
                        glm::vec3 wo, glm::vec3* out) {
-    if (c.env && !c.env->IsConstant()) return false;
     if (bsdf.HasSpecular() && (c.env || !c.quads.empty())) return false;
     glm::vec3 S(0.0f);
     if (glm::dot(wo, si.N) > 0.0f) {  // the BSDF is 0 otherwise
@@ -144,7 +144,7 @@ bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsd
             const glm::vec3 v[4] = {rel, rel + q.e1, rel + q.e1 + q.e2, rel + q.e2};
             S += R * q.L * (PolygonProjectedSolidAngle(v, 4, si.N) * kInvPi);
         }
-        if (c.env) S += R * c.env->AverageRadiance();
+        if (c.env) S += R * c.env->Irradiance(si.N) * kInvPi;
         for (size_t i = 0; i < c.distantDir.size(); ++i) {
             glm::vec3 fd, fs;
             bsdf.EvalLobes(wo, c.distantDir[i], &fd, &fs);

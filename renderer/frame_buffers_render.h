@@ -18,11 +18,13 @@
 //   below the first bounce do not count light they hit directly at their first hit.
 // * shading: the unshadowed direct light (f_diffuse + w_mis f_specular) Le cos / pdf. In closed
 //   form where every light and lobe has one (ClosedFormShading in frame_buffers_render.cpp): the
-//   diffuse lobe under quad lights (Lambert's polygon formula, renderer/polygon_light.h), a
-//   constant environment and distant lights, and a GGX lobe under distant lights only; the
+//   diffuse lobe under quad lights (Lambert's polygon formula, renderer/polygon_light.h), an
+//   environment (pi L for a constant one, degree-2 spherical harmonics of a map: up to ~15% off
+//   next to a sun, which only the visibility ratio sees, EnvironmentMap::Irradiance) and
+//   distant lights, and a GGX lobe under distant lights only; the
 //   ratio estimator of Heitz et al. 2018 ("Combining analytic direct illumination and
 //   stochastic shadows"), with the analytic term Zhuang et al. and Zeng et al. take as the
-//   noise-free factor. Elsewhere (an environment map, a GGX lobe under an area light) estimated
+//   noise-free factor. Elsewhere (a GGX lobe under an area light or an environment) estimated
 //   per sample from 32 light samples without shadow rays (BSDF and light evaluations only): the
 //   light pick stratified (a distant light's term is exact) and the point on an area light or
 //   the environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
