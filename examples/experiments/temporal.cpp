@@ -437,7 +437,7 @@ int Temporal(const Setup& s) {
         "**Unshadowed direct light.** The stage takes `shading` as noise-free (Zeng et al. "
         "evaluate it analytically) and passes it through unfiltered; `RenderFrameBuffers` "
         "gives it in closed form where the lights and materials have one (diffuse surfaces "
-        "under quad lights, a constant sky and distant lights; then `visibility` is the ratio "
+        "under quad lights, an environment and distant lights; then `visibility` is the ratio "
         "of 8 light samples' shadowed to unshadowed light) and estimates it from 32 light "
         "samples without shadow rays per pixel elsewhere (its shadow ray goes to one of them, "
         "resampled by contribution); the stage gets the frame as rendered. The input's "
