@@ -21,10 +21,29 @@ Distribution1D::Distribution1D(const std::vector<float>& weights)
     if (!(acc > 0.0)) std::fill(func_.begin(), func_.end(), 1.0f), integral_ = 1.0f;
 }
 
+namespace {
+
+// std::upper_bound's index (the first element > u) without a branch per step: the halving
+// compiles to a conditional move, where std::upper_bound's branches were mispredicted about
+// every other step (environment-map light samples: Distribution1D::Sample was 41% of the car's
+// frame-buffer render in `perf`, 32 unshadowed samples a pixel).
+size_t UpperBound(const float* a, size_t count, float u) {
+    const float* base = a;
+    size_t n = count;
+    while (n > 1) {
+        const size_t half = n / 2;
+        base = base[half] <= u ? base + half : base;
+        n -= half;
+    }
+    return size_t(base - a) + (count > 0 && base[0] <= u ? 1 : 0);
+}
+
+}  // namespace
+
 float Distribution1D::Sample(float u, float* pdf, int* offset) const {
     const int n = int(func_.size());
     // Last bin whose cdf <= u, skipping empty bins.
-    int o = int(std::upper_bound(cdf_.begin(), cdf_.end(), u) - cdf_.begin()) - 1;
+    int o = int(UpperBound(cdf_.data(), cdf_.size(), u)) - 1;
     o = std::clamp(o, 0, n - 1);
     while (o < n - 1 && cdf_[o + 1] - cdf_[o] <= 0.0f) ++o;
     if (offset) *offset = o;

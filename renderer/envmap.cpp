@@ -148,6 +148,44 @@ float EnvironmentMap::PdfUv(glm::vec2 uv) const {
     return sinTheta > 0.0f ? dist_.Pdf(uv) / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;
 }
 
+glm::vec3 EnvironmentMap::Irradiance(glm::vec3 n) const {
+    if (isConstant_) return kPiF * constant_;
+    std::call_once(sh_->once, [this] {
+        // Each texel's radiance times the basis at its centre times its solid angle
+        // (2 pi / W)(pi / H) sin(theta), summed in double.
+        constexpr double kPiD = 3.14159265358979323846;
+        glm::dvec3 acc[9] = {};
+        const double dA = (2.0 * kPiD / width_) * (kPiD / height_);
+        for (int y = 0; y < height_; ++y) {
+            const float v = (float(y) + 0.5f) / float(height_);
+            const double w = dA * std::sin(double(v) * kPiD);
+            for (int x = 0; x < width_; ++x) {
+                const glm::vec3 d = UvToDir({(float(x) + 0.5f) / float(width_), v});
+                const double basis[9] = {0.282095,
+                                         0.488603 * d.y,
+                                         0.488603 * d.z,
+                                         0.488603 * d.x,
+                                         1.092548 * d.x * d.y,
+                                         1.092548 * d.y * d.z,
+                                         0.315392 * (3.0 * d.z * d.z - 1.0),
+                                         1.092548 * d.x * d.z,
+                                         0.546274 * (d.x * d.x - d.y * d.y)};
+                const glm::dvec3 L = glm::dvec3(Texel(x, y)) * w;
+                for (int k = 0; k < 9; ++k) acc[k] += basis[k] * L;
+            }
+        }
+        for (int k = 0; k < 9; ++k) sh_->c[k] = glm::vec3(acc[k]);
+    });
+    // Ramamoorthi and Hanrahan's eq. 13: the clamped cosine's convolution in closed form.
+    constexpr float c1 = 0.429043f, c2 = 0.511664f, c3 = 0.743125f, c4 = 0.886227f, c5 = 0.247708f;
+    const glm::vec3* L = sh_->c;
+    const glm::vec3 E = c1 * L[8] * (n.x * n.x - n.y * n.y) + c3 * L[6] * n.z * n.z + c4 * L[0] -
+                        c5 * L[6] +
+                        2.0f * c1 * (L[4] * n.x * n.y + L[7] * n.x * n.z + L[5] * n.y * n.z) +
+                        2.0f * c2 * (L[3] * n.x + L[1] * n.y + L[2] * n.z);
+    return glm::max(E, glm::vec3(0.0f));
+}
+
 const EnvironmentMap::LuminancePyramid& EnvironmentMap::Pyramid() const {
     std::call_once(pyramid_->once, [this] {
         std::vector<LuminancePyramid::Level>& levels = pyramid_->pyramid.levels;

@@ -55,6 +55,12 @@ public:
     glm::vec2 DirToUv(glm::vec3 d) const;
     glm::vec3 UvToDir(glm::vec2 uv) const;
 
+    /// Irradiance onto a surface of unit normal `n` (int L max(0, n.w) dw): pi * radiance for a
+    /// constant environment; for a map, from its projection on the 9 real spherical harmonics of
+    /// degree <= 2 (Ramamoorthi and Hanrahan 2001: a few % off for natural light, more next to a
+    /// small bright source, whose ringing is clamped at 0). Projected on first use (thread-safe).
+    glm::vec3 Irradiance(glm::vec3 n) const;
+
     /// A mip pyramid of the map's luminance, for distributions that need the light averaged over
     /// a solid angle and then refined (product sampling): level 0 is the map, each level a 2x2
     /// box average of the one before (an odd last row or column is left out), down to 2x1 texels
@@ -92,6 +98,11 @@ private:
         LuminancePyramid pyramid;
     };
     std::shared_ptr<LazyPyramid> pyramid_ = std::make_shared<LazyPyramid>();
+    struct LazySh {
+        std::once_flag once;
+        glm::vec3 c[9];  // radiance's SH coefficients L_00, L_1-1, L_10, L_11, L_2-2 .. L_22
+    };
+    std::shared_ptr<LazySh> sh_ = std::make_shared<LazySh>();
 };
 
 }  // namespace texcache

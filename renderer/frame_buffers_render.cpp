@@ -20,6 +20,7 @@
 
 #include "renderer/cached_shading.h"
 #include "renderer/path_tracer.h"
+#include "renderer/polygon_light.h"
 #include "renderer/render.h"
 #include "texcache/error.h"
 
@@ -54,6 +55,10 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 // Unshadowed light samples per frame-buffer sample for `shading` (no rays: BSDF and light
 // evaluations only). Measured noise: frame_buffers_render.h.
 constexpr int kShadingCandidates = 32;
+// Light samples per frame-buffer sample when `shading` has a closed form (ClosedFormShading):
+// they only pick the shadow ray and estimate the visibility ratio, whose noise the stage filters.
+// Measured: see frame_buffers_render.h.
+constexpr int kRatioCandidates = 8;
 const glm::vec3 kNaN3(kNaN);
 
 /// Where everything that moves was at the previous frame: world at the frame time -> world at
@@ -118,30 +123,68 @@ glm::vec3 FiniteOrZero(glm::vec3 v) {
     return std::isfinite(v.x + v.y + v.z) ? v : glm::vec3(0.0f);
 }
 
+/// The unshadowed direct light of every light, integrated in closed form, or false when some
+/// light and lobe have none here: a GGX lobe under an area light (quad or environment; LTCs and
+/// prefiltered maps would give one). The diffuse lobe under a quad light is Lambert's polygon
+/// formula (clipped to the shading normal's hemisphere), under the environment albedo / pi times
+/// its irradiance (exact for a constant one, degree-2 spherical harmonics for a map); a distant
+/// light's term is the BSDF times its irradiance. Unlike the light samples it ignores the
+/// geometric normal's cut-off (the BSDF's ng test) and, for a map, the harmonics' error: the
+/// visibility ratio below absorbs both in expectation.
+bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
+                       glm::vec3 wo, glm::vec3* out) {
+    if (bsdf.HasSpecular() && (c.env || !c.quads.empty())) return false;
+    glm::vec3 S(0.0f);
+    if (glm::dot(wo, si.N) > 0.0f) {  // the BSDF is 0 otherwise
+        constexpr float kInvPi = 0.31830988618379067f;
+        const glm::vec3 R = bsdf.DiffuseReflectance();
+        for (const Context::Quad& q : c.quads) {
+            const glm::vec3 rel = q.corner - si.P;
+            if (!q.twoSided && glm::dot(q.n, rel) >= 0.0f) continue;  // behind a one-sided quad
+            const glm::vec3 v[4] = {rel, rel + q.e1, rel + q.e1 + q.e2, rel + q.e2};
+            S += R * q.L * (PolygonProjectedSolidAngle(v, 4, si.N) * kInvPi);
+        }
+        if (c.env) S += R * c.env->Irradiance(si.N) * kInvPi;
+        for (size_t i = 0; i < c.distantDir.size(); ++i) {
+            glm::vec3 fd, fs;
+            bsdf.EvalLobes(wo, c.distantDir[i], &fd, &fs);
+            S += (fd + fs) * c.distantE[i] * std::abs(glm::dot(c.distantDir[i], si.N));
+        }
+    }
+    *out = FiniteOrZero(S);
+    return true;
+}
+
 /// The light sample of one frame-buffer sample: unshadowed shading into `px` from
 /// kShadingCandidates light samples, and one shadow ray to a candidate resampled in proportion to
 /// its shading's luminance, with the blocker and light point when blocked (see
-/// frame_buffers_render.h).
+/// frame_buffers_render.h). With `exact` (ClosedFormShading, luminance > 0) the shading is that
+/// and kRatioCandidates light samples give the visibility as the ratio lum(mean of the
+/// candidates) * V / lum(exact), whose expectation is the shadowed over the unshadowed light.
 void FrameDirectSample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
-                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+                       const Bsdf& bsdf, glm::vec3 wo, const glm::vec3* exact, Rng& rng,
+                       FramePixel& px, RayCounts& rays) {
     // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
     // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
     // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
-    constexpr int kN = kShadingCandidates;
+    constexpr int kMax = kShadingCandidates;
+    const int kN = exact ? kRatioCandidates : kShadingCandidates;
     constexpr float kG1 = 0.75487766f, kG2 = 0.56984029f;  // 1/phi_2, 1/phi_2^2
     const float pickShift = rng.Next1D();
     const glm::vec2 shift = rng.Next2D();
     const float uResample = rng.Next1D();
-    LightSample cand[kN];
-    glm::vec3 S[kN];
-    float lum[kN];
+    LightSample cand[kMax];
+    glm::vec3 S[kMax];
+    float lum[kMax];
     glm::vec3 sum(0.0f);
     float lumSum = 0.0f;
     for (int k = 0; k < kN; ++k) {
         lum[k] = 0.0f, S[k] = glm::vec3(0.0f);
         const float uPick = (float(k) + pickShift) / float(kN);
-        const glm::vec2 u(std::fmod(shift.x + kG1 * float(k), 1.0f),
-                          std::fmod(shift.y + kG2 * float(k), 1.0f));
+        // x - floor(x) is fmod(x, 1) for x >= 0, exactly, without libm's fmodf (11% of the bench
+        // profile with 32 candidates).
+        const float rx = shift.x + kG1 * float(k), ry = shift.y + kG2 * float(k);
+        const glm::vec2 u(rx - std::floor(rx), ry - std::floor(ry));
         LightSample& ls = cand[k];
         if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
                            glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
@@ -158,11 +201,16 @@ void FrameDirectSample(const Context& c, const FrameMotion& motion, const Surfac
         lum[k] = Luminance(glm::abs(S[k]));
         sum += S[k], lumSum += lum[k];
     }
-    if (!(lumSum > 0.0f)) return;  // no shadow ray: counts as visible (see the header)
+    if (exact) {
+        px.shadingSum += *exact;
+        px.weightSum += Luminance(glm::abs(*exact));
+        if (!(lumSum > 0.0f)) return;  // every candidate found 0: this sample's ratio is 0
+    } else if (!(lumSum > 0.0f)) {
+        return;  // no shadow ray: counts as visible (see the header)
+    }
     const glm::vec3 Sbar = sum / float(kN);
-    px.shadingSum += Sbar;
     const float w = Luminance(glm::abs(Sbar));
-    px.weightSum += w;
+    if (!exact) px.shadingSum += Sbar, px.weightSum += w;
     // The shadow ray's candidate: index j with probability lum_j / sum lum.
     int j = 0;
     float acc = lum[0], target = uResample * lumSum;
@@ -303,27 +351,30 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
         for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = Epi;
     }
     const std::array<glm::vec3, screen::kNumCones> axes = screen::ConeAxes(si.N);
+    glm::vec3 exactShading;
+    const bool closedForm = ClosedFormShading(c, si, bsdf, wo, &exactShading) &&
+                            Luminance(glm::abs(exactShading)) > 0.0f;
     FramePixel px;
     const int spp = std::max(c.opt.spp, 1);
     for (int s = 0; s < spp; ++s) {
         Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
-        FrameDirectSample(c, motion, si, bsdf, wo, rng, px, rays);
+        FrameDirectSample(c, motion, si, bsdf, wo, closedForm ? &exactShading : nullptr, rng, px,
+                          rays);
         if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
         if (diffuse && !cachedIndirect) FrameDiffuseSample(c, si, bsdf, wo, axes, rng, px, rays);
     }
     const float inv = 1.0f / float(spp);
     fb.shading[p] = px.shadingSum * inv;
     fb.visibility[p] = px.weightSum > 0.0f ? px.visibleWeightSum / px.weightSum : 1.0f;
-    fb.glossy[p] = px.glossySum * inv;
+    if (bsdf.HasSpecular()) fb.glossy[p] = px.glossySum * inv;
     if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
-    if (fb.visibility[p] < 1.0f) {
+    if (px.blockerWeight >= 0.0f) {  // a sample was blocked (the ratio can be < 1 without)
         fb.blocker[p] = px.blocker;
         fb.prevBlocker[p] = px.prevBlocker;
         fb.lightSample[p] = px.light;
         fb.prevLightSample[p] = px.prevLight;
     }
-    fb.glossyHit[p] = px.glossyHit;
-    fb.prevGlossyHit[p] = px.prevGlossyHit;
+    if (bsdf.HasSpecular()) fb.glossyHit[p] = px.glossyHit, fb.prevGlossyHit[p] = px.prevGlossyHit;
     if (px.hasCones)
         for (int k = 0; k < screen::kNumCones; ++k)
             fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
@@ -377,7 +428,14 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     fb.emitted.assign(n, zero);
     fb.shading.assign(n, zero);
     fb.visibility.assign(n, 1.0f);
-    fb.glossy.assign(n, zero);
+    // Only what the scene has: without a GGX material `glossy` and its hits stay empty, and the
+    // stage skips that component (its motion vectors, history and a-trous channels: 17% of the
+    // stage's CPU time on anim_shadow at 640x360, `texcache preview --bench --denoise reliable`).
+    const Scene& scene = rs.scene();
+    bool anyGlossy = false;
+    for (const Object& o : scene.objects)
+        anyGlossy |= scene.materials[size_t(o.material)].type == Material::Type::GGX;
+    fb.glossy.assign(anyGlossy ? n : 0, zero);
     fb.indirect.assign(n, zero);
     fb.position.assign(n, kNaN3);
     fb.normal.assign(n, kNaN3);
@@ -388,9 +446,9 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     fb.objectId.assign(n, -1);
     fb.prevPosition.assign(n, kNaN3);
     fb.prevNormal.assign(n, kNaN3);
-    for (auto* v : {&fb.blocker, &fb.prevBlocker, &fb.lightSample, &fb.prevLightSample,
-                    &fb.glossyHit, &fb.prevGlossyHit})
+    for (auto* v : {&fb.blocker, &fb.prevBlocker, &fb.lightSample, &fb.prevLightSample})
         v->assign(n, kNaN3);
+    for (auto* v : {&fb.glossyHit, &fb.prevGlossyHit}) v->assign(anyGlossy ? n : 0, kNaN3);
     fb.cones.assign(n * screen::kNumCones, kNaN3);
 
     tbb::enumerable_thread_specific<RayCounts> counts;

@@ -16,29 +16,46 @@
 //   (power heuristic) between the light sample (in `shading`) and the specular ray hitting the
 //   light (in `glossy`, where a highlight moves like a reflection); the diffuse ray and the paths
 //   below the first bounce do not count light they hit directly at their first hit.
-// * shading: the unshadowed direct light (f_diffuse + w_mis f_specular) Le cos / pdf, estimated
+// * shading: the unshadowed direct light (f_diffuse + w_mis f_specular) Le cos / pdf. In closed
+//   form where every light and lobe has one (ClosedFormShading in frame_buffers_render.cpp): the
+//   diffuse lobe under quad lights (Lambert's polygon formula, renderer/polygon_light.h), an
+//   environment (pi L for a constant one, degree-2 spherical harmonics of a map: up to ~15% off
+//   next to a sun, which only the visibility ratio sees, EnvironmentMap::Irradiance) and
+//   distant lights, and a GGX lobe under distant lights only; the
+//   ratio estimator of Heitz et al. 2018 ("Combining analytic direct illumination and
+//   stochastic shadows"), with the analytic term Zhuang et al. and Zeng et al. take as the
+//   noise-free factor. Elsewhere (a GGX lobe under an area light or an environment) estimated
 //   per sample from 32 light samples without shadow rays (BSDF and light evaluations only): the
-//   light pick stratified (a distant light's term is exact) and the point on an area light or the
-//   environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
-//   noise-free; its relative per-pixel error at 1 spp is ~5% RMS (FrameBuffers.ShadingIsLowNoise;
-//   one light sample would be about sqrt(32) times noisier). 0 where no light was sampled (no
-//   lights, one-sided quad seen from behind) or every sample lies below the surface.
-// * visibility: the 0/1 of one shadow ray, to one of those light samples picked with probability
-//   proportional to its shading's luminance (resampling), so that shading * visibility keeps the
-//   path tracer's expectation (exactly for white light, consistent for coloured: the sample
-//   colours' chromaticities differ). A sample with zero shading traces no shadow ray and counts
-//   as visible (1): its product is 0 anyway, and a 1 keeps the attached shadows of a surface
-//   turning away from the light from bleeding into lit pixels when the stage filters visibility.
-//   With spp > 1 it is the mean of the samples weighted by the luminance of their shading (the
-//   ratio estimator), so shading * visibility is the mean of the shadowed samples for white
-//   light (consistent, not unbiased, for coloured light).
+//   light pick stratified (a distant light's term is exact) and the point on an area light or
+//   the environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
+//   noise-free; the light samples' relative per-pixel error at 1 spp is ~5% RMS
+//   (FrameBuffers.ShadingIsLowNoise; one light sample would be about sqrt(32) times noisier).
+//   0 where no light was sampled (no lights, one-sided quad seen from behind) or every sample
+//   lies below the surface.
+// * visibility: with light-sampled shading, the 0/1 of one shadow ray, to one of those light
+//   samples picked with probability proportional to its shading's luminance (resampling), so
+//   that shading * visibility keeps the path tracer's expectation (exactly for white light,
+//   consistent for coloured: the sample colours' chromaticities differ). A sample with zero
+//   shading traces no shadow ray and counts as visible (1): its product is 0 anyway, and a 1
+//   keeps the attached shadows of a surface turning away from the light from bleeding into lit
+//   pixels when the stage filters visibility. With closed-form shading, 8 light samples are
+//   taken instead of 32 and visibility is the ratio lum(their mean) * V / lum(shading), V the
+//   0/1 of the shadow ray resampled as above: its expectation is the shadowed over the
+//   unshadowed light (the luminance of shading * visibility is unbiased; measured, the
+//   ComposeIsUnbiased test; taking V alone was visibly biased in penumbrae, z^2 1.54 there), so
+//   it is 0 where the ray was blocked and near 1, above or below, where not; it is 0 without a
+//   shadow ray when all 8 samples fell where the BSDF is 0. With spp > 1 it is the mean of the
+//   samples weighted by the luminance of their shading (the ratio estimator), so shading *
+//   visibility is the mean of the shadowed samples for white light (consistent, not unbiased,
+//   for coloured light).
 // * blocker / lightSample: the first surface the shadow ray hit (quad lights block too, as in the
-//   path tracer) and the sampled light point; NaN exactly where visibility is 1. With spp > 1
-//   they are those of the blocked sample with the most shading. Lights at infinity (distant,
+//   path tracer) and the sampled light point; NaN exactly where no shadow ray was blocked. With spp
+//   > 1 they are those of the blocked sample with the most shading. Lights at infinity (distant,
 //   environment) get the point 1e4 scene extents from the blocker along the light direction.
 //   prevBlocker / prevLightSample: moved to `prevTime` by the blocker's object (or light) and by
 //   the light's keyframes (distant lights: the direction rotated; the environment does not move).
-// * glossy: GGX materials only (0 elsewhere): the specular lobe's visible-normal-sampled ray,
+// * glossy: GGX materials only (0 elsewhere; empty, with glossyHit and prevGlossyHit, when the
+//   scene has no GGX material): the specular lobe's visible-normal-sampled ray,
 //   path-traced below (light hit directly MIS-weighted, see above). glossyHit: its first hit (a
 //   surface or a quad light; NaN when it left the scene or there is no specular lobe), of the
 //   first sample that hit something; prevGlossyHit: moved by that hit's object or light.

@@ -444,6 +444,19 @@ TEST(Preview, BadDenoiseValuesAreClearErrors) {
         << m.output;
 }
 
+// The preview's stage runs one a-trous level fewer below 720 rows (progressive_renderer.h: a
+// quarter of its filtering at 640x360) and the library's defaults from 720 rows; both are
+// settings the denoiser accepts.
+TEST(Preview, StageFiltersLessOnSmallFrames) {
+    using namespace texcache::preview;
+    const texcache::screen::DenoiserSettings defaults;
+    EXPECT_EQ(StageSettingsFor(1080).atrousLevels, defaults.atrousLevels);
+    EXPECT_EQ(StageSettingsFor(720).atrousLevels, defaults.atrousLevels);
+    EXPECT_EQ(StageSettingsFor(360).atrousLevels, defaults.atrousLevels - 1);
+    for (int h : {1, 360, 1080})
+        EXPECT_NO_THROW(texcache::screen::ScreenSpaceDenoiser{StageSettingsFor(h)}) << h;
+}
+
 // The preview worker's stage keeps its history while the camera orbits and the animation plays,
 // and drops it when the resolution, the integrator, the method or the scene (re-tessellated)
 // changes. One frame per change (maxFrames 1), 32x18: stageHistory counts the frames in it.

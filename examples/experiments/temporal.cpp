@@ -436,9 +436,12 @@ int Temporal(const Setup& s) {
         "included (there every method is spatial only). %s\n\n"
         "**Unshadowed direct light.** The stage takes `shading` as noise-free (Zeng et al. "
         "evaluate it analytically) and passes it through unfiltered; `RenderFrameBuffers` "
-        "estimates it from 32 light samples without shadow rays per pixel (its shadow ray goes "
-        "to one of them, resampled by contribution), and the stage gets the frame as rendered. "
-        "The input's `shading` error against the reference's is in the last table.\n\n",
+        "gives it in closed form where the lights and materials have one (diffuse surfaces "
+        "under quad lights, an environment and distant lights; then `visibility` is the ratio "
+        "of 8 light samples' shadowed to unshadowed light) and estimates it from 32 light "
+        "samples without shadow rays per pixel elsewhere (its shadow ray goes to one of them, "
+        "resampled by contribution); the stage gets the frame as rendered. The input's "
+        "`shading` error against the reference's is in the last table.\n\n",
         frames, kFps, W, H, refSpp,
         s.quick ? "**Quick mode: test-size images and few frames; not for conclusions.**" : "");
     md +=
@@ -486,9 +489,10 @@ int Temporal(const Setup& s) {
             }
 
     md +=
-        "\n**Unshadowed direct light of the input** (`shading`, 1 spp = 32 light samples "
-        "without shadow rays) against the reference's, mean over frames: RMSE, and relative to "
-        "the reference's RMS.\n\n| scene | shading RMSE | relative |\n|---|---|---|\n";
+        "\n**Unshadowed direct light of the input** (`shading`, 1 spp: closed form, 0 error, "
+        "or 32 light samples without shadow rays) against the reference's, mean over frames: "
+        "RMSE, and relative to the reference's RMS.\n\n| scene | shading RMSE | relative "
+        "|\n|---|---|---|\n";
     for (const SceneResult& r : results)
         md += Format("| %s | %.4f | %.2f%% |\n", r.name.c_str(), r.shadingRmse,
                      100.0 * r.shadingRmse / r.shadingRms);

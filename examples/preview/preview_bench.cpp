@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <iterator>
 #include <memory>
 #include <string>
 
@@ -65,20 +66,31 @@ double CpuSeconds() {
     return double(t.tv_sec) + double(t.tv_nsec) * 1e-9;
 }
 
+// The stage's passes as the bench lists them.
+constexpr double screen::StageTimings::*kPasses[] = {
+    &screen::StageTimings::prepare,        &screen::StageTimings::traditionalMotion,
+    &screen::StageTimings::reliableMotion, &screen::StageTimings::temporal,
+    &screen::StageTimings::spatial,        &screen::StageTimings::cleanup,
+    &screen::StageTimings::compose};
+constexpr const char* kPassNames[] = {"prepare", "motion",  "reliable-motion", "temporal",
+                                      "a-trous", "cleanup", "compose"};
+
 /// One configuration of the stage bench: frame buffers (texture-space indirect or per hit) and
 /// the stage on them, with its times summed over the timed frames.
 struct StageRun {
     const char* name;
     bool textureSpace;
     std::unique_ptr<TextureSpaceCache> cache;
-    screen::ScreenSpaceDenoiser denoiser;
+    screen::ScreenSpaceDenoiser denoiser;  // the preview's settings (StageSettingsFor)
     screen::FrameBuffers fb;
     std::vector<glm::vec3> image;
     double renderWall = 0.0, renderCpu = 0.0, stageWall = 0.0, stageCpu = 0.0;
     double maxStageWall = 0.0;
+    screen::StageTimings passCpu;  ///< each pass's CPU ms, summed over the timed frames
     CacheStats cacheStats;
 
-    StageRun(const char* n, bool tex) : name(n), textureSpace(tex) {}
+    StageRun(const char* n, bool tex, int height)
+        : name(n), textureSpace(tex), denoiser(StageSettingsFor(height)) {}
     double Fps(int frames) const { return double(frames) / (renderWall + 1e-3 * stageWall); }
 };
 
@@ -118,7 +130,8 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     const RenderResult ref = Render(rs, refOpt);
     std::printf("reference       : path traced, %d spp, %.1f s\n", refOpt.spp, ref.stats.seconds);
 
-    StageRun runs[2] = {StageRun("texture space", true), StageRun("per hit", false)};
+    StageRun runs[2] = {StageRun("texture space", true, s.height),
+                        StageRun("per hit", false, s.height)};
     TextureSpaceOptions tex = TextureOptionsOf(s);
     tex.enabled = true;
     runs[0].cache = std::make_unique<TextureSpaceCache>(rs, tex);
@@ -136,7 +149,9 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             if (i == 0) continue;
             r.renderWall += st.seconds, r.renderCpu += c1 - c0;
             const screen::StageTimings& t = r.denoiser.Timings();
-            r.stageWall += t.total, r.stageCpu += r.denoiser.CpuTimings().total;
+            const screen::StageTimings& tc = r.denoiser.CpuTimings();
+            r.stageWall += t.total, r.stageCpu += tc.total;
+            for (double screen::StageTimings::*pass : kPasses) r.passCpu.*pass += tc.*pass;
             r.maxStageWall = std::max(r.maxStageWall, t.total);
             r.cacheStats.Merge(st.cache);
         }
@@ -157,6 +172,10 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
                       .c_str()
                 : "",
             RelMSE(img, ref.beauty), RelMSE(noisy, ref.beauty));
+        std::printf("  %-13s  stage passes, ms cpu a frame:", "");
+        for (size_t k = 0; k < std::size(kPasses); ++k)
+            std::printf(" %s %.1f", kPassNames[k], r.passCpu.*kPasses[k] / n);
+        std::printf("\n");
         const std::string stem = b.out + (r.textureSpace ? "_stage_texture" : "_stage_hit");
         WriteImage(stem + ".png", img);
     }

@@ -57,6 +57,12 @@ TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s) {
     return t;
 }
 
+screen::DenoiserSettings StageSettingsFor(int height) {
+    screen::DenoiserSettings d;
+    if (height < 720) d.atrousLevels = std::max(1, d.atrousLevels - 1);
+    return d;
+}
+
 namespace {
 
 glm::vec3 HashColour(uint64_t h) {
@@ -356,6 +362,7 @@ void ProgressiveRenderer::Run() {
     Image mean;
     // The screen-space stage (UsesStage): made on first use, its history kept across frames.
     std::unique_ptr<screen::ScreenSpaceDenoiser> denoiser;
+    int denoiserLevels = 0;  // its a-trous levels (StageSettingsFor the frame's height)
     screen::FrameBuffers frameBuffers;
     std::vector<glm::vec3> denoised;
     PreviewSettings stageSettings;                  // what the stage's history was made with
@@ -491,7 +498,12 @@ void ProgressiveRenderer::Run() {
                 RenderCacheView(*rs, *cache, frameTime, cur.view, &mean);
                 accumulated = INT_MAX;
             } else if (staged) {
-                if (!denoiser) denoiser = std::make_unique<screen::ScreenSpaceDenoiser>();
+                const screen::DenoiserSettings ds = StageSettingsFor(cur.height);
+                if (!denoiser || denoiserLevels != ds.atrousLevels) {
+                    denoiser = std::make_unique<screen::ScreenSpaceDenoiser>(ds);
+                    denoiserLevels = ds.atrousLevels;
+                    stageHistory = 0;
+                }
                 if (stageHistory == 0 || !KeepsStageHistory(stageSettings, cur) ||
                     stageSceneBuild != sceneBuilds) {
                     denoiser->Reset();

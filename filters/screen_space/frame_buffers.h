@@ -6,8 +6,10 @@
 // The final colour of a pixel is
 //     emitted + shading * visibility + glossy + indirect
 // where `shading` is the unshadowed direct light (the noise-free part, Zeng Sec. 4.1), `visibility`
-// its shadowing in [0, 1], `glossy` the glossy reflection of microfacet materials and `indirect`
-// the diffuse indirect light (albedo included; `albedo` is given for demodulation).
+// its shadowing (an estimate of shadowed / unshadowed: 0..1 in expectation, a single frame can
+// exceed 1 where `shading` is in closed form), `glossy` the glossy reflection of microfacet
+// materials and `indirect` the diffuse indirect light (albedo included; `albedo` is given for
+// demodulation).
 //
 // Layout: one structure of arrays per frame, row-major, y down, `width * height` entries per
 // array. An optional input (e.g. cones when nothing is diffuse) is left empty, and the stage then
@@ -125,7 +127,7 @@ struct FrameBuffers {
     // The components (linear radiance, RGB).
     std::vector<glm::vec3> emitted;   ///< light seen directly (environment, emitters)
     std::vector<glm::vec3> shading;   ///< unshadowed direct light (low noise: no ray)
-    std::vector<float> visibility;    ///< shadow-ray visibility of that light sample, 0..1
+    std::vector<float> visibility;    ///< shadowed / unshadowed estimate (shadow rays), >= 0
     std::vector<glm::vec3> glossy;    ///< glossy (microfacet) reflection, 1 path
     std::vector<glm::vec3> indirect;  ///< diffuse indirect light, albedo included, 1 path
 
