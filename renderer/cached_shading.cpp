@@ -2,6 +2,7 @@
 #include "renderer/cached_shading.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 #include "renderer/ptex_mapping.h"
@@ -152,6 +153,15 @@ private:
 
 /// The n cosine-distributed rays of a cache sample, in order: each with its shutter time and
 /// posed (ShutterMotion), drawn from the sample's own random stream.
+///
+/// The directions are the Sobol' (0,2)-sequence (Sobol02), digitally shifted by a random pair of
+/// the sample's own: each ray alone is cosine-distributed (the shift is uniform), so the sample is
+/// an unbiased estimate, and its n rays form a (0,log2 n,2)-net when n is a power of two, whose
+/// error falls faster than independent rays' (car AO, `texcache experiment speed-vs-error --only
+/// car-ao`, 16 rays per sample: unfiltered relMSE 0.0276 -> 0.0129, 13x13 normal filter 0.0048
+/// -> 0.0035; one ray per sample unchanged). Tried and not kept: one net over the 16 samples of a
+/// 4x4 texel block (the filter averages them), shifted per block: no gain at one ray per sample,
+/// where the filter's footprint sees parts of several blocks.
 class CosineRays {
 public:
     CosineRays(const Context& c, const SampleRequest& r, const SurfaceSample& ss, glm::vec3 origin,
@@ -161,12 +171,14 @@ public:
           motion_(c, c.tsc->ObjectOfMesh(r.mesh)),
           origin_(origin),
           normal_(ss.N),
-          n_(n) {}
+          n_(n),
+          shift_(MixBits(SampleSeed(c, r) ^ 0x50b01ull)) {}
     /// Ray i (in order), and the sample's normal at its time in `N`.
     Ray Next(int i, glm::vec3* N) {
         const float time = motion_.Time(rng_, i, n_);
         Ray ray;
-        ray.dir = frame_.FromLocal(SampleCosineHemisphere(rng_.Next2D()));
+        ray.dir = frame_.FromLocal(
+            SampleCosineHemisphere(Sobol02(uint32_t(i), uint32_t(shift_), uint32_t(shift_ >> 32))));
         ray.org = origin_;
         *N = normal_;
         motion_.Pose(time, &ray, N);
@@ -180,20 +192,36 @@ private:
     ShutterMotion motion_;
     glm::vec3 origin_, normal_;
     int n_;
+    uint64_t shift_;  ///< the digital shift of the sample's net: x in the low 32 bits
 };
 
-/// The mean of a sample's ray values and the variance of that mean (luminance).
+/// The mean of a sample's n ray values and the variance of that mean (luminance).
+///
+/// The rays are a (0,m,2)-net when n = 2^m (CosineRays), and the independent-ray formula
+/// (sum of squares) overstates the variance of their mean by far: it ignores the
+/// stratification (at 16 rays per sample the unfiltered car AO has half the error of
+/// independent rays). For such n the two halves, nets of n/2 points each, estimate it instead:
+/// (mean_1 - mean_2)^2 / 4, which the regression filter's bias-variance choice needs (with the
+/// old formula it smoothed too much once samples had many rays: car AO, 16 rays, relMSE
+/// 0.0037 with independent rays, 0.0050 with the net and the old variance).
 struct RayMean {
-    glm::vec3 sum{0.0f};
+    explicit RayMean(int n) : n(n), half(n >= 2 && std::has_single_bit(unsigned(n)) ? n / 2 : 0) {}
+    int n, half, added = 0;
+    glm::vec3 sum{0.0f}, firstHalf{0.0f};
     float sum2 = 0.0f;
     void Add(glm::vec3 L) {
         sum += L;
         const float y = Luminance(L);
         sum2 += y * y;
+        if (++added == half) firstHalf = sum;
     }
-    ShadedSample Sample(glm::vec3 normal, int n) const {
+    ShadedSample Sample(glm::vec3 normal) const {
         const glm::vec3 mean = sum / float(n);
         const float ym = Luminance(mean);
+        if (half > 0) {
+            const float d = Luminance(firstHalf - (sum - firstHalf)) / float(half);
+            return {mean, normal, 0.25f * d * d};
+        }
         return {mean, normal,
                 std::max(0.0f, sum2 / float(n) - ym * ym) / float(std::max(n - 1, 1))};
     }
@@ -209,13 +237,13 @@ ShadedSample ShadeCosineRays(const Context& c, const SampleRequest& r, int n, Ra
     glm::vec3 origin;
     if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
     CosineRays gen(c, r, ss, origin, n);
-    RayMean mean;
+    RayMean mean(n);
     for (int i = 0; i < n; ++i) {
         glm::vec3 N;
         Ray ray = gen.Next(i, &N);
         mean.Add(trace(ray, gen.rng(), N));
     }
-    return mean.Sample(ss.N, n);
+    return mean.Sample(ss.N);
 }
 
 }  // namespace
@@ -228,7 +256,7 @@ ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& 
     // the random numbers and in the order of one ray at a time (the same sample).
     const int n = c.opt.aoSamples;
     CosineRays gen(c, r, ss, origin, n);
-    RayMean mean;
+    RayMean mean(n);
     Ray batch[16];
     bool blocked[16];
     int queued = 0;
@@ -245,7 +273,7 @@ ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& 
         if (queued == 16) flush();
     }
     flush();
-    return mean.Sample(ss.N, n);
+    return mean.Sample(ss.N);
 }
 
 /// Diffuse light at a cache sample, as (1/pi) * integral of L cos (the hit multiplies it by its

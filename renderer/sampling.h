@@ -95,6 +95,25 @@ inline glm::vec3 SampleCosineHemisphere(glm::vec2 u) {
     const float z = std::sqrt(std::max(0.0f, 1.0f - d.x * d.x - d.y * d.y));
     return {d.x, d.y, z};
 }
+/// Point j of the 2D Sobol' (0,2)-sequence in base 2 (van der Corput and Sobol's second
+/// dimension), digitally shifted by (sx, sy): each 2^m consecutive points from a multiple of 2^m
+/// form a (0,m,2)-net (one point in every elementary 2^-a x 2^-(m-a) box), and with a uniformly
+/// random shift every point alone is uniform on [0,1)^2 (Kollig and Keller 2002).
+inline glm::vec2 Sobol02(uint32_t j, uint32_t sx, uint32_t sy) {
+    uint32_t x = j;  // bit reversal
+    x = (x << 16) | (x >> 16);
+    x = ((x & 0x00ff00ffu) << 8) | ((x & 0xff00ff00u) >> 8);
+    x = ((x & 0x0f0f0f0fu) << 4) | ((x & 0xf0f0f0f0u) >> 4);
+    x = ((x & 0x33333333u) << 2) | ((x & 0xccccccccu) >> 2);
+    x = ((x & 0x55555555u) << 1) | ((x & 0xaaaaaaaau) >> 1);
+    uint32_t y = 0;
+    for (uint32_t v = 1u << 31; j; j >>= 1, v ^= v >> 1)
+        if (j & 1) y ^= v;
+    // 24 bits: exactly representable, and below 1.
+    constexpr float kScale = 1.0f / float(1u << 24);
+    return {float((x ^ sx) >> 8) * kScale, float((y ^ sy) >> 8) * kScale};
+}
+
 inline float CosineHemispherePdf(float cosTheta) {
     return std::max(cosTheta, 0.0f) * kInvPiF;
 }

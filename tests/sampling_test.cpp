@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <vector>
 
 #include "renderer/bsdf.h"
 #include "renderer/distribution.h"
@@ -29,6 +30,44 @@ TEST(Sampling, RngIsDeterministicAndBelowOne) {
         differ |= x != c.Next1D();
     }
     EXPECT_TRUE(differ);
+}
+
+// Sobol02: every 2^m consecutive points from a multiple of 2^m, whatever the digital shift, put
+// exactly one point in each elementary box of area 2^-m (the (0,m,2)-net property the cache
+// samples' rays rely on); points stay in [0,1); over random shifts a point is uniform (mean 1/2
+// and variance 1/12 per axis: within 0.01 and 10% for 20000 shifts).
+TEST(Sampling, Sobol02PointsFormNetsForAnyShift) {
+    Rng rng(11, 5);
+    for (int trial = 0; trial < 200; ++trial) {
+        const uint32_t sx = uint32_t(rng.Next1D() * 4294967296.0),
+                       sy = uint32_t(rng.Next1D() * 4294967296.0);
+        for (int m = 0; m <= 6; ++m) {
+            const uint32_t n = 1u << m, start = n * uint32_t(trial % 7);
+            for (int a = 0; a <= m; ++a) {  // boxes of 2^-a x 2^-(m-a)
+                std::vector<int> count(n, 0);
+                for (uint32_t j = start; j < start + n; ++j) {
+                    const glm::vec2 p = Sobol02(j, sx, sy);
+                    ASSERT_TRUE(p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f);
+                    const int bx = int(p.x * float(1 << a)), by = int(p.y * float(1 << (m - a)));
+                    ++count[size_t(by * (1 << a) + bx)];
+                }
+                for (int c : count)
+                    ASSERT_EQ(c, 1) << "m " << m << " a " << a << " trial " << trial;
+            }
+        }
+    }
+    double mx = 0.0, vx = 0.0, my = 0.0, vy = 0.0;
+    const int shifts = 20000;
+    for (int i = 0; i < shifts; ++i) {
+        const glm::vec2 p = Sobol02(5, uint32_t(rng.Next1D() * 4294967296.0),
+                                    uint32_t(rng.Next1D() * 4294967296.0));
+        mx += p.x, vx += double(p.x) * p.x, my += p.y, vy += double(p.y) * p.y;
+    }
+    mx /= shifts, my /= shifts, vx = vx / shifts - mx * mx, vy = vy / shifts - my * my;
+    EXPECT_NEAR(mx, 0.5, 0.01);
+    EXPECT_NEAR(my, 0.5, 0.01);
+    EXPECT_NEAR(vx, 1.0 / 12.0, 0.1 / 12.0);
+    EXPECT_NEAR(vy, 1.0 / 12.0, 0.1 / 12.0);
 }
 
 // The polynomial sin/cos used by the concentric map: within 1e-7 of libm on [-pi/4, pi/4], and

@@ -205,11 +205,11 @@ TEST(TextureSpace, VisibleFootprintsShadeWhatTheCameraSees) {
     EXPECT_EQ(none.stats.cache.tapsUnseen, 0u);  // no footprint, no prepass
     EXPECT_EQ(all.stats.cache.tapsUnseen, 0u);
     EXPECT_GT(visible.stats.cache.tapsUnseen, 0u);
-    // Measured: samples 6416 / 21126 / 6786 (1x1 / all / visible), relMSE 0.079 / 0.0336 /
-    // 0.0353.
+    // Measured: samples 6416 / 21126 / 6786 (1x1 / all / visible), relMSE 0.059 / 0.0340 /
+    // 0.0352 (the 1x1 render was at 0.079 before each sample's 4 rays became a (0,2,2)-net).
     EXPECT_LT(nVisible, 0.5 * nAll) << nNone << " " << nAll << " " << nVisible;
     EXPECT_LT(nVisible, 1.25 * nNone) << nNone << " " << nAll << " " << nVisible;
-    EXPECT_LT(eVisible, 0.5 * eNone) << eNone << " " << eAll << " " << eVisible;
+    EXPECT_LT(eVisible, 0.7 * eNone) << eNone << " " << eAll << " " << eVisible;
     EXPECT_LT(eVisible, 1.2 * eAll) << eNone << " " << eAll << " " << eVisible;
     // Each camera sample is traced once: the shading pass takes its texels from the prepass.
     EXPECT_EQ(visible.stats.cameraRays, all.stats.cameraRays);
