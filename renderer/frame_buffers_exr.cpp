@@ -53,7 +53,13 @@ auto Layers(FB& fb, bool resize, std::vector<float>* ids) {
     auto vec3 = [&](const char* name, auto& v, const char* const* ch) {
         if constexpr (!std::is_const_v<FB>)
             if (resize) v.assign(n, glm::vec3(0.0f));
-        layers.push_back({name, {ch[0], ch[1], ch[2]}, &v.data()->x, 3, v.size(), clearer(v)});
+        // An empty buffer (glossy in a scene without glossy materials) has no data to point into.
+        layers.push_back({name,
+                          {ch[0], ch[1], ch[2]},
+                          v.empty() ? nullptr : &v.data()->x,
+                          3,
+                          v.size(),
+                          clearer(v)});
     };
     auto scalar = [&](const char* name, auto& v, const char* ch) {
         if constexpr (!std::is_const_v<FB>)
