@@ -302,6 +302,7 @@ struct PassTexels {
     static constexpr size_t kBytesPerSample = sizeof(PassTexel);
     PassTexel* at = nullptr;
     int width = 0, s0 = 0, s1 = 0;
+    bool cacheEmptied = false;  ///< the pass began by emptying the cache: nothing to find
 
     PassTexel& operator[](size_t k) const { return at[k]; }
     size_t Index(int x, int y, int s) const {
@@ -326,6 +327,7 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
     CameraSample block[kCameraBlock];
     SampleRequest texels[kCameraBlock];
     CacheStats* stats = out ? &c.cacheStats->local() : nullptr;
+    const bool find = out && !out->cacheEmptied;
     Cursor gen(r, s0), mark = gen;
     for (size_t b = 0; b < total; b += kCameraBlock) {
         const size_t n = std::min(kCameraBlock, total - b);
@@ -337,7 +339,7 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
             const CameraSample& cs = block[i];
             if (!cs.found || cs.hit.object < 0) continue;
             texels[i] = c.tsc->TexelOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff));
-            if (out) c.tsc->Prefetch(texels[i]);
+            if (find) c.tsc->Prefetch(texels[i]);
         }
         for (size_t i = 0; i < n; ++i, mark.Next(r, s0, s1)) {
             const CameraSample& cs = block[i];
@@ -349,7 +351,7 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
             }
             if (!out) continue;
             PassTexel& t = (*out)[out->Index(mark.x, mark.y, mark.s)];
-            if (mesh >= 0 && c.tsc->FindTexel(texels[i], &t.found)) {
+            if (find && mesh >= 0 && c.tsc->FindTexel(texels[i], &t.found)) {
                 mesh = PassTexels::kFound;
                 ++stats->lookups, ++stats->texelHits;
                 if (c.pixelCache) {
@@ -505,8 +507,9 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         }
         const auto passStart = Clock::now();
         // The pass count saturates: a wrap to 0 would repeat pass 0's random numbers.
-        if (progressive && done > opt.firstSample && c.tsc->Pass() < UINT32_MAX)
-            c.tsc->BeginPass(c.tsc->Pass() + 1);
+        const bool newPass = progressive && done > opt.firstSample && c.tsc->Pass() < UINT32_MAX;
+        if (newPass) c.tsc->BeginPass(c.tsc->Pass() + 1);
+        passTexels.cacheEmptied = newPass;
         if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
