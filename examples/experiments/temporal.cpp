@@ -270,7 +270,14 @@ int Temporal(const Setup& s) {
                  [](screen::DenoiserSettings* d) { d->maxGlossyJitter = 16.0f; }},
                 // k = 1000: no clamping in practice (history within 1000 sigma of the 3x3 mean).
                 {"reliable, no clamping (visibility too)",
-                 [](screen::DenoiserSettings* d) { d->reliableClampK = 1000.0f; }}};
+                 [](screen::DenoiserSettings* d) { d->reliableClampK = 1000.0f; }},
+                {"reliable, visibility in SVGF order (clamped where the vectors disagree)",
+                 [](screen::DenoiserSettings* d) {
+                     d->reliableVisibilityOrder = screen::VisibilityOrder::Svgf;
+                 }},
+                {"reliable, visibility in Zeng's order", [](screen::DenoiserSettings* d) {
+                     d->reliableVisibilityOrder = screen::VisibilityOrder::Zeng;
+                 }}};
             for (const Change& c : changes) {
                 Variant& v = ablation.emplace_back();
                 v.method = Method::Reliable, v.demod = Demodulation::On, v.label = c.label;

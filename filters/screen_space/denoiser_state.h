@@ -69,6 +69,7 @@ struct ScreenSpaceDenoiser::State {
     internal::MotionField trad, shadow, glossy, occl;
     bool motionValid[4] = {false, false, false, false};
     internal::Plane shadowAlpha, sigma;
+    internal::Plane visClampK;  ///< Reliable, VisibilityOrder::Svgf: per-pixel clamp k
     internal::IntPlane occluder;
     internal::Plane splat[8];
     std::vector<uint8_t> zeroRow;  // validity flags of a row outside the image
@@ -86,8 +87,10 @@ namespace internal {
 /// clampK > 0, blended with weight max(alpha, 1 / length), luminance moments alike; writes the
 /// integrated colour and its variance (moments, or the 3x3 spatial variance for histories
 /// shorter than 4 frames; -1 where unusable) to scratch[ci].t / tVar and the moments and length
-/// to this frame's history.
-void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK);
+/// to this frame's history. With `clampKPerPixel` (one-channel components only) each pixel's
+/// history is clamped with its own k from that plane instead.
+void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK,
+                  const Plane* clampKPerPixel = nullptr);
 
 /// Zeng's temporal step for component `ci` whose spatially filtered frame is in `sp` / `spVar`
 /// (variance < 0: unusable): history reprojected with `mf`, clamped to mu +- clampK sigma of

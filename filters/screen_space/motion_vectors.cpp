@@ -248,11 +248,21 @@ struct ShadowRowArgs {
     const int32_t* id;
     const float *gx, *gy, *gz;  // previous guides, bases
     const int32_t* gid;
+    const float *tx, *ty;  // traditional vectors of the row
     float pm[16], cam[3];
     float alpha, inv2s2;
     float *ox, *oy, *oa, *mask, *sdx, *sdy, *sal;
     uint8_t* om;
 };
+
+// Where a pixel's history would be if only the camera and the receiver moved: its traditional
+// vector, or the pixel itself where it has none. Shadow vectors are splatted as offsets from it
+// (the shadow's motion over the receiver), so that a splatted pixel keeps its own camera motion:
+// splatting absolute offsets gave it its neighbours' parallax instead, which differs wherever the
+// camera moves (a fly-through over a static scene, issue 21).
+inline float SplatBase(float t, int x) {
+    return std::isfinite(t) ? t : float(x) + 0.5f;
+}
 
 // eq. 3 for one row: in-shadow pixels' vectors, eq. 4's alpha^V, and the splat inputs.
 TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
@@ -349,8 +359,8 @@ TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
             ox[i] = has ? rx : kNaN, oy[i] = has ? ry : kNaN, om[i] = bits;
             oa[i] = has ? av : a.alpha;
             mk[i] = has ? 1.0f : 0.0f;
-            sdx[i] = has ? rx - (float(x) + 0.5f) : 0.0f;
-            sdy[i] = has ? ry - (float(a.y) + 0.5f) : 0.0f;
+            sdx[i] = has ? rx - SplatBase(a.tx[x], x) : 0.0f;
+            sdy[i] = has ? ry - SplatBase(a.ty[x], a.y) : 0.0f;
             sal[i] = has ? av : 0.0f;
         }
         for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
@@ -410,8 +420,8 @@ TEXCACHE_SCREEN_CLONES void SplatRow(const SplatRowArgs& args) {
                               (nl2 > 0.0f ? 1.0f : 0.0f);
             const float inl = okf > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
             nx *= inl, ny *= inl, nz *= inl;
-            const float sx = float(x) + 0.5f + a.sdx[x] * ic;
-            const float sy = float(a.y) + 0.5f + a.sdy[x] * ic;
+            const float sx = SplatBase(a.tx[x], x) + a.sdx[x] * ic;
+            const float sy = SplatBase(a.ty[x], a.y) + a.sdy[x] * ic;
             const float ux = px - a.cam[0], uy = py - a.cam[1], uz = pz - a.cam[2];
             const float tol = kShadowPlaneTol * std::sqrt(ux * ux + uy * uy + uz * uz) + 1e-6f;
             const Foot4 fp = MakeFoot4(sx, sy, a.w, a.h, a.stride);
@@ -457,6 +467,7 @@ void ShadowMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& pre
         a.cam[0] = prev.camera.position.x, a.cam[1] = prev.camera.position.y;
         a.cam[2] = prev.camera.position.z;
         a.alpha = alpha, a.inv2s2 = 1.0f / (2.0f * falloffSigma * falloffSigma);
+        a.tx = trad.x.Row(y), a.ty = trad.y.Row(y);
         a.ox = out->x.Row(y), a.oy = out->y.Row(y), a.om = out->taps.Row(y);
         a.oa = alphaV->Row(y);
         a.mask = scratch[0].Row(y), a.sdx = scratch[1].Row(y), a.sdy = scratch[2].Row(y);

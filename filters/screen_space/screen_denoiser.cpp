@@ -159,7 +159,7 @@ void ScreenSpaceDenoiser::State::Resize(int width, int height) {
         sc.tVar.Resize(w, h), sc.aVar.Resize(w, h), sc.bVar.Resize(w, h), sc.outVar.Resize(w, h);
     }
     for (MotionField* m : {&trad, &shadow, &glossy, &occl}) m->Resize(w, h);
-    shadowAlpha.Resize(w, h), sigma.Resize(w, h);
+    shadowAlpha.Resize(w, h), sigma.Resize(w, h), visClampK.Resize(w, h);
     occluder.Resize(w, h, -1);
     for (Plane& p : splat) p.Resize(w, h);
     zeroRow.assign(size_t(w) + 2 * kPad, 0);
@@ -607,6 +607,33 @@ void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) 
     }
 }
 
+// VisibilityOrder::Svgf: where a shadow vector lands within a quarter pixel of the
+// traditional one (no shadow moved over its receiver; in a static scene the two are the same
+// reprojection computed two ways), the traditional vector and its taps replace it and the
+// history is not clamped (k 0 in `clampK`); elsewhere the history is clamped with `k`. The taps
+// matter as much as the position: the shadow vectors' plane test and the disocclusion test keep
+// different taps at edges, and a history averaged over other taps than the baseline's made a
+// static scene's visibility drift from the baseline's.
+void TrustAgreeingShadowVectors(const MotionField& trad, float k, MotionField* shadow,
+                                Plane* clampK) {
+    constexpr float kTol = 0.25f;
+    ForRows(trad.x.Height(), [&](int y) {
+        float *sx = shadow->x.Row(y), *sy = shadow->y.Row(y);
+        uint8_t* sm = shadow->taps.Row(y);
+        const float *tx = trad.x.Row(y), *ty = trad.y.Row(y);
+        const uint8_t* tm = trad.taps.Row(y);
+        float* o = clampK->Row(y);
+        const int w = trad.x.Width();
+        for (int x = 0; x < w; ++x) {
+            // NaN (no vector) fails the comparisons: clamped.
+            const bool agree = std::fabs(sx[x] - tx[x]) <= kTol && std::fabs(sy[x] - ty[x]) <= kTol;
+            sx[x] = agree ? tx[x] : sx[x], sy[x] = agree ? ty[x] : sy[x];
+            sm[x] = agree ? tm[x] : sm[x];
+            o[x] = agree ? 0.0f : k;
+        }
+    });
+}
+
 // Zeng's clean-up: separable joint bilateral 9x9 with the per-pixel std in s.sigma, from
 // scratch[ci].t (validity in tVar) into this frame's history colour.
 void Cleanup(ScreenSpaceDenoiser::State& s, int ci) {
@@ -807,21 +834,36 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
             jobs[njobs++].ci = kGlossy;
             s.hist[kGlossy][s.cur].valid = true;
         }
-        // Visibility: c~_i is the a-trous of this frame alone (spatial variance).
-        SvgfTemporal(s, kVis, nullptr, 0.0f);
-        jobs[njobs++].ci = kVis;
-        clock.Lap(&StageTimings::temporal);
-        RunAtrous(s, jobs, njobs);
-        clock.Lap(&StageTimings::spatial);
-        // Zeng's temporal step and clean-up for visibility.
-        ComponentScratch& vs = s.scratch[kVis];
-        const MotionField* sm = temporal ? &s.shadow : nullptr;
-        Plane* vb[3] = {&vs.out[0], &vs.out[1], &vs.out[2]};
-        ReliableTemporal(s, kVis, vb, vs.outVar, sm,
-                         temporal && s.set.shadowFalloff ? &s.shadowAlpha : nullptr);
-        clock.Lap(&StageTimings::temporal);
-        Cleanup(s, kVis);
-        clock.Lap(&StageTimings::cleanup);
+        if (s.set.reliableVisibilityOrder == VisibilityOrder::Svgf) {
+            // Visibility accumulated first along the shadow vectors, clamped only where they
+            // part from the traditional ones, then filtered with the other components.
+            if (temporal)
+                TrustAgreeingShadowVectors(s.trad, s.set.reliableClampK, &s.shadow, &s.visClampK);
+            SvgfTemporal(s, kVis, temporal ? &s.shadow : nullptr, s.set.reliableClampK,
+                         temporal ? &s.visClampK : nullptr);
+            for (int k3 = 0; k3 < 3; ++k3) jobs[njobs].feedback[k3] = &s.hist[kVis][s.cur].c[k3];
+            jobs[njobs++].ci = kVis;
+            s.hist[kVis][s.cur].valid = true;
+            clock.Lap(&StageTimings::temporal);
+            RunAtrous(s, jobs, njobs);
+            clock.Lap(&StageTimings::spatial);
+        } else {
+            // Visibility: c~_i is the a-trous of this frame alone (spatial variance).
+            SvgfTemporal(s, kVis, nullptr, 0.0f);
+            jobs[njobs++].ci = kVis;
+            clock.Lap(&StageTimings::temporal);
+            RunAtrous(s, jobs, njobs);
+            clock.Lap(&StageTimings::spatial);
+            // Zeng's temporal step and clean-up for visibility.
+            ComponentScratch& vs = s.scratch[kVis];
+            const MotionField* sm = temporal ? &s.shadow : nullptr;
+            Plane* vb[3] = {&vs.out[0], &vs.out[1], &vs.out[2]};
+            ReliableTemporal(s, kVis, vb, vs.outVar, sm,
+                             temporal && s.set.shadowFalloff ? &s.shadowAlpha : nullptr);
+            clock.Lap(&StageTimings::temporal);
+            Cleanup(s, kVis);
+            clock.Lap(&StageTimings::cleanup);
+        }
     }
 
     Compose(s, frame, image);

@@ -66,11 +66,25 @@ enum class MotionKind {
     Occlusion,    ///< diffuse indirect (Reliable): traditional where valid, dual (eq. 6) elsewhere
 };
 
+/// The order of Reliable's visibility passes.
+enum class VisibilityOrder {
+    /// Zeng et al.: this frame filtered spatially first, the history along the shadow vectors
+    /// clamped to mu +- reliableClampK sigma of the filtered frame, blended, cleaned up.
+    Zeng,
+    /// SVGF's order along the shadow vectors: accumulate first, then the variance-guided
+    /// a-trous. Where a shadow vector is within a quarter pixel of the traditional one (no
+    /// shadow moved over its receiver) the traditional vector is used, unclamped: there it is
+    /// the baseline's visibility. Elsewhere the history is clamped to mu +- reliableClampK
+    /// sigma of the 3x3. LastMotion(Shadow) returns the vectors so merged.
+    Svgf,
+};
+
 /// Parameters; defaults follow the papers. Validated by the denoiser (InputError).
 struct DenoiserSettings {
     float alpha = 0.2f;           ///< weight of the current frame in the temporal blend (eq. 2)
     float baselineClampK = 1.0f;  ///< BaselineClamp: history in mu +- k sigma (3x3)
     float reliableClampK = 3.0f;  ///< Reliable visibility: history in mu +- k sigma (Sec. 5)
+    VisibilityOrder reliableVisibilityOrder = VisibilityOrder::Zeng;
     /// Reliable glossy and diffuse indirect: history in mu +- k sigma of the current 3x3, 0 for
     /// none. Zeng et al. clamp every component at 3 sigma, but their clamp is against a spatially
     /// filtered frame; ours (accumulate first, see screen_denoiser.cpp) is against 1-spp samples,

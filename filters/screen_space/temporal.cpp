@@ -90,6 +90,7 @@ struct SvgfArgs {
     const float* hm2;
     const float* hlen;
     float alpha, clampK;
+    const float* clampKRow;  // per-pixel k of the row (Clamp == kClampPerPixel)
     float* out[3];
     float* outVar;
     float* m1;
@@ -97,7 +98,10 @@ struct SvgfArgs {
     float* len;
 };
 
-template <int NC, bool Hist, bool Clamp>
+// How SvgfRowImpl clamps the history: not at all, with one k, or with a k per pixel.
+constexpr int kClampNone = 0, kClampUniform = 1, kClampPerPixel = 2;
+
+template <int NC, bool Hist, int Clamp>
 inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     // Everything the loop reads is copied to locals and its results go to local arrays: then the
     // compiler sees no possible aliasing and needs no run-time checks to vectorize.
@@ -138,13 +142,14 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
                     hm2 = RunGather<kUniform>(a.hm2, b, run, x);
                     hl = RunGather<kUniform>(a.hlen, b, run, x);
                     hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
-                    if constexpr (Clamp) {
+                    if constexpr (Clamp != kClampNone) {
+                        const float k = Clamp == kClampPerPixel ? a.clampKRow[x] : a.clampK;
 #pragma GCC unroll 3
                         for (int c = 0; c < NC; ++c) {
                             const float mu = s1[c] * in;
                             const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
-                            hv[c] =
-                                std::min(std::max(hv[c], mu - a.clampK * sg), mu + a.clampK * sg);
+                            const float cl = std::min(std::max(hv[c], mu - k * sg), mu + k * sg);
+                            hv[c] = k > 0.0f ? cl : hv[c];  // per pixel, k = 0: not clamped
                         }
                     }
 #pragma GCC unroll 3
@@ -177,12 +182,13 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     TEXCACHE_SCREEN_CLONES void name(const SvgfArgs& a) { \
         SvgfRowImpl<NC, H, C>(a);                         \
     }
-TEXCACHE_SVGF(Svgf1, 1, false, false)
-TEXCACHE_SVGF(Svgf1H, 1, true, false)
-TEXCACHE_SVGF(Svgf1HC, 1, true, true)
-TEXCACHE_SVGF(Svgf3, 3, false, false)
-TEXCACHE_SVGF(Svgf3H, 3, true, false)
-TEXCACHE_SVGF(Svgf3HC, 3, true, true)
+TEXCACHE_SVGF(Svgf1, 1, false, kClampNone)
+TEXCACHE_SVGF(Svgf1H, 1, true, kClampNone)
+TEXCACHE_SVGF(Svgf1HC, 1, true, kClampUniform)
+TEXCACHE_SVGF(Svgf1HP, 1, true, kClampPerPixel)
+TEXCACHE_SVGF(Svgf3, 3, false, kClampNone)
+TEXCACHE_SVGF(Svgf3H, 3, true, kClampNone)
+TEXCACHE_SVGF(Svgf3HC, 3, true, kClampUniform)
 #undef TEXCACHE_SVGF
 
 struct ReliableArgs {
@@ -283,7 +289,8 @@ TEXCACHE_RELIABLE(Reliable3H, 3, true, false)
 
 }  // namespace
 
-void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK) {
+void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK,
+                  const Plane* clampKPerPixel) {
     ComponentPlanes& cp = s.comp[ci];
     ComponentScratch& sc = s.scratch[ci];
     History& hc = s.hist[ci][s.cur];
@@ -305,11 +312,14 @@ void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, 
                 a.hm1 = hp->m1.Base(), a.hm2 = hp->m2.Base(), a.hlen = hp->len.Base();
             }
             a.alpha = s.set.alpha, a.clampK = clampK;
+            a.clampKRow = clampKPerPixel ? clampKPerPixel->Row(y) : nullptr;
             for (int c = 0; c < nc; ++c) a.out[c] = sc.t[c].Row(y);
             a.outVar = sc.tVar.Row(y);
             a.m1 = hc.m1.Row(y), a.m2 = hc.m2.Row(y), a.len = hc.len.Row(y);
             if (nc == 3)
                 !hp ? Svgf3(a) : clampK > 0.0f ? Svgf3HC(a) : Svgf3H(a);
+            else if (hp && clampKPerPixel)
+                Svgf1HP(a);
             else
                 !hp ? Svgf1(a) : clampK > 0.0f ? Svgf1HC(a) : Svgf1H(a);
         }
@@ -455,6 +465,7 @@ struct ConeArgs {
     const ConeOverlapTable* table;
     const ConeTransfer* same;
     float alpha, clampK;
+    const float* clampKRow;  // per-pixel k of the row (Clamp == kClampPerPixel)
     float* out[3];
     float* outVar;
     float* m1;
