@@ -44,7 +44,6 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
 
 glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
                RayCounts& rays) {
-    const Frame frame = Frame::FromZ(si.N);
     // The rays leave one point: traced as packets of up to 16 (RenderScene::Occluded16).
     Ray batch[16];
     bool blocked[16];
@@ -55,22 +54,10 @@ glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, R
         rays.shadow += uint64_t(queued);
         queued = 0;
     };
-    // A shading point's AO rays are a digitally shifted Sobol' net, as a cache sample's are
-    // (cached_shading.cpp): per-hit AO is the baseline texture space is measured against, and
-    // gets the same stratification (car AO 640x360, 16 rays per hit: see the commit).
-    const uint32_t sx = rng.NextU32(), sy = rng.NextU32();
-    for (int i = 0; i < c.opt.aoSamples; ++i) {
-        const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(Sobol02(uint32_t(i), sx, sy)));
-        // Directions below the tessellated surface are blocked by it.
-        if (glm::dot(wi, si.Ng) <= 0.0f) continue;
-        Ray& r = batch[queued++];
-        r = Ray{};
-        r.org = OffsetOrigin(si.P, si.Ng, wi);
-        r.dir = wi;
-        r.tfar = c.opt.aoDistance;
-        r.time = ray.time;
+    ForEachAoRay(c, ray, si, rng, [&](const Ray& r) {
+        batch[queued++] = r;
         if (queued == 16) flush();
-    }
+    });
     flush();
     return glm::vec3(float(open) / float(c.opt.aoSamples));
 }

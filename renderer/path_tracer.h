@@ -291,6 +291,30 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
     return L;
 }
 
+/// The AO rays of a camera hit, passed to emit(const Ray&) in order: opt.aoSamples directions
+/// of a digitally shifted Sobol' net (the shift drawn from `rng`), cosine-distributed about the
+/// shading normal, those below the tessellated surface left out (they count as blocked).
+/// LiAO traces them; `texcache bench rays` records them for its raw Embree loop.
+template <typename Emit>
+void ForEachAoRay(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
+                  Emit&& emit) {
+    const Frame frame = Frame::FromZ(si.N);
+    // A shading point's AO rays are a digitally shifted Sobol' net, as a cache sample's are
+    // (cached_shading.cpp): per-hit AO is the baseline texture space is measured against, and
+    // gets the same stratification (car AO 640x360, 16 rays per hit: see the commit).
+    const uint32_t sx = rng.NextU32(), sy = rng.NextU32();
+    for (int i = 0; i < c.opt.aoSamples; ++i) {
+        const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(Sobol02(uint32_t(i), sx, sy)));
+        if (glm::dot(wi, si.Ng) <= 0.0f) continue;
+        Ray r{};
+        r.org = OffsetOrigin(si.P, si.Ng, wi);
+        r.dir = wi;
+        r.tfar = c.opt.aoDistance;
+        r.time = ray.time;
+        emit(r);
+    }
+}
+
 /// Ambient occlusion at a camera hit: the fraction of opt.aoSamples cosine-distributed rays
 /// (up to opt.aoDistance) that escape.
 glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,

@@ -584,6 +584,23 @@ std::vector<ImageLayer> AovLayers(const std::vector<PixelAovs>& aovs, const AovF
 
 }  // namespace
 
+void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<Ray>* camera,
+                  std::vector<Ray>* occlusion) {
+    const Context c(rs, opt);
+    for (int y = 0; y < opt.height; ++y)
+        for (int x = 0; x < opt.width; ++x)
+            for (int s = 0; s < opt.spp; ++s) {
+                Rng rng(0, 0);
+                Ray ray;
+                CameraRay(c, x, y, s, &rng, &ray, nullptr);
+                camera->push_back(ray);
+                Hit hit;
+                if (!rs.Intersect(ray, &hit) || hit.object < 0) continue;
+                ForEachAoRay(c, ray, rs.Interact(ray, hit), rng,
+                             [&](const Ray& r) { occlusion->push_back(r); });
+            }
+}
+
 uint64_t PixelSeed(uint64_t seed, int x, int y, int width) {
     return MixBits(seed * 0x9E3779B97F4A7C15ull + uint64_t(y) * uint64_t(width) + uint64_t(x));
 }

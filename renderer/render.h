@@ -25,6 +25,13 @@ struct RenderResult {
 RenderResult Render(const RenderScene& scene, const RenderOptions& options,
                     TextureSpaceCache* cache = nullptr);
 
+/// The rays a per-hit AO render with `options` traces (integrator AO, no texture space), in
+/// pixel order, the same rays bit for bit: each camera ray, and after it the AO rays of its hit
+/// (none for a miss or a light). For `texcache bench rays`, whose raw Embree loop must trace what
+/// the integrator traces.
+void RecordAoRays(const RenderScene& scene, const RenderOptions& options, std::vector<Ray>* camera,
+                  std::vector<Ray>* occlusion);
+
 /// Seed of the random stream of (pixel, sample): identical for any thread count or pass split.
 uint64_t PixelSeed(uint64_t seed, int x, int y, int width);
 

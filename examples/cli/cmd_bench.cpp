@@ -36,10 +36,10 @@ struct BenchArgs {
     int threads = 0;
 };
 
-/// Replays the AO integrator's sampling (same seeds, same order) and records every ray it casts.
-void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<RTCRay>* cam,
-                  std::vector<RTCRay>* occ) {
-    const CameraModel camera(rs.scene().camera, opt.frameTime, opt.width, opt.height);
+/// Every ray the AO integrator casts (renderer's RecordAoRays: the same sampling code, seeds and
+/// order), in Embree's layout.
+void RecordRtcAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<RTCRay>* cam,
+                     std::vector<RTCRay>* occ) {
     auto toRtc = [](const Ray& r) {
         RTCRay q{};
         q.org_x = r.org.x, q.org_y = r.org.y, q.org_z = r.org.z;
@@ -47,28 +47,11 @@ void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<R
         q.tnear = r.tnear, q.tfar = r.tfar, q.time = r.time, q.mask = 0xFFFFFFFFu;
         return q;
     };
-    const bool blur = rs.scene().camera.shutterClose > rs.scene().camera.shutterOpen;
-    for (int y = 0; y < opt.height; ++y)
-        for (int x = 0; x < opt.width; ++x)
-            for (int s = 0; s < opt.spp; ++s) {
-                Rng rng(PixelSeed(opt.seed, x, y, opt.width), uint64_t(s));
-                const glm::vec2 jitter = rng.Next2D(), lens = rng.Next2D();
-                Ray ray = camera.Generate(float(x) + jitter.x, float(y) + jitter.y, lens, nullptr);
-                ray.time = blur ? rng.Next1D() : 0.0f;
-                cam->push_back(toRtc(ray));
-                Hit hit;
-                if (!rs.Intersect(ray, &hit) || hit.object < 0) continue;
-                const SurfaceInteraction si = rs.Interact(ray, hit);
-                const Frame frame = Frame::FromZ(si.N);
-                for (int i = 0; i < opt.aoSamples; ++i) {
-                    const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(rng.Next2D()));
-                    if (glm::dot(wi, si.Ng) <= 0.0f) continue;
-                    const float scale =
-                        std::max({1.0f, std::abs(si.P.x), std::abs(si.P.y), std::abs(si.P.z)});
-                    Ray r{si.P + 2e-5f * scale * si.Ng, wi, 0.0f, opt.aoDistance, ray.time};
-                    occ->push_back(toRtc(r));
-                }
-            }
+    std::vector<Ray> c, o;
+    RecordAoRays(rs, opt, &c, &o);
+    cam->reserve(c.size()), occ->reserve(o.size());
+    for (const Ray& r : c) cam->push_back(toRtc(r));
+    for (const Ray& r : o) occ->push_back(toRtc(r));
 }
 
 /// Traces the recorded rays with the plain Embree API, parallel over the same TBB scheduler.
@@ -136,7 +119,7 @@ int RunBench(const BenchArgs& a) {
     RenderScene rs(scene, ro);
 
     std::vector<RTCRay> cam, occ;
-    RecordAoRays(rs, opt, &cam, &occ);
+    RecordRtcAoRays(rs, opt, &cam, &occ);
     const double rays = double(cam.size() + occ.size());
     std::printf("scene %s, %dx%d, %d spp, %d AO rays per hit: %zu camera + %zu occlusion rays\n",
                 a.scene.c_str(), opt.width, opt.height, opt.spp, opt.aoSamples, cam.size(),
