@@ -247,12 +247,33 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         px[0] += L.x, px[1] += L.y, px[2] += L.z;
     };
     if (!c.tsc) {
-        for (Pending& p : queue) {
-            glm::vec3 L(0.0f);
-            if (p.found)
-                L = p.hit.object < 0 ? glm::vec3(1.0f)
-                                     : LiAO(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, rays);
-            add(p, L);
+        // The AO rays of every hit of the tile, traced 16 at a time across hits: full packets
+        // (4 rays of one hit fill a quarter of one).
+        thread_local std::vector<Ray> aoRays;
+        thread_local std::vector<uint32_t> owner, open;
+        aoRays.clear(), owner.clear();
+        open.assign(queue.size(), 0);
+        for (size_t i = 0; i < queue.size(); ++i) {
+            Pending& p = queue[i];
+            if (!p.found || p.hit.object < 0) continue;
+            ForEachAoRay(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, [&](const Ray& r) {
+                aoRays.push_back(r);
+                owner.push_back(uint32_t(i));
+            });
+        }
+        bool blocked[16];
+        for (size_t i = 0; i < aoRays.size(); i += 16) {
+            const int m = int(std::min<size_t>(16, aoRays.size() - i));
+            c.rs.Occluded16(&aoRays[i], m, blocked);
+            for (int k = 0; k < m; ++k) open[owner[i + size_t(k)]] += !blocked[k];
+        }
+        rays.shadow += aoRays.size();
+        const float inv = 1.0f / float(c.opt.aoSamples);
+        for (size_t i = 0; i < queue.size(); ++i) {
+            const Pending& p = queue[i];
+            add(p, !p.found           ? glm::vec3(0.0f)
+                   : p.hit.object < 0 ? glm::vec3(1.0f)
+                                      : glm::vec3(float(open[i]) * inv));
         }
         return;
     }
