@@ -54,9 +54,9 @@ glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, R
         rays.shadow += uint64_t(queued);
         queued = 0;
     };
-    ForEachAoRay(c, ray, si, rng, [&](const Ray& r) {
-        batch[queued++] = r;
+    ForEachAoRay(c, ray, si, rng, [&]() -> Ray& {
         if (queued == 16) flush();
+        return batch[queued++];
     });
     flush();
     return glm::vec3(float(open) / float(c.opt.aoSamples));

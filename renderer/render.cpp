@@ -227,9 +227,9 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
     struct Pending {
         Ray ray;
         Hit hit;
-        Rng rng;
-        int pixel;
-        bool found;
+        Rng rng{0, 0};
+        int pixel = 0;
+        bool found = false;
         RayDifferentials diff;
     };
     thread_local std::vector<Pending> queue;
@@ -237,9 +237,10 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x)
             for (int s = s0; s < s1; ++s) {
-                Pending p{Ray{}, Hit{}, Rng(0, 0), y * c.opt.width + x, false, {}};
+                // Written in place, not built on the stack and copied (see ForEachAoRay).
+                Pending& p = queue.emplace_back();
+                p.pixel = y * c.opt.width + x;
                 CameraRay(c, x, y, s, &p.rng, &p.ray, c.tsc ? &p.diff : nullptr);
-                queue.push_back(p);
             }
     IntersectCameraRays(c, queue.data(), queue.size(), rays);
     auto add = [&](const Pending& p, glm::vec3 L) {
@@ -256,9 +257,9 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         for (size_t i = 0; i < queue.size(); ++i) {
             Pending& p = queue[i];
             if (!p.found || p.hit.object < 0) continue;
-            ForEachAoRay(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, [&](const Ray& r) {
-                aoRays.push_back(r);
+            ForEachAoRay(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, [&]() -> Ray& {
                 owner.push_back(uint32_t(i));
+                return aoRays.emplace_back();
             });
         }
         bool blocked[16];
@@ -618,7 +619,7 @@ void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<R
                 Hit hit;
                 if (!rs.Intersect(ray, &hit) || hit.object < 0) continue;
                 ForEachAoRay(c, ray, rs.Interact(ray, hit), rng,
-                             [&](const Ray& r) { occlusion->push_back(r); });
+                             [&]() -> Ray& { return occlusion->emplace_back(); });
             }
 }
 
