@@ -750,6 +750,7 @@ TEST(ScreenSpaceRobustness, BadInputThrowsNamingTheBuffer) {
     badSettings([](DenoiserSettings& s) { s.alpha = std::nanf(""); }, "alpha");
     badSettings([](DenoiserSettings& s) { s.atrousLevels = 9; }, "atrousLevels");
     badSettings([](DenoiserSettings& s) { s.brdfSamples = 0; }, "brdfSamples");
+    badSettings([](DenoiserSettings& s) { s.shadowFalloff = true; }, "reliableVisibilityOrder");
 }
 
 // ---- Demodulation --------------------------------------------------------------------------

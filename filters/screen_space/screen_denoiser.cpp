@@ -196,6 +196,10 @@ void CheckSettings(const DenoiserSettings& s) {
     if (s.shadowSplatRadius < 0 || s.shadowSplatRadius > 64)
         fail("shadowSplatRadius must be in 0..64, got " + std::to_string(s.shadowSplatRadius));
     if (!(s.shadowFalloffSigma > 0.0f)) fail("shadowFalloffSigma must be positive");
+    if (s.shadowFalloff && s.reliableVisibilityOrder != VisibilityOrder::Zeng)
+        fail(
+            "shadowFalloff (eq. 4's alpha^V) weights Zeng's visibility blend: it needs "
+            "reliableVisibilityOrder = Zeng");
     if (!(s.glossyLobeScale >= 0.0f) || !(s.maxGlossyJitter >= 0.0f))
         fail("glossyLobeScale and maxGlossyJitter must be non-negative");
     if (s.brdfSamples < 1) fail("brdfSamples must be at least 1");

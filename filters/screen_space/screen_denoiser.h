@@ -111,7 +111,8 @@ struct DenoiserSettings {
     float sigmaDepth = 1.0f;      ///< SVGF's sigma_z (relative to the local depth slope)
     float normalPower = 128.0f;   ///< SVGF's sigma_n (weight max(0, n.n')^sigma_n)
     int shadowSplatRadius = 8;    ///< Reliable: window shadow vectors and sizes splat through
-    /// Reliable: eq. 4's non-planarity falloff (alpha^V) on the visibility blend. Off by default:
+    /// Reliable with VisibilityOrder::Zeng (InputError otherwise): eq. 4's non-planarity
+    /// falloff (alpha^V) on the visibility blend. Off by default:
     /// it raised the direct-light RMSE on every ghosting scene (temporal experiment, 96x54, 8
     /// frames, mean direct RMSE with / without: anim_glossy 0.0382 / 0.0334, anim_light 0.0053 /
     /// 0.0052, anim_shadow 0.0098 / 0.0096, anim_disocclusion 0.0185 / 0.0180; `texcache
