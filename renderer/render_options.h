@@ -72,6 +72,12 @@ struct TextureSpaceOptions {
     /// (environment, large area lights) and off by default.
     bool cacheDirect = false;
     int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
+    /// Screen-space frame buffers (RenderFrameBuffers): also fill FrameBuffers::cachedVisibility
+    /// for diffuse materials from a cached visibility (shadowSamples shadow rays per sample
+    /// towards all lights, filtered and accumulated like the other cached terms), which the
+    /// stage takes where its visibility has no history (disocclusions). The cache then keeps a
+    /// second set of grids per object for it. Off by default: see results/disocclusion.md.
+    bool cachedVisibility = false;
     /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.
     FootprintMode footprint = FootprintMode::Auto;
     /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then

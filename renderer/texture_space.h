@@ -73,6 +73,16 @@ public:
         return cache_.TexelAt({MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
                                si.dudx, si.dvdx, si.dudy, si.dvdy});
     }
+    /// The texel of a shading point in its object's visibility grids (options.cachedVisibility:
+    /// a second set of grids per object, so that the cached visibility and the cached light of
+    /// one texel are different keys of the one cache).
+    SampleRequest VisibilityTexelOf(const SurfaceInteraction& si) const {
+        const size_t o = size_t(si.object);
+        const int mesh =
+            si.backFacing && visBackMeshOf_[o] >= 0 ? visBackMeshOf_[o] : visMeshOf_[o];
+        return cache_.TexelAt(
+            {mesh, si.ptex.face, si.ptex.u, si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy});
+    }
     /// TexelOf's result for a texel key of cache mesh `mesh` (see ShadingCache::RequestOf).
     SampleRequest RequestOf(int mesh, const TexelKey& key) const {
         return cache_.RequestOf(mesh, key);
@@ -185,6 +195,7 @@ private:
     TextureSpaceOptions options_;
     RenderShadingCache cache_;
     std::vector<int> meshOf_, backMeshOf_;
+    std::vector<int> visMeshOf_, visBackMeshOf_;  ///< visibility grids (empty unless cached)
     std::vector<int> meshObject_;
     std::vector<char> meshIsBack_, meshAgainstNormal_;
     std::vector<TextureFilterKind> filterOf_;

@@ -6,7 +6,10 @@
 // seen in, on the surface itself), each denoised by Reliable. A pixel is disoccluded in the
 // frame where its traditional motion vector finds no history (the stage's own test); its error
 // against a high-sample reference is measured in that frame and the two after it, over the
-// newly disoccluded pixels only: the frames where screen-space history cannot help yet.
+// newly disoccluded pixels only: the frames where screen-space history cannot help yet. The rows
+// with cached visibility also take the direct light's visibility from the cache where the stage
+// has none (FrameBuffers::cachedVisibility); each row's frame cost is the CPU time of its
+// frame-buffer renders (RenderStats::cpuSeconds), in this one process.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -34,13 +37,17 @@ struct Config {
     const char* name;
     bool cache;
     float temporalAlpha;
+    bool cachedVisibility = false;
+    int shadowSamples = TextureSpaceOptions{}.shadowSamples;  // per cached visibility sample
     std::optional<RenderScene> rs{};  // re-posed per frame in place (the cache refers to it)
     std::unique_ptr<TextureSpaceCache> tsc{};
     std::unique_ptr<screen::ScreenSpaceDenoiser> denoiser{};
     std::vector<glm::vec3> image{};
     // Squared error sums and pixel counts of the newly disoccluded pixels, k frames after.
     std::array<double, kAfter> se{}, n{};
-    std::array<double, kAfter> seIndirect{};
+    std::array<double, kAfter> seIndirect{}, seDirect{};
+    double seDirect0 = 0.0, n0 = 0.0;  // frame 0, every geometry pixel (no history anywhere)
+    std::vector<double> cpu{};         // frame-buffer render CPU seconds per frame
     std::vector<std::vector<uint8_t>> masks{};  // per frame: newly disoccluded pixels
 };
 
@@ -58,8 +65,13 @@ int Disocclusion(const Setup& s) {
     Say("[disocclusion] %s: %d frames at %.0f fps, %dx%d, reference %d spp", name.c_str(), frames,
         kFps, W, H, refSpp);
     const auto brdf = std::make_shared<const screen::BrdfPreintegration>();
-    std::array<Config, 3> configs{
-        {{"per hit", false, 0.0f}, {"cache", true, 0.0f}, {"cache, temporal 0.7", true, 0.7f}}};
+    std::array<Config, 7> configs{{{"per hit", false, 0.0f},
+                                   {"cache", true, 0.0f},
+                                   {"cache, temporal 0.7", true, 0.7f},
+                                   {"cache, indirect + visibility", true, 0.0f, true},
+                                   {"cache, indirect + visibility, temporal 0.7", true, 0.7f, true},
+                                   {"cache, indirect + visibility, 1 ray", true, 0.0f, true, 1},
+                                   {"cache, indirect + visibility, 2 rays", true, 0.0f, true, 2}}};
     for (Config& c : configs)
         c.denoiser =
             std::make_unique<screen::ScreenSpaceDenoiser>(screen::DenoiserSettings{}, brdf);
@@ -87,12 +99,25 @@ int Disocclusion(const Setup& s) {
             co.texture.enabled = c.cache;
             co.texture.temporalAlpha = c.temporalAlpha;
             co.texture.passSpp = 0;
+            co.texture.cachedVisibility = c.cachedVisibility;
+            co.texture.shadowSamples = c.shadowSamples;
             if (c.cache && !c.tsc) c.tsc = std::make_unique<TextureSpaceCache>(*c.rs, co.texture);
             if (c.tsc) c.tsc->BeginFrame(uint32_t(f));
             screen::FrameBuffers fb;
-            RenderFrameBuffers(*c.rs, co, t - 1.0f / kFps, &fb, c.tsc.get());
+            c.cpu.push_back(
+                RenderFrameBuffers(*c.rs, co, t - 1.0f / kFps, &fb, c.tsc.get()).cpuSeconds);
             c.denoiser->Denoise(fb, screen::Method::Reliable, screen::Demodulation::On, &c.image);
             const std::vector<glm::vec3> indirect = c.denoiser->Indirect();
+            const std::vector<float> vis = c.denoiser->Visibility();
+            // Direct light: the denoised visibility times the unshadowed shading, against the
+            // reference's own product.
+            auto directError = [&](size_t p) {
+                const glm::vec3 d = fb.shading[p] * vis[p] - refFb.shading[p] * refFb.visibility[p];
+                return double(glm::dot(d, d)) / 3.0;
+            };
+            if (f == 0)
+                for (size_t p = 0; p < fb.NumPixels(); ++p)
+                    if (fb.objectId[p] >= 0) c.seDirect0 += directError(p), c.n0 += 1.0;
             // Newly disoccluded: geometry, but no history along the traditional vector (frame 0
             // has no history anywhere: not a disocclusion).
             const std::vector<glm::vec2> from =
@@ -109,6 +134,7 @@ int Disocclusion(const Setup& s) {
                         (indirect.empty() ? glm::vec3(0.0f) : indirect[p]) - refFb.indirect[p];
                     c.se[size_t(k)] += double(glm::dot(d, d)) / 3.0;
                     c.seIndirect[size_t(k)] += double(glm::dot(di, di)) / 3.0;
+                    c.seDirect[size_t(k)] += directError(p);
                     c.n[size_t(k)] += 1.0;
                 }
             }
@@ -120,20 +146,37 @@ int Disocclusion(const Setup& s) {
         "# Disocclusions from the texture-space cache\n\n%s, %d frames at %.0f fps, %dx%d, 1 "
         "spp, Reliable with demodulation; reference %d spp, composed. Diffuse indirect light per "
         "hit (one path) or from the cache (default filter, footprint all, one pass; with "
-        "`--temporal-alpha 0.7` the texels also average over frames). Direct and glossy light "
-        "are per hit in every row (the split needs the shadow ray). RMSE over the pixels newly "
-        "disoccluded in a frame (geometry without history along the traditional motion vector), "
-        "in that frame (k = 0) and the next ones.\n\n"
-        "| indirect light | pixels | RMSE k=0 | k=1 | k=2 | indirect RMSE k=0 | k=1 | k=2 |\n"
-        "|---|---|---|---|---|---|---|---|\n",
-        name.c_str(), frames, kFps, W, H, refSpp);
+        "`--temporal-alpha 0.7` the texels also average over frames). Direct light is "
+        "`shading * visibility`: the visibility per hit (1 spp, denoised) in every row; in the "
+        "\"indirect + visibility\" rows the frame also carries the cache's visibility "
+        "(`cachedVisibility`: %d shadow rays per cache sample towards all lights, the same "
+        "filter), which the stage takes where its visibility has no history. RMSE over the pixels "
+        "newly disoccluded in a frame (geometry without history along the traditional motion "
+        "vector), in that frame (k = 0) and the next ones; direct RMSE also over every pixel of "
+        "frame 0 (no history anywhere: there the cache's visibility replaces the stage's spatial "
+        "filter on every diffuse pixel, shadow edges included). Frame CPU: the frame-buffer "
+        "render's process CPU time, mean and standard deviation over frames 1-%d (frame 0 maps "
+        "the cache's memory), all rows in this one process.\n\n"
+        "| shading | pixels | RMSE k=0 | k=1 | k=2 | indirect k=0 | k=1 | k=2 | direct k=0 | k=1 "
+        "| k=2 | direct, frame 0, all | frame CPU (ms) |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        name.c_str(), frames, kFps, W, H, refSpp, TextureSpaceOptions{}.shadowSamples, frames - 1);
     for (const Config& c : configs) {
         auto rmse = [&](const std::array<double, kAfter>& se, int k) {
             return c.n[size_t(k)] > 0 ? std::sqrt(se[size_t(k)] / c.n[size_t(k)]) : NAN;
         };
-        md += Format("| %s | %.0f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f |\n", c.name, c.n[0],
-                     rmse(c.se, 0), rmse(c.se, 1), rmse(c.se, 2), rmse(c.seIndirect, 0),
-                     rmse(c.seIndirect, 1), rmse(c.seIndirect, 2));
+        double mean = 0.0, var = 0.0;
+        const size_t m = c.cpu.size() - 1;
+        for (size_t f = 1; f < c.cpu.size(); ++f) mean += c.cpu[f] / double(m);
+        for (size_t f = 1; f < c.cpu.size(); ++f)
+            var += (c.cpu[f] - mean) * (c.cpu[f] - mean) / double(std::max<size_t>(m - 1, 1));
+        md += Format(
+            "| %s | %.0f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | "
+            "%.0f +- %.0f |\n",
+            c.name, c.n[0], rmse(c.se, 0), rmse(c.se, 1), rmse(c.se, 2), rmse(c.seIndirect, 0),
+            rmse(c.seIndirect, 1), rmse(c.seIndirect, 2), rmse(c.seDirect, 0), rmse(c.seDirect, 1),
+            rmse(c.seDirect, 2), c.n0 > 0 ? std::sqrt(c.seDirect0 / c.n0) : NAN, 1e3 * mean,
+            1e3 * std::sqrt(var));
     }
     if (s.quick) md += "\n**Quick mode: test-size images and few frames; not for conclusions.**\n";
     WriteText((fs::path(s.outDir) / "disocclusion.md").string(), md);
