@@ -90,7 +90,8 @@
 //   texel in the object's visibility grids (TextureSpaceCache::VisibilityTexelOf; a cache
 //   sample is ShadeVisibilitySample: the shadowed / unshadowed irradiance ratio of
 //   options.texture.shadowSamples stratified light samples of all lights, one shadow ray each),
-//   filtered by the object's texture filter and blended over frames with temporalAlpha; NaN
+//   filtered by the object's filter kind over a footprint of options.texture.visibilityRadius
+//   (5x5 by default: shadows have edges) and blended over frames with temporalAlpha; NaN
 //   elsewhere (background, lights, GGX materials, whose visibility is weighted by a
 //   view-dependent lobe). It is the diffuse lobe's cosine-weighted ratio where `visibility` is
 //   weighted by the BSDF, and the filter blurs shadow edges over its footprint (measured:

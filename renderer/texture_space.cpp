@@ -37,6 +37,8 @@ bool NormalsPointInward(const ControlCage& cage, glm::vec3 centre, const glm::ma
 
 void CheckOptions(const TextureSpaceOptions& options) {
     if (options.radius != -1) CheckFilterRadius(options.radius, "filter radius");
+    if (options.visibilityRadius != -1)
+        CheckFilterRadius(options.visibilityRadius, "visibility filter radius");
     if (!(options.cosThreshold >= -1.0f && options.cosThreshold <= 1.0f))
         throw InputError("normal threshold", "must be a cosine in [-1, 1]");
 }
@@ -149,7 +151,10 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
         }
     };
     addGrids(&meshOf_, &backMeshOf_);
-    if (options.cachedVisibility) addGrids(&visMeshOf_, &visBackMeshOf_);
+    if (options.cachedVisibility) {
+        firstVisMesh_ = int(meshObject_.size());
+        addGrids(&visMeshOf_, &visBackMeshOf_);
+    }
     AssignFilters(scene);
 }
 

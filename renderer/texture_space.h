@@ -24,6 +24,7 @@
 // the same seed still gives the same image for any thread count. Temporal accumulation
 // (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
 #pragma once
+#include <climits>
 #include <memory>
 #include <vector>
 
@@ -196,6 +197,7 @@ private:
     RenderShadingCache cache_;
     std::vector<int> meshOf_, backMeshOf_;
     std::vector<int> visMeshOf_, visBackMeshOf_;  ///< visibility grids (empty unless cached)
+    int firstVisMesh_ = INT_MAX;                  ///< cache meshes from here on are those
     std::vector<int> meshObject_;
     std::vector<char> meshIsBack_, meshAgainstNormal_;
     std::vector<TextureFilterKind> filterOf_;
@@ -264,7 +266,9 @@ glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, Shad
         }
     }
     const float cosThreshold = options_.cosThreshold;
-    const int radius = passRadiusOf_[object];
+    const int radius = texel.mesh >= firstVisMesh_ && options_.visibilityRadius >= 0
+                           ? options_.visibilityRadius
+                           : passRadiusOf_[object];
     switch (filterOf_[object]) {
         case TextureFilterKind::None:
             return lookup(0, CentreFilter{});

@@ -882,6 +882,11 @@ TEST(FrameBuffers, CachedVisibilityNearThePerHitExpectation) {
     RenderFrameBuffers(rs, o, -0.04f, &fb);
     EXPECT_TRUE(fb.cachedVisibility.empty()) << "without texture shading";
     o.texture.enabled = true;
+    {
+        TextureSpaceOptions bad = o.texture;
+        bad.visibilityRadius = -2;
+        EXPECT_THROW(TextureSpaceCache(rs, bad), InputError);
+    }
     TextureSpaceCache cache(rs, o.texture);
     const size_t n = size_t(W) * H;
     std::vector<double> mean(n, 0.0);
@@ -1045,9 +1050,9 @@ TEST(FrameBuffers, CliCachedVisibility) {
         ++finite;
     }
     EXPECT_GT(finite, 100);
-    const test::CliRun denoised =
-        test::Texcache("render " + scene + " --denoise reliable --frames 0:1 --shading texture " +
-                       "--cached-visibility -o " + (out / "d_#.png").string() + small);
+    const test::CliRun denoised = test::Texcache(
+        "render " + scene + " --denoise reliable --frames 0:1 --shading texture " +
+        "--cached-visibility --visibility-radius 1 -o " + (out / "d_#.png").string() + small);
     EXPECT_EQ(denoised.code, 0) << denoised.out;
     for (const std::string& bad :
          {std::string(" --frame-buffers ") + out.string(), std::string(" --shading texture")}) {

@@ -83,6 +83,7 @@ struct RenderArgs {
     std::string denoise;
     bool demodulate = false;
     bool cachedVisibility = false;
+    int visibilityRadius = TextureSpaceOptions{}.visibilityRadius;
     // Stereo: both eyes through one texture-space cache (renderer/stereo.h).
     bool stereo = false;
     float eyeSeparation = 0.0f, convergence = 0.0f;
@@ -131,6 +132,12 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
                          "fills the screen-space frame buffers: needs --shading texture and "
                          "--denoise or --frame-buffers");
     t.cachedVisibility = a.cachedVisibility;
+    if (a.Given("--visibility-radius")) {
+        if (!a.cachedVisibility)
+            throw InputError("--visibility-radius", "applies to --cached-visibility");
+        if (a.visibilityRadius != -1) CheckFilterRadius(a.visibilityRadius, "--visibility-radius");
+    }
+    t.visibilityRadius = a.visibilityRadius;
     t.cache.Validate();
     return t;
 }
@@ -930,6 +937,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                   "With --shading texture and --denoise / --frame-buffers: also cache the direct "
                   "light's visibility in texture space (--shadow-samples rays per sample) and "
                   "let the stage take it where it has no history (disocclusions)");
+    cmd->add_option("--visibility-radius", args->visibilityRadius,
+                    "With --cached-visibility: its filter's footprint radius (-1: --filter-radius)")
+        ->capture_default_str();
     cmd->add_flag("--stereo", args->stereo,
                   "Both eyes of the camera's stereo rig (scene camera 'stereo'), sharing one "
                   "texture-space cache: writes NAME_left and NAME_right (.exr + .png)");
