@@ -1031,8 +1031,9 @@ TEST(FrameBuffers, CliWritesOneExrPerFrame) {
 }
 
 // `--cached-visibility` fills the frame buffers' cachedVisibility layer (finite on the diffuse
-// scene's geometry) and runs through the denoiser; without texture shading or without frame
-// buffers it is an error naming the flag (exit 2).
+// scene's geometry; the same with 1 and 2 threads as with the default count) and runs through
+// the denoiser; without texture shading or without frame buffers it is an error naming the flag
+// (exit 2).
 TEST(FrameBuffers, CliCachedVisibility) {
     const fs::path out = TempDir() / "cli_cached_visibility";
     fs::remove_all(out);
@@ -1050,6 +1051,16 @@ TEST(FrameBuffers, CliCachedVisibility) {
         ++finite;
     }
     EXPECT_GT(finite, 100);
+    // Same seed, same buffer, for any thread count (the cache samples' streams are their keys').
+    for (const char* threads : {"1", "2"}) {
+        const fs::path dir = out / threads;
+        const test::CliRun t =
+            test::Texcache("render " + scene + " --frame-buffers " + dir.string() +
+                           " --shading texture --cached-visibility --threads " + threads + small);
+        ASSERT_EQ(t.code, 0) << t.out;
+        ExpectSameBuffer(ReadFrameBuffers((dir / "frame_0000.exr").string()).cachedVisibility,
+                         fb.cachedVisibility, threads);
+    }
     const test::CliRun denoised = test::Texcache(
         "render " + scene + " --denoise reliable --frames 0:1 --shading texture " +
         "--cached-visibility --visibility-radius 1 -o " + (out / "d_#.png").string() + small);
