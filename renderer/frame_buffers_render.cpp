@@ -463,6 +463,11 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     for (auto* v : {&fb.glossyHit, &fb.prevGlossyHit}) v->assign(anyGlossy ? n : 0, kNaN3);
     fb.cones.assign(n * screen::kNumCones, kNaN3);
     // Only when asked for and there is a cache to look it up in (ctx.tsc: texture shading).
+    if (ctx.tsc && opt.texture.cachedVisibility && !ctx.tsc->options().cachedVisibility)
+        throw InputError("frame buffers",
+                         "cached visibility asked for, but the texture-space cache was built "
+                         "without it (TextureSpaceOptions::cachedVisibility): it has no "
+                         "visibility grids");
     fb.cachedVisibility.assign(ctx.tsc && opt.texture.cachedVisibility ? n : 0, kNaN);
 
     tbb::enumerable_thread_specific<RayCounts> counts;
