@@ -867,7 +867,8 @@ TEST(FrameBuffers, EveryDenoiserKeepsTheCachedIndirectLight) {
 // they differ where a texel straddles the occluder's shadow edge (the texel's centre is not the
 // pixel's hit) and by the noise left after 16 frames: RMS difference over the diffuse pixels
 // < 0.08 (measured 0.044), mean difference < 0.02 (measured 0.0006). The buffer survives the EXR
-// round trip (NaN included).
+// round trip (NaN included). Bad settings (a negative visibility radius other than -1, a cache
+// built without the visibility grids) are InputErrors.
 TEST(FrameBuffers, CachedVisibilityNearThePerHitExpectation) {
     Scene s = TestScene();
     RenderScene rs(s, {});
@@ -886,6 +887,11 @@ TEST(FrameBuffers, CachedVisibilityNearThePerHitExpectation) {
         TextureSpaceOptions bad = o.texture;
         bad.visibilityRadius = -2;
         EXPECT_THROW(TextureSpaceCache(rs, bad), InputError);
+        // A cache built without the visibility grids cannot serve it.
+        bad = o.texture;
+        bad.cachedVisibility = false;
+        TextureSpaceCache without(rs, bad);
+        EXPECT_THROW(RenderFrameBuffers(rs, o, -0.04f, &fb, &without), InputError);
     }
     TextureSpaceCache cache(rs, o.texture);
     const size_t n = size_t(W) * H;

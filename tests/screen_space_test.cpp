@@ -436,7 +436,7 @@ INSTANTIATE_TEST_SUITE_P(ScreenSpaceTemporal, Disocclusion, ::testing::Values(1,
 TEST(ScreenSpaceTemporal, CachedVisibilityOnlyWhereThereIsNoHistory) {
     const JumpScene js;
     std::vector<FrameBuffers> still;
-    for (int fr = 0; fr < 4; ++fr) still.push_back(SynthRender(js.before, fr, 1));
+    for (int fr = 0; fr < 2; ++fr) still.push_back(SynthRender(js.before, fr, 1));
     const FrameBuffers cur = SynthRender(js.after, 6, 1);
     FrameBuffers withCache = cur;
     withCache.cachedVisibility.assign(cur.NumPixels(), 0.25f);
