@@ -357,6 +357,50 @@ ShadedSample ShadeShadowSample(const Context& c, const SampleRequest& r, RayCoun
     return {glm::vec3(V), ss.N, counted ? V * (1.0f - V) / float(counted) : 0.0f, blurTexels};
 }
 
+ShadedSample ShadeVisibilitySample(const Context& c, const SampleRequest& r, RayCounts& rays) {
+    SurfaceSample ss;
+    glm::vec3 origin;
+    if (!SamplePoint(c, r, &ss, &origin, rays)) return {glm::vec3(NAN), glm::vec3(NAN), 0.0f};
+    Rng rng = SampleRng(c, r);
+    const int n = c.opt.texture.shadowSamples;
+    const ShutterMotion motion(c, c.tsc->ObjectOfMesh(r.mesh));
+    // As the frame buffers' light samples (FrameDirectSample): the light pick stratified, so
+    // each light gets its share of the n rays exactly, the point on it from the R2 sequence,
+    // both randomly shifted.
+    constexpr float kG1 = 0.75487766f, kG2 = 0.56984029f;
+    const float pickShift = rng.Next1D();
+    const glm::vec2 shift = rng.Next2D();
+    float lit = 0.0f, all = 0.0f;
+    for (int k = 0; k < n; ++k) {
+        Ray ray;
+        ray.org = origin;
+        ray.dir = ss.N;
+        glm::vec3 N = ss.N;
+        motion.Pose(motion.Time(rng, k, n), &ray, &N);
+        const float uPick = std::min((float(k) + pickShift) / float(n), kOneMinusEpsilon);
+        const float rx = shift.x + kG1 * float(k), ry = shift.y + kG2 * float(k);
+        const glm::vec2 u = glm::min(glm::vec2(rx - std::floor(rx), ry - std::floor(ry)),
+                                     glm::vec2(kOneMinusEpsilon));
+        LightSample ls;
+        if (!c.SampleLight(ray.org, N, uPick, u, &ls)) continue;
+        const float cosi = glm::dot(ls.wi, N);
+        if (!(cosi > 0.0f)) continue;  // below the horizon: no light, not a visibility question
+        const float ck = Luminance(ls.Li) * (ls.delta ? cosi : cosi / ls.pdf);
+        if (!(ck > 0.0f) || !std::isfinite(ck)) continue;
+        all += ck;
+        Ray shadow;
+        shadow.org = ray.org;
+        shadow.dir = ls.wi;
+        shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
+        shadow.time = ray.time;
+        ++rays.shadow;
+        if (!c.rs.Occluded(shadow)) lit += ck;
+    }
+    // No light above the horizon: visible, as the frame buffers count a sample with no shading.
+    const float V = all > 0.0f ? lit / all : 1.0f;
+    return {glm::vec3(V), ss.N, all > 0.0f ? V * (1.0f - V) / float(n) : 0.0f};
+}
+
 /// Direct lighting with area-light visibility from the texture-space cache (the soft-shadow
 /// filter). Per hit, each quad light's unshadowed light is estimated from `shadowSamples` points
 /// on it (no rays: the cheap, low-noise part) and multiplied by the texel's filtered visibility;

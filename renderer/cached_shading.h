@@ -47,6 +47,13 @@ ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool d
 /// smallest blur std sigma_l * t / (d - t) the blocked rays allow (see soft_shadow_filter.h).
 ShadedSample ShadeShadowSample(const Context& c, const SampleRequest& r, RayCounts& rays);
 
+/// Visibility of all the scene's lights from a cache sample (the screen-space frame buffers'
+/// cachedVisibility): shadowed over unshadowed irradiance, the ratio sum c_k V_k / sum c_k of
+/// opt.texture.shadowSamples light samples (c_k their cosine-weighted irradiance luminance,
+/// V_k the 0/1 of their shadow rays), in every channel; 1 when no light reaches the sample's
+/// hemisphere. View-independent: the diffuse lobe's visibility.
+ShadedSample ShadeVisibilitySample(const Context& c, const SampleRequest& r, RayCounts& rays);
+
 /// Direct lighting with area-light visibility from the texture-space cache (the soft-shadow
 /// filter). Per hit, each quad light's unshadowed light is estimated from `shadowSamples` points
 /// on it (no rays: the cheap, low-noise part) and multiplied by the texel's filtered visibility;

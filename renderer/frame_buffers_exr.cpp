@@ -69,6 +69,7 @@ auto Layers(FB& fb, bool resize, std::vector<float>* ids) {
     vec3("emitted", fb.emitted, kRgb);
     vec3("shading", fb.shading, kRgb);
     scalar("visibility", fb.visibility, "Y");
+    scalar("cachedVisibility", fb.cachedVisibility, "Y");
     vec3("glossy", fb.glossy, kRgb);
     vec3("indirect", fb.indirect, kRgb);
     vec3("position", fb.position, kXyz);

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <limits>
 #include <memory>
 
@@ -350,6 +351,16 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
         const glm::vec3 Epi = FiniteOrZero(E);
         for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = Epi;
     }
+    // The diffuse lobe's visibility from the cache (view-independent, so diffuse materials
+    // only; GGX ones keep NaN: none).
+    if (!fb.cachedVisibility.empty() && m.type == Material::Type::Diffuse &&
+        glm::dot(wo, si.N) > 0.0f) {
+        const SampleRequest texel = c.tsc->VisibilityTexelOf(si);
+        const glm::vec3 V = CachedLookup(
+            c, si, [&](const SampleRequest& r) { return ShadeVisibilitySample(c, r, rays); },
+            c.opt.texture.shadowSamples, nullptr, &texel);
+        fb.cachedVisibility[p] = std::isfinite(V.x) ? std::max(V.x, 0.0f) : kNaN;
+    }
     const std::array<glm::vec3, screen::kNumCones> axes = screen::ConeAxes(si.N);
     glm::vec3 exactShading;
     const bool closedForm = ClosedFormShading(c, si, bsdf, wo, &exactShading) &&
@@ -404,6 +415,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                                screen::FrameBuffers* out, TextureSpaceCache* cache) {
     using Clock = std::chrono::steady_clock;
     const auto start = Clock::now();
+    const std::clock_t cpuStart = std::clock();
     if (options.width <= 0 || options.height <= 0)
         throw InputError("frame buffers", "frame size must be positive, got " +
                                               std::to_string(options.width) + "x" +
@@ -450,6 +462,13 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         v->assign(n, kNaN3);
     for (auto* v : {&fb.glossyHit, &fb.prevGlossyHit}) v->assign(anyGlossy ? n : 0, kNaN3);
     fb.cones.assign(n * screen::kNumCones, kNaN3);
+    // Only when asked for and there is a cache to look it up in (ctx.tsc: texture shading).
+    if (ctx.tsc && opt.texture.cachedVisibility && !ctx.tsc->options().cachedVisibility)
+        throw InputError("frame buffers",
+                         "cached visibility asked for, but the texture-space cache was built "
+                         "without it (TextureSpaceOptions::cachedVisibility): it has no "
+                         "visibility grids");
+    fb.cachedVisibility.assign(ctx.tsc && opt.texture.cachedVisibility ? n : 0, kNaN);
 
     tbb::enumerable_thread_specific<RayCounts> counts;
     tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
@@ -471,6 +490,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     for (const CacheStats& cs : frameCache.Stats()) stats.cache.Merge(cs);
     stats.sppDone = std::max(opt.spp, 1);
     stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
     return stats;
 }
 

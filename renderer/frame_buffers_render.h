@@ -85,6 +85,17 @@
 //   indirect to 0 there, issue 21); direct light always stays per hit here (the split needs its
 //   visibility), so options.texture.cacheDirect is ignored. GGX materials are shaded per hit as
 //   above.
+// * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty
+//   otherwise): for diffuse materials facing the camera, the texel-cache lookup of the pixel's
+//   texel in the object's visibility grids (TextureSpaceCache::VisibilityTexelOf; a cache
+//   sample is ShadeVisibilitySample: the shadowed / unshadowed irradiance ratio of
+//   options.texture.shadowSamples stratified light samples of all lights, one shadow ray each),
+//   filtered by the object's filter kind over a footprint of options.texture.visibilityRadius
+//   (5x5 by default: shadows have edges) and blended over frames with temporalAlpha; NaN
+//   elsewhere (background, lights, GGX materials, whose visibility is weighted by a
+//   view-dependent lobe). It is the diffuse lobe's cosine-weighted ratio where `visibility` is
+//   weighted by the BSDF, and the filter blurs shadow edges over its footprint (measured:
+//   results/disocclusion.md). The stage uses it only where its visibility has no history.
 #pragma once
 #include <string>
 

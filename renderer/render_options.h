@@ -72,6 +72,19 @@ struct TextureSpaceOptions {
     /// (environment, large area lights) and off by default.
     bool cacheDirect = false;
     int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
+    /// Screen-space frame buffers (RenderFrameBuffers): also fill FrameBuffers::cachedVisibility
+    /// for diffuse materials from a cached visibility (shadowSamples shadow rays per sample
+    /// towards all lights, filtered and accumulated like the other cached terms), which the
+    /// stage takes where its visibility has no history (disocclusions). The cache then keeps a
+    /// second set of grids per object for it. Off by default: see results/disocclusion.md.
+    bool cachedVisibility = false;
+    /// Footprint radius of the cached visibility's filter (the object's filter kind), -1 for
+    /// the object's own radius as the other cached terms. Shadows have edges the other terms
+    /// lack: on anim_disocclusion (160x90, 4 rays per sample) a 5x5 footprint gave the lowest
+    /// direct-light RMSE over frame 0 (0.0116, radius 1: 0.0119, 3: 0.0120, the normal filter's
+    /// 13x13: 0.0142, 1x1: 0.0183, the stage's own spatial filter: 0.0163) at 80% of the 13x13's
+    /// cost (`texcache experiment disocclusion --out DIR`; results/disocclusion.md).
+    int visibilityRadius = 2;
     /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.
     FootprintMode footprint = FootprintMode::Auto;
     /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then

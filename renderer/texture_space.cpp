@@ -37,6 +37,8 @@ bool NormalsPointInward(const ControlCage& cage, glm::vec3 centre, const glm::ma
 
 void CheckOptions(const TextureSpaceOptions& options) {
     if (options.radius != -1) CheckFilterRadius(options.radius, "filter radius");
+    if (options.visibilityRadius != -1)
+        CheckFilterRadius(options.visibilityRadius, "visibility filter radius");
     if (!(options.cosThreshold >= -1.0f && options.cosThreshold <= 1.0f))
         throw InputError("normal threshold", "must be a cosine in [-1, 1]");
 }
@@ -120,29 +122,38 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
         history_ = std::make_unique<TemporalHistory<glm::vec3>>(options.cache.texelCacheBytes,
                                                                 options.temporalAlpha);
     const Scene& scene = rs.scene();
-    for (size_t o = 0; o < scene.objects.size(); ++o) {
-        const ControlCage& cage = scene.meshes[scene.objects[o].mesh];
-        glm::vec3 lo, hi;
-        CageBounds(cage, &lo, &hi);
-        const float texel = MipZeroTexelSize(lo, hi, options.texelFraction);
-        // The scene's Ptex topology, shared: not built again (on a 1,000,000-quad cage it is
-        // 44 MB, and building it took an OpenSubdiv refinement of ~0.5 s and ~250 MB).
-        meshOf_.push_back(cache_.AddMesh(cage, texel, rs.SharedTopology(int(o))));
-        meshObject_.push_back(int(o));
-        meshIsBack_.push_back(0);
-        // Open surfaces get a second set of grids for their back side (model only what is
-        // needed: closed surfaces are seen from outside only, whichever way they are wound).
-        if (cache_.Mesh(meshOf_.back()).Topology().HasBoundary()) {
-            meshAgainstNormal_.push_back(0);
-            backMeshOf_.push_back(cache_.AddMesh(cage, texel, rs.SharedTopology(int(o))));
+    // The grids of every object (front, and back for open surfaces): the shading's, and with
+    // cached visibility a second set (its own face ids, hence its own texel keys and history).
+    auto addGrids = [&](std::vector<int>* front, std::vector<int>* back) {
+        for (size_t o = 0; o < scene.objects.size(); ++o) {
+            const ControlCage& cage = scene.meshes[scene.objects[o].mesh];
+            glm::vec3 lo, hi;
+            CageBounds(cage, &lo, &hi);
+            const float texel = MipZeroTexelSize(lo, hi, options.texelFraction);
+            // The scene's Ptex topology, shared: not built again (on a 1,000,000-quad cage it
+            // is 44 MB, and building it took an OpenSubdiv refinement of ~0.5 s and ~250 MB).
+            front->push_back(cache_.AddMesh(cage, texel, rs.SharedTopology(int(o))));
             meshObject_.push_back(int(o));
-            meshIsBack_.push_back(1);
-            meshAgainstNormal_.push_back(1);
-        } else {
-            meshAgainstNormal_.push_back(
-                NormalsPointInward(cage, 0.5f * (lo + hi), rs.ObjectToWorld(int(o), 0.0f)));
-            backMeshOf_.push_back(-1);
+            meshIsBack_.push_back(0);
+            // Open surfaces get a second set of grids for their back side (model only what is
+            // needed: closed surfaces are seen from outside only, whichever way they are wound).
+            if (cache_.Mesh(front->back()).Topology().HasBoundary()) {
+                meshAgainstNormal_.push_back(0);
+                back->push_back(cache_.AddMesh(cage, texel, rs.SharedTopology(int(o))));
+                meshObject_.push_back(int(o));
+                meshIsBack_.push_back(1);
+                meshAgainstNormal_.push_back(1);
+            } else {
+                meshAgainstNormal_.push_back(
+                    NormalsPointInward(cage, 0.5f * (lo + hi), rs.ObjectToWorld(int(o), 0.0f)));
+                back->push_back(-1);
+            }
         }
+    };
+    addGrids(&meshOf_, &backMeshOf_);
+    if (options.cachedVisibility) {
+        firstVisMesh_ = int(meshObject_.size());
+        addGrids(&visMeshOf_, &visBackMeshOf_);
     }
     AssignFilters(scene);
 }
@@ -170,7 +181,7 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
         a.lodBias == b.lodBias && a.referenceMode == b.referenceMode &&
         a.texelTwoChoices == b.texelTwoChoices && a.sampleTwoChoices == b.sampleTwoChoices &&
         options.texelFraction == options_.texelFraction && options.temporalAlpha == 0.0f &&
-        options_.temporalAlpha == 0.0f;
+        options_.temporalAlpha == 0.0f && options.cachedVisibility == options_.cachedVisibility;
     if (!sameStorage) return false;
     CheckOptions(options);
     options_ = options;

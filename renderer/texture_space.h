@@ -24,6 +24,7 @@
 // the same seed still gives the same image for any thread count. Temporal accumulation
 // (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
 #pragma once
+#include <climits>
 #include <memory>
 #include <vector>
 
@@ -72,6 +73,16 @@ public:
     SampleRequest TexelOf(const SurfaceInteraction& si) const {
         return cache_.TexelAt({MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
                                si.dudx, si.dvdx, si.dudy, si.dvdy});
+    }
+    /// The texel of a shading point in its object's visibility grids (options.cachedVisibility:
+    /// a second set of grids per object, so that the cached visibility and the cached light of
+    /// one texel are different keys of the one cache).
+    SampleRequest VisibilityTexelOf(const SurfaceInteraction& si) const {
+        const size_t o = size_t(si.object);
+        const int mesh =
+            si.backFacing && visBackMeshOf_[o] >= 0 ? visBackMeshOf_[o] : visMeshOf_[o];
+        return cache_.TexelAt(
+            {mesh, si.ptex.face, si.ptex.u, si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy});
     }
     /// TexelOf's result for a texel key of cache mesh `mesh` (see ShadingCache::RequestOf).
     SampleRequest RequestOf(int mesh, const TexelKey& key) const {
@@ -185,6 +196,8 @@ private:
     TextureSpaceOptions options_;
     RenderShadingCache cache_;
     std::vector<int> meshOf_, backMeshOf_;
+    std::vector<int> visMeshOf_, visBackMeshOf_;  ///< visibility grids (empty unless cached)
+    int firstVisMesh_ = INT_MAX;                  ///< cache meshes from here on are those
     std::vector<int> meshObject_;
     std::vector<char> meshIsBack_, meshAgainstNormal_;
     std::vector<TextureFilterKind> filterOf_;
@@ -253,7 +266,9 @@ glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, Shad
         }
     }
     const float cosThreshold = options_.cosThreshold;
-    const int radius = passRadiusOf_[object];
+    const int radius = texel.mesh >= firstVisMesh_ && options_.visibilityRadius >= 0
+                           ? options_.visibilityRadius
+                           : passRadiusOf_[object];
     switch (filterOf_[object]) {
         case TextureFilterKind::None:
             return lookup(0, CentreFilter{});

@@ -216,9 +216,9 @@ TEST(TemporalExperiment, EveryMethodHasFiniteRmseOnEveryScene) {
                 << abText.str();
 }
 
-// `experiment disocclusion --quick`: each way of rendering the indirect light (per hit, cache,
-// cache with temporal accumulation) gets a row with newly disoccluded pixels and finite RMSE
-// figures, in [0, 10).
+// `experiment disocclusion --quick`: each way of rendering the quick mode runs (per hit, cache,
+// cache with temporal accumulation, cache with cached visibility) gets a row with newly
+// disoccluded pixels, finite RMSE figures in [0, 10) and a positive frame CPU time.
 TEST(DisocclusionExperiment, EveryRowHasPixelsAndFiniteRmse) {
     const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_disocclusion";
     fs::remove_all(out);
@@ -238,12 +238,15 @@ TEST(DisocclusionExperiment, EveryRowHasPixelsAndFiniteRmse) {
             const double x = std::strtod(cell.c_str(), &end);
             if (end != cell.c_str()) v.push_back(x);
         }
-        ASSERT_EQ(v.size(), 7u) << line;  // pixels, then 6 RMSE figures
+        // pixels, 9 RMSE figures at k = 0..2 (image, indirect, direct), the direct RMSE of
+        // frame 0, the frame CPU time (ms; "mean +- std": the mean is read)
+        ASSERT_EQ(v.size(), 12u) << line;
         EXPECT_GT(v[0], 0.0) << line;
-        for (size_t i = 1; i < v.size(); ++i)
+        for (size_t i = 1; i < 11; ++i)
             EXPECT_TRUE(std::isfinite(v[i]) && v[i] >= 0.0 && v[i] < 10.0) << line;
+        EXPECT_GT(v[11], 0.0) << line;
     }
-    EXPECT_EQ(rows, 3) << r.out;
+    EXPECT_EQ(rows, 4) << r.out;
 }
 
 // `experiment stereo --quick`: a CSV with the columns and a row per case and separation,

@@ -444,6 +444,18 @@ TEST(Preview, BadDenoiseValuesAreClearErrors) {
         << m.output;
 }
 
+// --cached-visibility belongs to the stage on texture-space frames: without --denoise, or with
+// per-hit shading, it is a clear error (exit 2, naming the flag) before any window opens.
+TEST(Preview, CachedVisibilityNeedsTheStageAndTextureSpace) {
+    for (const std::string& args :
+         {std::string(" --shading texture"), std::string(" --denoise reliable --shading hit")}) {
+        const ShellResult r =
+            Shell(kBin + " preview " + kScene + args + " --cached-visibility --frames 1");
+        EXPECT_EQ(r.exitCode, 2) << args << ": " << r.output;
+        EXPECT_NE(r.output.find("--cached-visibility"), std::string::npos) << r.output;
+    }
+}
+
 // The preview's stage runs one a-trous level fewer below 720 rows (progressive_renderer.h: a
 // quarter of its filtering at 640x360) and the library's defaults from 720 rows; both are
 // settings the denoiser accepts.

@@ -426,6 +426,64 @@ TEST_P(Disocclusion, RevealedPixelsTakeNoHistoryFromTheOccluder) {
 }
 INSTANTIATE_TEST_SUITE_P(ScreenSpaceTemporal, Disocclusion, ::testing::Values(1, 2));
 
+// The frame's cachedVisibility (here a constant 0.25, far from the scene's visibility of ~1)
+// is taken exactly where the visibility has no history: after the box's jump, every revealed
+// pixel without a vector (Reliable: shadow vectors, which fall back to the traditional ones;
+// Baseline and BaselineClamp: the traditional ones) shows 0.25 (within 1e-3: nothing else is
+// mixed in), and every pixel more than 32 px from those (beyond the a-trous's 30 px and the
+// clean-up's 4) is bit for bit what a denoiser without the buffer gives. Used everywhere, the far
+// pixels would be 0.25; used nowhere, the revealed ones would not.
+TEST(ScreenSpaceTemporal, CachedVisibilityOnlyWhereThereIsNoHistory) {
+    const JumpScene js;
+    std::vector<FrameBuffers> still;
+    for (int fr = 0; fr < 2; ++fr) still.push_back(SynthRender(js.before, fr, 1));
+    const FrameBuffers cur = SynthRender(js.after, 6, 1);
+    FrameBuffers withCache = cur;
+    withCache.cachedVisibility.assign(cur.NumPixels(), 0.25f);
+    const int w = cur.width, h = cur.height;
+    for (Method m : kTemporal) {
+        SCOPED_TRACE(MethodName(m));
+        ScreenSpaceDenoiser plain(DenoiserSettings{}, SharedBrdf()),
+            cached(DenoiserSettings{}, SharedBrdf());
+        for (const FrameBuffers& f : still) {
+            plain.Denoise(f, m, Demodulation::On);
+            cached.Denoise(f, m, Demodulation::On);
+        }
+        plain.Denoise(cur, m, Demodulation::On);
+        cached.Denoise(withCache, m, Demodulation::On);
+        const std::vector<float> v0 = plain.Visibility(), v1 = cached.Visibility();
+        const auto mv =
+            cached.LastMotion(m == Method::Reliable ? MotionKind::Shadow : MotionKind::Traditional);
+        std::vector<char> none(cur.NumPixels(), 0);
+        int numNone = 0;
+        for (size_t i = 0; i < none.size(); ++i)
+            if (cur.objectId[i] >= 0 && std::isnan(mv[i].x)) none[i] = 1, ++numNone;
+        ASSERT_GT(numNone, 100);
+        int numFar = 0;
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                const size_t i = size_t(y) * size_t(w) + size_t(x);
+                if (cur.objectId[i] < 0) continue;
+                if (none[i]) {
+                    EXPECT_NEAR(v1[i], 0.25f, 1e-3f) << x << ", " << y;
+                    continue;
+                }
+                bool far = true;
+                for (int dy = -32; dy <= 32 && far; ++dy)
+                    for (int dx = -32; dx <= 32 && far; ++dx) {
+                        const int xx = x + dx, yy = y + dy;
+                        if (xx >= 0 && yy >= 0 && xx < w && yy < h &&
+                            none[size_t(yy) * size_t(w) + size_t(xx)])
+                            far = false;
+                    }
+                if (!far) continue;
+                ++numFar;
+                EXPECT_EQ(v1[i], v0[i]) << x << ", " << y;
+            }
+        EXPECT_GT(numFar, 1000);
+    }
+}
+
 // A ground plane lit by a point light straight above, a small box floating between them and
 // moving along x: a hard shadow moving over a static receiver (the traditional vectors say
 // "no motion", Zeng Fig. 1 left).
@@ -751,6 +809,38 @@ TEST(ScreenSpaceRobustness, BadInputThrowsNamingTheBuffer) {
     badSettings([](DenoiserSettings& s) { s.atrousLevels = 9; }, "atrousLevels");
     badSettings([](DenoiserSettings& s) { s.brdfSamples = 0; }, "brdfSamples");
     badSettings([](DenoiserSettings& s) { s.shadowFalloff = true; }, "reliableVisibilityOrder");
+}
+
+// cachedVisibility: optional, but when given it must have the frame's size and hold
+// visibilities (finite, >= 0) or NaN for "none"; the error names the buffer and the pixel.
+TEST(ScreenSpaceRobustness, BadCachedVisibilityThrowsNamingIt) {
+    const FrameBuffers good = SynthRender(FullScene(32, 24), 0, 1);
+    auto message = [&](const FrameBuffers& f) -> std::string {
+        ScreenSpaceDenoiser dn(DenoiserSettings{}, SharedBrdf());
+        try {
+            dn.Denoise(f, Method::Reliable, Demodulation::On);
+        } catch (const InputError& e) {
+            return e.what();
+        }
+        return "";
+    };
+    FrameBuffers f = good;
+    f.cachedVisibility.assign(good.NumPixels() - 1, 0.5f);
+    EXPECT_NE(message(f).find("'cachedVisibility' has 767 entries"), std::string::npos)
+        << message(f);
+    for (float bad : {-0.1f, std::numeric_limits<float>::infinity()}) {
+        f.cachedVisibility.assign(good.NumPixels(), 0.5f);
+        f.cachedVisibility[5 * 32 + 7] = bad;
+        const std::string e = message(f);
+        EXPECT_NE(e.find("'cachedVisibility'"), std::string::npos) << e;
+        EXPECT_NE(e.find("(7, 5)"), std::string::npos) << e;
+    }
+    // NaN is "none here": accepted, and the output stays finite.
+    f.cachedVisibility.assign(good.NumPixels(), std::numeric_limits<float>::quiet_NaN());
+    EXPECT_EQ(message(f), "");
+    ScreenSpaceDenoiser dn(DenoiserSettings{}, SharedBrdf());
+    for (const glm::vec3& c : dn.Denoise(f, Method::Baseline, Demodulation::On))
+        ASSERT_TRUE(std::isfinite(c.x + c.y + c.z));
 }
 
 // ---- Demodulation --------------------------------------------------------------------------

@@ -41,6 +41,7 @@ struct PreviewCliArgs {
     bool saveCamera = false;
     std::string denoise = "off";
     bool demodulate = false;
+    bool cachedVisibility = false;
     std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
@@ -84,6 +85,11 @@ int RunPreview(const PreviewCliArgs& a) {
     s.demodulate = a.demodulate;
     if (a.demodulate && !s.denoise)
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    s.cachedVisibility = a.cachedVisibility;
+    if (a.cachedVisibility && (!s.denoise || !s.textureSpace))
+        throw InputError("--cached-visibility",
+                         "applies to the screen-space stage with texture space: give --denoise "
+                         "and --shading texture");
     s.motionKind = preview::ParseMotionKind(a.motion, "--motion");
     s.stereo = a.stereo;
     if (a.eyeSeparation) {
@@ -192,6 +198,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--demodulate", a->demodulate,
                   "With --denoise: filter glossy and diffuse indirect light divided by their "
                   "pre-integrated BRDF / albedo");
+    cmd->add_flag("--cached-visibility", a->cachedVisibility,
+                  "With --denoise and --shading texture: cache the direct light's visibility in "
+                  "texture space too; the stage takes it where it has no history");
     cmd->add_option("--motion", a->motion,
                     "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())
         ->capture_default_str();

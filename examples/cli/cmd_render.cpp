@@ -82,6 +82,8 @@ struct RenderArgs {
     // Screen-space stage on the frame buffers, written as images.
     std::string denoise;
     bool demodulate = false;
+    bool cachedVisibility = false;
+    int visibilityRadius = TextureSpaceOptions{}.visibilityRadius;
     // Stereo: both eyes through one texture-space cache (renderer/stereo.h).
     bool stereo = false;
     float eyeSeparation = 0.0f, convergence = 0.0f;
@@ -125,6 +127,17 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
         throw InputError("--cached-light",
                          "unknown value '" + a.cachedLight + "' (valid: all, indirect)");
     t.cacheDirect = a.cachedLight == "all";
+    if (a.cachedVisibility && (!t.enabled || (a.frameBuffers.empty() && a.denoise.empty())))
+        throw InputError("--cached-visibility",
+                         "fills the screen-space frame buffers: needs --shading texture and "
+                         "--denoise or --frame-buffers");
+    t.cachedVisibility = a.cachedVisibility;
+    if (a.Given("--visibility-radius")) {
+        if (!a.cachedVisibility)
+            throw InputError("--visibility-radius", "applies to --cached-visibility");
+        if (a.visibilityRadius != -1) CheckFilterRadius(a.visibilityRadius, "--visibility-radius");
+    }
+    t.visibilityRadius = a.visibilityRadius;
     t.cache.Validate();
     return t;
 }
@@ -847,7 +860,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "for AO, all for direct and path)")
         ->capture_default_str();
     cmd->add_option("--shadow-samples", args->shadowSamples,
-                    "Shadow rays per cached visibility sample (--filter softshadow)")
+                    "Shadow rays per cached visibility sample (--filter softshadow, "
+                    "--cached-visibility)")
         ->capture_default_str();
     cmd->add_option("--pass-spp", args->passSpp,
                     "Progressive texture space: camera samples per pass; each further pass "
@@ -919,6 +933,13 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--demodulate", args->demodulate,
                   "With --denoise: filter glossy and diffuse indirect light divided by their "
                   "pre-integrated BRDF / albedo (Zhuang et al. 2021)");
+    cmd->add_flag("--cached-visibility", args->cachedVisibility,
+                  "With --shading texture and --denoise / --frame-buffers: also cache the direct "
+                  "light's visibility in texture space (--shadow-samples rays per sample) and "
+                  "let the stage take it where it has no history (disocclusions)");
+    cmd->add_option("--visibility-radius", args->visibilityRadius,
+                    "With --cached-visibility: its filter's footprint radius (-1: --filter-radius)")
+        ->capture_default_str();
     cmd->add_flag("--stereo", args->stereo,
                   "Both eyes of the camera's stereo rig (scene camera 'stereo'), sharing one "
                   "texture-space cache: writes NAME_left and NAME_right (.exr + .png)");

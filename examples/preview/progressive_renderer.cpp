@@ -31,7 +31,8 @@ bool SameCacheContents(const PreviewSettings& a, const PreviewSettings& b) {
            a.materialFilter == b.materialFilter && a.materialRadius == b.materialRadius &&
            a.sampleCacheMb == b.sampleCacheMb && a.texelCacheMb == b.texelCacheMb &&
            a.lodBias == b.lodBias && a.aoSamples == b.aoSamples && a.aoDistance == b.aoDistance &&
-           a.maxDepth == b.maxDepth && a.tessellationRate == b.tessellationRate;
+           a.maxDepth == b.maxDepth && a.tessellationRate == b.tessellationRate &&
+           a.cachedVisibility == b.cachedVisibility;
 }
 
 /// Settings that change the picture (exposure and the accumulation cap do not).
@@ -53,6 +54,7 @@ TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s) {
     t.cache.sampleCacheBytes = size_t(double(s.sampleCacheMb) * (1 << 20));
     t.cache.texelCacheBytes = size_t(double(s.texelCacheMb) * (1 << 20));
     t.cache.lodBias = s.lodBias;
+    t.cachedVisibility = s.cachedVisibility;
     t.cache.Validate();
     return t;
 }

@@ -84,6 +84,9 @@ struct PreviewSettings {
     bool denoise = false;
     screen::Method denoiseMethod = screen::Method::Reliable;
     bool demodulate = true;
+    /// With the stage and texture space: the direct light's visibility cached too, taken by the
+    /// stage where it has no history (TextureSpaceOptions::cachedVisibility).
+    bool cachedVisibility = false;
     /// The motion vectors the Motion view shows (the stage runs Reliable for it when off).
     screen::MotionKind motionKind = screen::MotionKind::Traditional;
     /// Stereo (renderer/stereo.h): the beauty and debug-integrator views show both eyes side by

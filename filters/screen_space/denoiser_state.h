@@ -70,6 +70,8 @@ struct ScreenSpaceDenoiser::State {
     bool motionValid[4] = {false, false, false, false};
     internal::Plane shadowAlpha, sigma;
     internal::Plane visClampK;  ///< Reliable, VisibilityOrder::Svgf: per-pixel clamp k
+    internal::Plane cachedVis;  ///< the frame's cachedVisibility (< 0: none), when it has one
+    bool hasCachedVis = false;
     internal::IntPlane occluder;
     internal::Plane splat[8];
     std::vector<uint8_t> zeroRow;  // validity flags of a row outside the image
@@ -104,6 +106,13 @@ void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, c
 /// the shaded result to scratch[kIndirect].t / tVar and the cones, moments and length to this
 /// frame's history.
 void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const MotionField* mf);
+
+/// Where this frame's visibility has no history (its sample is usable and the temporal step
+/// found none: a history length of 1) and s.cachedVis has a value, that value replaces the
+/// temporal output in scratch[kVis].t, and so starts the history. With `svgf` (SVGF order: the
+/// a-trous runs next) its variance is set to 0, which keeps the a-trous from mixing the noisy
+/// neighbours into it, and its moments to those of the cached value.
+void CachedWhereNoHistory(ScreenSpaceDenoiser::State& s, bool svgf);
 
 }  // namespace internal
 }  // namespace texcache::screen

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "filters/screen_space/frame_buffers.h"
 
+#include <cmath>
+
 #include "texcache/error.h"
 
 namespace texcache::screen {
@@ -58,6 +60,16 @@ void FrameBuffers::Validate(const std::string& where) const {
     check("glossyHit", glossyHit.size(), false);
     check("prevGlossyHit", prevGlossyHit.size(), false);
     check("cones", cones.size(), false, kNumCones);
+    check("cachedVisibility", cachedVisibility.size(), false);
+    // NaN means "none here"; anything else must be a visibility.
+    for (size_t i = 0; i < cachedVisibility.size(); ++i) {
+        const float v = cachedVisibility[i];
+        if (std::isnan(v) || (v >= 0.0f && v < INFINITY)) continue;
+        throw InputError(where, "buffer 'cachedVisibility' has " + std::to_string(v) +
+                                    " at pixel (" + std::to_string(i % size_t(width)) + ", " +
+                                    std::to_string(i / size_t(width)) +
+                                    "): expected a finite value >= 0, or NaN for none");
+    }
 }
 
 }  // namespace texcache::screen

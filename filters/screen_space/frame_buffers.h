@@ -125,9 +125,15 @@ struct FrameBuffers {
     float time = 0.0f;  ///< frame time (seconds)
 
     // The components (linear radiance, RGB).
-    std::vector<glm::vec3> emitted;   ///< light seen directly (environment, emitters)
-    std::vector<glm::vec3> shading;   ///< unshadowed direct light (low noise: no ray)
-    std::vector<float> visibility;    ///< shadowed / unshadowed estimate (shadow rays), >= 0
+    std::vector<glm::vec3> emitted;  ///< light seen directly (environment, emitters)
+    std::vector<glm::vec3> shading;  ///< unshadowed direct light (low noise: no ray)
+    std::vector<float> visibility;   ///< shadowed / unshadowed estimate (shadow rays), >= 0
+    /// Optional: a low-noise visibility from elsewhere (the renderer's texture-space cache: the
+    /// shadowed / unshadowed diffuse light at the surface point, filtered and accumulated on the
+    /// surface), >= 0 and finite, NaN where there is none for a pixel. The temporal methods take
+    /// it where their visibility has no history (disocclusions, the first frame) instead of
+    /// the spatially filtered `visibility`; pixels with history ignore it.
+    std::vector<float> cachedVisibility;
     std::vector<glm::vec3> glossy;    ///< glossy (microfacet) reflection, 1 path
     std::vector<glm::vec3> indirect;  ///< diffuse indirect light, albedo included, 1 path
 
@@ -161,8 +167,8 @@ struct FrameBuffers {
     /// The composed image: emitted + shading * visibility + glossy + indirect.
     std::vector<glm::vec3> Compose() const;
     /// Throws InputError naming the buffer when a non-empty buffer has the wrong size, a required
-    /// one (shading, visibility, position, normal, depth, objectId) is missing, or the size is not
-    /// positive.
+    /// one (shading, visibility, position, normal, depth, objectId) is missing, the size is not
+    /// positive, or cachedVisibility holds a negative or infinite value (naming the pixel).
     void Validate(const std::string& where) const;
 };
 

@@ -168,7 +168,7 @@ void ScreenSpaceDenoiser::State::Resize(int width, int height) {
         sc.tVar.Resize(w, h), sc.aVar.Resize(w, h), sc.bVar.Resize(w, h), sc.outVar.Resize(w, h);
     }
     for (MotionField* m : {&trad, &shadow, &glossy, &occl}) m->Resize(w, h);
-    shadowAlpha.Resize(w, h), sigma.Resize(w, h), visClampK.Resize(w, h);
+    shadowAlpha.Resize(w, h), sigma.Resize(w, h), visClampK.Resize(w, h), cachedVis.Resize(w, h);
     occluder.Resize(w, h, -1);
     for (Plane& p : splat) p.Resize(w, h);
     zeroRow.assign(size_t(w) + 2 * kPad, 0);
@@ -515,6 +515,13 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
         a.dz = g.depth.Row(y), a.oid = g.objectId.Row(y), a.ok = g.valid.Row(y);
         a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
         PrepGuides(a);
+        if (s.hasCachedVis) {
+            // -1 where there is none or the pixel's geometry is unusable.
+            const float* cv = &f.cachedVisibility[row];
+            const uint8_t* ok = g.valid.Row(y);
+            float* out = s.cachedVis.Row(y);
+            for (int x = 0; x < w; ++x) out[x] = ok[x] && cv[x] >= 0.0f ? cv[x] : -1.0f;
+        }
         if (gl.present) {
             GlossyRow b;
             b.w = w, b.c = &f.glossy[row].x;
@@ -768,6 +775,8 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         Reset();
     s.method = method, s.demod = demodulation;
     const bool reliable = method == Method::Reliable;
+    // Without history by design, SpatialOnly stays the spatial filter alone.
+    s.hasCachedVis = !frame.cachedVisibility.empty() && method != Method::SpatialOnly;
     const bool demod = demodulation == Demodulation::On;
     s.comp[kVis].nc = 1, s.comp[kVis].present = true;
     s.comp[kGlossy].nc = 3, s.comp[kGlossy].present = !frame.glossy.empty();
@@ -818,6 +827,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         for (int c = 0; c < 3; ++c) {
             if (!s.comp[c].present) continue;
             SvgfTemporal(s, c, mf, k);
+            if (c == kVis && s.hasCachedVis) CachedWhereNoHistory(s, true);
             AtrousJob& j = jobs[njobs++];
             j.ci = c;
             for (int k3 = 0; k3 < 3; ++k3) j.feedback[k3] = &s.hist[c][s.cur].c[k3];
@@ -854,6 +864,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
                 TrustAgreeingShadowVectors(s.trad, s.set.reliableClampK, &s.shadow, &s.visClampK);
             SvgfTemporal(s, kVis, temporal ? &s.shadow : nullptr, s.set.reliableClampK,
                          temporal ? &s.visClampK : nullptr);
+            if (s.hasCachedVis) CachedWhereNoHistory(s, true);
             for (int k3 = 0; k3 < 3; ++k3) jobs[njobs].feedback[k3] = &s.hist[kVis][s.cur].c[k3];
             jobs[njobs++].ci = kVis;
             s.hist[kVis][s.cur].valid = true;
@@ -873,6 +884,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
             Plane* vb[3] = {&vs.out[0], &vs.out[1], &vs.out[2]};
             ReliableTemporal(s, kVis, vb, vs.outVar, sm,
                              temporal && s.set.shadowFalloff ? &s.shadowAlpha : nullptr);
+            if (s.hasCachedVis) CachedWhereNoHistory(s, false);
             clock.Lap(&StageTimings::temporal);
             Cleanup(s, kVis);
             clock.Lap(&StageTimings::cleanup);

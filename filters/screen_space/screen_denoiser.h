@@ -26,6 +26,12 @@
 //                  weights (eqs. 9-11) when indirectCones; glossy and indirect accumulate before
 //                  their a-trous filter, unclamped by default (why: screen_denoiser.cpp and
 //                  DenoiserSettings).
+// Disocclusions: where a temporal method's visibility finds no history for a pixel (Reliable:
+// no usable shadow vector; Baseline / BaselineClamp: the disocclusion test; everywhere in the
+// first frame) and the frame has `cachedVisibility` there, that value replaces the pixel's raw
+// (SVGF order) or spatially filtered (Zeng's order) 1-spp visibility and starts its history
+// (SVGF order: with variance 0, so the a-trous keeps it). Pixels with history
+// are unchanged up to the filters that read their neighbours (a-trous, clean-up).
 // Demodulation::On divides glossy by the pre-integrated GGX + Schlick albedo F_beta and diffuse
 // indirect by the albedo before filtering and multiplies them back after (Zhuang et al.).
 //

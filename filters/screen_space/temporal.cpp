@@ -362,6 +362,28 @@ void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, c
     });
 }
 
+void CachedWhereNoHistory(ScreenSpaceDenoiser::State& s, bool svgf) {
+    ComponentPlanes& cp = s.comp[kVis];
+    ComponentScratch& sc = s.scratch[kVis];
+    History& hc = s.hist[kVis][s.cur];
+    ForRows(s.h, [&](int y) {
+        const float* cached = s.cachedVis.Row(y);
+        const float* valid = cp.valid.Row(y);
+        const float* len = hc.len.Row(y);
+        float* t = sc.t[0].Row(y);
+        float* var = sc.tVar.Row(y);
+        float* m1 = hc.m1.Row(y);
+        float* m2 = hc.m2.Row(y);
+        for (int x = 0; x < s.w; ++x) {
+            // len 1 with a usable sample: blended with weight 1, i.e. no history was found.
+            const bool use = cached[x] >= 0.0f && valid[x] > 0.0f && len[x] == 1.0f;
+            if (!use) continue;
+            t[x] = cached[x];
+            if (svgf) var[x] = 0.0f, m1[x] = cached[x], m2[x] = cached[x] * cached[x];
+        }
+    });
+}
+
 // ---- Cones ---------------------------------------------------------------------------------
 //
 // History layout: per pixel 3 vectors of 8 floats, one per colour channel, lanes 0..5 the 6 cones
