@@ -89,7 +89,7 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--ablation", args->ablation,
                   "temporal: also Reliable (demodulation on) with issue 5's defaults (glossy "
                   "and indirect clamped, indirect in cones), alpha 0.1 (the paper's), the glossy "
-                  "jitter cap at 0 and 16 px, without clamping, and with its visibility in "
+                  "jitter cap at 4 and 16 px, without clamping, and with its visibility in "
                   "SVGF's and in Zeng's order, summarised in temporal_ablation.md");
     cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
         ->capture_default_str();

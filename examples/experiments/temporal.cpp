@@ -264,8 +264,8 @@ int Temporal(const Setup& s) {
                 {"reliable, indirect colour clamped (3 sigma)",
                  [](screen::DenoiserSettings* d) { d->reliableIndirectClampK = 3.0f; }},
                 {"reliable, alpha 0.1", [](screen::DenoiserSettings* d) { d->alpha = 0.1f; }},
-                {"reliable, glossy jitter 0",
-                 [](screen::DenoiserSettings* d) { d->maxGlossyJitter = 0.0f; }},
+                {"reliable, glossy jitter 4 (issue 21's default)",
+                 [](screen::DenoiserSettings* d) { d->maxGlossyJitter = 4.0f; }},
                 {"reliable, glossy jitter 16",
                  [](screen::DenoiserSettings* d) { d->maxGlossyJitter = 16.0f; }},
                 // k = 1000: no clamping in practice (history within 1000 sigma of the 3x3 mean).

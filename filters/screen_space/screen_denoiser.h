@@ -133,8 +133,14 @@ struct DenoiserSettings {
     /// another part of the reflection, and in a static scene the jitter is a blur that never
     /// converges (glossy RMSE after 16 static frames, 96x64 test: 0.025 at 8 px, 0.023 at 4,
     /// 0.017 without jitter; the scene of ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges,
-    /// glossy RMSE of Reliable: figure from 6a7cb45).
-    float maxGlossyJitter = 4.0f;
+    /// glossy RMSE of Reliable: figure from 6a7cb45). 0 by default (the glossy vector is then
+    /// eq. 5's virtual-image reprojection alone): with the jitter capped at 4 px Reliable was
+    /// above the plain baseline on a camera flying over a static scene, and no scene gained
+    /// from it (mean RMSE demod on, 4 px / 0 / baseline: anim_flythrough 0.0446 / 0.0444 /
+    /// 0.0443, anim_glossy 0.0663 / 0.0662 / 0.0667, anim_light 0.0059 / 0.0058 / 0.0067,
+    /// anim_shadow and anim_disocclusion equal; `texcache experiment temporal --ablation --out
+    /// DIR` at 7f132b3, "glossy jitter 0" against the default).
+    float maxGlossyJitter = 0.0f;
     int brdfSamples = 1024;  ///< samples per BRDF-table entry (Zhuang et al.'s count)
     unsigned seed = 1;       ///< glossy motion-vector sampling
 };
