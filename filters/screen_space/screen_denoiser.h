@@ -20,11 +20,12 @@
 //                  (VisibilityOrder::Svgf, the default), or in Zeng's order (VisibilityOrder::Zeng:
 //                  filtered spatially first, the SpatialOnly a-trous, its history clamped and
 //                  cleaned up with std min(w_A + w_C, 5), eqs. 7-8; eq. 4's alpha^V only with
-//                  shadowFalloff); glossy follows stochastic glossy motion vectors
-//                  (eq. 5); diffuse indirect follows dual motion vectors (eq. 6) where the
-//                  traditional ones fail and is reused as incident radiance per cone with overlap
-//                  weights (eqs. 9-11) when indirectCones; glossy and indirect accumulate before
-//                  their a-trous filter, unclamped by default (why: screen_denoiser.cpp and
+//                  shadowFalloff); glossy follows glossy motion vectors (eq. 5's virtual
+//                  image; jittered over the lobe's footprint, Zeng's stochastic vectors, only
+//                  with maxGlossyJitter > 0); diffuse indirect follows dual motion vectors (eq. 6)
+//                  where the traditional ones fail and is reused as incident radiance per cone with
+//                  overlap weights (eqs. 9-11) when indirectCones; glossy and indirect accumulate
+//                  before their a-trous filter, unclamped by default (why: screen_denoiser.cpp and
 //                  DenoiserSettings).
 // Disocclusions: where a temporal method's visibility finds no history for a pixel (Reliable:
 // no usable shadow vector; Baseline / BaselineClamp: the disocclusion test; everywhere in the
