@@ -14,7 +14,7 @@
 #include <limits>
 #include <memory>
 
-#include <tbb/blocked_range2d.h>
+#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <glm/gtc/matrix_transform.hpp>
@@ -58,8 +58,12 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr int kShadingCandidates = 32;
 // Light samples per frame-buffer sample when `shading` has a closed form (ClosedFormShading):
 // they only pick the shadow ray and estimate the visibility ratio, whose noise the stage filters.
-// Measured: see frame_buffers_render.h.
-constexpr int kRatioCandidates = 8;
+// Picked in proportion to the lights' closed-form terms, 6 gave the error of 8 picked uniformly
+// (which spent half of them on anim_shadow's dim sky) with two candidates fewer: relMSE
+// undenoised 0.0966 vs 0.0973, denoised 0.01422 vs 0.01421 (`texcache preview
+// scenes/anim_shadow.json --bench --denoise reliable --resolution 640x360`; 4: 0.0987 / 0.01423,
+// 8: 0.0947 / 0.01424).
+constexpr int kRatioCandidates = 6;
 const glm::vec3 kNaN3(kNaN);
 
 /// Where everything that moves was at the previous frame: world at the frame time -> world at
@@ -109,20 +113,42 @@ struct FrameMotion {
     }
 };
 
-/// One pixel's buffers while its samples are taken.
+/// One pixel's buffers while its samples are taken (but the shadow rays': PixelShadow).
 struct FramePixel {
     glm::vec3 shadingSum{0.0f}, glossySum{0.0f}, diffuseSum{0.0f};
-    float weightSum = 0.0f, visibleWeightSum = 0.0f;
-    float blockerWeight = -1.0f;  // shading luminance of the recorded blocked sample
-    glm::vec3 blocker = kNaN3, prevBlocker = kNaN3, light = kNaN3, prevLight = kNaN3;
     glm::vec3 glossyHit = kNaN3, prevGlossyHit = kNaN3;
     std::array<glm::vec3, screen::kNumCones> coneSum{};
     bool hasCones = false;  ///< a diffuse ray was traced
 };
 
+/// What a pixel's shadow rays make of its visibility and blocker, kept until its tile's shadow
+/// rays are traced.
+struct PixelShadow {
+    float weightSum, visibleWeightSum;
+    float blockerWeight;  // shading luminance of the recorded blocked sample
+    glm::vec3 blocker, prevBlocker, light, prevLight;
+
+    /// No sample yet: visible, no blocker. (Set field by field: a temporary's copy of the
+    /// whole struct per pixel showed in the profile.)
+    void Reset() {
+        weightSum = visibleWeightSum = 0.0f;
+        blockerWeight = -1.0f;
+        blocker = prevBlocker = light = prevLight = kNaN3;
+    }
+};
+
 glm::vec3 FiniteOrZero(glm::vec3 v) {
     return std::isfinite(v.x + v.y + v.z) ? v : glm::vec3(0.0f);
 }
+
+/// Each light's share of a pixel's closed-form shading (the luminance of its term), indexed as
+/// SampleLight picks lights; n = 0 when the scene has more lights than kMax (then the pick stays
+/// uniform).
+struct LightWeights {
+    static constexpr int kMax = 16;
+    int n = 0;
+    float w[kMax];
+};
 
 /// The unshadowed direct light of every light, integrated in closed form, or false when some
 /// light and lobe have none here: a GGX lobe under an area light (quad or environment; LTCs and
@@ -133,38 +159,62 @@ glm::vec3 FiniteOrZero(glm::vec3 v) {
 /// geometric normal's cut-off (the BSDF's ng test) and, for a map, the harmonics' error: the
 /// visibility ratio below absorbs both in expectation.
 bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
-                       glm::vec3 wo, glm::vec3* out) {
+                       glm::vec3 wo, glm::vec3* out, LightWeights* weights) {
     if (bsdf.HasSpecular() && (c.env || !c.quads.empty())) return false;
     glm::vec3 S(0.0f);
+    weights->n = c.numLights <= LightWeights::kMax ? c.numLights : 0;
+    std::fill_n(weights->w, weights->n, 0.0f);
+    // Each light's term, in SampleLight's order (quads, distant lights, environment).
+    auto add = [&](int light, glm::vec3 term) {
+        S += term;
+        if (light < weights->n) weights->w[light] = Luminance(FiniteOrZero(term));
+    };
     if (glm::dot(wo, si.N) > 0.0f) {  // the BSDF is 0 otherwise
         constexpr float kInvPi = 0.31830988618379067f;
         const glm::vec3 R = bsdf.DiffuseReflectance();
-        for (const Context::Quad& q : c.quads) {
+        for (size_t i = 0; i < c.quads.size(); ++i) {
+            const Context::Quad& q = c.quads[i];
             const glm::vec3 rel = q.corner - si.P;
             if (!q.twoSided && glm::dot(q.n, rel) >= 0.0f) continue;  // behind a one-sided quad
             const glm::vec3 v[4] = {rel, rel + q.e1, rel + q.e1 + q.e2, rel + q.e2};
-            S += R * q.L * (PolygonProjectedSolidAngle(v, 4, si.N) * kInvPi);
+            add(int(i), R * q.L * (PolygonProjectedSolidAngle(v, 4, si.N) * kInvPi));
         }
-        if (c.env) S += R * c.env->Irradiance(si.N) * kInvPi;
+        if (c.env) add(c.numLights - 1, R * c.env->Irradiance(si.N) * kInvPi);
+        const int firstDistant = int(c.quads.size());
         for (size_t i = 0; i < c.distantDir.size(); ++i) {
             glm::vec3 fd, fs;
             bsdf.EvalLobes(wo, c.distantDir[i], &fd, &fs);
-            S += (fd + fs) * c.distantE[i] * std::abs(glm::dot(c.distantDir[i], si.N));
+            add(firstDistant + int(i),
+                (fd + fs) * c.distantE[i] * std::abs(glm::dot(c.distantDir[i], si.N)));
         }
     }
     *out = FiniteOrZero(S);
     return true;
 }
 
+/// A shadow ray of FrameDirectSample waiting for its packet (FinishShadow takes it from there):
+/// the ray, the light sample it goes to and the weight of its frame-buffer sample.
+struct PendingShadow {
+    Ray ray;
+    glm::vec3 P;   // the shading point: a quad's sampled point is P + dist wi
+    glm::vec3 wi;  // towards the light
+    float dist;
+    float w;  // luminance of the sample's unshadowed shading
+    int quad, distant;
+    int pixel;  // the pixel's index in its tile
+};
+
 /// The light sample of one frame-buffer sample: unshadowed shading into `px` from
 /// kShadingCandidates light samples, and one shadow ray to a candidate resampled in proportion to
-/// its shading's luminance, with the blocker and light point when blocked (see
-/// frame_buffers_render.h). With `exact` (ClosedFormShading, luminance > 0) the shading is that
-/// and kRatioCandidates light samples give the visibility as the ratio lum(mean of the
-/// candidates) * V / lum(exact), whose expectation is the shadowed over the unshadowed light.
-void FrameDirectSample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
-                       const Bsdf& bsdf, glm::vec3 wo, const glm::vec3* exact, Rng& rng,
-                       FramePixel& px, RayCounts& rays) {
+/// its shading's luminance, appended to `shadows` (for tile pixel `pixel`) for FinishShadow,
+/// which records the blocker and light point when blocked (see frame_buffers_render.h). With
+/// `exact` (ClosedFormShading, luminance > 0) the shading is that and kRatioCandidates light
+/// samples give the visibility as the ratio lum(mean of the candidates) * V / lum(exact), whose
+/// expectation is the shadowed over the unshadowed light.
+void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
+                       glm::vec3 wo, const glm::vec3* exact, const LightWeights& weights, Rng& rng,
+                       FramePixel& px, PixelShadow& sh, int pixel,
+                       std::vector<PendingShadow>& shadows) {
     // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
     // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
     // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
@@ -179,14 +229,67 @@ void FrameDirectSample(const Context& c, const FrameMotion& motion, const Surfac
     float lum[kMax];
     glm::vec3 sum(0.0f);
     float lumSum = 0.0f;
+    // With closed-form shading the pick follows each light's share of it instead of being
+    // uniform, so that the candidates go where the light is (none to a dim sky next to a lamp):
+    // candidate k's light is where (k + shift) / kN falls in the lights' cumulative shares.
+    float wSum = 0.0f;
+    if (exact)
+        for (int i = 0; i < weights.n; ++i) wSum += weights.w[i];
+    const bool weighted = wSum > 0.0f;
+    // A diffuse BSDF under quad lights (the common case of closed-form shading): the candidate in
+    // closed form below. wo is above the shading normal (the closed form is 0 otherwise).
+    const bool diffuseQuads = weighted && !bsdf.HasSpecular();
+    const glm::vec3 diffuseF = bsdf.DiffuseReflectance() * 0.31830988618379067f;
+    int light = 0;
+    float wAcc = weighted ? weights.w[0] : 0.0f;
     for (int k = 0; k < kN; ++k) {
         lum[k] = 0.0f, S[k] = glm::vec3(0.0f);
-        const float uPick = (float(k) + pickShift) / float(kN);
+        float uPick = (float(k) + pickShift) / float(kN);
+        float pickScale = 1.0f;  // SampleLight's pick probability over this one's
+        if (weighted) {
+            // The targets rise with k: the light index only moves on.
+            const float target = uPick * wSum;
+            while (light + 1 < weights.n && (wAcc <= target || weights.w[light] <= 0.0f))
+                wAcc += weights.w[++light];
+            while (weights.w[light] <= 0.0f) --light;  // rounding ran past the last share
+            uPick = (float(light) + 0.5f) / float(c.numLights);
+            pickScale = wSum / (weights.w[light] * float(c.numLights));
+        }
         // x - floor(x) is fmod(x, 1) for x >= 0, exactly, without libm's fmodf (11% of the bench
         // profile with 32 candidates).
         const float rx = shift.x + kG1 * float(k), ry = shift.y + kG2 * float(k);
         const glm::vec2 u(rx - std::floor(rx), ry - std::floor(ry));
         LightSample& ls = cand[k];
+        if (diffuseQuads && light < int(c.quads.size())) {
+            // SampleLight's quad sample and the diffuse BSDF folded together (pdf and cosines
+            // from the unnormalized direction): one square root and one division instead of
+            // their six (a third of the frame buffers' render time went to these candidates).
+            const Context::Quad& q = c.quads[size_t(light)];
+            const glm::vec2 v = glm::min(u, glm::vec2(kOneMinusEpsilon));
+            const glm::vec3 d = q.corner + v.x * q.e1 + v.y * q.e2 - si.P;
+            const float dist2 = glm::dot(d, d);
+            const float cosLight = -glm::dot(q.n, d), cosSurface = glm::dot(si.N, d);
+            // Zero where SampleLight has no sample (behind a one-sided quad, pdf 0) or the
+            // BSDF is 0 (below the shading or the geometric normal).
+            if (!(dist2 > 0.0f) || !(cosSurface > 0.0f) || !(glm::dot(si.Ng, d) > 0.0f) ||
+                !(q.twoSided ? cosLight != 0.0f : cosLight > 0.0f))
+                continue;
+            // 1 / sqrt by the estimate and one Newton step (relative error ~1e-7): the square
+            // root and the division in a row were the loop's longest latency.
+            const float e = _mm_cvtss_f32(_mm_rsqrt_ss(_mm_set_ss(dist2)));
+            const float invDist = e * (1.5f - 0.5f * dist2 * e * e);
+            ls.wi = d * invDist;
+            ls.dist = dist2 * invDist;
+            ls.delta = false;
+            ls.quad = light;
+            // f Le cos / pdf, pdf = dist^2 / (area cosLight) * pick probability.
+            const float g = cosSurface * std::abs(cosLight) * (invDist * invDist) *
+                            (invDist * invDist) * (q.area * pickScale * float(c.numLights));
+            S[k] = FiniteOrZero(diffuseF * q.L * g);
+            lum[k] = Luminance(glm::abs(S[k]));
+            sum += S[k], lumSum += lum[k];
+            continue;
+        }
         if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
                            glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
             continue;
@@ -198,47 +301,62 @@ void FrameDirectSample(const Context& c, const FrameMotion& motion, const Surfac
                                 ? 1.0f
                                 : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
         const float cosi = std::abs(glm::dot(ls.wi, si.N));
-        S[k] = FiniteOrZero((fd + wSpec * fs) * ls.Li * (ls.delta ? cosi : cosi / ls.pdf));
+        S[k] = FiniteOrZero((fd + wSpec * fs) * ls.Li *
+                            (pickScale * (ls.delta ? cosi : cosi / ls.pdf)));
         lum[k] = Luminance(glm::abs(S[k]));
         sum += S[k], lumSum += lum[k];
     }
     if (exact) {
         px.shadingSum += *exact;
-        px.weightSum += Luminance(glm::abs(*exact));
+        sh.weightSum += Luminance(glm::abs(*exact));
         if (!(lumSum > 0.0f)) return;  // every candidate found 0: this sample's ratio is 0
     } else if (!(lumSum > 0.0f)) {
         return;  // no shadow ray: counts as visible (see the header)
     }
     const glm::vec3 Sbar = sum / float(kN);
     const float w = Luminance(glm::abs(Sbar));
-    if (!exact) px.shadingSum += Sbar, px.weightSum += w;
+    if (!exact) px.shadingSum += Sbar, sh.weightSum += w;
     // The shadow ray's candidate: index j with probability lum_j / sum lum.
     int j = 0;
     float acc = lum[0], target = uResample * lumSum;
     while (j + 1 < kN && (acc <= target || lum[j] <= 0.0f)) acc += lum[++j];
     while (lum[j] <= 0.0f) --j;  // rounding ran past the last candidate with shading
     const LightSample& ls = cand[j];
-    const Ray shadow = ShadowRay(si, ls, 0.0f);
-    Hit bh;
-    ++rays.shadow;
-    if (!c.rs.Intersect(shadow, &bh)) {
-        px.visibleWeightSum += w;
+    // Written in place, field by field (whole temporaries stalled on store forwarding).
+    PendingShadow& q = shadows.emplace_back();
+    const Ray r = ShadowRay(si, ls, 0.0f);
+    q.ray.org = r.org, q.ray.dir = r.dir;
+    q.ray.tnear = r.tnear, q.ray.tfar = r.tfar, q.ray.time = r.time;
+    q.P = si.P;
+    q.wi = ls.wi;
+    q.dist = ls.dist;
+    q.w = w;
+    q.quad = ls.quad;
+    q.distant = ls.distant;
+    q.pixel = pixel;
+}
+
+/// The outcome of a queued shadow ray (blocked: `bh` is its first hit) into its pixel's `sh`.
+void FinishShadow(const FrameMotion& motion, const PendingShadow& s, bool blocked, const Hit& bh,
+                  PixelShadow& sh) {
+    if (!blocked) {
+        sh.visibleWeightSum += s.w;
         return;
     }
-    if (w <= px.blockerWeight) return;
-    px.blockerWeight = w;
-    px.blocker = shadow.org + bh.t * shadow.dir;
-    px.prevBlocker = motion.Point(bh, px.blocker);
-    if (ls.quad >= 0) {
-        px.light = si.P + ls.dist * ls.wi;  // the sampled point of the quad
-        px.prevLight = glm::vec3(motion.light[ls.quad] * glm::vec4(px.light, 1.0f));
+    if (s.w <= sh.blockerWeight) return;
+    sh.blockerWeight = s.w;
+    sh.blocker = s.ray.org + bh.t * s.ray.dir;
+    sh.prevBlocker = motion.Point(bh, sh.blocker);
+    if (s.quad >= 0) {
+        sh.light = s.P + s.dist * s.wi;  // the sampled point of the quad
+        sh.prevLight = glm::vec3(motion.light[s.quad] * glm::vec4(sh.light, 1.0f));
     } else {
         // At infinity: a far point along the light direction from the blocker, so the line from
         // the light point through the blocker has the light's direction in both frames.
         const glm::vec3 prevDir =
-            ls.distant >= 0 ? glm::normalize(motion.distant[ls.distant] * ls.wi) : ls.wi;
-        px.light = px.blocker + motion.infinity * ls.wi;
-        px.prevLight = px.prevBlocker + motion.infinity * prevDir;
+            s.distant >= 0 ? glm::normalize(motion.distant[s.distant] * s.wi) : s.wi;
+        sh.light = sh.blocker + motion.infinity * s.wi;
+        sh.prevLight = sh.prevBlocker + motion.infinity * prevDir;
     }
 }
 
@@ -292,18 +410,53 @@ void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bs
     px.hasCones = true;
 }
 
-/// All buffers of pixel (x, y).
-void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y,
-                       screen::FrameBuffers& fb, RayCounts& rays) {
+/// The values of a pixel that nothing was found at (background), in every buffer but the
+/// shadow rays' (WriteShadowBuffers): each pixel writes all of its entries, so the buffers need
+/// no clearing pass before a frame (a serial fill of ~40 MB at 640x360).
+void ClearPixel(screen::FrameBuffers& fb, size_t p) {
+    const glm::vec3 zero(0.0f);
+    fb.emitted[p] = zero;
+    fb.shading[p] = zero;
+    if (!fb.glossy.empty()) {
+        fb.glossy[p] = zero;
+        fb.glossyHit[p] = kNaN3;
+        fb.prevGlossyHit[p] = kNaN3;
+    }
+    fb.indirect[p] = zero;
+    fb.position[p] = kNaN3;
+    fb.normal[p] = kNaN3;
+    fb.depth[p] = INFINITY;
+    fb.roughness[p] = 0.0f;
+    fb.albedo[p] = zero;
+    fb.specular[p] = zero;
+    fb.objectId[p] = -1;
+    fb.prevPosition[p] = kNaN3;
+    fb.prevNormal[p] = kNaN3;
+    for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = kNaN3;
+    if (!fb.cachedVisibility.empty()) fb.cachedVisibility[p] = kNaN;
+}
+
+/// Visibility, blocker and light point of a pixel whose shadow rays are all finished (a pixel
+/// without any: visible, NaN points).
+void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& sh) {
+    fb.visibility[p] = sh.weightSum > 0.0f ? sh.visibleWeightSum / sh.weightSum : 1.0f;
+    // NaN unless a sample was blocked (the ratio can be < 1 without).
+    fb.blocker[p] = sh.blocker;
+    fb.prevBlocker[p] = sh.prevBlocker;
+    fb.lightSample[p] = sh.light;
+    fb.prevLightSample[p] = sh.prevLight;
+}
+
+/// Every buffer of pixel (x, y) from its camera ray and hit but the shadow rays' (see
+/// WriteShadowBuffers): the samples' shadow rays are appended to `shadows`, for pixel `pixel` of
+/// the tile, and `px` keeps what they need.
+void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int pixel,
+                const Ray& ray, const RayDifferentials* diff, bool found, const Hit& hit,
+                screen::FrameBuffers& fb, PixelShadow& sh, std::vector<PendingShadow>& shadows,
+                RayCounts& rays) {
     const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
-    RayDifferentials diff;
-    // Pixel centre, lens centre, shutter open: exact guides (see the header).
-    Ray ray = c.camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f),
-                                c.tsc ? &diff : nullptr);
-    ray.time = 0.0f;
-    ++rays.camera;
-    Hit hit;
-    if (!c.rs.Intersect(ray, &hit)) {
+    ClearPixel(fb, p);
+    if (!found) {
         if (c.env) fb.emitted[p] = c.env->Eval(ray.dir);
         return;
     }
@@ -319,7 +472,7 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
         fb.prevNormal[p] = motion.Normal(hit, n);
         return;
     }
-    const SurfaceInteraction si = c.rs.Interact(ray, hit, c.tsc ? &diff : nullptr);
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, diff);
     const Bsdf bsdf = MakeBsdf(c, si);
     const Material& m = c.scene.materials[si.material];
     fb.position[p] = si.P;
@@ -361,34 +514,97 @@ void FramePixelBuffers(const Context& c, const FrameMotion& motion, int x, int y
             c.opt.texture.shadowSamples, nullptr, &texel);
         fb.cachedVisibility[p] = std::isfinite(V.x) ? std::max(V.x, 0.0f) : kNaN;
     }
-    const std::array<glm::vec3, screen::kNumCones> axes = screen::ConeAxes(si.N);
+    const bool diffuseRay = diffuse && !cachedIndirect;
+    std::array<glm::vec3, screen::kNumCones> axes;
+    if (diffuseRay) axes = screen::ConeAxes(si.N);
     glm::vec3 exactShading;
-    const bool closedForm = ClosedFormShading(c, si, bsdf, wo, &exactShading) &&
+    LightWeights weights;
+    const bool closedForm = ClosedFormShading(c, si, bsdf, wo, &exactShading, &weights) &&
                             Luminance(glm::abs(exactShading)) > 0.0f;
     FramePixel px;
     const int spp = std::max(c.opt.spp, 1);
     for (int s = 0; s < spp; ++s) {
         Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
-        FrameDirectSample(c, motion, si, bsdf, wo, closedForm ? &exactShading : nullptr, rng, px,
-                          rays);
+        FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng, px,
+                          sh, pixel, shadows);
         if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
-        if (diffuse && !cachedIndirect) FrameDiffuseSample(c, si, bsdf, wo, axes, rng, px, rays);
+        if (diffuseRay) FrameDiffuseSample(c, si, bsdf, wo, axes, rng, px, rays);
     }
     const float inv = 1.0f / float(spp);
     fb.shading[p] = px.shadingSum * inv;
-    fb.visibility[p] = px.weightSum > 0.0f ? px.visibleWeightSum / px.weightSum : 1.0f;
     if (bsdf.HasSpecular()) fb.glossy[p] = px.glossySum * inv;
     if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
-    if (px.blockerWeight >= 0.0f) {  // a sample was blocked (the ratio can be < 1 without)
-        fb.blocker[p] = px.blocker;
-        fb.prevBlocker[p] = px.prevBlocker;
-        fb.lightSample[p] = px.light;
-        fb.prevLightSample[p] = px.prevLight;
-    }
     if (bsdf.HasSpecular()) fb.glossyHit[p] = px.glossyHit, fb.prevGlossyHit[p] = px.prevGlossyHit;
     if (px.hasCones)
         for (int k = 0; k < screen::kNumCones; ++k)
             fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
+}
+
+// Frames are rendered in tiles of kTile x kTile pixels, fixed whatever the thread count (the
+// packets below are the same for any, and so is the image).
+constexpr int kTile = 8;
+constexpr int kTilePixels = kTile * kTile;
+
+/// A thread's scratch for its tiles (sized once: nothing is allocated per tile).
+struct TileScratch {
+    std::array<Ray, kTilePixels> ray;
+    std::array<RayDifferentials, kTilePixels> diff;
+    std::array<Hit, kTilePixels> hit;
+    std::array<bool, kTilePixels> found;
+    std::array<PixelShadow, kTilePixels> shadow;
+    std::vector<PendingShadow> shadows;
+};
+
+/// The tile with top-left pixel (x0, y0). Its camera rays and then its shadow rays are traced 16
+/// at a time (RenderScene::Intersect16): neighbouring pixels' camera rays share most of their
+/// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
+/// cheaper per ray for such rays than single rays.
+void RenderTile(const Context& c, const FrameMotion& motion, int x0, int y0,
+                screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
+    const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
+    int n = 0;
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x, ++n) {
+            // Pixel centre, lens centre, shutter open: exact guides (see the header).
+            const Ray r = c.camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f),
+                                            c.tsc ? &ts.diff[n] : nullptr);
+            // Field by field: copying the whole temporary stalled on store forwarding (8% of
+            // this function in the profile).
+            Ray& ray = ts.ray[n];
+            ray.org = r.org, ray.dir = r.dir;
+            ray.tnear = r.tnear, ray.tfar = r.tfar;
+            ray.time = 0.0f;
+        }
+    for (int i = 0; i < n; i += 16)
+        c.rs.Intersect16(&ts.ray[i], std::min(16, n - i), &ts.hit[i], &ts.found[i]);
+    rays.camera += uint64_t(n);
+
+    ts.shadows.clear();
+    for (int i = 0, y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x, ++i) {
+            ts.shadow[i].Reset();
+            ShadePixel(c, motion, x, y, i, ts.ray[i], c.tsc ? &ts.diff[i] : nullptr, ts.found[i],
+                       ts.hit[i], fb, ts.shadow[i], ts.shadows, rays);
+        }
+
+    // In queue order: a pixel's samples finish in their order, as if traced one by one.
+    Ray packet[16];
+    Hit hits[16];
+    bool blocked[16];
+    const size_t ns = ts.shadows.size();
+    for (size_t i = 0; i < ns; i += 16) {
+        const int m = int(std::min<size_t>(16, ns - i));
+        for (int j = 0; j < m; ++j) packet[j] = ts.shadows[i + size_t(j)].ray;
+        c.rs.Intersect16(packet, m, hits, blocked);
+        for (int j = 0; j < m; ++j) {
+            const PendingShadow& s = ts.shadows[i + size_t(j)];
+            FinishShadow(motion, s, blocked[j], hits[j], ts.shadow[s.pixel]);
+        }
+    }
+    rays.shadow += ns;
+    for (int i = 0, y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x, ++i)
+            WriteShadowBuffers(fb, size_t(y) * size_t(c.opt.width) + size_t(x), ts.shadow[i]);
 }
 
 }  // namespace
@@ -435,11 +651,14 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     fb.time = opt.frameTime;
     fb.camera = MakeFrameCamera(rs.scene().camera, opt.frameTime, W, H);
     const size_t n = fb.NumPixels();
-    // assign() keeps the capacity of a FrameBuffers reused across frames.
-    const glm::vec3 zero(0.0f);
-    fb.emitted.assign(n, zero);
-    fb.shading.assign(n, zero);
-    fb.visibility.assign(n, 1.0f);
+    // Sized only: every pixel writes all of its entries (ClearPixel), so a FrameBuffers reused
+    // across frames is neither cleared nor reallocated.
+    for (auto* v : {&fb.emitted, &fb.shading, &fb.indirect, &fb.position, &fb.normal, &fb.albedo,
+                    &fb.specular, &fb.prevPosition, &fb.prevNormal, &fb.blocker, &fb.prevBlocker,
+                    &fb.lightSample, &fb.prevLightSample})
+        v->resize(n);
+    for (auto* v : {&fb.visibility, &fb.depth, &fb.roughness}) v->resize(n);
+    fb.objectId.resize(n);
     // Only what the scene has: without a GGX material `glossy` and its hits stay empty, and the
     // stage skips that component (its motion vectors, history and a-trous channels: 17% of the
     // stage's CPU time on anim_shadow at 640x360, `texcache preview --bench --denoise reliable`).
@@ -447,39 +666,28 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     bool anyGlossy = false;
     for (const Object& o : scene.objects)
         anyGlossy |= scene.materials[size_t(o.material)].type == Material::Type::GGX;
-    fb.glossy.assign(anyGlossy ? n : 0, zero);
-    fb.indirect.assign(n, zero);
-    fb.position.assign(n, kNaN3);
-    fb.normal.assign(n, kNaN3);
-    fb.depth.assign(n, INFINITY);
-    fb.roughness.assign(n, 0.0f);
-    fb.albedo.assign(n, zero);
-    fb.specular.assign(n, zero);
-    fb.objectId.assign(n, -1);
-    fb.prevPosition.assign(n, kNaN3);
-    fb.prevNormal.assign(n, kNaN3);
-    for (auto* v : {&fb.blocker, &fb.prevBlocker, &fb.lightSample, &fb.prevLightSample})
-        v->assign(n, kNaN3);
-    for (auto* v : {&fb.glossyHit, &fb.prevGlossyHit}) v->assign(anyGlossy ? n : 0, kNaN3);
-    fb.cones.assign(n * screen::kNumCones, kNaN3);
+    for (auto* v : {&fb.glossy, &fb.glossyHit, &fb.prevGlossyHit}) v->resize(anyGlossy ? n : 0);
+    fb.cones.resize(n * screen::kNumCones);
     // Only when asked for and there is a cache to look it up in (ctx.tsc: texture shading).
     if (ctx.tsc && opt.texture.cachedVisibility && !ctx.tsc->options().cachedVisibility)
         throw InputError("frame buffers",
                          "cached visibility asked for, but the texture-space cache was built "
                          "without it (TextureSpaceOptions::cachedVisibility): it has no "
                          "visibility grids");
-    fb.cachedVisibility.assign(ctx.tsc && opt.texture.cachedVisibility ? n : 0, kNaN);
+    fb.cachedVisibility.resize(ctx.tsc && opt.texture.cachedVisibility ? n : 0);
 
+    const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;
     tbb::enumerable_thread_specific<RayCounts> counts;
-    tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 8, 0, W, 8),
-                      [&](const tbb::blocked_range2d<int>& r) {
-                          _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-                          _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-                          RayCounts& rc = counts.local();
-                          for (int y = r.rows().begin(); y < r.rows().end(); ++y)
-                              for (int x = r.cols().begin(); x < r.cols().end(); ++x)
-                                  FramePixelBuffers(ctx, motion, x, y, fb, rc);
-                      });
+    tbb::enumerable_thread_specific<TileScratch> scratch;
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, tilesX * tilesY), [&](const tbb::blocked_range<int>& r) {
+            _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+            _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+            RayCounts& rc = counts.local();
+            TileScratch& ts = scratch.local();
+            for (int t = r.begin(); t < r.end(); ++t)
+                RenderTile(ctx, motion, (t % tilesX) * kTile, (t / tilesX) * kTile, fb, ts, rc);
+        });
 
     RenderStats stats;
     for (const RayCounts& rc : counts) {

@@ -38,13 +38,15 @@
 //   consistent for coloured: the sample colours' chromaticities differ). A sample with zero
 //   shading traces no shadow ray and counts as visible (1): its product is 0 anyway, and a 1
 //   keeps the attached shadows of a surface turning away from the light from bleeding into lit
-//   pixels when the stage filters visibility. With closed-form shading, 8 light samples are
-//   taken instead of 32 and visibility is the ratio lum(their mean) * V / lum(shading), V the
+//   pixels when the stage filters visibility. With closed-form shading, 6 light samples are
+//   taken instead of 32, their lights picked in proportion to each light's closed-form term
+//   (stratified; a dim sky beside a lamp gets none; with more than 16 lights the pick stays
+//   uniform), and visibility is the ratio lum(their mean) * V / lum(shading), V the
 //   0/1 of the shadow ray resampled as above: its expectation is the shadowed over the
 //   unshadowed light (the luminance of shading * visibility is unbiased; measured, the
 //   ComposeIsUnbiased test; taking V alone was visibly biased in penumbrae, z^2 1.54 there), so
 //   it is 0 where the ray was blocked and near 1, above or below, where not; it is 0 without a
-//   shadow ray when all 8 samples fell where the BSDF is 0. With spp > 1 it is the mean of the
+//   shadow ray when all 6 samples fell where the BSDF is 0. With spp > 1 it is the mean of the
 //   samples weighted by the luminance of their shading (the ratio estimator), so shading *
 //   visibility is the mean of the shadowed samples for white light (consistent, not unbiased,
 //   for coloured light).

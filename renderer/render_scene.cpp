@@ -170,8 +170,7 @@ struct EmbreeMesh {
             // Regular patches: our bicubic evaluation, ~10x cheaper than rtcInterpolate (same
             // surface; figure from 2ad54fc, nothing times it alone: closest command `texcache
             // bench rays`).
-            float unused[3];
-            regular->Eval(c.face, c.u, c.v, P ? P : unused, du, dv);
+            regular->Eval(c.face, c.u, c.v, P, du, dv);
             return true;
         }
         if (limit) {

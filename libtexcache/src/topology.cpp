@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #include <opensubdiv/far/patchMap.h>
 #include <opensubdiv/far/patchTableFactory.h>
@@ -311,17 +312,26 @@ void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu
     BSpline(v, wv, dv);
     // Local sums: the outputs might alias the points as far as the compiler knows.
     float sp[3] = {0, 0, 0}, su[3] = {0, 0, 0}, sv[3] = {0, 0, 0};
-    for (int j = 0; j < 4; ++j)
-        for (int i = 0; i < 4; ++i) {
-            const float* cp = cv[4 * j + i];
-            const float w = wu[i] * wv[j], wdu = du[i] * wv[j], wdv = wu[i] * dv[j];
-            for (int k = 0; k < 3; ++k) {
-                sp[k] += w * cp[k];
-                su[k] += wdu * cp[k];
-                sv[k] += wdv * cp[k];
+    auto sum = [&](auto withP) {
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) {
+                const float* cp = cv[4 * j + i];
+                const float w = wu[i] * wv[j], wdu = du[i] * wv[j], wdv = wu[i] * dv[j];
+                for (int k = 0; k < 3; ++k) {
+                    if constexpr (decltype(withP)::value) sp[k] += w * cp[k];
+                    su[k] += wdu * cp[k];
+                    sv[k] += wdv * cp[k];
+                }
             }
-        }
-    for (int k = 0; k < 3; ++k) P[k] = sp[k], dPdu[k] = su[k], dPdv[k] = sv[k];
+    };
+    if (P)
+        sum(std::true_type{});
+    else
+        sum(std::false_type{});
+    for (int k = 0; k < 3; ++k) {
+        if (P) P[k] = sp[k];
+        dPdu[k] = su[k], dPdv[k] = sv[k];
+    }
 }
 
 float RegularPatches::Coverage() const {
