@@ -150,8 +150,8 @@ public:
     bool Uses(TextureFilterKind kind) const;
     /// Whether any object's filter reads more than its centre texel.
     bool AnyFootprint() const;
-    /// The visibility set for a render of width x height pixels, empty: about a quarter of a
-    /// word per pixel (see visible_texels.h), between 32 KB and 16 MB; kept from render to
+    /// The visibility set for a render of width x height pixels, empty: about two words per
+    /// pixel (see visible_texels.h), between 32 KB and 16 MB; kept from render to
     /// render and only reallocated when the size changes. With `clear` false, the marks of the
     /// previous render of this size are kept (stereo: both eyes mark one set).
     VisibleTexels& Visibility(int width, int height, bool clear = true);

@@ -44,8 +44,7 @@ constexpr int kInward[4][2] = {{0, 1}, {-1, 0}, {0, -1}, {1, 0}};
 struct Walker {
     int face, mip, res;
     float x, y;
-    int axis[2][2];       // axis[0] = footprint u direction, axis[1] = footprint v direction
-    bool scaled = false;  // crossed an edge whose two sides differ in length (quad <-> n-gon)
+    int axis[2][2];  // axis[0] = footprint u direction, axis[1] = footprint v direction
 };
 
 // Moves one texel along footprint axis `a`; false when a boundary ends the walk.
@@ -62,7 +61,6 @@ bool Step(const MeshGrids& g, int footprintMip, Walker* w, int a, int sign) {
     float u, v, scale;
     if (!g.Topology().Cross(w->face, edge, along, -inward, &nbFace, &u, &v, &nbEdge, &scale))
         return false;
-    w->scaled |= scale != 1.0f;
     float nbAlong, nbInward;
     UvToEdge(nbEdge, u, v, &nbAlong, &nbInward);
     const int mip = g.ClampMip(nbFace, footprintMip);
@@ -204,8 +202,14 @@ int KeepSymmetric(std::vector<FootprintSample>* out, int radius) {
 // When every texel the ring reaches lies on a grid of the face's size (and no edge on the way
 // joins sides of different lengths) this is the texel the centre's own walk reaches (steps continue
 // across an edge texel for texel; test PadsMatchTheWalkOnGridsOfOneSize). Where a neighbour's grid
-// is coarser or finer the centre's walk steps in the neighbour's texels, which no single pad gives
-// every window: such faces are walked per window (PadOf).
+// is coarser or finer, a walk from the centre would step in the neighbour's texels from wherever
+// it crossed, so its taps would depend on the centre; the pad's do not: a window keeps its taps at
+// their distance from the face along each axis. That makes every window of a face a read of one
+// pad, and every 8x8 block of windows one tile (ShadingCache::FilterBlock). Walking those faces
+// per window instead (commit 0074c73) kept the centre-dependent taps for an image difference of
+// relMSE 0.00004 on the car's 21x21 AO, but sent 65k of its 110k texel misses down the per-texel
+// path (FilterBlock refused their tiles): 1.18 s render against 0.89-1.06 s with the pads (car AO,
+// 640x360, 4 spp, 4 rays per sample, r = 10).
 //
 // Duplicates (two pad positions on one texel: around extraordinary vertices, faces smaller
 // than the window that the ring wraps around) are flagged when the
@@ -213,11 +217,13 @@ int KeepSymmetric(std::vector<FootprintSample>* out, int radius) {
 // wins, as before).
 //
 // Memory and threading. Each thread keeps kPadSlots pads, direct-mapped by (grids, face, mip,
-// radius), each at most kMaxPadTaps entries of 24 bytes: at most 64 x 16384 x 24 B = 24 MiB per
-// thread, allocated as pads are first built (a pad of a 16x16 grid at r = 10 takes 25 KiB); a
-// (face, mip) whose ring would be larger (a grid of 512 texels at r = 10) is walked per window.
-// The cap was 4096 first: windows of the car's 128-256 texel grids were then walked, 10% of the
-// 21x21 render's profile against 7% now (perf, 1 thread). Pads depend only on the (immutable)
+// radius), each at most kMaxPadTaps entries of 24 bytes (a grid of 2048 texels at r = 10; a pad
+// of a 16x16 grid at r = 10 takes 25 KiB), allocated as pads are first built; a (face, mip)
+// whose ring would be larger is walked per window. All of a thread's pads together hold at most
+// kMaxHeldTaps entries (24 MiB): a build that would pass it frees every pad first. The cap per
+// pad was 4096 first, then 16384: windows of the car's 512 and 1024-texel grids (its ground) at
+// r = 8..10 were then walked, and their blocks filtered texel by texel (25k of the 21x21
+// render's 110k misses). Pads depend only on the (immutable)
 // grids, tagged by MeshGrids::Id(), so they never go stale and need no locking; the visible set
 // is tested per tap through the texel's stored Probe (marks may be added between passes).
 namespace {
@@ -225,8 +231,9 @@ namespace {
 using PadTap = internal::PaddedTexel;
 constexpr uint8_t kReached = internal::PaddedTexel::kReached,
                   kDuplicate = internal::PaddedTexel::kDuplicate;
-constexpr int kPadSlots = 64;
-constexpr size_t kMaxPadTaps = 16384;
+constexpr int kPadSlots = 256;
+constexpr size_t kMaxPadTaps = size_t(1) << 17;
+constexpr size_t kMaxHeldTaps = size_t(1) << 20;  // 24 MiB of pads per thread
 
 // The ring of r texels around (face, mip). Rows below the face (y = -r..-1) and above it
 // (y = res..res+r-1) are stored whole, (res + 2r) wide; rows of the face keep their r texels on
@@ -234,8 +241,6 @@ constexpr size_t kMaxPadTaps = 16384;
 struct Pad {
     uint64_t grids = 0;
     int face = -1, mip = -1, radius = -1, res = 0;
-    bool oneSize = false;  // every texel reached lies on a grid of the face's size, and no
-                           // edge crossed on the way scales its length (quad <-> n-gon)
     std::vector<PadTap> taps;
 
     static size_t Size(int res, int r) { return size_t(4) * size_t(r) * size_t(res + r); }
@@ -252,8 +257,7 @@ struct Pad {
     }
 };
 
-void SetPadTap(const MeshGrids& g, const Walker& w, PadTap* t, bool* scaled) {
-    *scaled |= w.scaled;
+void SetPadTap(const MeshGrids& g, const Walker& w, PadTap* t) {
     const FootprintSample s = Emit(g, w, 0, 0);
     t->key = s.key.Pack();
     t->u = s.u, t->v = s.v;
@@ -292,7 +296,6 @@ void BuildPad(const MeshGrids& g, uint64_t id, int face, int mip, int radius, Pa
     const int res = g.Res(face, mip), r = radius;
     p->grids = id, p->face = face, p->mip = mip, p->radius = r, p->res = res;
     p->taps.assign(Pad::Size(res, r), PadTap{0, 0.0f, 0.0f, 0, 0, 0});
-    bool scaled = false;
     auto texel = [&](int x, int y) {
         return Walker{face, mip, res, float(x) + 0.5f, float(y) + 0.5f, {{1, 0}, {0, 1}}};
     };
@@ -301,7 +304,7 @@ void BuildPad(const MeshGrids& g, uint64_t id, int face, int mip, int radius, Pa
         for (int sign : {-1, 1}) {
             Walker w = texel(sign < 0 ? 0 : res - 1, y);
             for (int k = 1; k <= r && Step(g, mip, &w, 0, sign); ++k)
-                SetPadTap(g, w, &p->taps[p->Index(sign < 0 ? -k : res - 1 + k, y)], &scaled);
+                SetPadTap(g, w, &p->taps[p->Index(sign < 0 ? -k : res - 1 + k, y)]);
         }
     for (int x = -r; x < res + r; ++x)
         for (int sign : {-1, 1}) {
@@ -311,35 +314,35 @@ void BuildPad(const MeshGrids& g, uint64_t id, int face, int mip, int radius, Pa
             for (int k = 0; k < std::abs(x - xc) && reached; ++k)
                 reached = Step(g, mip, &w, 0, x < xc ? -1 : 1);
             for (int k = 1; reached && k <= r && Step(g, mip, &w, 1, sign); ++k)
-                SetPadTap(g, w, &p->taps[p->Index(x, sign < 0 ? -k : res - 1 + k)], &scaled);
+                SetPadTap(g, w, &p->taps[p->Index(x, sign < 0 ? -k : res - 1 + k)]);
         }
     constexpr uint64_t kFaceMipShift = 2 * TexelKey::kCoordBits;
     const TexelKey own{g.FaceOffset() + uint32_t(face), uint8_t(mip), 0, 0};
     FlagDuplicates(p, own.Pack(), ~uint64_t(0) << kFaceMipShift);
-    p->oneSize = !scaled && std::all_of(p->taps.begin(), p->taps.end(), [&](const PadTap& t) {
-        const TexelKey k = TexelKey::Unpack(t.key);
-        return !(t.flags & kReached) || g.Res(int(k.face - g.FaceOffset()), k.mip) == res;
-    });
 }
 
 // The thread's pad for (face, mip, radius), built on first use; null when the ring would exceed
-// kMaxPadTaps or reaches grids of another size (the caller walks instead: there the walk from
-// each centre steps in the neighbour's texels, which a pad cannot give every window; pads on
-// every grid changed the car's 21x21 AO relMSE from 0.01750 to 0.01754, commit 4adfa25).
-// With `anySize`, the pad also where grids of other sizes surround the face: its rows below and
-// above the face (x in 0..res-1) are still what every window's walk reaches there. A walk reaches
-// (x, y) past the lower or upper edge by stepping along u inside the face to column x, then along
-// v: it leaves the face at (x, 0) or (x, res - 1) in the state the pad's walk starts from.
-const Pad* PadOf(const MeshGrids& g, int face, int mip, int radius, bool anySize = false) {
+// kMaxPadTaps (the caller walks instead).
+const Pad* PadOf(const MeshGrids& g, int face, int mip, int radius) {
     if (Pad::Size(g.Res(face, mip), radius) > kMaxPadTaps) return nullptr;
     thread_local std::vector<Pad> pads(kPadSlots);
+    thread_local size_t heldTaps = 0;  // the capacity of all of this thread's pads
     uint64_t h = (g.Id() * 0x9E3779B97F4A7C15ull) ^
                  (uint64_t(face) << 12 | uint64_t(mip) << 6 | uint64_t(radius));
     h *= 0xBF58476D1CE4E5B9ull;
-    Pad& p = pads[size_t(h >> 58) & (kPadSlots - 1)];
-    if (p.grids != g.Id() || p.face != face || p.mip != mip || p.radius != radius)
+    Pad& p = pads[size_t(h >> 56) & (kPadSlots - 1)];
+    if (p.grids != g.Id() || p.face != face || p.mip != mip || p.radius != radius) {
+        const size_t need = Pad::Size(g.Res(face, mip), radius);
+        heldTaps -= p.taps.capacity();
+        if (heldTaps + std::max(need, p.taps.capacity()) > kMaxHeldTaps) {
+            // Over the thread's budget: give every pad's memory back (they are rebuilt on use).
+            for (Pad& q : pads) q = Pad{};
+            heldTaps = 0;
+        }
         BuildPad(g, g.Id(), face, mip, radius, &p);
-    return p.oneSize || anySize ? &p : nullptr;
+        heldTaps += p.taps.capacity();
+    }
+    return &p;
 }
 
 // A window's taps as bits: row j (dy = j - r) holds bit p for dx = p - r, in `words` 64-bit
@@ -392,54 +395,18 @@ struct DuplicateTap {
     int16_t dx, dy;
 };
 
-// The per-centre walk: for windows whose face has no pad (too large, or grids of other sizes
-// around it). Unseen taps are dropped as they are reached (a texel is seen or not whichever walk
-// reaches it, so this commutes with removing duplicates).
-//
-// With `strips` (the face's pad, of any grid sizes): a column that has not left the face along u
-// is the face's texels, then the pad's row below or above the face at that column (the pad walks
-// it from the face's edge row, where this walk passes in the same state), so only the columns
-// past the face's sides are walked. Same taps in the same order; on the car's 21x21 windows,
-// most of which reach grids of other sizes, the walk was a quarter of the render (perf).
+// The per-centre walk: for windows whose face has no pad (too large), and tests (`pads` false).
+// Unseen taps are dropped as they are reached (a texel is seen or not whichever walk reaches it,
+// so this commutes with removing duplicates).
 int WalkFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int radius,
-                  std::vector<FootprintSample>* out, const VisibleTexels* visible,
-                  const Pad* strips) {
+                  std::vector<FootprintSample>* out, const VisibleTexels* visible) {
     const int res = g.Res(face, mip);
     const Walker centre{face, mip, res, float(iu) + 0.5f, float(iv) + 0.5f, {{1, 0}, {0, 1}}};
-    const uint32_t gface = g.FaceOffset() + uint32_t(face);
     int unseen = 0;
     for (int sign : {-1, 1}) {
         Walker row = centre;
         for (int dx = (sign < 0 ? 0 : 1); dx <= radius; ++dx) {
             if (dx > 0 && !Step(g, mip, &row, 0, sign)) break;
-            const int x = iu + sign * dx;
-            if (strips && x >= 0 && x < res) {
-                for (int vs : {-1, 1})
-                    for (int dy = (vs < 0 ? 0 : 1); dy <= radius; ++dy) {
-                        const int y = iv + vs * dy;
-                        FootprintSample t;
-                        t.dx = int16_t(sign * dx), t.dy = int16_t(vs * dy);
-                        if (y >= 0 && y < res) {
-                            t.key = {gface, uint8_t(mip), uint16_t(x), uint16_t(y)};
-                            t.u = TexelCenter(x, res), t.v = TexelCenter(y, res);
-                            if (visible && (dx | dy) != 0 && !visible->Contains(t.key)) {
-                                ++unseen;
-                                continue;
-                            }
-                        } else {
-                            const PadTap& p = strips->taps[strips->Index(x, y)];
-                            if (!(p.flags & kReached)) break;  // a boundary ended the walk
-                            if (visible && !visible->ContainsAt(p.probe, uint64_t(1) << p.bit)) {
-                                ++unseen;
-                                continue;
-                            }
-                            t.key = TexelKey::Unpack(p.key);
-                            t.u = p.u, t.v = p.v;
-                        }
-                        out->push_back(t);
-                    }
-                continue;
-            }
             for (int vs : {-1, 1}) {
                 Walker col = row;
                 for (int dy = (vs < 0 ? 0 : 1); dy <= radius; ++dy) {
@@ -463,8 +430,8 @@ int WalkFootprint(const MeshGrids& g, int face, int mip, int iu, int iv, int rad
 }  // namespace
 
 const internal::PaddedTexel* internal::PaddedRun(const MeshGrids& g, int face, int mip, int radius,
-                                                 int x, int y, bool anySize) {
-    const Pad* p = PadOf(g, face, mip, radius, anySize);
+                                                 int x, int y) {
+    const Pad* p = PadOf(g, face, mip, radius);
     return p ? &p->taps[p->Index(x, y)] : nullptr;
 }
 
@@ -506,10 +473,7 @@ int internal::GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int
         }
         return 0;
     }
-    // A window whose columns stay on the face reads only the pad's rows below and above it,
-    // which hold what the walk reaches whatever the grids around (see PadOf).
-    const bool columnsInside = iu - radius >= 0 && iu + radius < res;
-    const Pad* pad = inside || !pads ? nullptr : PadOf(g, face, mip, radius, columnsInside);
+    const Pad* pad = inside || !pads ? nullptr : PadOf(g, face, mip, radius);
     if (inside || pad) {
         thread_local WindowBits taps, kept;
         thread_local std::vector<DuplicateTap> duplicates;
@@ -616,8 +580,7 @@ int internal::GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int
         out->resize(size_t(o - out->data()));
         return visible ? unseen : 0;
     }
-    unseen = WalkFootprint(g, face, mip, iu, iv, radius, out, visible,
-                           pads ? PadOf(g, face, mip, radius, /*anySize=*/true) : nullptr);
+    unseen = WalkFootprint(g, face, mip, iu, iv, radius, out, visible);
     return visible ? unseen + (symmetric ? KeepSymmetric(out, radius) : 0) : 0;
 }
 

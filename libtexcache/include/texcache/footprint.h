@@ -80,14 +80,17 @@ struct FootprintSample {
 
 /// Collects the footprint of radius r around texel (face, mip, iu, iv) into `out` (cleared
 /// first; reuse the vector to avoid allocation). Faces are the mesh's local Ptex ids; keys carry
-/// global ids. Policy: a sample at offset (dx, dy) is reached by walking dx texels along u, then
-/// dy texels along the (possibly rotated) v axis, one texel at a time; crossing an edge lands in
-/// the first texel row of the neighbour, whose frame is turned to continue the same direction.
-/// Boundary and non-manifold edges end the walk (that sample is left out). Around extraordinary
-/// vertices two walks can reach the same texel; each sample is returned once (the walk with the
-/// smallest |dx| + |dy|). Where the neighbourhood's grids have the face's size, the walks are
-/// read from the face's pad (built once per thread, face, mip and radius: see footprint.cpp for
-/// its memory bound) instead of walked per window, with the same result. With `visible`, only
+/// global ids. Policy: the window is the (2r+1)^2 block of the face's grid around the texel,
+/// continued past the face's edges by its pad: position (x, y) outside the face is the texel
+/// reached from the nearest face texel by walking along u first, then along the (possibly
+/// rotated) v axis, one texel at a time; crossing an edge lands in the first texel row of the
+/// neighbour, whose frame is turned to continue the same direction. With neighbours of the face's
+/// grid size that is the texel a walk from the centre reaches; with coarser or finer neighbours
+/// taps keep their distance from the face along each axis, whatever the centre. Boundary and
+/// non-manifold edges end the walk (that sample is left out). Around extraordinary vertices two
+/// positions can hold the same texel; each sample is returned once (at the smallest |dx| + |dy|).
+/// Pads are built once per thread, face, mip and radius (see footprint.cpp for their memory
+/// bound); faces too large for one are walked from each centre. With `visible`, only
 /// the samples it contains are returned (and the centre, always), and with `symmetric` only
 /// those whose mirrored offset (-dx, -dy) is returned too (see visible_texels.h): the return
 /// value is how many it left out.
@@ -108,11 +111,9 @@ struct PaddedTexel {
 };
 /// The pad texel at (x, y) of (face, mip)'s grid, a position outside the face within `radius`
 /// of it; the next positions of row y follow while x stays on the same side of the face. Null
-/// when the face has no pad at this radius (too large, or grids of other sizes around it, unless
-/// `anySize`: then only positions below and above the face, x in 0..res-1, are a window's taps).
-/// Valid until this thread's next call (or GatherFootprint) for another face.
-const PaddedTexel* PaddedRun(const MeshGrids& g, int face, int mip, int radius, int x, int y,
-                             bool anySize = false);
+/// when the face has no pad at this radius (too large). Valid until this thread's next call (or
+/// GatherFootprint) for another face.
+const PaddedTexel* PaddedRun(const MeshGrids& g, int face, int mip, int radius, int x, int y);
 
 /// GatherFootprint, with `pads` false walking every window from its centre (what faces without a
 /// pad get): for tests comparing the two.

@@ -574,10 +574,7 @@ private:
             const int x0 = xlo - radius, y0 = ylo - radius;
             const int w = xhi - xlo + 1 + 2 * radius, h = yhi - ylo + 1 + 2 * radius;
             const bool padded = x0 < 0 || y0 < 0 || x0 + w > res || y0 + h > res;
-            // Columns on the face take the pad's rows below and above it whatever the grids
-            // around (footprint.h); past its sides only a pad of one grid size is every window's.
-            const bool anySize = x0 >= 0 && x0 + w <= res;
-            if (padded && (w > 64 || !internal::PaddedRun(g, face, mip, radius, -1, -1, anySize)))
+            if (padded && (w > 64 || !internal::PaddedRun(g, face, mip, radius, -1, -1)))
                 return false;
             thread_local std::vector<FootprintSample> taps;
             thread_local std::vector<Sample> values, tile;
@@ -593,8 +590,15 @@ private:
             reversed.assign(size_t(h), 0);
             duplicates.assign(size_t(h), 0);
             bool anyDuplicate = false;
-            auto add = [&](const TexelKey& key, float u, float v, int tx, int ty) {
-                taps.push_back({key, 0, 0, u, v});
+            // Taps are written field by field in place: a FootprintSample built on the stack from
+            // narrow stores and copied out with wide loads stalled on store forwarding (half of
+            // this function's time in perf annotate, car AO 21x21), and so did a key updated
+            // field by field and then read whole.
+            auto add = [&](uint32_t kface, uint8_t kmip, uint16_t kiu, uint16_t kiv, float u,
+                           float v, int tx, int ty) {
+                FootprintSample& s = taps.emplace_back();
+                s.key.face = kface, s.key.mip = kmip, s.key.iu = kiu, s.key.iv = kiv;
+                s.dx = 0, s.dy = 0, s.u = u, s.v = v;
                 at.push_back(ty * w + tx);
                 seen[size_t(ty * w + tx)] = 1;
                 if (bits) {
@@ -605,12 +609,13 @@ private:
             // The tile's visible texels: inside the face a word of the visible set per 8 texels
             // of a row, outside it the pad's texels, each with its stored probe.
             const float inv = 1.0f / float(res);  // exact: res is a power of two
-            TexelKey k = centre.key;
+            const uint32_t gface = centre.key.face;
+            const uint8_t gmip = centre.key.mip;
             for (int y = y0; y < y0 + h; ++y) {
                 const int ty = y - y0;
                 auto padRun = [&](int xa, int xb) {
                     const internal::PaddedTexel* p =
-                        internal::PaddedRun(g, face, mip, radius, xa, y, anySize);
+                        internal::PaddedRun(g, face, mip, radius, xa, y);
                     for (int x = xa; x <= xb; ++x, ++p) {
                         if (!(p->flags & internal::PaddedTexel::kReached) ||
                             !visible_->ContainsAt(p->probe, uint64_t(1) << p->bit))
@@ -619,7 +624,8 @@ private:
                             duplicates[size_t(ty)] |= uint64_t(1) << (x - x0);
                             anyDuplicate = true;
                         }
-                        add(TexelKey::Unpack(p->key), p->u, p->v, x - x0, ty);
+                        const TexelKey pk = TexelKey::Unpack(p->key);
+                        add(pk.face, pk.mip, pk.iu, pk.iv, p->u, p->v, x - x0, ty);
                     }
                 };
                 if (y < 0 || y >= res) {
@@ -628,16 +634,15 @@ private:
                 }
                 if (x0 < 0) padRun(x0, -1);
                 const int a = std::max(x0, 0), b = std::min(x0 + w - 1, res - 1);
-                k.iv = uint16_t(y);
                 for (int blk = a >> 3; blk <= b >> 3; ++blk) {
-                    k.iu = uint16_t(blk << 3);
-                    uint32_t m = uint32_t(visible_->BlockBits(k) >> ((y & 7) * 8)) & 0xFFu;
+                    const TexelKey bk{gface, gmip, uint16_t(blk << 3), uint16_t(y)};
+                    uint32_t m = uint32_t(visible_->BlockBits(bk) >> ((y & 7) * 8)) & 0xFFu;
                     const int lo = std::max(a - (blk << 3), 0), hi = std::min(b - (blk << 3), 7);
                     m &= (0xFFu << lo) & (0xFFu >> (7 - hi));
                     for (; m; m &= m - 1) {
                         const int x = (blk << 3) + std::countr_zero(m);
-                        k.iu = uint16_t(x);
-                        add(k, (float(x) + 0.5f) * inv, (float(y) + 0.5f) * inv, x - x0, ty);
+                        add(gface, gmip, uint16_t(x), uint16_t(y), (float(x) + 0.5f) * inv,
+                            (float(y) + 0.5f) * inv, x - x0, ty);
                     }
                 }
                 if (x0 + w - 1 >= res) padRun(res, x0 + w - 1);
@@ -662,13 +667,12 @@ private:
                                        bits ? rows.data() : nullptr,
                                        bits ? reversed.data() : nullptr};
             const auto reconstruct = internal::PrepareTile(filter, t, radius);
-            k = centre.key;
             for (int y = ylo; y <= yhi; ++y)
                 for (int x = xlo; x <= xhi; ++x) {
                     if ((x == iu && y == iv) || !seen[size_t((y - y0) * w + (x - x0))] ||
                         !single(x - x0, y - y0))
                         continue;
-                    k.iu = uint16_t(x), k.iv = uint16_t(y);
+                    const TexelKey k{gface, gmip, uint16_t(x), uint16_t(y)};
                     const uint64_t key = k.Pack(), hash = Hash(k);
                     Texel texel;
                     SlotTicket ticket;

@@ -20,7 +20,7 @@
 // every test, so relaxed atomics are enough. Blocks that hash to the same word share it: a test
 // may then answer "visible" for a texel that is not (a false positive: that tap is shaded, as
 // without the set), never the reverse. So the table's size is a memory bound, not a correctness
-// one (the renderer gives a quarter of a word per pixel; a test bounds the false positives).
+// one (the renderer gives two words per pixel; a test bounds the false positives).
 // A footprint's taps fall in a handful of blocks, so a test touches few cache lines.
 #pragma once
 #include <algorithm>
