@@ -73,7 +73,9 @@ struct CacheStats {
     uint64_t sampleLookups = 0, sampleHits = 0, samplesShaded = 0, sampleEvictions = 0;
     uint64_t deferrals = 0, waits = 0, samplesUncached = 0;
     uint64_t sampleMemoHits = 0;  ///< sample hits served by the thread's tap memo (see Filter)
-    uint64_t tapsUnseen = 0;      ///< footprint taps left out as not visible (RestrictFootprints)
+    /// Footprint taps left out as not visible (RestrictFootprints): per window on the per-texel
+    /// path, per tile (the union of a block's windows) on the block path.
+    uint64_t tapsUnseen = 0;
     uint64_t texelsPrefiltered = 0;  ///< texels a miss reconstructed besides its own (SampleTile)
 
     void Merge(const CacheStats& o) {
@@ -550,12 +552,15 @@ private:
     // testing each window's taps again per texel was most of a 21x21 render (perf, car AO,
     // `texcache experiment filter-size`). The tile is at most (8 + 2r)^2 samples per thread
     // (r = 10: 784, 28 KiB with ShadedSample). Past the face's edges the tile reads the face's
-    // pad, which gives every window there the taps GatherFootprint gives it, except windows
-    // holding a texel twice (they take the per-texel path). Texels are reconstructed from the
-    // samples they would have been filtered with, so their values are the per-texel path's.
+    // pad, which gives every window there the taps GatherFootprint gives it; a window holding a
+    // texel twice (around extraordinary vertices, beside coarser grids) drops the positions
+    // GatherFootprint drops from its own copy of the tile's bit rows. (It took the per-texel
+    // path before, after its tile was built: 18k of the 40k misses of the car's 21x21 AO once
+    // pads covered grids of every size.) Texels are reconstructed from the samples they would
+    // have been filtered with, so their values are the per-texel path's.
     // False when the block path does not apply to the centre: no tile overload, no visible set,
-    // reference mode, an unseen centre, a window holding a texel twice, or a tile past the
-    // face's edges that is wider than 64 texels or whose face is too large for a pad.
+    // reference mode, an unseen centre, or a tile past the face's edges that is wider than 64
+    // texels or whose face is too large for a pad.
     template <typename ShadeFn, typename FilterFn>
     bool FilterBlock(const SampleRequest& centre, int radius, ShadeFn& shade, FilterFn& filter,
                      CacheStats& st, FootprintTaps keep, Texel* out) {
@@ -581,8 +586,10 @@ private:
             thread_local std::vector<uint8_t> seen;
             thread_local std::vector<int> at;
             thread_local std::vector<uint64_t> rows, reversed, duplicates;
+            thread_local std::vector<int> flagged;  // taps that may hold a texel twice
             taps.clear();
             at.clear();
+            flagged.clear();
             seen.assign(size_t(w) * size_t(h), 0);
             tile.resize(seen.size());
             const bool bits = w <= 64;
@@ -617,11 +624,14 @@ private:
                     const internal::PaddedTexel* p =
                         internal::PaddedRun(g, face, mip, radius, xa, y);
                     for (int x = xa; x <= xb; ++x, ++p) {
-                        if (!(p->flags & internal::PaddedTexel::kReached) ||
-                            !visible_->ContainsAt(p->probe, uint64_t(1) << p->bit))
+                        if (!(p->flags & internal::PaddedTexel::kReached)) continue;
+                        if (!visible_->ContainsAt(p->probe, uint64_t(1) << p->bit)) {
+                            ++st.tapsUnseen;
                             continue;
+                        }
                         if (p->flags & internal::PaddedTexel::kDuplicate) {
                             duplicates[size_t(ty)] |= uint64_t(1) << (x - x0);
+                            flagged.push_back(int(taps.size()));
                             anyDuplicate = true;
                         }
                         const TexelKey pk = TexelKey::Unpack(p->key);
@@ -639,6 +649,7 @@ private:
                     uint32_t m = uint32_t(visible_->BlockBits(bk) >> ((y & 7) * 8)) & 0xFFu;
                     const int lo = std::max(a - (blk << 3), 0), hi = std::min(b - (blk << 3), 7);
                     m &= (0xFFu << lo) & (0xFFu >> (7 - hi));
+                    st.tapsUnseen += uint64_t(hi - lo + 1 - std::popcount(m));
                     for (; m; m &= m - 1) {
                         const int x = (blk << 3) + std::countr_zero(m);
                         add(gface, gmip, uint16_t(x), uint16_t(y), (float(x) + 0.5f) * inv,
@@ -647,8 +658,8 @@ private:
                 }
                 if (x0 + w - 1 >= res) padRun(res, x0 + w - 1);
             }
-            // A window holding a texel twice keeps the closest (GatherFootprint): those texels
-            // take the per-texel path.
+            // A window holding a texel twice keeps it at one position, the closest
+            // (GatherFootprint): such windows are reconstructed from bit rows of their own.
             const uint64_t window =
                 2 * radius + 1 >= 64 ? ~uint64_t(0) : (uint64_t(1) << (2 * radius + 1)) - 1;
             auto single = [&](int tx, int ty) {
@@ -666,12 +677,70 @@ private:
                                        keep == FootprintTaps::VisibleSymmetric,
                                        bits ? rows.data() : nullptr,
                                        bits ? reversed.data() : nullptr};
-            const auto reconstruct = internal::PrepareTile(filter, t, radius);
+            const auto prepared = internal::PrepareTile(filter, t, radius);
+            // A window holding a texel twice (`single` false): the tile with the positions
+            // that lose removed from this window's copy of the bit rows, as GatherFootprint
+            // removes them (per texel the smallest |dx| + |dy|, then dx, then dy; a texel of
+            // the face that the ring wrapped around to is a candidate at its own position too).
+            thread_local std::vector<uint64_t> ownRows, ownReversed;
+            thread_local std::vector<uint8_t> ownSeen;
+            struct Candidate {
+                uint64_t key;
+                int dx, dy;
+            };
+            thread_local std::vector<Candidate> candidates;
+            auto deduplicated = [&](int tx, int ty, const SampleRequest& texel) {
+                candidates.clear();
+                auto inWindow = [&](int dx, int dy) {
+                    return std::abs(dx) <= radius && std::abs(dy) <= radius;
+                };
+                for (const int i : flagged) {
+                    const int dx = at[size_t(i)] % w - tx, dy = at[size_t(i)] / w - ty;
+                    if (!inWindow(dx, dy)) continue;
+                    const TexelKey k = taps[size_t(i)].key;
+                    candidates.push_back({k.Pack(), dx, dy});
+                    if (k.face != gface || k.mip != gmip) continue;
+                    const int qx = int(k.iu) - x0, qy = int(k.iv) - y0;  // its twin on the face
+                    if (inWindow(qx - tx, qy - ty) && seen[size_t(qy * w + qx)])
+                        candidates.push_back({k.Pack(), qx - tx, qy - ty});
+                }
+                std::sort(candidates.begin(), candidates.end(),
+                          [](const Candidate& p, const Candidate& q) {
+                              if (p.key != q.key) return p.key < q.key;
+                              const int dp = std::abs(p.dx) + std::abs(p.dy),
+                                        dq = std::abs(q.dx) + std::abs(q.dy);
+                              if (dp != dq) return dp < dq;
+                              return p.dx != q.dx ? p.dx < q.dx : p.dy < q.dy;
+                          });
+                ownRows.assign(rows.begin(), rows.end());
+                ownReversed.assign(reversed.begin(), reversed.end());
+                ownSeen.assign(seen.begin(), seen.end());
+                for (size_t i = 1, winner = 0; i < candidates.size(); ++i) {
+                    const Candidate &c = candidates[i], &best = candidates[winner];
+                    if (c.key != best.key) {
+                        winner = i;
+                    } else if (c.dx != best.dx || c.dy != best.dy) {
+                        const int x = tx + c.dx, y = ty + c.dy;
+                        ownRows[size_t(y)] &= ~(uint64_t(1) << x);
+                        ownReversed[size_t(y)] &= ~(uint64_t(1) << (w - 1 - x));
+                        ownSeen[size_t(y * w + x)] = 0;
+                    }
+                }
+                const SampleTile<Sample> own{w,
+                                             h,
+                                             tile.data(),
+                                             ownSeen.data(),
+                                             t.symmetric,
+                                             ownRows.data(),
+                                             ownReversed.data()};
+                return filter(own, tx, ty, radius, texel);
+            };
+            auto reconstruct = [&](int tx, int ty, const SampleRequest& texel) {
+                return single(tx, ty) ? prepared(tx, ty, texel) : deduplicated(tx, ty, texel);
+            };
             for (int y = ylo; y <= yhi; ++y)
                 for (int x = xlo; x <= xhi; ++x) {
-                    if ((x == iu && y == iv) || !seen[size_t((y - y0) * w + (x - x0))] ||
-                        !single(x - x0, y - y0))
-                        continue;
+                    if ((x == iu && y == iv) || !seen[size_t((y - y0) * w + (x - x0))]) continue;
                     const TexelKey k{gface, gmip, uint16_t(x), uint16_t(y)};
                     const uint64_t key = k.Pack(), hash = Hash(k);
                     Texel texel;
@@ -683,7 +752,6 @@ private:
                     texels_->Publish(ticket, reconstruct(x - x0, y - y0, r));
                     ++st.texelsPrefiltered;
                 }
-            if (!single(iu - x0, iv - y0)) return false;
             *out = reconstruct(iu - x0, iv - y0, centre);
             return true;
         }
