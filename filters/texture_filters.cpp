@@ -34,8 +34,8 @@ std::string TextureFilterNames() {
 NormalWeightedFilter::Tile NormalWeightedFilter::Prepare(const SampleTile<ShadedSample>& t,
                                                          int radius) const {
     Tile tile(*this, t, radius);
-    // Gaussian weights differ per tap, and tiles wider than 64 texels have no bit rows.
-    if (sigma > 0.0f || !t.rows || !t.reversed || t.w > 64) return tile;
+    // Tiles wider than 64 texels have no bit rows.
+    if (!t.rows || !t.reversed || t.w > 64) return tile;
     // The least d (see Tile) that passes: 2 d^2 - 1 > cosThreshold + 1e-3, d > 0 (NaN: none).
     const float need = std::sqrt(0.5f * (cosThreshold + 1e-3f + 1.0f));
     if (!(need >= 0.0f && need < 1.0f)) return tile;
@@ -64,7 +64,21 @@ NormalWeightedFilter::Tile NormalWeightedFilter::Prepare(const SampleTile<Shaded
                 return tile;
     tile.smooth_ = true;
     tile.finite_ = finite.data();
+    if (sigma > 0.0f) tile.weights_ = GaussianWeights(2 * radius * radius);
     return tile;
+}
+
+const float* NormalWeightedFilter::GaussianWeights(int reach) const {
+    thread_local std::vector<float> table;
+    thread_local float tableSigma = 0.0f;
+    if (sigma != tableSigma || size_t(reach) >= table.size()) {
+        const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
+        table.resize(std::max(table.size(), size_t(reach) + 1));
+        for (size_t d2 = 0; d2 < table.size(); ++d2)
+            table[d2] = std::exp(-float(int(d2)) * inv2s2);
+        tableSigma = sigma;
+    }
+    return table.data();
 }
 
 namespace {

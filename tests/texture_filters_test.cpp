@@ -346,8 +346,9 @@ TEST(NormalWeightedFilter, TileFormEqualsFootprintForm) {
 // same finite taps summed in the same order; the stated tolerance is 0), whether its windows skip
 // the normal test (smooth tiles) or take it: radius 0, 3 and 10, windows at the tile's borders,
 // NaN and inf values (and finite components whose sum overflows), a non-finite centre, unseen
-// taps, NaN and non-unit normals, creases (normals 40 degrees apart), Gaussian weights, and a
-// spread of normals just inside the bound (+-8 degrees: any two within 23, cos 0.92).
+// taps, NaN and non-unit normals, creases (normals 40 degrees apart), Gaussian weights (smooth
+// tiles too), and a spread of normals just inside the bound (+-8 degrees: any two within 23,
+// cos 0.92).
 TEST(NormalWeightedFilter, PreparedTileEqualsTileForm) {
     std::mt19937 rng(5);
     int smooth = 0, tested = 0, compared = 0;
@@ -376,7 +377,8 @@ TEST(NormalWeightedFilter, PreparedTileEqualsTileForm) {
                 const SampleTile<ShadedSample> t = tile.View(symmetric, true);
                 const NormalWeightedFilter::Tile prepared = filter.Prepare(t, R);
                 ++tested, smooth += prepared.Smooth();
-                EXPECT_EQ(prepared.Smooth(), variant <= 2) << "variant " << variant << " r " << R;
+                EXPECT_EQ(prepared.Smooth(), variant <= 2 || variant == 6)
+                    << "variant " << variant << " r " << R;
                 for (int cy = R; cy < tile.h - R; ++cy)
                     for (int cx = R; cx < tile.w - R; ++cx) {
                         if (!tile.seen[size_t(cy * tile.w + cx)]) continue;
@@ -390,6 +392,21 @@ TEST(NormalWeightedFilter, PreparedTileEqualsTileForm) {
     EXPECT_GT(smooth, 0);
     EXPECT_LT(smooth, tested);
     EXPECT_GT(compared, 1000);
+}
+
+// The Gaussian weight table holds, for every squared offset, the weight the filter computed per
+// tap before it (exact: the same float expression), whether it was built for this reach, grown
+// from a smaller one, or rebuilt after another sigma.
+TEST(NormalWeightedFilter, GaussianWeightTableIsThePerTapWeight) {
+    for (float sigma : {0.5f, 3.0f, 5.5f, 0.5f}) {
+        const NormalWeightedFilter f{0.9f, sigma};
+        const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
+        for (int reach : {2, 200, 50}) {
+            const float* w = f.GaussianWeights(reach);
+            for (int d2 = 0; d2 <= reach; ++d2)
+                ASSERT_EQ(w[d2], std::exp(-float(d2) * inv2s2)) << "sigma " << sigma << " d2 " << d2;
+        }
+    }
 }
 
 // Soft shadows: the blur follows the occluder slope. A contact shadow (tiny blur radius) keeps
