@@ -74,8 +74,7 @@ const float* NormalWeightedFilter::GaussianWeights(int reach) const {
     if (sigma != tableSigma || size_t(reach) >= table.size()) {
         const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
         table.resize(std::max(table.size(), size_t(reach) + 1));
-        for (size_t d2 = 0; d2 < table.size(); ++d2)
-            table[d2] = std::exp(-float(int(d2)) * inv2s2);
+        for (size_t d2 = 0; d2 < table.size(); ++d2) table[d2] = std::exp(-float(int(d2)) * inv2s2);
         tableSigma = sigma;
     }
     return table.data();

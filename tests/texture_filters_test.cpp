@@ -404,7 +404,8 @@ TEST(NormalWeightedFilter, GaussianWeightTableIsThePerTapWeight) {
         for (int reach : {2, 200, 50}) {
             const float* w = f.GaussianWeights(reach);
             for (int d2 = 0; d2 <= reach; ++d2)
-                ASSERT_EQ(w[d2], std::exp(-float(d2) * inv2s2)) << "sigma " << sigma << " d2 " << d2;
+                ASSERT_EQ(w[d2], std::exp(-float(d2) * inv2s2))
+                    << "sigma " << sigma << " d2 " << d2;
         }
     }
 }
