@@ -152,6 +152,7 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
         json += buf;
     };
     add("seconds", s.seconds);
+    add("cpu_seconds", s.cpuSeconds);  // all threads: on a shared machine, the figure to compare
     add("spp", s.sppDone);
     add("rays", double(s.TotalRays()));
     add("lookups", double(c.lookups));
@@ -167,6 +168,7 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     add("samples_uncached", double(c.samplesUncached));
     add("sample_memo_hits", double(c.sampleMemoHits));
     add("taps_unseen", double(c.tapsUnseen));
+    add("texels_prefiltered", double(c.texelsPrefiltered));
     add("deferrals", double(c.deferrals));
     add("waits", double(c.waits));
     add("reference_mode", opt.texture.cache.referenceMode ? 1.0 : 0.0);
