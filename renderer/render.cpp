@@ -537,7 +537,8 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         // The pass count saturates: a wrap to 0 would repeat pass 0's random numbers.
         const bool newPass = progressive && done > opt.firstSample && c.tsc->Pass() < UINT32_MAX;
         if (newPass) c.tsc->BeginPass(c.tsc->Pass() + 1);
-        passTexels.cacheEmptied = newPass;
+        // Nothing to find in a cache emptied by this pass or not used since it was emptied.
+        passTexels.cacheEmptied = newPass || !c.tsc || !c.tsc->MayHoldTexels();
         if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
@@ -556,6 +557,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             }
             pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
         });
+        if (c.tsc && opt.visibilityPrepass != VisibilityPrepass::Only) c.tsc->NoteLookups();
         done = s1;
         if (opt.seconds > 0.0f) {
             const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();

@@ -103,6 +103,7 @@ bool TextureSpaceCache::FindNeighbourTexel(const SampleRequest& t, glm::vec3* va
 void TextureSpaceCache::BeginFrame(uint32_t frame) {
     frame_ = frame;
     cache_.InvalidateAll();
+    mayHoldTexels_ = false;
     pass_ = 0;
     passRadiusOf_ = radiusOf_;
 }
@@ -113,7 +114,10 @@ int TextureSpaceCache::PassRadius(int radius, uint32_t pass) {
 }
 
 void TextureSpaceCache::BeginPass(uint32_t pass) {
-    if (pass != pass_) cache_.InvalidateAll();
+    if (pass != pass_) {
+        cache_.InvalidateAll();
+        mayHoldTexels_ = false;
+    }
     pass_ = pass;
     passRadiusOf_.resize(radiusOf_.size());
     for (size_t o = 0; o < radiusOf_.size(); ++o) passRadiusOf_[o] = PassRadius(radiusOf_[o], pass);
@@ -193,6 +197,7 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
     frame_ = 0;
     pass_ = 0;
     cache_.InvalidateAll();
+    mayHoldTexels_ = false;
     return true;
 }
 

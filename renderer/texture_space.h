@@ -116,7 +116,16 @@ public:
     /// filtering anew; such a lookup counts as a texel hit. Never while lookups run.
     void ReuseNeighbourTexels(bool on) { neighbourReuse_ = on; }
     /// Evicts every sample and texel (not the temporal history): the next lookups shade anew.
-    void Invalidate() { cache_.InvalidateAll(); }
+    void Invalidate() {
+        cache_.InvalidateAll();
+        mayHoldTexels_ = false;
+    }
+    /// False when no lookups ran since the caches were last emptied: a renderer may then skip
+    /// asking for texels it knows cannot be there (the visibility prepass of a first pass would
+    /// otherwise probe the empty texel table once per camera sample). Renderers call
+    /// NoteLookups() after lookups; forgetting it only costs those probes.
+    bool MayHoldTexels() const { return mayHoldTexels_; }
+    void NoteLookups() { mayHoldTexels_ = true; }
 
     /// Starts pass `pass` of a progressive render (see the note at the top): evicts every
     /// sample and texel unless `pass` is the current one, and sets the filter radii of the pass.
@@ -208,6 +217,7 @@ private:
     std::vector<internal::PassTexel> passTexels_;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
+    bool mayHoldTexels_ = false;  ///< see MayHoldTexels
     bool neighbourReuse_ = false;
 };
 
