@@ -720,7 +720,7 @@ TEST(ShadingCache, BlockReconstructionGivesThePerTexelValues) {
         perTexel.RestrictFootprints(&vis);
         blocks.RestrictFootprints(&vis);
         for (FootprintTaps taps : {FootprintTaps::VisibleSymmetric, FootprintTaps::Visible})
-            for (int radius : {2, 6}) {
+            for (int radius : {2, 6, 26}) {  // 26: 8x8 blocks (16x16 tiles would pass 64 bits)
                 perTexel.InvalidateAll();
                 blocks.InvalidateAll();
                 shadedA.clear();
