@@ -389,11 +389,7 @@ constexpr auto kBitCount = [] {
     return n;
 }();
 
-// A tap that may be another position's texel too (see FlagDuplicates).
-struct DuplicateTap {
-    uint64_t key;
-    int16_t dx, dy;
-};
+using internal::DuplicateTap;
 
 // The per-centre walk: for windows whose face has no pad (too large), and tests (`pads` false).
 // Unseen taps are dropped as they are reached (a texel is seen or not whichever walk reaches it,
@@ -532,21 +528,8 @@ int internal::GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int
                     std::abs(dy) <= radius && taps.Test(dy + radius, dx + radius))
                     duplicates.push_back({duplicates[i].key, int16_t(dx), int16_t(dy)});
             }
-            // Per texel, the closest position wins (as in RemoveDuplicateTexels).
-            std::sort(duplicates.begin(), duplicates.end(), [](const auto& p, const auto& q) {
-                if (p.key != q.key) return p.key < q.key;
-                const int dp = std::abs(p.dx) + std::abs(p.dy),
-                          dq = std::abs(q.dx) + std::abs(q.dy);
-                if (dp != dq) return dp < dq;
-                return p.dx != q.dx ? p.dx < q.dx : p.dy < q.dy;
-            });
-            for (size_t i = 1, winner = 0; i < duplicates.size(); ++i) {
-                const DuplicateTap &d = duplicates[i], &w = duplicates[winner];
-                if (d.key != w.key)
-                    winner = i;
-                else if (d.dx != w.dx || d.dy != w.dy)
-                    taps.Unset(d.dy + radius, d.dx + radius);
-            }
+            internal::ForEachLosingDuplicate(
+                &duplicates, [&](int dx, int dy) { taps.Unset(dy + radius, dx + radius); });
         }
         const WindowBits* keep = &taps;
         if (visible && symmetric) {

@@ -4,6 +4,7 @@
 #pragma once
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
 #include <vector>
 
@@ -114,6 +115,32 @@ struct PaddedTexel {
 /// when the face has no pad at this radius (too large). Valid until this thread's next call (or
 /// GatherFootprint) for another face.
 const PaddedTexel* PaddedRun(const MeshGrids& g, int face, int mip, int radius, int x, int y);
+
+/// A window position that may hold the same texel as another position of the window.
+struct DuplicateTap {
+    uint64_t key;  ///< packed TexelKey
+    int16_t dx, dy;
+};
+/// Sorts `taps` and calls lose(dx, dy) for every position whose texel another position holds
+/// too and wins: per texel the smallest |dx| + |dy|, then the smaller dx, then dy (as
+/// RemoveDuplicateTexels keeps the closest walk). GatherFootprint and block reconstruction
+/// (ShadingCache::FilterBlock) both drop duplicates this way, so they keep the same taps.
+template <typename LoseFn>
+void ForEachLosingDuplicate(std::vector<DuplicateTap>* taps, LoseFn&& lose) {
+    std::sort(taps->begin(), taps->end(), [](const DuplicateTap& p, const DuplicateTap& q) {
+        if (p.key != q.key) return p.key < q.key;
+        const int dp = std::abs(p.dx) + std::abs(p.dy), dq = std::abs(q.dx) + std::abs(q.dy);
+        if (dp != dq) return dp < dq;
+        return p.dx != q.dx ? p.dx < q.dx : p.dy < q.dy;
+    });
+    for (size_t i = 1, winner = 0; i < taps->size(); ++i) {
+        const DuplicateTap &d = (*taps)[i], &w = (*taps)[winner];
+        if (d.key != w.key)
+            winner = i;
+        else if (d.dx != w.dx || d.dy != w.dy)
+            lose(int(d.dx), int(d.dy));
+    }
+}
 
 /// GatherFootprint, with `pads` false walking every window from its centre (what faces without a
 /// pad get): for tests comparing the two.

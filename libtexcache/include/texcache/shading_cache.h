@@ -688,11 +688,7 @@ private:
             // the face that the ring wrapped around to is a candidate at its own position too).
             thread_local std::vector<uint64_t> ownRows, ownReversed;
             thread_local std::vector<uint8_t> ownSeen;
-            struct Candidate {
-                uint64_t key;
-                int dx, dy;
-            };
-            thread_local std::vector<Candidate> candidates;
+            thread_local std::vector<internal::DuplicateTap> candidates;
             auto deduplicated = [&](int tx, int ty, const SampleRequest& texel) {
                 candidates.clear();
                 auto inWindow = [&](int dx, int dy) {
@@ -702,34 +698,21 @@ private:
                     const int dx = at[size_t(i)] % w - tx, dy = at[size_t(i)] / w - ty;
                     if (!inWindow(dx, dy)) continue;
                     const TexelKey k = taps[size_t(i)].key;
-                    candidates.push_back({k.Pack(), dx, dy});
+                    candidates.push_back({k.Pack(), int16_t(dx), int16_t(dy)});
                     if (k.face != gface || k.mip != gmip) continue;
                     const int qx = int(k.iu) - x0, qy = int(k.iv) - y0;  // its twin on the face
                     if (inWindow(qx - tx, qy - ty) && seen[size_t(qy * w + qx)])
-                        candidates.push_back({k.Pack(), qx - tx, qy - ty});
+                        candidates.push_back({k.Pack(), int16_t(qx - tx), int16_t(qy - ty)});
                 }
-                std::sort(candidates.begin(), candidates.end(),
-                          [](const Candidate& p, const Candidate& q) {
-                              if (p.key != q.key) return p.key < q.key;
-                              const int dp = std::abs(p.dx) + std::abs(p.dy),
-                                        dq = std::abs(q.dx) + std::abs(q.dy);
-                              if (dp != dq) return dp < dq;
-                              return p.dx != q.dx ? p.dx < q.dx : p.dy < q.dy;
-                          });
                 ownRows.assign(rows.begin(), rows.end());
                 ownReversed.assign(reversed.begin(), reversed.end());
                 ownSeen.assign(seen.begin(), seen.end());
-                for (size_t i = 1, winner = 0; i < candidates.size(); ++i) {
-                    const Candidate &c = candidates[i], &best = candidates[winner];
-                    if (c.key != best.key) {
-                        winner = i;
-                    } else if (c.dx != best.dx || c.dy != best.dy) {
-                        const int x = tx + c.dx, y = ty + c.dy;
-                        ownRows[size_t(y)] &= ~(uint64_t(1) << x);
-                        ownReversed[size_t(y)] &= ~(uint64_t(1) << (w - 1 - x));
-                        ownSeen[size_t(y * w + x)] = 0;
-                    }
-                }
+                internal::ForEachLosingDuplicate(&candidates, [&](int dx, int dy) {
+                    const int x = tx + dx, y = ty + dy;
+                    ownRows[size_t(y)] &= ~(uint64_t(1) << x);
+                    ownReversed[size_t(y)] &= ~(uint64_t(1) << (w - 1 - x));
+                    ownSeen[size_t(y * w + x)] = 0;
+                });
                 const SampleTile<Sample> own{w,
                                              h,
                                              tile.data(),
