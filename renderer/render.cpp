@@ -330,7 +330,8 @@ struct PassTexels {
     static constexpr size_t kBytesPerSample = sizeof(PassTexel);
     PassTexel* at = nullptr;
     int width = 0, s0 = 0, s1 = 0;
-    bool cacheEmptied = false;  ///< the pass began by emptying the cache: nothing to find
+    /// Nothing to find: the pass began by emptying the cache, or it holds no texels yet.
+    bool cacheEmptied = false;
 
     PassTexel& operator[](size_t k) const { return at[k]; }
     size_t Index(int x, int y, int s) const {
@@ -538,7 +539,8 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         const bool newPass = progressive && done > opt.firstSample && c.tsc->Pass() < UINT32_MAX;
         if (newPass) c.tsc->BeginPass(c.tsc->Pass() + 1);
         // Nothing to find in a cache emptied by this pass or not used since it was emptied.
-        passTexels.cacheEmptied = newPass || !c.tsc || !c.tsc->MayHoldTexels();
+        passTexels.cacheEmptied =
+            newPass || !c.tsc || !c.tsc->MayHoldTexels();  // per hit: no cache
         if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);

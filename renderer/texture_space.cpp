@@ -102,8 +102,7 @@ bool TextureSpaceCache::FindNeighbourTexel(const SampleRequest& t, glm::vec3* va
 
 void TextureSpaceCache::BeginFrame(uint32_t frame) {
     frame_ = frame;
-    cache_.InvalidateAll();
-    mayHoldTexels_ = false;
+    Invalidate();
     pass_ = 0;
     passRadiusOf_ = radiusOf_;
 }
@@ -114,10 +113,7 @@ int TextureSpaceCache::PassRadius(int radius, uint32_t pass) {
 }
 
 void TextureSpaceCache::BeginPass(uint32_t pass) {
-    if (pass != pass_) {
-        cache_.InvalidateAll();
-        mayHoldTexels_ = false;
-    }
+    if (pass != pass_) Invalidate();
     pass_ = pass;
     passRadiusOf_.resize(radiusOf_.size());
     for (size_t o = 0; o < radiusOf_.size(); ++o) passRadiusOf_[o] = PassRadius(radiusOf_[o], pass);
@@ -196,8 +192,7 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
     AssignFilters(rs.scene());
     frame_ = 0;
     pass_ = 0;
-    cache_.InvalidateAll();
-    mayHoldTexels_ = false;
+    Invalidate();
     return true;
 }
 

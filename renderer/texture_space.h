@@ -116,6 +116,7 @@ public:
     /// filtering anew; such a lookup counts as a texel hit. Never while lookups run.
     void ReuseNeighbourTexels(bool on) { neighbourReuse_ = on; }
     /// Evicts every sample and texel (not the temporal history): the next lookups shade anew.
+    /// Every way of emptying the caches (BeginFrame, a new pass, Reconfigure) comes here.
     void Invalidate() {
         cache_.InvalidateAll();
         mayHoldTexels_ = false;
