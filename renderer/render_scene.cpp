@@ -147,6 +147,9 @@ struct EmbreeMesh {
     RTCGeometry geom = nullptr;
     std::shared_ptr<const PtexTopology> topo;  // shared with texture-space caches
     std::unique_ptr<RegularPatches> regular;   // fast path for rtcInterpolate
+    // Subdivision meshes: OpenSubdiv's patches for the faces `regular` leaves out (see
+    // OffFastPathFaces); null when there are none.
+    std::unique_ptr<LimitSurface> irregular;
     bool hasUv = false;
     std::vector<uint8_t> isHole;  // per coarse face, only for subdivision cages with holes
     // Limit tessellation only: the general evaluator, and per quad its Ptex square and uvs.
@@ -182,6 +185,16 @@ struct EmbreeMesh {
             }
             return true;
         }
+        if (irregular) {
+            LimitPoint p;
+            if (irregular->Eval(c.face, c.u, c.v, &p)) {
+                for (int k = 0; k < 3; ++k) {
+                    if (P) P[k] = p.P[k];
+                    du[k] = p.dPdu[k], dv[k] = p.dPdv[k];
+                }
+                return true;
+            }
+        }
         rtcInterpolate1(geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
         return true;
     }
@@ -201,6 +214,56 @@ struct EmbreeMesh {
         return {uv[0], uv[1]};
     }
 };
+
+/// Isolation level of the patches OffFastPathFaces' faces get.
+constexpr int kIrregularPatchLevel = 6;
+
+/// The cage faces whose limit derivatives a hit on Embree's subdivision surface takes from
+/// OpenSubdiv's patches (LimitSurface at kIrregularPatchLevel) rather than rtcInterpolate: those
+/// off the regular fast path, except holes (never hit) and faces near a crease or corner whose
+/// sharpness the patches do not reproduce:
+/// - below 1, where the two libraries subdivide differently (tests/ptex_mapping_test.cpp,
+///   FractionalCreasesDifferBetweenEmbreeAndOpenSubdiv);
+/// - above the isolation level, infinite included: the end caps smooth what sharpness is left
+///   (the rook's 7.9 creases: normals 56 degrees off Embree's, which match its positions).
+/// A face's patch depends on the vertices of its neighbours, so faces within two rings of such
+/// a vertex keep rtcInterpolate.
+std::vector<int> OffFastPathFaces(const ControlCage& cage, const PtexTopology& topo,
+                                  const RegularPatches& regular) {
+    const int numFaces = cage.numFaces();
+    auto unmatched = [](float w) {
+        return w > 0.0f && (w < 1.0f || w > float(kIrregularPatchLevel));
+    };
+    std::vector<char> near(size_t(cage.numVertices()), 0);
+    for (size_t i = 0; i < cage.creaseEdges.size(); ++i)
+        if (unmatched(cage.creaseWeights[i]))
+            near[cage.creaseEdges[i][0]] = near[cage.creaseEdges[i][1]] = 1;
+    for (size_t i = 0; i < cage.cornerVertices.size(); ++i)
+        if (unmatched(cage.cornerWeights[i])) near[cage.cornerVertices[i]] = 1;
+    std::vector<size_t> start(size_t(numFaces) + 1, 0);
+    for (int f = 0; f < numFaces; ++f) start[f + 1] = start[f] + size_t(cage.faceVertexCounts[f]);
+    auto touches = [&](int f, const std::vector<char>& marked) {
+        for (size_t i = start[f]; i < start[f + 1]; ++i)
+            if (marked[cage.faceVertexIndices[i]]) return true;
+        return false;
+    };
+    for (int ring = 0; ring < 2; ++ring) {  // grow the marked vertices by two face rings
+        std::vector<char> grown = near;
+        for (int f = 0; f < numFaces; ++f)
+            if (touches(f, near))
+                for (size_t i = start[f]; i < start[f + 1]; ++i)
+                    grown[cage.faceVertexIndices[i]] = 1;
+        near.swap(grown);
+    }
+    std::vector<char> hole(size_t(numFaces), 0);
+    for (int h : cage.holes) hole[h] = 1;
+    std::vector<int> faces;
+    for (int f = 0; f < numFaces; ++f) {
+        const bool fast = topo.IsQuad(f) && regular.Has(topo.FirstPtexFace(f));
+        if (!fast && !hole[f] && !touches(f, near)) faces.push_back(f);
+    }
+    return faces;
+}
 
 /// The cage as Embree's subdivision surface.
 RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, float rate,
@@ -436,11 +499,23 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         mesh.topo = std::make_shared<const PtexTopology>(std::move(t.ptex));
         mesh.regular = std::make_unique<RegularPatches>(std::move(t.regular));
         const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
+        const bool tessellate = beyond > 0 || options.tessellateAll;
+        if (!tessellate && options.irregularPatches) {
+            // rtcInterpolate re-derives a face's patch on every call: ~1 us, a sixth of the CPU
+            // time of a path-traced frame of the car (1.75 M camera hits, 992 of its 1575 faces
+            // off the fast path; `perf`). OpenSubdiv's patches at isolation level 6 evaluate the
+            // same surface (normals within 1e-5 on the car: `texcache compare` of the normal
+            // view) for a build of ~0.16 s and ~17 MiB there; level 4 differed by 3e-3 along
+            // the car's sharpness-6 creases.
+            const std::vector<int> faces = OffFastPathFaces(cage, *mesh.topo, *mesh.regular);
+            if (!faces.empty())
+                mesh.irregular = std::make_unique<LimitSurface>(cage, kIrregularPatchLevel, faces);
+        }
         clock.Charge(&I.build.opensubdiv);
         mesh.scene = rtcNewScene(I.device);
         const bool wantUv = needUv[m] && !cage.uvs.empty();
         RTCGeometry g;
-        if (beyond > 0 || options.tessellateAll) {
+        if (tessellate) {
             g = NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
                                      &mesh);
             clock.Charge(&I.build.opensubdiv);
@@ -567,8 +642,8 @@ size_t RenderScene::MeshBytes() const {
     size_t n = 0;
     for (const auto& m : impl_->meshes) {
         if (!m.topo) continue;
-        n += m.topo->Bytes() + m.regular->Bytes() + m.isHole.capacity() +
-             m.squares.capacity() * sizeof(m.squares[0]) +
+        n += m.topo->Bytes() + m.regular->Bytes() + (m.irregular ? m.irregular->Bytes() : 0) +
+             m.isHole.capacity() + m.squares.capacity() * sizeof(m.squares[0]) +
              m.cornerUvs.capacity() * sizeof(m.cornerUvs[0]);
     }
     return n;

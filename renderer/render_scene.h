@@ -67,6 +67,10 @@ struct RenderSceneOptions {
     /// Tessellate every mesh's limit surface with OpenSubdiv, not only the meshes Embree cannot
     /// take (to compare the two on the same cage).
     bool tessellateAll = false;
+    /// Limit derivatives (shading normals, the cache's surface queries) of the faces off the
+    /// regular fast path from OpenSubdiv's patches; false: from rtcInterpolate, Embree's own
+    /// (to compare the two).
+    bool irregularPatches = true;
 };
 
 /// Embree device + scene for one frame of a Scene. Thread-safe for queries after construction.

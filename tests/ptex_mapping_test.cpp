@@ -8,6 +8,7 @@
 #include "renderer/ptex_mapping.h"
 #include "renderer/render_scene.h"
 #include "test_util.h"
+#include "texcache/error.h"
 #include "texcache/topology.h"
 
 namespace texcache {
@@ -121,6 +122,72 @@ TEST_P(PtexMappingTest, OpenSubdivDerivativesMatchFiniteDifferences) {
         EXPECT_LE(glm::length(fdU - V(p.dPdu)), 2e-2f * scale) << GetParam() << " face " << f;
         EXPECT_LE(glm::length(fdV - V(p.dPdv)), 2e-2f * scale) << GetParam() << " face " << f;
     }
+}
+
+// A LimitSurface built for some cage faces evaluates them as the whole cage's does (positions
+// within 1e-6 of the diagonal, derivatives within 1e-4 of their size: the selection changes
+// which faces are refined, not the rules), and no other face; a face out of range is an error.
+TEST_P(PtexMappingTest, SelectedFacesEvaluateAsTheWholeCage) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    const float diag = BBoxDiagonal(cage);
+    std::vector<int> odd;
+    for (int f = 1; f < cage.numFaces(); f += 2) odd.push_back(f);
+    const LimitSurface all(cage), some(cage, 6, odd);
+    const PtexTopology topo(cage);
+    int checked = 0;
+    for (int f = 0; f < topo.NumPtexFaces(); ++f) {
+        LimitPoint a, b;
+        const bool selected = topo.CoarseFace(f) % 2 == 1;
+        const bool inAll = all.Eval(f, 0.3f, 0.8f, &a);
+        EXPECT_EQ(some.Eval(f, 0.3f, 0.8f, &b), selected && inAll) << GetParam() << " " << f;
+        if (!selected || !inAll) continue;
+        const float scale = glm::length(V(a.dPdu)) + glm::length(V(a.dPdv));
+        EXPECT_LE(glm::length(V(a.P) - V(b.P)), 1e-6f * diag) << GetParam() << " " << f;
+        EXPECT_LE(glm::length(V(a.dPdu) - V(b.dPdu)), 1e-4f * scale) << GetParam() << " " << f;
+        EXPECT_LE(glm::length(V(a.dPdv) - V(b.dPdv)), 1e-4f * scale) << GetParam() << " " << f;
+        ++checked;
+    }
+    EXPECT_GT(checked, 0) << GetParam();
+    EXPECT_THROW(LimitSurface(cage, 6, std::vector<int>{cage.numFaces()}), InputError);
+    EXPECT_THROW(LimitSurface(cage, 6, std::vector<int>{-1}), InputError);
+}
+
+// OpenSubdiv's patches for the faces off the regular fast path (RenderSceneOptions::
+// irregularPatches, the default) evaluate Embree's surface: against rtcInterpolate on every Ptex
+// face, positions within 5e-4 of the diagonal (the two libraries' measured worst: see
+// LimitPositionsAgreeWithOpenSubdiv) and shading normals within TOL degrees.
+TEST_P(PtexMappingTest, IrregularPatchesMatchRtcInterpolate) {
+    const ControlCage cage = WithoutFractionalSharpness(test::LoadMesh(GetParam()));
+    const float diag = BBoxDiagonal(cage);
+    Scene scene = test::OneObjectScene(cage);
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    const RenderScene patches(scene, ro);
+    ro.irregularPatches = false;
+    const RenderScene embree(scene, ro);
+    const PtexTopology& topo = patches.Topology(0);
+    float worstP = 0.0f, worstDeg = 0.0f;
+    int n = 0, off = 0;
+    for (int f = 0; f < topo.NumPtexFaces(); ++f)
+        for (float u : {0.02f, 0.5f, 0.97f})
+            for (float v : {0.03f, 0.45f, 1.0f}) {
+                SurfaceSample a, b;
+                if (!embree.EvalSurface(0, {f, u, v}, 0.0f, &b)) continue;  // hole
+                ASSERT_TRUE(patches.EvalSurface(0, {f, u, v}, 0.0f, &a)) << f;
+                ASSERT_TRUE(std::isfinite(a.N.x + a.N.y + a.N.z)) << f;
+                worstP = std::max(worstP, glm::length(a.P - b.P));
+                const float c = std::clamp(glm::dot(a.N, b.N), -1.0f, 1.0f);
+                const float deg = glm::degrees(std::acos(c));
+                worstDeg = std::max(worstDeg, deg);
+                off += deg > 10.0f;
+                ++n;
+            }
+    std::printf(
+        "%s: worst position %.3g of the diagonal, worst normal %.3g degrees, %d of %d "
+        "normals more than 10 degrees off\n",
+        GetParam().c_str(), worstP / diag, worstDeg, off, n);
+    EXPECT_LE(worstP, 5e-4f * diag) << GetParam();
+    EXPECT_LE(off, n / 200) << GetParam();
 }
 
 // Rays that hit the mesh: the decoded Ptex location's limit point lies near the tessellated hit

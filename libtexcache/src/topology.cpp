@@ -396,17 +396,28 @@ struct LimitSurface::Impl {
 };
 
 LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
+    : LimitSurface(cage, maxIsolationLevel, {}) {}
+
+LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel,
+                           const std::vector<int>& cageFaces)
     : impl_(std::make_unique<Impl>()) {
     auto refiner = internal::CreateRefiner(cage);
+    for (int f : cageFaces)
+        if (f < 0 || f >= cage.numFaces())
+            throw InputError(cage.sourcePath, "LimitSurface: cage face " + std::to_string(f) +
+                                                  " out of range [0, " +
+                                                  std::to_string(cage.numFaces()) + ")");
+    // Empty: every face (OpenSubdiv's own default).
+    const Far::ConstIndexArray selected(cageFaces.data(), int(cageFaces.size()));
     // Infinitely sharp features are isolated and end-capped, not given OSD's inf-sharp patches:
     // measured, that is what matches Embree on the regression shapes (the inf-sharp patches
     // differ from Embree near sharp extraordinary vertices of the bishop and rook; ctest -R
     // LimitPositionsAgreeWithOpenSubdiv).
-    refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(maxIsolationLevel));
+    refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(maxIsolationLevel), selected);
 
     Far::PatchTableFactory::Options options(maxIsolationLevel);
     options.endCapType = Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS;
-    impl_->patches.reset(Far::PatchTableFactory::Create(*refiner, options));
+    impl_->patches.reset(Far::PatchTableFactory::Create(*refiner, options, selected));
     impl_->map = std::make_unique<Far::PatchMap>(*impl_->patches);
 
     const int numRefined = refiner->GetNumVerticesTotal();
@@ -434,6 +445,15 @@ LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel)
         impl_->nonQuadPtex.insert(impl_->nonQuadPtex.end(), n == 4 ? 1 : n, n != 4);
 }
 LimitSurface::~LimitSurface() = default;
+
+size_t LimitSurface::Bytes() const {
+    const Far::PatchTable& t = *impl_->patches;
+    const size_t patches = size_t(t.GetNumPatchesTotal());
+    // PatchMap: about one quadtree node (16 bytes) and one handle (12 bytes) per patch.
+    return impl_->points.capacity() * sizeof(impl_->points[0]) + impl_->nonQuadPtex.capacity() +
+           size_t(t.GetNumControlVerticesTotal()) * sizeof(Far::Index) +
+           patches * (sizeof(Far::PatchParam) + 28);
+}
 LimitSurface::LimitSurface(LimitSurface&&) noexcept = default;
 LimitSurface& LimitSurface::operator=(LimitSurface&&) noexcept = default;
 

@@ -208,6 +208,10 @@ class LimitSurface {
 public:
     /// Builds patches for the cage (positions are copied); throws InputError on bad topology.
     explicit LimitSurface(const ControlCage& cage, int maxIsolationLevel = 6);
+    /// The same, with patches for the listed cage faces only (their Ptex faces): Eval returns
+    /// false on the others. Refinement, patches and memory are those of the listed faces (a
+    /// renderer evaluating only the faces its fast path leaves out).
+    LimitSurface(const ControlCage& cage, int maxIsolationLevel, const std::vector<int>& cageFaces);
     ~LimitSurface();
     LimitSurface(LimitSurface&&) noexcept;
     LimitSurface& operator=(LimitSurface&&) noexcept;
@@ -215,6 +219,8 @@ public:
     /// Limit position and derivatives at (u,v) in [0,1]^2 of a Ptex face; derivatives are with
     /// respect to that face's own (u,v), also on n-gon sub-faces. False for holes/invalid faces.
     bool Eval(int ptexFace, float u, float v, LimitPoint* out) const;
+    /// Bytes held (points, patch vertices and parameters; the patch map's tree estimated).
+    size_t Bytes() const;
 
 private:
     struct Impl;
