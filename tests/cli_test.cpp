@@ -487,6 +487,14 @@ TEST(Cli, BenchPeerSaysWhatItCannotRun) {
     EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << r.out;
     EXPECT_FALSE(fs::exists(out));
 
+    // A reference with no more samples than the timed renders is refused before anything runs.
+    r = Texcache("bench peer " + cube + " --spp 64 --reference-spp 64 --out " + out.string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("--reference-spp: must be more than --spp (64), got 64"),
+              std::string::npos)
+        << r.out;
+    EXPECT_FALSE(fs::exists(out));
+
     // Found on PATH by default: with an empty PATH it is not.
     const std::string path = std::getenv("PATH") ? std::getenv("PATH") : "";
     setenv("PATH", "/no/such/dir", 1);

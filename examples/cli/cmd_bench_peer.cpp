@@ -158,6 +158,10 @@ int RunPeerBench(const PeerArgs& a) {
     ParseResolution(a.resolution, &width, &height);
     CheckRange("--spp", a.spp, 1, 1 << 16);
     CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 20);
+    // A reference no better than the timed image measures nothing (relMSE 0, a 0/0 ratio).
+    if (a.referenceSpp <= a.spp)
+        throw InputError("--reference-spp", "must be more than --spp (" + std::to_string(a.spp) +
+                                                "), got " + std::to_string(a.referenceSpp));
     CheckRange("--max-path-length", a.pathLength, 1, 64);
     CheckRange("--repeats", a.repeats, 1, 100);
     CheckRange("--fov", a.fov, 1e-3f, 179.0f);
