@@ -45,6 +45,8 @@ public:
     bool Project(glm::vec3 world, glm::vec2* film) const;
 
     glm::vec3 Position() const { return eye_; }
+    /// True without a lens: every ray leaves Position() (Project is then exact for them).
+    bool IsPinhole() const { return lensRadius_ <= 0.0f; }
     /// Makes this one eye of a stereo pair (renderer/stereo.h): the eye moves `offset` along
     /// the camera's x axis and the frustum is sheared (off-axis) so that the plane at distance
     /// `convergence` projects as in the centred camera. Ray differentials do not change.

@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "renderer/path_tracer.h"
 
+#include <algorithm>
+#include <cmath>
+
 namespace texcache::internal {
 
 Context::Context(const RenderScene& r, const RenderOptions& o)
@@ -19,6 +22,28 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
         for (CameraModel* m :
              {&camera, cameraOpen ? &*cameraOpen : nullptr, cameraClose ? &*cameraClose : nullptr})
             if (m) m->SetEye(o.eyeOffset, o.eyeConvergence);
+    hitRect = {0, 0, o.width, o.height};
+    glm::vec3 lo, hi;
+    if (o.cullMissingPixels && camera.IsPinhole() && !cameraMoves && r.StaticBounds(&lo, &hi)) {
+        // A pinhole's rays through a pixel's square meet the box only if the square meets the
+        // box's projection, inside the bounds of its corners' projections (all in front).
+        glm::vec2 fmin(INFINITY), fmax(-INFINITY);
+        bool front = true;
+        for (int k = 0; k < 8 && front; ++k) {
+            const glm::vec3 p(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
+            glm::vec2 f;
+            front = camera.Project(p, &f) && std::isfinite(f.x + f.y);
+            fmin = glm::min(fmin, f), fmax = glm::max(fmax, f);
+        }
+        // Two pixels of margin: float rounding of the projection and of Generate's rays.
+        // Clamped before converting: a box far off screen projects to any float.
+        auto px = [](float v, int size) { return int(std::clamp(v, -4.0f, float(size) + 4.0f)); };
+        if (front)
+            hitRect = {std::clamp(px(std::floor(fmin.x), o.width) - 2, 0, o.width),
+                       std::clamp(px(std::floor(fmin.y), o.height) - 2, 0, o.height),
+                       std::clamp(px(std::ceil(fmax.x), o.width) + 2, 0, o.width),
+                       std::clamp(px(std::ceil(fmax.y), o.height) + 2, 0, o.height)};
+    }
     if (!IntegratorUsesLights(o.integrator)) return;
     for (const DistantLight& d : scene.distantLights) {
         const glm::mat3 M(d.transform.Eval(o.frameTime));

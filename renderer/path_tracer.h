@@ -28,6 +28,7 @@ namespace internal {
 
 struct RayCounts {
     uint64_t camera = 0, shadow = 0, bounce = 0;
+    uint64_t cameraCulled = 0;  // camera samples not traced: outside Context::hitRect
 };
 
 /// Offsets a ray origin off the surface along the geometric normal, scaled to the coordinates'
@@ -74,6 +75,17 @@ struct Context {
     LightSampling lightSampling = LightSampling::Mis;
     ProductRecordCache* psrCache = nullptr;  // set by the renderer for Cpis
     tbb::enumerable_thread_specific<RecordStats>* psrStats = nullptr;
+
+    /// Pixels [x0, x1) x [y0, y1) hold every camera sample that can hit something: the
+    /// projection of the scene's bounds, plus a margin. Samples of other pixels miss, and are
+    /// not traced (most of an object under a sky: ShadeTile). Everything when the camera has a
+    /// lens or moves, the scene moves, or the bounds reach behind the camera.
+    struct PixelRect {
+        int x0, y0, x1, y1;
+        bool Outside(int bx0, int by0, int bx1, int by1) const {
+            return bx1 <= x0 || bx0 >= x1 || by1 <= y0 || by0 >= y1;
+        }
+    } hitRect;
 
     Context(const RenderScene& r, const RenderOptions& o);
 

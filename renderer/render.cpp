@@ -252,7 +252,12 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
                 p.pixel = y * c.opt.width + x;
                 CameraRay(c, x, y, s, &p.rng, &p.ray, c.tsc ? &p.diff : nullptr);
             }
-    IntersectCameraRays(c, queue, n, rays);
+    if (c.hitRect.Outside(x0, y0, x1, y1)) {  // every ray misses (Context::hitRect)
+        for (size_t i = 0; i < n; ++i) queue[i].found = false;
+        rays.cameraCulled += n;
+    } else {
+        IntersectCameraRays(c, queue, n, rays);
+    }
     auto add = [&](const Pending& p, glm::vec3 L) {
         double* px = &sum[3 * size_t(p.pixel)];
         px[0] += L.x, px[1] += L.y, px[2] += L.z;
@@ -451,6 +456,9 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     const bool needDiff = NeedsDifferentials(c);
     CameraSample block[kCameraBlock];
     Cursor gen(r, s0), shade = gen;
+    // A tile outside the scene's projection: every camera ray misses (Context::hitRect).
+    const bool sky =
+        c.hitRect.Outside(r.cols().begin(), r.rows().begin(), r.cols().end(), r.rows().end());
     glm::dvec3 acc(0.0);  // the current pixel's sum
     CacheSnapshot before;
     for (size_t b = 0; b < total; b += kCameraBlock) {
@@ -458,7 +466,12 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
             CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray,
                       needDiff ? &block[i].diff : nullptr);
-        IntersectCameraRays(c, block, n, rays);
+        if (sky) {
+            for (size_t i = 0; i < n; ++i) block[i].found = false;
+            rays.cameraCulled += n;
+        } else {
+            IntersectCameraRays(c, block, n, rays);
+        }
         // Shade in the single-ray loop's order; a pixel's sum is added once, when its last
         // sample is done (its samples may span two blocks), so it does not depend on the tile.
         for (size_t i = 0; i < n; ++i, shade.Next(r, s0, s1)) {
@@ -684,6 +697,7 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     result.aovs = AovLayers(sums.aovs, opt.aovs, W, H, done);
     for (const RayCounts& rc : counts) {
         result.stats.cameraRays += rc.camera;
+        result.stats.cameraRaysCulled += rc.cameraCulled;
         result.stats.shadowRays += rc.shadow;
         result.stats.bounceRays += rc.bounce;
     }

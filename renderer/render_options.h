@@ -148,6 +148,9 @@ struct RenderOptions {
     /// Every camera ray through its pixel's centre (no antialiasing), as the screen-space frame
     /// buffers trace them (frame_buffers_render.h): for comparing the two pixel by pixel.
     bool pixelCentre = false;
+    /// Camera samples of pixels outside the projection of the scene's bounds are not traced:
+    /// they miss (internal::Context::hitRect). The image is the same either way.
+    bool cullMissingPixels = true;
     AovFlags aovs;
     TextureSpaceOptions texture;  ///< cached AO / diffuse indirect when texture.enabled
     bool progress = true;         ///< progress bar on stderr for renders longer than a second
@@ -180,6 +183,7 @@ struct RenderStats {
     double cpuSeconds = 0.0;  ///< process CPU time, all threads: the work, however busy the machine
     int sppDone = 0;
     uint64_t cameraRays = 0, shadowRays = 0, bounceRays = 0;
+    uint64_t cameraRaysCulled = 0;  ///< camera samples known to miss, not traced (not in TotalRays)
     uint64_t TotalRays() const { return cameraRays + shadowRays + bounceRays; }
     CacheStats cache;     ///< texture-space shading only
     RecordStats psr;      ///< cached product sampling records (light sampling cpis) only

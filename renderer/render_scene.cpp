@@ -700,6 +700,17 @@ size_t RenderScene::EmbreePeakBytes() const {
     return impl_->embreeMemory.PeakBytes();
 }
 
+bool RenderScene::StaticBounds(glm::vec3* lo, glm::vec3* hi) const {
+    for (const Impl::Instance& inst : impl_->objects)
+        if (inst.steps.size() > 1) return false;
+    RTCBounds b;
+    rtcGetSceneBounds(impl_->top, &b);
+    *lo = glm::vec3(b.lower_x, b.lower_y, b.lower_z);
+    *hi = glm::vec3(b.upper_x, b.upper_y, b.upper_z);
+    return lo->x <= hi->x && lo->y <= hi->y && lo->z <= hi->z &&
+           std::isfinite(lo->x + lo->y + lo->z + hi->x + hi->y + hi->z);
+}
+
 size_t RenderScene::NumPtexFaces() const {
     size_t n = 0;
     for (const auto& m : impl_->meshes)

@@ -129,6 +129,9 @@ public:
     void* EmbreeScene() const;
     /// Number of Ptex faces over the meshes the scene uses.
     size_t NumPtexFaces() const;
+    /// World-space box of everything a ray can hit at the frame time (objects and quad
+    /// lights); false when the scene has nothing to hit or moves over the shutter (motion blur).
+    bool StaticBounds(glm::vec3* lo, glm::vec3* hi) const;
 
     /// The meshes whose limit surface OpenSubdiv tessellated because Embree cannot take them.
     struct TessellationStats {

@@ -18,6 +18,7 @@ void AddCost(RenderStats* s, const RenderStats& p) {
     s->seconds += p.seconds;
     s->cpuSeconds += p.cpuSeconds;
     s->cameraRays += p.cameraRays;
+    s->cameraRaysCulled += p.cameraRaysCulled;
     s->shadowRays += p.shadowRays;
     s->bounceRays += p.bounceRays;
     s->cache.Merge(p.cache);

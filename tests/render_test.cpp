@@ -167,6 +167,41 @@ Scene PawnUnderSky() {
     return s;
 }
 
+// Camera samples of pixels outside the projection of the scene's bounds are not traced
+// (RenderOptions::cullMissingPixels): the image is bit for bit the one with every ray traced, for
+// the per-hit path, AO (two-phase tiles) and debug integrators and a stereo eye; with a lens, or
+// a camera inside the bounds, nothing is culled.
+TEST(Render, CulledSkyPixelsLookTheSame) {
+    Scene s = PawnUnderSky();
+    s.camera.pose.keys = {test::LookAt({0.0f, 3.0f, 14.0f}, {1.0f, 1.5f, 0})};  // pawn off-centre
+    auto check = [&](const Scene& scene, RenderOptions o, bool expectCulled) {
+        RenderScene rs(scene, {});
+        o.width = 96, o.height = 64;
+        const RenderResult culled = Render(rs, o);
+        o.cullMissingPixels = false;
+        const RenderResult all = Render(rs, o);
+        EXPECT_EQ(all.stats.cameraRaysCulled, 0u);
+        EXPECT_EQ(culled.stats.cameraRays + culled.stats.cameraRaysCulled, all.stats.cameraRays);
+        EXPECT_EQ(culled.stats.cameraRaysCulled > 0, expectCulled)
+            << culled.stats.cameraRaysCulled << " of " << all.stats.cameraRays;
+        ASSERT_EQ(culled.beauty.data.size(), all.beauty.data.size());
+        for (size_t i = 0; i < all.beauty.data.size(); ++i)
+            ASSERT_EQ(culled.beauty.data[i], all.beauty.data[i]) << i;
+    };
+    for (IntegratorKind k : {IntegratorKind::Path, IntegratorKind::AO, IntegratorKind::Normal})
+        check(s, SmallOptions(k, 2), true);
+    RenderOptions eye = SmallOptions(IntegratorKind::Path, 2);
+    eye.eyeOffset = 0.3f, eye.eyeConvergence = 14.0f;
+    check(s, eye, true);
+    Scene lens = s;
+    lens.camera.lensRadius = 0.2f, lens.camera.focusDistance = 14.0f;
+    check(lens, SmallOptions(IntegratorKind::Path, 2), false);
+    Scene inside = s;
+    // In the pawn's bounding box (x 1.59-1.90, y -1.43 to -1.12, z 0.03-0.52).
+    inside.camera.pose.keys = {test::LookAt({1.75f, -1.27f, 0.27f}, {3.0f, -1.27f, 0.27f})};
+    check(inside, SmallOptions(IntegratorKind::Path, 2), false);
+}
+
 // Same seed, same image, for 1 and 2 threads (bit-exact: every pixel sums its own samples in
 // sample order whatever thread runs it).
 TEST(Render, DeterministicAcrossThreadCounts) {

@@ -101,6 +101,9 @@ RenderOptions AoBenchOptions(const Scene& scene, const std::string& resolution, 
     o.seed = scene.settings.seed;
     o.frameTime = scene.settings.time;
     o.progress = false;
+    // The raw loop traces every camera ray: so does the integrator here, even where it could
+    // tell that a tile's rays miss (RenderOptions::cullMissingPixels).
+    o.cullMissingPixels = false;
     CheckRange("--repeats", repeats, 1, 100);
     return o;
 }

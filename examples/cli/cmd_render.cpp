@@ -155,6 +155,7 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     add("cpu_seconds", s.cpuSeconds);  // all threads: on a shared machine, the figure to compare
     add("spp", s.sppDone);
     add("rays", double(s.TotalRays()));
+    add("camera_rays_culled", double(s.cameraRaysCulled));
     add("lookups", double(c.lookups));
     add("texel_hits", double(c.texelHits));
     add("texel_misses", double(c.texelMisses));
