@@ -1,5 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
 #include <glm/glm.hpp>
 
 #include "renderer/render_scene.h"
@@ -39,6 +43,36 @@ public:
             diff->dOdx = diff->dOdy = glm::vec3(0.0f);
             diff->dDdx = glm::normalize(d + dirX_) - ray->dir;
             diff->dDdy = glm::normalize(d + dirY_) - ray->dir;
+        }
+    }
+    /// Generate for n pinhole rays at film positions (px[i], py[i]) (IsPinhole(); no
+    /// differentials), written field by field into rayAt(i): the same rays bit for bit, with
+    /// the normalizes in one loop the compiler vectorizes. One ray at a time, the sqrt and the
+    /// division behind it were a quarter of a sky-only frame's CPU time (`perf annotate`).
+    template <typename RayAt>
+    void GeneratePinhole(const float* px, const float* py, size_t n, RayAt&& rayAt) const {
+        constexpr size_t kChunk = 64;
+        float dx[kChunk], dy[kChunk], dz[kChunk];
+        for (size_t b = 0; b < n; b += kChunk) {
+            const size_t m = std::min(kChunk, n - b);
+            // As glm evaluates dirBase_ + px * dirX_ + py * dirY_ and normalize (v times
+            // 1 / sqrt(dot(v, v)), the dot summed x, y, z): the same roundings.
+            for (size_t i = 0; i < m; ++i) {
+                const float u = px[b + i], v = py[b + i];
+                dx[i] = (dirBase_.x + u * dirX_.x) + v * dirY_.x;
+                dy[i] = (dirBase_.y + u * dirX_.y) + v * dirY_.y;
+                dz[i] = (dirBase_.z + u * dirX_.z) + v * dirY_.z;
+            }
+            for (size_t i = 0; i < m; ++i) {
+                const float inv = 1.0f / std::sqrt((dx[i] * dx[i] + dy[i] * dy[i]) + dz[i] * dz[i]);
+                dx[i] *= inv, dy[i] *= inv, dz[i] *= inv;
+            }
+            for (size_t i = 0; i < m; ++i) {
+                Ray& ray = rayAt(b + i);
+                ray.org = eye_;
+                ray.dir = glm::vec3(dx[i], dy[i], dz[i]);
+                ray.tnear = 0.0f, ray.tfar = 1e30f, ray.time = 0.0f;
+            }
         }
     }
     /// World point -> film position in pixels (x right, y down); false when behind the camera.

@@ -148,6 +148,28 @@ struct Cursor {
 /// at a time (IntersectCameraRays).
 constexpr size_t kCameraBlock = 64;
 
+/// CameraRay for the n <= kCameraBlock samples from `gen` on (advancing it), for a pinhole
+/// camera that does not move, without differentials: the same rays and random streams bit for
+/// bit, with the directions made together (CameraModel::GeneratePinhole).
+template <typename Sample>
+void PinholeCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                       Cursor& gen, Sample* block, size_t n) {
+    float px[kCameraBlock], py[kCameraBlock], time[kCameraBlock];
+    uint64_t seed = 0;
+    for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1)) {
+        if (i == 0 || gen.s == s0) seed = PixelSeed(c.opt.seed, gen.x, gen.y, c.opt.width);
+        Rng& rng = block[i].rng;
+        rng = Rng(seed, uint64_t(gen.s));
+        glm::vec2 jitter = rng.Next2D();
+        if (c.opt.pixelCentre) jitter = glm::vec2(0.5f);
+        rng.Next2D();  // the lens sample, drawn as CameraRay draws it: the streams agree
+        time[i] = c.shutterLength > 0.0f ? rng.Next1D() : 0.0f;
+        px[i] = float(gen.x) + jitter.x, py[i] = float(gen.y) + jitter.y;
+    }
+    c.camera.GeneratePinhole(px, py, n, [&](size_t i) -> Ray& { return block[i].ray; });
+    for (size_t i = 0; i < n; ++i) block[i].ray.time = time[i];
+}
+
 /// What camera sample `cs` (pixel (x, y), sample s) sees, its ray already traced.
 glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample& cs, PixelAovs* aov,
                             RayCounts& rays) {
@@ -244,14 +266,21 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
     if (storage.size() < n) storage.resize(n);
     Pending* const queue = storage.data();
     size_t next = 0;
+    const bool pinhole = c.camera.IsPinhole() && !c.cameraMoves && !c.tsc;
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x)
             for (int s = s0; s < s1; ++s) {
                 // Written in place, not built on the stack and copied (see ForEachAoRay).
                 Pending& p = queue[next++];
                 p.pixel = y * c.opt.width + x;
-                CameraRay(c, x, y, s, &p.rng, &p.ray, c.tsc ? &p.diff : nullptr);
+                if (!pinhole) CameraRay(c, x, y, s, &p.rng, &p.ray, c.tsc ? &p.diff : nullptr);
             }
+    if (pinhole) {
+        const tbb::blocked_range2d<int> r(y0, y1, x0, x1);
+        Cursor gen(r, s0);
+        for (size_t b = 0; b < n; b += kCameraBlock)
+            PinholeCameraRays(c, r, s0, s1, gen, queue + b, std::min(kCameraBlock, n - b));
+    }
     if (c.hitRect.Outside(x0, y0, x1, y1)) {  // every ray misses (Context::hitRect)
         for (size_t i = 0; i < n; ++i) queue[i].found = false;
         rays.cameraCulled += n;
@@ -459,13 +488,17 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     // A tile outside the scene's projection: every camera ray misses (Context::hitRect).
     const bool sky =
         c.hitRect.Outside(r.cols().begin(), r.rows().begin(), r.cols().end(), r.rows().end());
+    const bool pinhole = c.camera.IsPinhole() && !c.cameraMoves && !needDiff;
     glm::dvec3 acc(0.0);  // the current pixel's sum
     CacheSnapshot before;
     for (size_t b = 0; b < total; b += kCameraBlock) {
         const size_t n = std::min(kCameraBlock, total - b);
-        for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
-            CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray,
-                      needDiff ? &block[i].diff : nullptr);
+        if (pinhole)
+            PinholeCameraRays(c, r, s0, s1, gen, block, n);
+        else
+            for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
+                CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray,
+                          needDiff ? &block[i].diff : nullptr);
         if (sky) {
             for (size_t i = 0; i < n; ++i) block[i].found = false;
             rays.cameraCulled += n;

@@ -3,6 +3,9 @@
 // ray differentials against finite differences, and determinism across thread counts.
 #include <gtest/gtest.h>
 
+#include <random>
+#include <vector>
+
 #include <tbb/global_control.h>
 
 #include "renderer/camera.h"
@@ -165,6 +168,31 @@ Scene PawnUnderSky() {
     env.constant = glm::vec3(0.8f, 0.9f, 1.0f);
     s.environments.push_back(env);
     return s;
+}
+
+// CameraModel::GeneratePinhole makes Generate's rays bit for bit (the renderer's pinhole camera
+// rays come from it), for any count (chunks of 64 and a rest), a centred camera and a stereo eye.
+TEST(Render, PinholeRaysInBulkAreGenerateBitForBit) {
+    Scene s = PawnUnderSky();
+    CameraModel cam(s.camera, 0.0f, 640, 480);
+    std::mt19937 gen(3);
+    std::uniform_real_distribution<float> X(0.0f, 640.0f), Y(0.0f, 480.0f);
+    for (int eye = 0; eye < 2; ++eye) {
+        if (eye) cam.SetEye(0.3f, 9.0f);
+        std::vector<float> px(150), py(150);
+        for (size_t i = 0; i < px.size(); ++i) px[i] = X(gen), py[i] = Y(gen);
+        std::vector<Ray> bulk(px.size());
+        cam.GeneratePinhole(px.data(), py.data(), px.size(),
+                            [&](size_t i) -> Ray& { return bulk[i]; });
+        for (size_t i = 0; i < px.size(); ++i) {
+            const Ray one = cam.Generate(px[i], py[i], {0.5f, 0.5f}, nullptr);
+            ASSERT_EQ(one.org, bulk[i].org) << i;
+            ASSERT_EQ(one.dir, bulk[i].dir) << i;
+            ASSERT_EQ(one.tnear, bulk[i].tnear);
+            ASSERT_EQ(one.tfar, bulk[i].tfar);
+            ASSERT_EQ(one.time, bulk[i].time);
+        }
+    }
 }
 
 // Camera samples of pixels outside the projection of the scene's bounds are not traced
