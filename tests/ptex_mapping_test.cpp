@@ -4,6 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <random>
+#include <vector>
+
+#include <tbb/parallel_for.h>
 
 #include "renderer/ptex_mapping.h"
 #include "renderer/render_scene.h"
@@ -188,6 +191,31 @@ TEST_P(PtexMappingTest, IrregularPatchesMatchRtcInterpolate) {
         GetParam().c_str(), worstP / diag, worstDeg, off, n);
     EXPECT_LE(worstP, 5e-4f * diag) << GetParam();
     EXPECT_LE(off, n / 200) << GetParam();
+}
+
+// The patches of the faces off the fast path are built by the first query that needs them
+// (LazyPatches): queries from many threads at once, into parts not yet built, give what queries
+// one at a time give, bit for bit.
+TEST_P(PtexMappingTest, IrregularPatchesBuiltUnderConcurrentQueries) {
+    const ControlCage cage = test::LoadMesh(GetParam());
+    Scene scene = test::OneObjectScene(cage);
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    const RenderScene serial(scene, ro), parallel(scene, ro);
+    const int n = parallel.Topology(0).NumPtexFaces();
+    std::vector<SurfaceSample> want(static_cast<size_t>(n)), got(static_cast<size_t>(n));
+    std::vector<char> okWant(static_cast<size_t>(n)), okGot(static_cast<size_t>(n));
+    for (int f = 0; f < n; ++f) okWant[f] = serial.EvalSurface(0, {f, 0.4f, 0.7f}, 0.0f, &want[f]);
+    tbb::parallel_for(0, n, [&](int f) {
+        okGot[f] = parallel.EvalSurface(0, {f, 0.4f, 0.7f}, 0.0f, &got[f]);
+    });
+    for (int f = 0; f < n; ++f) {
+        ASSERT_EQ(okGot[f], okWant[f]) << f;
+        if (!okWant[f]) continue;
+        ASSERT_EQ(got[f].P, want[f].P) << GetParam() << " " << f;
+        ASSERT_EQ(got[f].N, want[f].N) << GetParam() << " " << f;
+        ASSERT_EQ(got[f].dPdu, want[f].dPdu) << GetParam() << " " << f;
+    }
 }
 
 // Rays that hit the mesh: the decoded Ptex location's limit point lies near the tessellated hit
