@@ -35,9 +35,9 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <mutex>
 
 #include <embree3/rtcore.h>
+#include <tbb/parallel_for.h>
 
 #include "renderer/envmap.h"
 #include "renderer/texture.h"
@@ -141,38 +141,6 @@ struct EmbreeMemory {
     size_t PeakBytes() const { return size_t(std::max<int64_t>(peak.load(), 0)); }
 };
 
-/// OpenSubdiv's patches (LimitSurface) for a run of cage faces, built by the first query that
-/// needs them: a part no ray reaches costs nothing, and the builds (the car's 992 faces off the
-/// fast path: 0.18-0.21 s in one part) overlap the render instead of preceding it. Queries of
-/// the part wait for its build (std::call_once); what a query returns does not depend on when
-/// the part was built, so neither do the images.
-class LazyPatches {
-public:
-    LazyPatches(const ControlCage& cage, int level, std::vector<int> faces)
-        : cage_(cage), level_(level), faces_(std::move(faces)) {}
-    const LimitSurface& Get() {
-        std::call_once(once_, [&] {
-            surface_ = std::make_unique<LimitSurface>(cage_, level_, faces_);
-            built_.store(surface_.get(), std::memory_order_release);
-        });
-        return *surface_;
-    }
-    /// Bytes of the patches if built (a build under way counts 0).
-    size_t Bytes() const {
-        const LimitSurface* s = built_.load(std::memory_order_acquire);
-        return faces_.capacity() * sizeof(int) + (s ? s->Bytes() : 0);
-    }
-    const std::vector<int>& Faces() const { return faces_; }
-
-private:
-    const ControlCage& cage_;  // the Scene's, which outlives its RenderScene
-    const int level_;
-    const std::vector<int> faces_;
-    std::once_flag once_;
-    std::unique_ptr<LimitSurface> surface_;
-    std::atomic<const LimitSurface*> built_{nullptr};
-};
-
 /// One mesh's Embree geometry and how its hits map to Ptex faces: Embree's own subdivision
 /// surface, or quads on the limit surface tessellated with OpenSubdiv (`limit` set).
 struct EmbreeMesh {
@@ -181,8 +149,8 @@ struct EmbreeMesh {
     std::shared_ptr<const PtexTopology> topo;  // shared with texture-space caches
     std::unique_ptr<RegularPatches> regular;   // fast path for rtcInterpolate
     // Subdivision meshes: OpenSubdiv's patches for the faces `regular` leaves out (see
-    // OffFastPathFaces), in parts (LazyPatches); per Ptex face its part, or kNoPart.
-    std::vector<std::unique_ptr<LazyPatches>> irregular;
+    // OffFastPathFaces), in parts built in parallel; per Ptex face its part, or kNoPart.
+    std::vector<std::unique_ptr<LimitSurface>> irregular;
     std::vector<uint8_t> irregularPart;
     static constexpr uint8_t kNoPart = 255;
     bool hasUv = false;
@@ -222,7 +190,7 @@ struct EmbreeMesh {
         }
         if (!irregularPart.empty() && irregularPart[c.face] != kNoPart) {
             LimitPoint p;
-            if (irregular[irregularPart[c.face]]->Get().Eval(c.face, c.u, c.v, &p)) {
+            if (irregular[irregularPart[c.face]]->Eval(c.face, c.u, c.v, &p)) {
                 for (int k = 0; k < 3; ++k) {
                     if (P) P[k] = p.P[k];
                     du[k] = p.dPdu[k], dv[k] = p.dPdv[k];
@@ -300,25 +268,28 @@ std::vector<int> OffFastPathFaces(const ControlCage& cage, const PtexTopology& t
     return faces;
 }
 
-/// mesh->irregular and irregularPart for `faces`: runs of consecutive faces (at least 128, at
-/// most 8 runs: every run copies the cage's points), each built when first needed
-/// (LazyPatches). The runs depend on the face count only.
-void SetIrregularPatches(const ControlCage& cage, const std::vector<int>& faces, EmbreeMesh* mesh) {
+/// mesh->irregular and irregularPart for `faces`: one LimitSurface per run of consecutive faces,
+/// built in parallel (OpenSubdiv's refinement is serial; the car's 992 faces: 0.18-0.21 s in
+/// one part, all before the first ray). The parts depend on the face count only, so the images
+/// do not depend on the thread count.
+void BuildIrregularPatches(const ControlCage& cage, const std::vector<int>& faces,
+                           EmbreeMesh* mesh) {
     if (faces.empty()) return;
     constexpr size_t kMinFacesPerPart = 128, kMaxParts = 8;
     const size_t parts = std::clamp<size_t>(faces.size() / kMinFacesPerPart, 1, kMaxParts);
     std::vector<std::vector<int>> runs(parts);
     for (size_t i = 0; i < faces.size(); ++i) runs[i * parts / faces.size()].push_back(faces[i]);
+    mesh->irregular.resize(parts);
+    tbb::parallel_for(size_t(0), parts, [&](size_t k) {
+        mesh->irregular[k] = std::make_unique<LimitSurface>(cage, kIrregularPatchLevel, runs[k]);
+    });
     mesh->irregularPart.assign(size_t(mesh->topo->NumPtexFaces()), EmbreeMesh::kNoPart);
-    for (size_t k = 0; k < parts; ++k) {
+    for (size_t k = 0; k < parts; ++k)
         for (int f : runs[k]) {
             const int first = mesh->topo->FirstPtexFace(f);
             const int count = mesh->topo->IsQuad(f) ? 1 : cage.faceVertexCounts[f];
             for (int i = 0; i < count; ++i) mesh->irregularPart[size_t(first + i)] = uint8_t(k);
         }
-        mesh->irregular.push_back(
-            std::make_unique<LazyPatches>(cage, kIrregularPatchLevel, std::move(runs[k])));
-    }
 }
 
 /// The cage as Embree's subdivision surface.
@@ -561,8 +532,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             // time of a path-traced frame of the car (1.75 M camera hits, 992 of its 1575 faces
             // off the fast path; `perf`). OpenSubdiv's patches at isolation level 6 evaluate the
             // same surface (the car's normal view: RMSE 8e-6 against rtcInterpolate's; level 4
-            // gave 3e-3) for ~0.2 s of build during the render and ~17 MiB there.
-            SetIrregularPatches(cage, OffFastPathFaces(cage, *mesh.topo, *mesh.regular), &mesh);
+            // gave 3e-3) for ~0.09 s of build on 2 cores and ~17 MiB there. Each part keeps its
+            // own copy of the cage's points (LimitSurface): a cost on huge irregular cages.
+            BuildIrregularPatches(cage, OffFastPathFaces(cage, *mesh.topo, *mesh.regular), &mesh);
         }
         clock.Charge(&I.build.opensubdiv);
         mesh.scene = rtcNewScene(I.device);

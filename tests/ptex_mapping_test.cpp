@@ -192,9 +192,9 @@ TEST_P(PtexMappingTest, IrregularPatchesMatchRtcInterpolate) {
     EXPECT_LE(off, n / 200) << GetParam();
 }
 
-// The patches of the faces off the fast path are built by the first query that needs them
-// (LazyPatches): queries from many threads at once, into parts not yet built, give what queries
-// one at a time give, bit for bit.
+// Queries of the faces off the fast path (OpenSubdiv's patches, in parts built in parallel at
+// load) from many threads at once give what queries one at a time give, bit for bit; run under
+// ThreadSanitizer as well.
 TEST_P(PtexMappingTest, IrregularPatchesBuiltUnderConcurrentQueries) {
     const ControlCage cage = test::LoadMesh(GetParam());
     Scene scene = test::OneObjectScene(cage);
