@@ -195,7 +195,7 @@ TEST_P(PtexMappingTest, IrregularPatchesMatchRtcInterpolate) {
 // Queries of the faces off the fast path (OpenSubdiv's patches, in parts built in parallel at
 // load) from many threads at once give what queries one at a time give, bit for bit; run under
 // ThreadSanitizer as well.
-TEST_P(PtexMappingTest, IrregularPatchesBuiltUnderConcurrentQueries) {
+TEST_P(PtexMappingTest, IrregularPatchesUnderConcurrentQueries) {
     const ControlCage cage = test::LoadMesh(GetParam());
     Scene scene = test::OneObjectScene(cage);
     RenderSceneOptions ro;
