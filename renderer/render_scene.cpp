@@ -179,25 +179,20 @@ struct EmbreeMesh {
             regular->Eval(c.face, c.u, c.v, P, du, dv);
             return true;
         }
-        if (limit) {
+        // OpenSubdiv's patches: the limit tessellation's evaluator, or the irregular faces'.
+        auto patches = [&](const LimitSurface& surface) {
             LimitPoint p;
-            if (!limit->Eval(c.face, c.u, c.v, &p)) return false;
+            if (!surface.Eval(c.face, c.u, c.v, &p)) return false;
             for (int k = 0; k < 3; ++k) {
                 if (P) P[k] = p.P[k];
                 du[k] = p.dPdu[k], dv[k] = p.dPdv[k];
             }
             return true;
-        }
-        if (!irregularPart.empty() && irregularPart[c.face] != kNoPart) {
-            LimitPoint p;
-            if (irregular[irregularPart[c.face]]->Eval(c.face, c.u, c.v, &p)) {
-                for (int k = 0; k < 3; ++k) {
-                    if (P) P[k] = p.P[k];
-                    du[k] = p.dPdu[k], dv[k] = p.dPdv[k];
-                }
-                return true;
-            }
-        }
+        };
+        if (limit) return patches(*limit);
+        if (!irregularPart.empty() && irregularPart[c.face] != kNoPart &&
+            patches(*irregular[irregularPart[c.face]]))
+            return true;
         rtcInterpolate1(geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
         return true;
     }
@@ -286,9 +281,8 @@ void BuildIrregularPatches(const ControlCage& cage, const std::vector<int>& face
     mesh->irregularPart.assign(size_t(mesh->topo->NumPtexFaces()), EmbreeMesh::kNoPart);
     for (size_t k = 0; k < parts; ++k)
         for (int f : runs[k]) {
-            const int first = mesh->topo->FirstPtexFace(f);
-            const int count = mesh->topo->IsQuad(f) ? 1 : cage.faceVertexCounts[f];
-            for (int i = 0; i < count; ++i) mesh->irregularPart[size_t(first + i)] = uint8_t(k);
+            for (int i = mesh->topo->FirstPtexFace(f); i < mesh->topo->FirstPtexFace(f + 1); ++i)
+                mesh->irregularPart[size_t(i)] = uint8_t(k);
         }
 }
 
