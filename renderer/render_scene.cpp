@@ -264,9 +264,9 @@ std::vector<int> OffFastPathFaces(const ControlCage& cage, const PtexTopology& t
 }
 
 /// mesh->irregular and irregularPart for `faces`: one LimitSurface per run of consecutive faces,
-/// built in parallel (OpenSubdiv's refinement is serial; the car's 992 faces: 0.18-0.21 s in
-/// one part, all before the first ray). The parts depend on the face count only, so the images
-/// do not depend on the thread count.
+/// built in parallel (OpenSubdiv's refinement is serial; the car's 992 faces: 0.03 s in one
+/// part, 0.017 s in 7 on 2 cores, all before the first ray). The parts depend on the face count
+/// only, so the images do not depend on the thread count.
 void BuildIrregularPatches(const ControlCage& cage, const std::vector<int>& faces,
                            EmbreeMesh* mesh) {
     if (faces.empty()) return;
@@ -526,7 +526,8 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             // time of a path-traced frame of the car (1.75 M camera hits, 992 of its 1575 faces
             // off the fast path; `perf`). OpenSubdiv's patches at isolation level 6 evaluate the
             // same surface (the car's normal view: RMSE 8e-6 against rtcInterpolate's; level 4
-            // gave 3e-3) for ~0.09 s of build on 2 cores and ~17 MiB there. Each part keeps its
+            // gave 3e-3) for ~0.017 s of build on 2 cores and ~4 MiB there (single-crease
+            // patches; isolating the creases took 0.05 s and 18 MiB). Each part keeps its
             // own copy of the cage's points (LimitSurface): a cost on huge irregular cages.
             BuildIrregularPatches(cage, OffFastPathFaces(cage, *mesh.topo, *mesh.regular), &mesh);
         }

@@ -6,8 +6,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
+#include <random>
 #include <set>
 
+#include <opensubdiv/far/stencilTableFactory.h>
+
+#include "../libtexcache/src/osd_refiner.h"  // the reference's refiner
 #include "libtexcache/topology_checks.h"
 #include "test_util.h"
 #include "tests/support/cages.h"
@@ -148,6 +153,95 @@ TEST(CageTopology, BytesPerFaceAreBounded) {
         EXPECT_LE(t.ptex.Bytes(), 4 * (coarse + 1 + faces + verts) + 32 * faces) << cage.sourcePath;
         // Patch index per Ptex face, 16 indices per patch, the cage's points.
         EXPECT_LE(t.regular.Bytes(), 4 * faces + 64 * patches + 12 * verts) << cage.sourcePath;
+    }
+}
+
+// LimitSurface evaluates a regular face with one semi-sharp creased edge as a single-crease patch
+// (a closed form, no isolation of the crease). The reference is OpenSubdiv's limit stencils on a
+// refiner that isolates every crease to level 10. The cage: a bumpy 8x8 grid with a crease row of
+// sharpness S (integer, fractional, infinite) across it and a crease column of sharpness 2
+// crossing it, so that the crossing vertex, the crease ends at the boundary and the faces next to
+// them are isolated patches as before. Tolerances: positions 2e-6 of the grid's size (float
+// rounding); derivatives 1e-4 of their size, 1e-3 for the infinitely sharp crease (at level 10
+// the reference's last patches along it are end caps, ours 10 levels of the crease rule: two
+// approximations of a one-sided derivative; measured 8e-4).
+TEST(LimitSurface, SingleCreasePatchesMatchIsolatedCreases) {
+    namespace Far = OpenSubdiv::Far;
+    struct Vertex {
+        float p[3];
+        void Clear(void* = nullptr) { p[0] = p[1] = p[2] = 0.0f; }
+        void AddWithWeight(const Vertex& s, float w) {
+            for (int k = 0; k < 3; ++k) p[k] += w * s.p[k];
+        }
+    };
+    const int n = 8;
+    for (float sharpness : {1.0f, 2.0f, 2.5f, 3.7f, 6.0f, 10.0f}) {
+        ControlCage cage = test::GridCage(n);
+        std::mt19937 gen(3);
+        std::uniform_real_distribution<float> bump(-0.3f, 0.3f);
+        for (auto& p : cage.positions) p[1] = bump(gen);
+        auto vertex = [&](int i, int j) { return j * (n + 1) + i; };
+        for (int i = 0; i < n; ++i) {
+            cage.creaseEdges.push_back({vertex(i, 4), vertex(i + 1, 4)});
+            cage.creaseWeights.push_back(sharpness);
+            cage.creaseEdges.push_back({vertex(3, i), vertex(3, i + 1)});
+            cage.creaseWeights.push_back(2.0f);
+        }
+        const LimitSurface ours(cage, 10);
+
+        // The library's own refiner (the cage's creases and boundary rules), refined as before.
+        std::unique_ptr<Far::TopologyRefiner> refiner = internal::CreateRefiner(cage);
+        refiner->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(10));  // isolates creases
+        std::vector<float> st;
+        for (int a = 0; a <= 4; ++a) st.push_back(float(a) / 4.0f);
+        for (float x : {0.01f, 0.13f, 0.49f, 0.93f}) st.push_back(x);
+        std::vector<float> us, vs;
+        for (float u : st)
+            for (float v : st) us.push_back(u), vs.push_back(v);
+        Far::LimitStencilTableFactory::LocationArrayVec locations;
+        for (int f = 0; f < cage.numFaces(); ++f) {
+            Far::LimitStencilTableFactory::LocationArray l;
+            l.ptexIdx = f;
+            l.numLocations = int(us.size());
+            l.s = us.data();
+            l.t = vs.data();
+            locations.push_back(l);
+        }
+        std::unique_ptr<const Far::LimitStencilTable> stencils(
+            Far::LimitStencilTableFactory::Create(*refiner, locations));
+        ASSERT_TRUE(stencils);
+        std::vector<Vertex> cv(size_t(cage.numVertices()));
+        for (size_t i = 0; i < cv.size(); ++i)
+            for (int k = 0; k < 3; ++k) cv[i].p[k] = cage.positions[i][k];
+        const size_t m = size_t(stencils->GetNumStencils());
+        ASSERT_EQ(m, size_t(cage.numFaces()) * us.size());
+        std::vector<Vertex> P(m), Du(m), Dv(m);
+        stencils->UpdateValues(cv.data(), P.data());
+        stencils->UpdateDerivs(cv.data(), Du.data(), Dv.data());
+
+        float worstP = 0.0f, worstD = 0.0f;
+        for (int f = 0; f < cage.numFaces(); ++f)
+            for (size_t i = 0; i < us.size(); ++i) {
+                const size_t r = size_t(f) * us.size() + i;
+                LimitPoint lp;
+                ASSERT_TRUE(ours.Eval(f, us[i], vs[i], &lp));
+                float dP = 0.0f, dD = 0.0f, size = 1e-3f;
+                for (int k = 0; k < 3; ++k) {
+                    dP = std::max(dP, std::abs(lp.P[k] - P[r].p[k]));
+                    dD = std::max(
+                        {dD, std::abs(lp.dPdu[k] - Du[r].p[k]), std::abs(lp.dPdv[k] - Dv[r].p[k])});
+                    size = std::max({size, std::abs(Du[r].p[k]), std::abs(Dv[r].p[k])});
+                }
+                worstP = std::max(worstP, dP);
+                worstD = std::max(worstD, dD / size);
+                ASSERT_LE(dP, 2e-6f * float(n)) << "sharpness " << sharpness << " face " << f
+                                                << " (" << us[i] << "," << vs[i] << ")";
+                ASSERT_LE(dD, (sharpness < 10.0f ? 1e-4f : 1e-3f) * size)
+                    << "sharpness " << sharpness << " face " << f << " (" << us[i] << "," << vs[i]
+                    << ")";
+            }
+        std::printf("sharpness %g: worst position %.2g, worst derivative %.2g (relative)\n",
+                    double(sharpness), double(worstP), double(worstD));
     }
 }
 
