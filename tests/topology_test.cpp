@@ -167,6 +167,8 @@ TEST(CageTopology, BytesPerFaceAreBounded) {
 // approximations of a one-sided derivative; measured 8e-4).
 TEST(LimitSurface, SingleCreasePatchesMatchIsolatedCreases) {
     namespace Far = OpenSubdiv::Far;
+    // The templated factory: the untemplated one downcasts its table (UBSan flags the header).
+    using Factory = Far::LimitStencilTableFactoryReal<float>;
     struct Vertex {
         float p[3];
         void Clear(void* = nullptr) { p[0] = p[1] = p[2] = 0.0f; }
@@ -198,17 +200,17 @@ TEST(LimitSurface, SingleCreasePatchesMatchIsolatedCreases) {
         std::vector<float> us, vs;
         for (float u : st)
             for (float v : st) us.push_back(u), vs.push_back(v);
-        Far::LimitStencilTableFactory::LocationArrayVec locations;
+        Factory::LocationArrayVec locations;
         for (int f = 0; f < cage.numFaces(); ++f) {
-            Far::LimitStencilTableFactory::LocationArray l;
+            Factory::LocationArray l;
             l.ptexIdx = f;
             l.numLocations = int(us.size());
             l.s = us.data();
             l.t = vs.data();
             locations.push_back(l);
         }
-        std::unique_ptr<const Far::LimitStencilTable> stencils(
-            Far::LimitStencilTableFactory::Create(*refiner, locations));
+        std::unique_ptr<const Far::LimitStencilTableReal<float>> stencils(
+            Factory::Create(*refiner, locations));
         ASSERT_TRUE(stencils);
         std::vector<Vertex> cv(size_t(cage.numVertices()));
         for (size_t i = 0; i < cv.size(); ++i)
