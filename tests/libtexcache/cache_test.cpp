@@ -745,6 +745,42 @@ TEST(ShadingCache, BlockReconstructionGivesThePerTexelValues) {
     }
 }
 
+// A miss in a block whose texels are cached already (a warm frame's texel lost to a conflict)
+// filters its own window only: the block path would gather and fetch its whole tile again. The
+// value is the per-texel path's either way.
+TEST(ShadingCache, AnIsolatedMissFiltersOnlyItsOwnWindow) {
+    CacheSettings settings;
+    settings.sampleCacheBytes = settings.texelCacheBytes = size_t(1) << 20;
+    ShadingCache<AoSample, float> cache(settings), reference(settings);
+    const ControlCage cage = test::GridCage(3);
+    const int mesh = cache.AddMesh(cage, 1.0f / 32.0f);
+    reference.AddMesh(cage, 1.0f / 32.0f);
+    const uint32_t face = cache.Mesh(mesh).FaceOffset() + 4;  // the middle face: no pads
+    VisibleTexels vis(1 << 14);
+    for (uint16_t v = 0; v < 16; ++v)
+        for (uint16_t u = 0; u < 16; ++u)
+            if (u != 9 || v != 8) vis.Mark({face, 0, u, v});
+    auto shade = [](const SampleRequest& r) {
+        return AoSample{float(r.key.Pack() * 0x9E3779B97F4A7C15ull >> 40) / float(1 << 24), {}};
+    };
+    cache.RestrictFootprints(&vis);
+    reference.RestrictFootprints(&vis);
+    CacheStats st, ref;
+    const int r = 3;
+    cache.LookupTexel(cache.RequestOf(mesh, {face, 0, 8, 8}), r, shade,
+                      OffsetWeightedMeanWithTiles{}, st);
+    EXPECT_EQ(st.texelsPrefiltered, 16u * 16u - 2u);  // the block's visible texels but (8,8)
+    // (9,8) becomes visible: its quad partner (8,8) is cached, so it takes the per-texel path.
+    vis.Mark({face, 0, 9, 8});
+    const CacheStats before = st;
+    const SampleRequest isolated = cache.RequestOf(mesh, {face, 0, 9, 8});
+    const float value = cache.LookupTexel(isolated, r, shade, OffsetWeightedMeanWithTiles{}, st);
+    EXPECT_EQ(st.texelMisses, before.texelMisses + 1);
+    EXPECT_EQ(st.texelsPrefiltered, before.texelsPrefiltered);
+    EXPECT_LE(st.sampleLookups - before.sampleLookups, uint64_t((2 * r + 1) * (2 * r + 1)));
+    EXPECT_EQ(value, reference.LookupTexel(isolated, r, shade, OffsetWeightedMean{}, ref));
+}
+
 TEST(ShadingCache, RejectsImpossibleSettings) {
     CacheSettings s;
     s.sampleCacheBytes = 0;

@@ -574,6 +574,7 @@ private:
             const int face = centre.face, mip = centre.mip, res = g.Res(face, mip);
             const int iu = centre.key.iu, iv = centre.key.iv;
             if (!visible_->Contains(centre.key)) return false;
+            if (IsolatedMiss(centre.key, res)) return false;
             // The block's texels and the tile their windows cover; where it passes the face's
             // edges, the face's pad (footprint.h) continues it as GatherFootprint does.
             // 16x16 blocks while their tiles fit the 64-bit rows (r <= 24), else 8x8.
@@ -742,6 +743,24 @@ private:
             *out = reconstruct(iu - x0, iv - y0, centre);
             return true;
         }
+    }
+
+    // Whether a miss is isolated: another visible texel of its 2x2 quad is in the texel cache.
+    // A block reconstruction (FilterBlock) pays off when the block's other texels are missing
+    // too, as in a frame that fills the cache; a miss in a filled block (the few texels a warm
+    // frame lost to conflicts) costs its whole tile's gather there, ~5x the per-texel window
+    // (car AO 640x360, warm frame of `texcache bench cache`: ~580 such misses, 7% of the frame's
+    // CPU). Both paths give the same value (BlockReconstructionGivesThePerTexelValues), so
+    // the choice changes the time, never the image.
+    bool IsolatedMiss(const TexelKey& k, int res) const {
+        for (int q = 1; q < 4; ++q) {
+            const int u = int(k.iu) ^ (q & 1), v = int(k.iv) ^ (q >> 1);
+            if (u >= res || v >= res) continue;
+            const TexelKey n{k.face, k.mip, uint16_t(u), uint16_t(v)};
+            Texel t;
+            if (visible_->Contains(n) && texels_->Find(n.Pack(), Hash(n), &t)) return true;
+        }
+        return false;
     }
 
     // One memo per thread for all caches of this Sample type (whatever their shaders and
