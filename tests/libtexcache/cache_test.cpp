@@ -188,6 +188,35 @@ TEST(DirectMappedCache, TwoChoicesKeepCollidingKeys) {
     EXPECT_EQ(keptTwo, 2);     // the last two: one in the shared slot, one in its own second slot
 }
 
+// An empty first slot is claimed without reading the second (a cold cache's fills). The one case
+// where that differs from reading both: the key sits in its second slot and its first slot was
+// emptied since. It then gets a second copy of its own payload, never another key's, and the
+// other key of the pair still misses.
+TEST(DirectMappedCache, AnEmptiedFirstSlotGivesTheSameKeyASecondCopy) {
+    DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes * 64, true);
+    Payload out;
+    SlotTicket t;
+    ASSERT_EQ(cache.Acquire(1, 7, &out, &t), AcquireResult::Claimed);  // key 1: first slot
+    cache.Publish(t, Payload::Of(1));
+    ASSERT_EQ(cache.Acquire(2, 7, &out, &t), AcquireResult::Claimed);  // key 2: second slot
+    EXPECT_FALSE(t.evicted);
+    cache.Publish(t, Payload::Of(2));
+    EXPECT_EQ(cache.InvalidateIf([](uint64_t k) { return k == 1; }), 1u);
+    ASSERT_EQ(cache.Acquire(2, 7, &out, &t), AcquireResult::Claimed);  // the emptied first slot
+    EXPECT_FALSE(t.evicted);
+    cache.Publish(t, Payload::Of(2));
+    for (int i = 0; i < 2; ++i) {
+        ASSERT_EQ(cache.Acquire(2, 7, &out, &t), AcquireResult::Hit);
+        EXPECT_TRUE(out.Matches(2));
+        ASSERT_TRUE(cache.Find(2, 7, &out));
+        EXPECT_TRUE(out.Matches(2));
+    }
+    EXPECT_FALSE(cache.Find(1, 7, &out));
+    // A key that misses both slots, held by live keys, still evicts rather than aliasing.
+    ASSERT_EQ(cache.Acquire(3, 7, &out, &t), AcquireResult::Claimed);
+    EXPECT_TRUE(t.evicted);
+}
+
 TEST(DirectMappedCache, StaysWithinItsByteBudget) {
     for (size_t bytes : {size_t(100), size_t(1000), size_t(4096), size_t(1) << 20, size_t(16) << 20,
                          (size_t(16) << 20) + 17}) {
