@@ -2,6 +2,7 @@
 #include "texcache/topology.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <type_traits>
 
@@ -407,10 +408,8 @@ struct SemiSharpCurve {
 
     explicit SemiSharpCurve(float sharpness) {
         levels = sharpness > 0.0f ? std::min(int(std::ceil(sharpness)), 10) : 0;
-        std::vector<std::array<double, 4>> cur(4);
-        for (int i = 0; i < 4; ++i)
-            cur[i] = {i == 0 ? 1.0 : 0.0, i == 1 ? 1.0 : 0.0, i == 2 ? 1.0 : 0.0,
-                      i == 3 ? 1.0 : 0.0};
+        std::vector<std::array<double, 4>> cur(4, std::array<double, 4>{});
+        for (int i = 0; i < 4; ++i) cur[size_t(i)][size_t(i)] = 1.0;  // level 0: q0..q3
         for (int k = 0; k < levels; ++k) {
             const double w = std::min(double(sharpness) - k, 1.0);  // sharp rule's weight at q1
             const int n = (1 << (k + 1)) + 3;  // positions -1..2^(k+1)+1; index = position + 1
@@ -537,8 +536,10 @@ LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel,
     for (int a = 0, patch = 0; a < table.GetNumPatchArrays(); ++a)
         for (int i = 0; i < table.GetNumPatches(a); ++i, ++patch) {
             const Far::Index s = sharpnessOf.empty() ? Far::INDEX_INVALID : sharpnessOf[patch];
+            // The creased edge is the one boundary bit of its PatchParam (SingleCreaseWeights).
             if (table.GetPatchArrayDescriptor(a).GetType() != Far::PatchDescriptor::REGULAR ||
-                s == Far::INDEX_INVALID || !(table.GetSharpnessValues()[s] > 0.0f))
+                s == Far::INDEX_INVALID || !(table.GetSharpnessValues()[s] > 0.0f) ||
+                !std::has_single_bit(unsigned(table.GetPatchParamTable()[patch].GetBoundary())))
                 continue;
             if (curveOf[s] < 0) {
                 curveOf[s] = int(impl_->creases.size());
