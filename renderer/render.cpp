@@ -113,9 +113,16 @@ struct CameraSample {
 };
 
 /// Traces the camera rays of samples[0, n) (anything with .ray, .hit, .found) 16 at a time:
-/// rays of neighbouring pixels share most of their BVH nodes (RenderScene::Intersect16).
+/// rays of neighbouring pixels share most of their BVH nodes (RenderScene::Intersect16). With
+/// `culled` (their tile lies outside Context::hitRect) every ray misses and none is traced.
 template <typename CameraSampleT>
-void IntersectCameraRays(const Context& c, CameraSampleT* samples, size_t n, RayCounts& rays) {
+void IntersectCameraRays(const Context& c, CameraSampleT* samples, size_t n, RayCounts& rays,
+                         bool culled = false) {
+    if (culled) {
+        for (size_t i = 0; i < n; ++i) samples[i].found = false;
+        rays.cameraCulled += n;
+        return;
+    }
     Ray packet[16];
     Hit hits[16];
     bool found[16];
@@ -281,12 +288,7 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
         for (size_t b = 0; b < n; b += kCameraBlock)
             PinholeCameraRays(c, r, s0, s1, gen, queue + b, std::min(kCameraBlock, n - b));
     }
-    if (c.hitRect.Outside(x0, y0, x1, y1)) {  // every ray misses (Context::hitRect)
-        for (size_t i = 0; i < n; ++i) queue[i].found = false;
-        rays.cameraCulled += n;
-    } else {
-        IntersectCameraRays(c, queue, n, rays);
-    }
+    IntersectCameraRays(c, queue, n, rays, c.hitRect.Outside(x0, y0, x1, y1));
     auto add = [&](const Pending& p, glm::vec3 L) {
         double* px = &sum[3 * size_t(p.pixel)];
         px[0] += L.x, px[1] += L.y, px[2] += L.z;
@@ -499,12 +501,7 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
             for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
                 CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray,
                           needDiff ? &block[i].diff : nullptr);
-        if (sky) {
-            for (size_t i = 0; i < n; ++i) block[i].found = false;
-            rays.cameraCulled += n;
-        } else {
-            IntersectCameraRays(c, block, n, rays);
-        }
+        IntersectCameraRays(c, block, n, rays, sky);
         // Shade in the single-ray loop's order; a pixel's sum is added once, when its last
         // sample is done (its samples may span two blocks), so it does not depend on the tile.
         for (size_t i = 0; i < n; ++i, shade.Next(r, s0, s1)) {
