@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "renderer/render_options.h"
 
+#include <algorithm>
+
 #include "texcache/enum_names.h"
 
 namespace texcache {
@@ -53,6 +55,24 @@ void CheckFilterRadius(int radius, const std::string& where) {
     if (radius < 0 || radius > 32)
         throw InputError(
             where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
+}
+
+void SizeCachesToFrame(CacheSettings* cache, int width, int height, int views,
+                       IntegratorKind integrator, FootprintMode footprint) {
+    // Bytes per pixel: 4 slots of 32 bytes per texel or sample a pixel needs (two choices per
+    // key keep evictions rare at a quarter full: car AO 480x270, 7% of the texels evicted
+    // once at 16 MiB, 0.5% more samples shaded); four times that for whole-window footprints.
+    constexpr double kTexelBytes = 128.0, kVisibleSampleBytes = 128.0, kAllSampleBytes = 512.0;
+    constexpr size_t kMin = size_t(4) << 20, kMax = size_t(64) << 20;
+    const bool visibleOnly = footprint == FootprintMode::Visible ||
+                             (footprint == FootprintMode::Auto && integrator == IntegratorKind::AO);
+    const double pixels =
+        double(std::max(width, 1)) * double(std::max(height, 1)) * double(std::max(views, 1));
+    auto fit = [&](double perPixel) {
+        return std::clamp(size_t(std::min(pixels * perPixel, double(kMax))), kMin, kMax);
+    };
+    cache->texelCacheBytes = fit(kTexelBytes);
+    cache->sampleCacheBytes = fit(visibleOnly ? kVisibleSampleBytes : kAllSampleBytes);
 }
 
 int DefaultFilterRadius(TextureFilterKind kind) {

@@ -522,6 +522,34 @@ TEST(Cli, BenchPeerSaysWhatItCannotRun) {
     EXPECT_FALSE(fs::exists(out));
 }
 
+/// A number field of a --stats JSON file.
+double StatsField(const fs::path& stats, const std::string& name) {
+    std::ifstream f(stats);
+    std::stringstream text;
+    text << f.rdbuf();
+    const std::string json = text.str(), key = "\"" + name + "\": ";
+    const size_t at = json.find(key);
+    return at == std::string::npos ? NAN : std::stod(json.substr(at + key.size()));
+}
+
+// Without --sample-cache-mb/--texel-cache-mb the caches are sized to the frame (4 MiB floor at
+// this size, SizeCachesToFrame), not the 64 MiB a large frame takes; a given size is kept.
+TEST(Cli, CachesAreSizedToTheFrameUnlessGiven) {
+    const fs::path out = Dir() / "sized.exr", stats = Dir() / "sized.json";
+    const std::string render = "render " + test::SceneDir() +
+                               "/car.json --integrator ao --resolution 64x36 --spp 1 --shading "
+                               "texture -q --no-png -o " +
+                               out.string() + " --stats " + stats.string();
+    CliRun r = Texcache(render);
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(StatsField(stats, "sample_cache_bytes"), double(4 << 20));
+    EXPECT_EQ(StatsField(stats, "texel_cache_bytes"), double(4 << 20));
+    r = Texcache(render + " --texel-cache-mb 8");
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(StatsField(stats, "sample_cache_bytes"), double(4 << 20));
+    EXPECT_EQ(StatsField(stats, "texel_cache_bytes"), double(8 << 20));
+}
+
 // Cached product sampling: --stats reports the record cache (its bytes counted in bytes_used);
 // without an environment light the option is one line naming the problem, exit 2.
 TEST(Cli, LightSamplingCpisReportsRecordBytes) {

@@ -221,6 +221,32 @@ TEST(TextureSpace, VisibleFootprintsShadeWhatTheCameraSees) {
 // filter, 1 AO ray per cached sample, 4 camera samples per pass; the reference's own relMSE is
 // ~1e-4. Measured: 1 pass 0.0494, 16 passes 0.0051 (1/9.7); the cache shaded once with the same
 // 64 camera samples 0.0106 (more camera samples still lower the pixels' coverage noise).
+// Caches sized to the frame (a render that gives no size): texels and visible-footprint samples
+// take 128 bytes per pixel of every view, whole-window footprints 512 bytes per sample, within
+// [4, 64] MiB.
+TEST(TextureSpace, CachesSizedToTheFrameStayWithinBounds) {
+    constexpr size_t kMiB = size_t(1) << 20;
+    CacheSettings c;
+    SizeCachesToFrame(&c, 480, 270, 1, IntegratorKind::AO, FootprintMode::Auto);
+    EXPECT_EQ(c.texelCacheBytes, size_t(480 * 270 * 128));
+    EXPECT_EQ(c.sampleCacheBytes, size_t(480 * 270 * 128));
+    SizeCachesToFrame(&c, 480, 270, 2, IntegratorKind::AO, FootprintMode::All);
+    EXPECT_EQ(c.texelCacheBytes, size_t(2 * 480 * 270 * 128));
+    EXPECT_EQ(c.sampleCacheBytes, 64 * kMiB);  // 2 x 480 x 270 x 512 = 126 MiB: capped
+    SizeCachesToFrame(&c, 320, 180, 1, IntegratorKind::Path, FootprintMode::Auto);
+    EXPECT_EQ(c.sampleCacheBytes, size_t(320 * 180 * 512));
+    SizeCachesToFrame(&c, 320, 180, 1, IntegratorKind::Path, FootprintMode::Visible);
+    EXPECT_EQ(c.sampleCacheBytes, size_t(320 * 180 * 128));
+    SizeCachesToFrame(&c, 16, 9, 1, IntegratorKind::AO, FootprintMode::Auto);
+    EXPECT_EQ(c.texelCacheBytes, 4 * kMiB);
+    EXPECT_EQ(c.sampleCacheBytes, 4 * kMiB);
+    SizeCachesToFrame(&c, 1 << 20, 1 << 20, 2, IntegratorKind::Direct, FootprintMode::Auto);
+    EXPECT_EQ(c.texelCacheBytes, 64 * kMiB);
+    EXPECT_EQ(c.sampleCacheBytes, 64 * kMiB);
+    SizeCachesToFrame(&c, 0, -5, 0, IntegratorKind::AO, FootprintMode::Auto);  // nonsense: floor
+    EXPECT_EQ(c.texelCacheBytes, 4 * kMiB);
+}
+
 TEST(TextureSpace, ProgressivePassesKeepConverging) {
     const RenderScene& rs = TorusAo();
     const Image ref = Render(rs, AoOptions(256, 16)).beauty;

@@ -463,15 +463,24 @@ int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool
     return 0;
 }
 
-/// Both cache sizes must fit in this machine's memory: the caches are allocated and zeroed up
-/// front, and a size the machine cannot hold would end in bad_alloc or the OOM killer mid-render.
-void CheckCacheMemory(const RenderArgs& a, const TextureSpaceOptions& t) {
+/// The cache sizes of a render of `opt`: those given, else sized to the frame (`views` images:
+/// SizeCachesToFrame). Both must fit in this machine's memory: the caches are allocated and
+/// zeroed up front, and a size the machine cannot hold would end in bad_alloc or the OOM killer
+/// mid-render.
+void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views) {
+    TextureSpaceOptions& t = opt->texture;
     if (!t.enabled || t.cache.referenceMode) return;
-    const double need = a.sampleCacheMb + a.texelCacheMb, have = PhysicalMemoryMiB();
-    if (need > have)
+    CacheSettings fit = t.cache;
+    SizeCachesToFrame(&fit, opt->width, opt->height, views, opt->integrator, t.footprint);
+    if (!a.Given("--sample-cache-mb")) t.cache.sampleCacheBytes = fit.sampleCacheBytes;
+    if (!a.Given("--texel-cache-mb")) t.cache.texelCacheBytes = fit.texelCacheBytes;
+    const double mib = 1.0 / double(1 << 20);
+    const double sample = double(t.cache.sampleCacheBytes) * mib,
+                 texel = double(t.cache.texelCacheBytes) * mib, have = PhysicalMemoryMiB();
+    if (sample + texel > have)
         throw InputError("--sample-cache-mb/--texel-cache-mb",
-                         "the caches (" + std::to_string(llround(a.sampleCacheMb)) + " + " +
-                             std::to_string(llround(a.texelCacheMb)) +
+                         "the caches (" + std::to_string(llround(sample)) + " + " +
+                             std::to_string(llround(texel)) +
                              " MiB) do not fit in this machine's " + std::to_string(llround(have)) +
                              " MiB of memory");
 }
@@ -665,7 +674,7 @@ int RunRender(const RenderArgs& a) {
         fbo.integrator = IntegratorKind::Path;
         fbo.seconds = 0.0f;
         fbo.texture = ParseTextureOptions(a);
-        CheckCacheMemory(a, fbo.texture);
+        SizeCaches(a, &fbo, 1);
         fbo.progress = false;
         int first = 0, last = 0;
         if (!a.frames.empty()) ParseFrames(a.frames, &first, &last);
@@ -681,7 +690,7 @@ int RunRender(const RenderArgs& a) {
     const VisibilityFilterKind visibility =
         ParseVisibilityFilter(a.visibilityFilter, "--visibility-filter");
     opt.texture = ParseTextureOptions(a);
-    CheckCacheMemory(a, opt.texture);
+    SizeCaches(a, &opt, a.stereo ? 2 : 1);
     ParseLightSamplingOptions(a, scene, &opt);
     opt.progress = !a.quiet;
     int first = 0, last = 0;
@@ -880,10 +889,10 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Animation: render frames A:B (inclusive) or N (0..N-1) at --fps; outputs "
                     "are numbered (a run of # in -o, else name_NNNN.ext)");
     cmd->add_option("--fps", args->fps, "Frames per second of --frames")->capture_default_str();
-    cmd->add_option("--sample-cache-mb", args->sampleCacheMb, "Sample cache size (MiB)")
-        ->capture_default_str();
-    cmd->add_option("--texel-cache-mb", args->texelCacheMb, "Texel cache size (MiB)")
-        ->capture_default_str();
+    cmd->add_option("--sample-cache-mb", args->sampleCacheMb,
+                    "Sample cache size (MiB; default: sized to the frame, 4 to 64)");
+    cmd->add_option("--texel-cache-mb", args->texelCacheMb,
+                    "Texel cache size (MiB; default: sized to the frame, 4 to 64)");
     cmd->add_option("--lod-bias", args->lodBias, "Shading LOD bias in mip levels (> 0: coarser)")
         ->capture_default_str();
     cmd->add_option("--hit-samples", args->hitSamples,
