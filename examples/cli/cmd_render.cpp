@@ -471,7 +471,10 @@ void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views) {
     TextureSpaceOptions& t = opt->texture;
     if (!t.enabled || t.cache.referenceMode) return;
     CacheSettings fit = t.cache;
-    SizeCachesToFrame(&fit, opt->width, opt->height, views, opt->integrator, t.footprint);
+    // --cached-visibility keeps a second term per texel under keys of its own (texture_space.h):
+    // sized as a second view.
+    const int terms = t.cachedVisibility ? 2 : 1;
+    SizeCachesToFrame(&fit, opt->width, opt->height, views * terms, opt->integrator, t.footprint);
     if (!a.Given("--sample-cache-mb")) t.cache.sampleCacheBytes = fit.sampleCacheBytes;
     if (!a.Given("--texel-cache-mb")) t.cache.texelCacheBytes = fit.texelCacheBytes;
     const double mib = 1.0 / double(1 << 20);
