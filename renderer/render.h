@@ -35,4 +35,14 @@ void RecordAoRays(const RenderScene& scene, const RenderOptions& options, std::v
 /// Seed of the random stream of (pixel, sample): identical for any thread count or pass split.
 uint64_t PixelSeed(uint64_t seed, int x, int y, int width);
 
+namespace internal {
+/// What a progressive texture-space render with a time budget does after a pass (Render's
+/// loop): another pass of fresh shading; camera samples against the last pass's cache, one per
+/// pixel at a time (Extend); or nothing. `left` is the budget left, `lastTime` and `lastSpp`
+/// the time and camera samples of the pass just done, `passesRun` how many ran so far (all of
+/// them full passes unless `extending`).
+enum class BudgetStep { Stop, Pass, Extend };
+BudgetStep NextBudgetStep(bool extending, int passesRun, double left, double lastTime, int lastSpp);
+}  // namespace internal
+
 }  // namespace texcache

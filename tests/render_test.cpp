@@ -390,4 +390,24 @@ TEST(Render, PacketOcclusionMatchesSingleRays) {
 }
 
 }  // namespace
+// A time budget's progressive passes: another pass while one fits; after a first pass that
+// leaves less than itself, camera samples against its cache (Extend) while one fits (one costs
+// at most the pass's time over its camera samples); never after two passes; nothing once the
+// budget is spent.
+TEST(Render, BudgetStepsFillTheBudgetAfterOnePass) {
+    using internal::BudgetStep;
+    using internal::NextBudgetStep;
+    EXPECT_EQ(NextBudgetStep(false, 1, 0.6, 0.5, 4), BudgetStep::Pass);
+    EXPECT_EQ(NextBudgetStep(false, 1, 0.48, 0.5, 4), BudgetStep::Extend);
+    EXPECT_EQ(NextBudgetStep(false, 1, 0.1, 0.5, 4), BudgetStep::Stop);  // under 0.5 / 4
+    EXPECT_EQ(NextBudgetStep(false, 2, 0.48, 0.5, 4), BudgetStep::Stop);
+    EXPECT_EQ(NextBudgetStep(false, 3, 0.6, 0.5, 4), BudgetStep::Pass);
+    EXPECT_EQ(NextBudgetStep(true, 1, 0.05, 0.04, 1), BudgetStep::Extend);
+    EXPECT_EQ(NextBudgetStep(true, 5, 0.03, 0.04, 1), BudgetStep::Stop);
+    EXPECT_EQ(NextBudgetStep(false, 1, 0.0, 0.5, 4), BudgetStep::Stop);
+    EXPECT_EQ(NextBudgetStep(false, 1, -1.0, 0.5, 4), BudgetStep::Stop);
+    EXPECT_EQ(NextBudgetStep(false, 1, 0.3, 0.5, 0), BudgetStep::Stop);  // no samples: 0.5 per
+    EXPECT_EQ(NextBudgetStep(false, 1, NAN, 0.5, 4), BudgetStep::Stop);
+}
+
 }  // namespace texcache
