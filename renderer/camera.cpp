@@ -53,6 +53,9 @@ Ray CameraModel::GenerateThinLens(float px, float py, glm::vec2 lens,
         diff->dOdy = dOy;
         diff->dDdx = R * (glm::normalize(filmX) - dn);
         diff->dDdy = R * (glm::normalize(filmY) - dn);
+        // The focus plane is z = -focusDistance in camera space.
+        diff->lensRadius = lensRadius_;
+        diff->focusT = lensRadius_ > 0.0f && dn.z < 0.0f ? -(focusDistance_ + o.z) / dn.z : 0.0f;
     }
     return ray;
 }

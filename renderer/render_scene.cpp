@@ -893,8 +893,24 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
             const float t = (d - glm::dot(si.N, o)) / denom;
             return o + t * dir - si.P;
         };
-        const glm::vec3 dPdx = planeOffset(diff->dOdx, diff->dDdx);
-        const glm::vec3 dPdy = planeOffset(diff->dOdy, diff->dDdy);
+        glm::vec3 dPdx = planeOffset(diff->dOdx, diff->dDdx);
+        glm::vec3 dPdy = planeOffset(diff->dOdy, diff->dDdy);
+        // Defocus: the camera samples of a pixel reach the surface anywhere in the circle of
+        // confusion, and the image averages them over it; a footprint narrower than its radius
+        // picked texels finer than the image shows (a pixel's differential is taken with the
+        // lens point fixed). Car AO through a lens (radius 0.08, focus 4.5; 640x360, 1 ray
+        // per cached sample, 32 spp), the footprint widened to k times the radius: k = 0: 4.35
+        // CPU s, relMSE 0.01965; k = 1: 2.74 s, 0.01979 (1.57x lower at equal time); k = 2:
+        // 2.32 s, 0.0222 (1.64x); k = 4: 2.08 s, 0.0292 (1.40x). k = 1: texels the size of the
+        // blur, a little short of the best ratio for hardly any bias.
+        if (diff->lensRadius > 0.0f && diff->focusT > 0.0f) {
+            const float coc = diff->lensRadius * std::abs(1.0f - hit.t / diff->focusT);
+            auto widen = [&](glm::vec3& d) {
+                const float l = glm::length(d);
+                if (l > 0.0f && l < coc) d *= coc / l;
+            };
+            widen(dPdx), widen(dPdy);
+        }
         SolveTangent(si.dPdu, si.dPdv, dPdx, &si.dudx, &si.dvdx);
         SolveTangent(si.dPdu, si.dPdv, dPdy, &si.dudy, &si.dvdy);
     }

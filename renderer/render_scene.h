@@ -27,6 +27,10 @@ struct Ray {
 /// Ray differentials (Igehy 1999): origin and direction derivatives per pixel step in x and y.
 struct RayDifferentials {
     glm::vec3 dOdx{0.0f}, dOdy{0.0f}, dDdx{0.0f}, dDdy{0.0f};
+    /// Thin lens (0 for a pinhole): the lens radius, and the distance along the ray to the
+    /// plane in focus. A hit at distance t is blurred over a circle of radius
+    /// lensRadius |1 - t / focusT| (RenderScene::Interact widens the footprint to it).
+    float lensRadius = 0.0f, focusT = 0.0f;
 };
 
 /// What a ray hit, before shading.
