@@ -18,13 +18,15 @@ namespace texcache::experiments {
 namespace fs = std::filesystem;
 
 std::unique_ptr<LoadedScene> LoadForExperiment(const Setup& s, const std::string& file,
-                                               bool needLights) {
+                                               bool needLights,
+                                               const std::function<void(Scene*)>& edit) {
     auto lp = std::make_unique<LoadedScene>();
     LoadedScene& l = *lp;
     const std::string path = (fs::path(s.scenesDir) / file).string();
     std::vector<std::string> warnings;
     l.scene = LoadScene(path, &warnings);
     l.name = fs::path(file).stem().string();
+    if (edit) edit(&l.scene);
     RenderSceneOptions ro;
     ro.needLights = needLights;
     ro.needEnvironment = needLights;

@@ -4,6 +4,7 @@
 // PNG plots and the markdown summary. Everything is written with a temporary file + rename.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -42,8 +43,10 @@ struct LoadedScene {
     LoadedScene(const LoadedScene&) = delete;
     LoadedScene& operator=(const LoadedScene&) = delete;
 };
+/// Loads scenes/`file`; `edit`, if given, changes the scene (e.g. its camera) before it is built.
 std::unique_ptr<LoadedScene> LoadForExperiment(const Setup& s, const std::string& file,
-                                               bool needLights);
+                                               bool needLights,
+                                               const std::function<void(Scene*)>& edit = {});
 
 /// Render options from a scene's settings at a given size and integrator.
 RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int width, int height);
