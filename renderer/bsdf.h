@@ -37,12 +37,19 @@ public:
     }
 
     /// BSDF value f(wo, wi) for world directions (both pointing away from the surface).
+    ///
+    /// wo may lie below the shading normal's plane while above the geometric one: a curved
+    /// surface seen at a grazing angle, where the interpolated normal leans away from the eye.
+    /// The diffuse lobe does not depend on wo and shades such a view as any other; the specular
+    /// lobe needs wo above the shading plane and is 0 there. (Both were 0, which left dark
+    /// fringes where a curved diffuse surface turns away: the clay car under a white sky, along
+    /// the lower edge of its body, lit 0.23 per hit against 0.8 x its ambient occlusion, 0.60.)
     glm::vec3 Eval(glm::vec3 woW, glm::vec3 wiW) const {
         if (glm::dot(wiW, ng_) <= 0.0f) return glm::vec3(0.0f);
         const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
-        if (wi.z <= 0.0f || wo.z <= 0.0f) return glm::vec3(0.0f);
+        if (wi.z <= 0.0f) return glm::vec3(0.0f);
         glm::vec3 f = kd_ * albedo_ * kInvPi;
-        if (ggx_) {
+        if (ggx_ && wo.z > 0.0f) {
             const glm::vec3 wm = glm::normalize(wo + wi);
             const glm::vec3 F = FresnelSchlick(f0_, glm::dot(wo, wm));
             f += F * (GgxD(wm, alpha_) * GgxG(wo, wi, alpha_) / (4.0f * wo.z * wi.z));
@@ -53,9 +60,9 @@ public:
     /// Solid-angle pdf of Sample() producing wiW.
     float Pdf(glm::vec3 woW, glm::vec3 wiW) const {
         const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
-        if (wi.z <= 0.0f || wo.z <= 0.0f) return 0.0f;
+        if (wi.z <= 0.0f) return 0.0f;
         const float pDiffuse = CosineHemispherePdf(wi.z);
-        if (!ggx_) return pDiffuse;
+        if (!ggx_ || wo.z <= 0.0f) return pDiffuse;  // Sample() then draws the diffuse lobe
         const float ps = SpecularProbability(wo);
         return ps * GgxPdfReflect(wo, wi, alpha_) + (1.0f - ps) * pDiffuse;
     }
@@ -64,9 +71,8 @@ public:
     bool Sample(glm::vec3 woW, float uChoice, glm::vec2 u, glm::vec3* wiW, glm::vec3* weight,
                 float* pdf) const {
         const glm::vec3 wo = frame_.ToLocal(woW);
-        if (wo.z <= 0.0f) return false;
         glm::vec3 wi;
-        if (ggx_ && uChoice < SpecularProbability(wo)) {
+        if (ggx_ && wo.z > 0.0f && uChoice < SpecularProbability(wo)) {
             const glm::vec3 wm = GgxSampleVisibleNormal(wo, alpha_, u);
             wi = glm::reflect(-wo, wm);
         } else {
@@ -99,9 +105,9 @@ public:
         *diffuse = *specular = glm::vec3(0.0f);
         if (glm::dot(wiW, ng_) <= 0.0f) return;
         const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
-        if (wi.z <= 0.0f || wo.z <= 0.0f) return;
+        if (wi.z <= 0.0f) return;
         *diffuse = kd_ * albedo_ * kInvPi;
-        if (ggx_) {
+        if (ggx_ && wo.z > 0.0f) {
             const glm::vec3 wm = glm::normalize(wo + wi);
             *specular = FresnelSchlick(f0_, glm::dot(wo, wm)) *
                         (GgxD(wm, alpha_) * GgxG(wo, wi, alpha_) / (4.0f * wo.z * wi.z));
@@ -133,11 +139,10 @@ public:
     }
 
     /// Samples the diffuse lobe alone (cosine); `weight` = DiffuseReflectance(). False when the
-    /// direction lies below the geometric surface or wo below the shading normal, where Eval() is
-    /// 0 (wiW is set in either case).
-    bool SampleDiffuse(glm::vec3 woW, glm::vec2 u, glm::vec3* wiW) const {
+    /// direction lies below the geometric surface, where Eval() is 0 (wiW is set in either case).
+    bool SampleDiffuse(glm::vec2 u, glm::vec3* wiW) const {
         *wiW = frame_.FromLocal(SampleCosineHemisphere(u));
-        return glm::dot(woW, frame_.n) > 0.0f && glm::dot(*wiW, ng_) > 0.0f;
+        return glm::dot(*wiW, ng_) > 0.0f;
     }
 
     const Frame& frame() const { return frame_; }

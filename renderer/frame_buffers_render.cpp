@@ -392,11 +392,11 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
 /// The diffuse lobe's path of one sample: incident indirect radiance into px.diffuseSum and its
 /// cone.
 void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
-                        glm::vec3 wo, const std::array<glm::vec3, screen::kNumCones>& axes,
-                        Rng& rng, FramePixel& px, RayCounts& rays) {
+                        const std::array<glm::vec3, screen::kNumCones>& axes, Rng& rng,
+                        FramePixel& px, RayCounts& rays) {
     glm::vec3 wi;
     glm::vec3 L(0.0f);
-    if (bsdf.SampleDiffuse(wo, rng.Next2D(), &wi)) {
+    if (bsdf.SampleDiffuse(rng.Next2D(), &wi)) {
         const Ray ray = SpawnRay(si, wi);
         Hit hit;
         ++rays.bounce;
@@ -528,7 +528,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
         FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng, px,
                           sh, pixel, shadows);
         if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
-        if (diffuseRay) FrameDiffuseSample(c, si, bsdf, wo, axes, rng, px, rays);
+        if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
     }
     const float inv = 1.0f / float(spp);
     fb.shading[p] = px.shadingSum * inv;

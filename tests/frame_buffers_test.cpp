@@ -882,10 +882,11 @@ TEST(FrameBuffers, TextureSpaceCacheComposes) {
 // Every screen-space method keeps the cached diffuse light (issue 21: with texture shading the
 // cones were NaN and Reliable's cone path set indirect to 0, darkening frame 0 by the mean
 // indirect buffer). Three frames of the test scene, each denoised by every method: the denoised
-// indirect light on the diffuse objects keeps 70-110% of the buffer's (measured 80-87%: the
-// a-trous's edge stopping loses some of the bright texels' light on this small scene; the broken
-// path gave 0%), Reliable's frame 0 (no history: the a-trous alone) is within 5%
-// of the spatial filter's (measured 0-2.5%), and the image is finite.
+// indirect light on the diffuse objects keeps 60-110% of the buffer's (measured 70-84%: the
+// a-trous's edge stopping loses some of the bright texels' light on this small scene, and more
+// since grazing views shade their diffuse lobe (bsdf.h), which put light in silhouette pixels:
+// 80-87% before; the broken path gave 0%), Reliable's frame 0 (no history: the a-trous alone) is
+// within 5% of the spatial filter's (measured 0-2.5%), and the image is finite.
 TEST(FrameBuffers, EveryDenoiserKeepsTheCachedIndirectLight) {
     Scene s = TestScene();
     RenderScene rs(s, {});
@@ -921,7 +922,7 @@ TEST(FrameBuffers, EveryDenoiserKeepsTheCachedIndirectLight) {
                     out += Luminance(indirect[p]);
                 }
                 ASSERT_GT(in, 0.0);
-                EXPECT_GT(out / in, 0.7) << "frame " << f;
+                EXPECT_GT(out / in, 0.6) << "frame " << f;
                 EXPECT_LT(out / in, 1.1) << "frame " << f;
                 if (f == 0 && m == screen::Method::SpatialOnly) spatialFrame0 = out;
                 if (f == 0 && m == screen::Method::Reliable) {

@@ -108,6 +108,42 @@ TEST(Sampling, CosineHemispherePdfIntegratesToOne) {
     EXPECT_NEAR(integral / n, 1.0, 1e-2);
 }
 
+// A grazing view of a curved surface: wo above the geometric plane but below the shading
+// normal's (the interpolated normal leans away from the eye). The diffuse lobe shades it as any
+// other view (it had been 0: dark fringes where diffuse surfaces turn away, the clay car's lower
+// edge under a white sky at 0.23 instead of ~0.73); the specular lobe stays 0 there; Sample()
+// draws the diffuse lobe with its own pdf and weight albedo (tolerance 1e-5).
+TEST(Sampling, GrazingViewsBelowTheShadingNormalStillShadeDiffuse) {
+    const glm::vec3 n = glm::normalize(glm::vec3(0.3f, 0.0f, 1.0f)), ng(0.0f, 0.0f, 1.0f);
+    const glm::vec3 wo = glm::normalize(glm::vec3(-1.0f, 0.0f, 0.1f));  // above ng, below n
+    ASSERT_GT(glm::dot(wo, ng), 0.0f);
+    ASSERT_LT(glm::dot(wo, n), 0.0f);
+    const glm::vec3 albedo(0.8f, 0.5f, 0.2f), wi = glm::normalize(glm::vec3(0.2f, 0.3f, 1.0f));
+    for (bool ggx : {false, true}) {
+        const Bsdf b(n, ng, albedo, ggx, glm::vec2(0.3f), glm::vec3(0.04f));
+        const glm::vec3 f = b.Eval(wo, wi);
+        const glm::vec3 kd = b.DiffuseReflectance();
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(f[k], kd[k] / 3.14159265f, 1e-5f) << ggx;
+        glm::vec3 diffuse, specular;
+        b.EvalLobes(wo, wi, &diffuse, &specular);
+        EXPECT_EQ(specular, glm::vec3(0.0f));
+        EXPECT_NEAR(b.Pdf(wo, wi), CosineHemispherePdf(glm::dot(wi, n)), 1e-5f);
+        Rng rng(7, 1);
+        int drawn = 0;
+        for (int i = 0; i < 64; ++i) {
+            glm::vec3 w, weight;
+            float pdf;
+            if (!b.Sample(wo, rng.Next1D(), rng.Next2D(), &w, &weight, &pdf)) continue;
+            ++drawn;
+            EXPECT_NEAR(pdf, CosineHemispherePdf(glm::dot(w, n)), 1e-4f * pdf);
+            if (glm::dot(w, ng) > 0.0f) {
+                for (int k = 0; k < 3; ++k) EXPECT_NEAR(weight[k], kd[k], 1e-4f) << ggx;
+            }
+        }
+        EXPECT_GT(drawn, 60) << ggx;
+    }
+}
+
 TEST(Sampling, GgxNormalsAreNormalizedAndVndfMatchesItsPdf) {
     for (float alpha : {0.001f, 0.1f, 0.5f, 1.0f}) {
         // ∫ D(m) cos(m) dm = 1 (uniform-sphere estimate; narrow lobes need many samples).
