@@ -29,7 +29,9 @@ while [ $# -gt 0 ]; do
   esac
 done
 
-key="$( (cat "$scene"; printf '%s\n' "${shared[@]+"${shared[@]}"}") | sha1sum | cut -c1-12)"
+# Keyed by the scene, the options and the renderer's build: a reference of another build (say,
+# before a change to the BSDF) would measure the difference between the builds.
+key="$( (cat "$scene" "$bin"; printf '%s\n' "${shared[@]+"${shared[@]}"}") | sha1sum | cut -c1-12)"
 ref="$out/demo_ref_$key.exr"
 if [ ! -f "$ref" ]; then
   echo "demo: rendering the reference once: $ref (512 spp, minutes; later runs reuse it)"
