@@ -97,11 +97,8 @@ public:
         ctx.tsc = cache_ = cache;
         ctx.cacheStats = &stats_;
         // Footprints of visible texels only: the prepass of each pass marks them.
-        const FootprintMode fm = opt.texture.footprint;
-        const bool visibleOnly =
-            fm == FootprintMode::Visible || (fm == FootprintMode::Auto && k == IntegratorKind::AO);
-        if (prepass == Prepass::Allowed && visibleOnly && opt.texture.constantTerm < 0.0f &&
-            cache->AnyFootprint()) {
+        if (prepass == Prepass::Allowed && VisibleOnly(opt.texture.footprint, k) &&
+            opt.texture.constantTerm < 0.0f && cache->AnyFootprint()) {
             visible_ = &cache->Visibility(opt.width, opt.height,
                                           opt.visibilityPrepass == VisibilityPrepass::Own);
             cache->RestrictFootprints(visible_);

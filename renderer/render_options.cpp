@@ -57,6 +57,11 @@ void CheckFilterRadius(int radius, const std::string& where) {
             where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
 }
 
+bool VisibleOnly(FootprintMode mode, IntegratorKind integrator) {
+    return mode == FootprintMode::Visible ||
+           (mode == FootprintMode::Auto && integrator == IntegratorKind::AO);
+}
+
 void SizeCachesToFrame(CacheSettings* cache, int width, int height, int views,
                        IntegratorKind integrator, FootprintMode footprint) {
     // Bytes per pixel: 4 slots of 32 bytes per texel or sample a pixel needs (two choices per
@@ -64,8 +69,7 @@ void SizeCachesToFrame(CacheSettings* cache, int width, int height, int views,
     // once at 16 MiB, 0.5% more samples shaded); four times that for whole-window footprints.
     constexpr double kTexelBytes = 128.0, kVisibleSampleBytes = 128.0, kAllSampleBytes = 512.0;
     constexpr size_t kMin = size_t(4) << 20, kMax = size_t(64) << 20;
-    const bool visibleOnly = footprint == FootprintMode::Visible ||
-                             (footprint == FootprintMode::Auto && integrator == IntegratorKind::AO);
+    const bool visibleOnly = VisibleOnly(footprint, integrator);
     const double pixels =
         double(std::max(width, 1)) * double(std::max(height, 1)) * double(std::max(views, 1));
     auto fit = [&](double perPixel) {

@@ -35,6 +35,8 @@ namespace texcache {
 ///            sunlit-indirect,car-diffuse,chess-diffuse --out DIR`: the "all" run is
 ///            results/speed_vs_error.md, the visible run's figures are from c6c07c5).
 enum class FootprintMode { Auto, Visible, All };
+/// Whether footprints of `mode` keep only the texels the camera sees: Visible, and Auto for AO.
+bool VisibleOnly(FootprintMode mode, IntegratorKind integrator);
 /// "auto", "visible" or "all"; throws InputError naming `where` and the valid names otherwise.
 FootprintMode ParseFootprintMode(const std::string& name, const std::string& where);
 /// "auto, visible, all" (for help texts and menus).

@@ -64,10 +64,8 @@ void PasteRows(RenderResult* into, RenderResult&& band, int y0, int y1) {
 
 /// Whether renders with these options restrict footprints to visible texels (as FrameCache).
 bool VisibleFootprints(const RenderOptions& o, const TextureSpaceCache& cache) {
-    const FootprintMode fm = o.texture.footprint;
-    return (fm == FootprintMode::Visible ||
-            (fm == FootprintMode::Auto && o.integrator == IntegratorKind::AO)) &&
-           o.texture.constantTerm < 0.0f && cache.AnyFootprint();
+    return VisibleOnly(o.texture.footprint, o.integrator) && o.texture.constantTerm < 0.0f &&
+           cache.AnyFootprint();
 }
 
 }  // namespace
