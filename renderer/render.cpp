@@ -380,12 +380,19 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
 /// which had made a warm-cache frame cost about twice a frame without lookups (`texcache bench
 /// cache`). sizeof(PassTexel) (24 bytes) per camera sample of the pass, in storage the texture
 /// space cache keeps between renders.
+///
+/// The prepass adds a pixel's samples to the frame itself while they need no lookup (a sky, a
+/// light, a texel it found cached), up to the first that does: `added` counts them per pixel,
+/// and the shading pass adds the rest, in order, so each pixel's sum is the same as if one
+/// pass had added them all. In a warm frame it then has nearly nothing left to read.
 struct PassTexels {
     static constexpr int32_t kMiss = -1;   ///< in `mesh`: the ray left the scene
     static constexpr int32_t kLight = -2;  ///< in `mesh`: the ray hit a light
     static constexpr int32_t kFound = -3;  ///< in `mesh`: the prepass found the texel cached
     static constexpr size_t kBytesPerSample = sizeof(PassTexel);
     PassTexel* at = nullptr;
+    uint32_t* added = nullptr;  ///< per pixel (y * width + x)
+    double* sum = nullptr;      ///< the frame's sums, 3 per pixel
     int width = 0, s0 = 0, s1 = 0;
     /// Nothing to find: the pass began by emptying the cache, or it holds no texels yet.
     bool cacheEmptied = false;
@@ -436,39 +443,62 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
                 mesh = texels[i].mesh, key = texels[i].key.Pack();
             }
             if (!out) continue;
-            PassTexel& t = (*out)[out->Index(mark.x, mark.y, mark.s)];
-            if (find && mesh >= 0 && c.tsc->FindTexel(texels[i], &t.found)) {
+            const size_t pixel = size_t(mark.y) * size_t(out->width) + size_t(mark.x);
+            if (mark.s == s0) out->added[pixel] = 0;
+            glm::vec3 found(0.0f);
+            if (find && mesh >= 0 && c.tsc->FindTexel(texels[i], &found)) {
                 mesh = PassTexels::kFound;
                 ++stats->lookups, ++stats->texelHits;
                 if (c.pixelCache) {
-                    PixelCacheCounts& px =
-                        c.pixelCache[size_t(mark.y) * size_t(c.opt.width) + size_t(mark.x)];
+                    PixelCacheCounts& px = c.pixelCache[pixel];
                     ++px.lookups, ++px.texelHits;
                 }
             }
-            t.key = key, t.mesh = mesh;
+            if (mesh < 0 && out->added[pixel] == uint32_t(mark.s - s0)) {
+                // Every sample of the pixel before this one is added: add this one too.
+                const glm::vec3 L = mesh == PassTexels::kFound   ? found
+                                    : mesh == PassTexels::kLight ? glm::vec3(1.0f)
+                                                                 : glm::vec3(0.0f);
+                double* px = &out->sum[3 * pixel];
+                px[0] += L.x, px[1] += L.y, px[2] += L.z;
+                ++out->added[pixel];
+                continue;
+            }
+            PassTexel& t = (*out)[out->Index(mark.x, mark.y, mark.s)];
+            t.key = key, t.mesh = mesh, t.found = found;
         }
     }
 }
 
 /// Texture-space AO for a tile from the texels its prepass kept: AoTileTwoPhase's lookups, in
-/// the same order, with the same texels, so the same image, without its camera rays.
+/// the same order, with the same texels, so the same image, without its camera rays. The
+/// samples the prepass added itself (PassTexels::added) are skipped.
 void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, const PassTexels& pt,
-                       std::vector<double>& sum, RayCounts& rays) {
-    // All texels first, prefetching their slots, then the lookups (as AoTileTwoPhase).
+                       RayCounts& rays) {
+    // The samples left, all texels first, prefetching their slots, then the lookups (as
+    // AoTileTwoPhase).
+    struct Left {
+        uint32_t x, y, s;
+    };
+    thread_local std::vector<Left> left;
     thread_local std::vector<SampleRequest> texels;
-    texels.resize(r.rows().size() * r.cols().size() * size_t(pt.s1 - pt.s0));
-    size_t i = 0;
-    for (Cursor at(r, pt.s0); i < texels.size(); ++i, at.Next(r, pt.s0, pt.s1)) {
-        const PassTexel& t = pt[pt.Index(at.x, at.y, at.s)];
-        if (t.mesh < 0) continue;
-        texels[i] = c.tsc->RequestOf(t.mesh, TexelKey::Unpack(t.key));
-        c.tsc->Prefetch(texels[i]);
-    }
+    left.clear();
+    texels.clear();
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x)
+            for (int s = pt.s0 + int(pt.added[size_t(y) * size_t(pt.width) + size_t(x)]); s < pt.s1;
+                 ++s) {
+                const PassTexel& t = pt[pt.Index(x, y, s)];
+                left.push_back({uint32_t(x), uint32_t(y), uint32_t(s)});
+                texels.emplace_back();
+                if (t.mesh < 0) continue;
+                texels.back() = c.tsc->RequestOf(t.mesh, TexelKey::Unpack(t.key));
+                c.tsc->Prefetch(texels.back());
+            }
     CacheStats& stats = c.cacheStats->local();
-    i = 0;
-    for (Cursor at(r, pt.s0); i < texels.size(); ++i, at.Next(r, pt.s0, pt.s1)) {
-        const PassTexel& t = pt[pt.Index(at.x, at.y, at.s)];
+    for (size_t i = 0; i < left.size(); ++i) {
+        const Left at = left[i];
+        const PassTexel& t = pt[pt.Index(int(at.x), int(at.y), int(at.s))];
         const int32_t mesh = t.mesh;
         const size_t pixel = size_t(at.y) * size_t(c.opt.width) + size_t(at.x);
         const CacheSnapshot before = c.pixelCache ? CacheSnapshot(stats) : CacheSnapshot();
@@ -480,7 +510,7 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
                 [&](const SampleRequest& req) { return ShadeAoSample(c, req, rays); },
                 c.opt.aoSamples, stats);
         if (c.pixelCache) AddPixelCounts(&c.pixelCache[pixel], before, stats);
-        double* px = &sum[3 * pixel];
+        double* px = &pt.sum[3 * pixel];
         px[0] += L.x, px[1] += L.y, px[2] += L.z;
     }
 }
@@ -595,9 +625,12 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         const bool fromPrepass = opt.visibilityPrepass != VisibilityPrepass::Only && prepassAo &&
                                  passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
         if (fromPrepass) {
-            std::vector<PassTexel>& store = c.tsc->PassTexelScratch();
-            if (passSamples > store.size()) store.resize(passSamples);
-            passTexels.at = store.data(), passTexels.width = W;
+            PassScratch& store = c.tsc->PassTexelScratch();
+            if (passSamples > store.texels.size()) store.texels.resize(passSamples);
+            const size_t pixels = size_t(W) * size_t(opt.height);
+            if (pixels > store.added.size()) store.added.resize(pixels);
+            passTexels.at = store.texels.data(), passTexels.added = store.added.data();
+            passTexels.sum = sums.rgb.data(), passTexels.width = W;
             passTexels.s0 = s0, passTexels.s1 = s1;
         }
         const auto passStart = Clock::now();
@@ -628,7 +661,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
             if (opt.visibilityPrepass == VisibilityPrepass::Only) return;  // marks only
             if (fromPrepass) {
-                AoTileFromPrepass(c, r, passTexels, sums.rgb, rc);
+                AoTileFromPrepass(c, r, passTexels, rc);
             } else if (twoPhaseAo) {
                 AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
                                r.cols().end(), s0, s1, sums.rgb, rc);

@@ -60,6 +60,14 @@ struct PassTexel {
     int32_t mesh;     ///< the texel's cache mesh, or a PassTexels marker (< 0)
     glm::vec3 found;  ///< the texel's value, when the prepass found it cached
 };
+/// What the visibility prepass keeps of a pass for its shading pass (render.cpp's PassTexels).
+struct PassScratch {
+    std::vector<PassTexel> texels;  ///< per camera sample of the pass
+    std::vector<uint32_t> added;    ///< per pixel: its first samples the prepass added itself
+    size_t Bytes() const {
+        return texels.capacity() * sizeof(PassTexel) + added.capacity() * sizeof(uint32_t);
+    }
+};
 }  // namespace internal
 
 class TextureSpaceCache {
@@ -168,7 +176,7 @@ public:
     /// What the visibility prepass found for each camera sample of a pass (render.cpp), kept
     /// here from render to render like the visibility set: a warm frame then reuses its pages
     /// instead of faulting in 24 bytes per camera sample again. Empty until a render uses it.
-    std::vector<internal::PassTexel>& PassTexelScratch() { return passTexels_; }
+    internal::PassScratch& PassTexelScratch() { return passTexels_; }
 
     /// Takes new options and starts empty, keeping the cache storage when its layout is the same
     /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
@@ -191,7 +199,7 @@ public:
     /// Bytes of all cache storage (sample and texel caches, temporal history, visibility set).
     size_t BytesUsed() const {
         return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0) +
-               (visible_ ? visible_->Bytes() : 0) + passTexels_.capacity() * sizeof(passTexels_[0]);
+               (visible_ ? visible_->Bytes() : 0) + passTexels_.Bytes();
     }
     size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
     size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
@@ -215,7 +223,7 @@ private:
     std::vector<int> passRadiusOf_;  ///< radiusOf_ shrunk for the current pass
     std::unique_ptr<TemporalHistory<glm::vec3>> history_;
     std::unique_ptr<VisibleTexels> visible_;
-    std::vector<internal::PassTexel> passTexels_;
+    internal::PassScratch passTexels_;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
     bool mayHoldTexels_ = false;  ///< see MayHoldTexels
