@@ -17,6 +17,8 @@
 #include <tuple>
 #include <unordered_map>
 
+#include <unistd.h>
+
 #include "libtexcache/topology_checks.h"
 #include "tests/support/cages.h"
 #include "texcache/direct_mapped_cache.h"
@@ -229,6 +231,49 @@ TEST(DirectMappedCache, StaysWithinItsByteBudget) {
     EXPECT_THROW(DirectMappedCache<Payload>(DirectMappedCache<Payload>::kSlotBytes - 1),
                  InputError);
 }
+
+#if defined(__x86_64__) && defined(__linux__)
+// A function whose only effect is a cache's Prefetch, out of line, and a caller. GCC's IPA
+// pure-const pass finds such a function "const" when its prefetch is __builtin_prefetch, and
+// deletes the calls to it: that had left the renderer without a single prefetch instruction
+// (see PrefetchLine). The test reads the caller's machine code back: the call (or the prefetch,
+// if the compiler inlines it after all) must still be there.
+extern "C" __attribute__((noinline)) void TexcachePrefetchProbe(
+    const DirectMappedCache<Payload>* cache, uint64_t hash) {
+    cache->Prefetch(hash);
+}
+extern "C" __attribute__((noinline)) void TexcachePrefetchCaller(
+    const DirectMappedCache<Payload>* cache, uint64_t hash) {
+    TexcachePrefetchProbe(cache, hash);
+}
+
+TEST(DirectMappedCache, PrefetchSurvivesTheOptimizer) {
+    DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes * 64);
+    TexcachePrefetchCaller(&cache, 12345);  // and it is safe to call
+    char self[4096];
+    const ssize_t n = readlink("/proc/self/exe", self, sizeof(self) - 1);
+    ASSERT_GT(n, 0);
+    self[n] = 0;
+    // objdump comes with binutils, which the compiler itself needs.
+    const std::string command = std::string(
+                                    "objdump -d --no-show-raw-insn "
+                                    "--disassemble=TexcachePrefetchCaller '") +
+                                self + "' 2>&1";
+    FILE* pipe = popen(command.c_str(), "r");
+    ASSERT_NE(pipe, nullptr);
+    std::string text;
+    char buf[4096];
+    for (size_t got; (got = fread(buf, 1, sizeof(buf), pipe)) > 0;) text.append(buf, got);
+    ASSERT_EQ(pclose(pipe), 0) << text;
+    const size_t body = text.find("<TexcachePrefetchCaller>:");
+    ASSERT_NE(body, std::string::npos) << text;
+    const std::string code = text.substr(body + 25);
+    EXPECT_TRUE(code.find("prefetch") != std::string::npos ||
+                code.find("TexcachePrefetchProbe") != std::string::npos)
+        << "the prefetch was deleted:\n"
+        << text;
+}
+#endif
 
 // Threads hammer overlapping keys through a small cache (many evictions): every hit must carry
 // exactly the payload of the key asked for. Run under ThreadSanitizer by the `tsan` build.
