@@ -96,8 +96,12 @@ public:
         }
         ctx.tsc = cache_ = cache;
         ctx.cacheStats = &stats_;
-        // Footprints of visible texels only: the prepass of each pass marks them.
-        if (prepass == Prepass::Allowed && VisibleOnly(opt.texture.footprint, k) &&
+        // Footprints of visible texels only: the prepass of each pass marks them. AO shaded at
+        // the hits has no footprints (render.cpp, AoHitsBin; a render with AOVs shades on the
+        // grid).
+        const bool hits = k == IntegratorKind::AO && opt.texture.samples == TextureSamples::Hits &&
+                          !opt.aovs.Any();
+        if (prepass == Prepass::Allowed && !hits && VisibleOnly(opt.texture.footprint, k) &&
             opt.texture.constantTerm < 0.0f && cache->AnyFootprint()) {
             visible_ = &cache->Visibility(opt.width, opt.height,
                                           opt.visibilityPrepass == VisibilityPrepass::Own);

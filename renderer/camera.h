@@ -75,6 +75,15 @@ public:
             }
         }
     }
+    /// The width of a pixel's footprint at distance `t` along a camera ray, across the ray: t
+    /// times a pixel's angle at the image centre, widened to a thin lens's circle of confusion
+    /// (as RenderScene::Interact widens differentials). An isotropic stand-in for ray
+    /// differentials where only a level of detail is wanted (hit-binned AO, render.cpp).
+    float FootprintAt(float t) const {
+        const float w = t * 2.0f * tanHalfY_ / float(height_);
+        if (!(lensRadius_ > 0.0f) || !(focusDistance_ > 0.0f)) return w;
+        return std::max(w, lensRadius_ * std::abs(1.0f - t / focusDistance_));
+    }
     /// World point -> film position in pixels (x right, y down); false when behind the camera.
     bool Project(glm::vec3 world, glm::vec2* film) const;
 

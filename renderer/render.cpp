@@ -252,6 +252,33 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
     }
 }
 
+/// The AO rays of many hits, traced 16 at a time across hits (full packets: 4 rays of one hit
+/// fill a quarter of one), and the rays that escape counted per hit.
+struct AoRayBatch {
+    std::vector<Ray> rays;
+    std::vector<uint32_t> owner;  // the hit of each ray
+
+    void Clear() { rays.clear(), owner.clear(); }
+    /// Queues hit `hit`'s AO rays (ForEachAoRay: its random stream, its rays).
+    void Queue(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
+               uint32_t hit) {
+        ForEachAoRay(c, ray, si, rng, [&]() -> Ray& {
+            owner.push_back(hit);
+            return rays.emplace_back();
+        });
+    }
+    /// Traces the queued rays; open[hit] += the hit's rays that escape.
+    void Trace(const Context& c, uint32_t* open, RayCounts& counts) const {
+        bool blocked[16];
+        for (size_t i = 0; i < rays.size(); i += 16) {
+            const int m = int(std::min<size_t>(16, rays.size() - i));
+            c.rs.Occluded16(&rays[i], m, blocked);
+            for (int k = 0; k < m; ++k) open[owner[i + size_t(k)]] += !blocked[k];
+        }
+        counts.shadow += rays.size();
+    }
+};
+
 /// Per-hit AO for a tile in two phases: all camera rays first, then the AO rays of every hit.
 /// Same samples, same random numbers, same result as Sample(); tracing like rays together keeps
 /// Embree's working set (and the traversal's caches) warm, as a wavefront renderer would.
@@ -313,25 +340,16 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
     if (!c.tsc) {
         // The AO rays of every hit of the tile, traced 16 at a time across hits: full packets
         // (4 rays of one hit fill a quarter of one).
-        thread_local std::vector<Ray> aoRays;
-        thread_local std::vector<uint32_t> owner, open;
-        aoRays.clear(), owner.clear();
+        thread_local AoRayBatch batch;
+        thread_local std::vector<uint32_t> open;
+        batch.Clear();
         open.assign(n, 0);
         for (size_t i = 0; i < n; ++i) {
             Pending& p = queue[i];
             if (!p.found || p.hit.object < 0) continue;
-            ForEachAoRay(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, [&]() -> Ray& {
-                owner.push_back(uint32_t(i));
-                return aoRays.emplace_back();
-            });
+            batch.Queue(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, uint32_t(i));
         }
-        bool blocked[16];
-        for (size_t i = 0; i < aoRays.size(); i += 16) {
-            const int m = int(std::min<size_t>(16, aoRays.size() - i));
-            c.rs.Occluded16(&aoRays[i], m, blocked);
-            for (int k = 0; k < m; ++k) open[owner[i + size_t(k)]] += !blocked[k];
-        }
-        rays.shadow += aoRays.size();
+        batch.Trace(c, open.data(), rays);
         const float inv = 1.0f / float(c.opt.aoSamples);
         for (size_t i = 0; i < n; ++i) {
             const Pending& p = queue[i];
@@ -515,10 +533,198 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
     }
 }
 
+/// Whether this render's texture-space AO shades at the camera hits (TextureSamples).
+bool ShadesAtHits(const Context& c) {
+    return c.tsc && c.opt.integrator == IntegratorKind::AO && c.opt.texture.constantTerm < 0.0f &&
+           c.opt.texture.samples == TextureSamples::Hits;
+}
+
+/// Hit-binned texture-space AO, phase 1 of a pass, for one tile: traces its camera rays, shades
+/// AO at each hit exactly as per-hit AO does (same rays, same random numbers, 16-ray packets
+/// across the tile's hits), and adds each hit's escaped rays to the bin of its texel at its bin
+/// level. Records where each camera sample hit, for phase 2.
+void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
+               float blend, HitRecord* records, HitBins& bins, RayCounts& rays) {
+    const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
+    thread_local std::vector<CameraSample> cs;
+    thread_local std::vector<TexelKey> keys;
+    thread_local AoRayBatch aoRays;
+    thread_local std::vector<uint32_t> open;
+    if (cs.size() < total) cs.resize(total);
+    keys.resize(2 * total);
+    // The camera rays of per-hit AO (AoSamplesTwoPhase), without differentials: the bins' level
+    // needs only the footprint's size (below).
+    Cursor gen(r, s0);
+    if (c.camera.IsPinhole() && !c.cameraMoves) {
+        for (size_t b = 0; b < total; b += kCameraBlock)
+            PinholeCameraRays(c, r, s0, s1, gen, cs.data() + b, std::min(kCameraBlock, total - b));
+    } else {
+        for (size_t i = 0; i < total; ++i, gen.Next(r, s0, s1))
+            CameraRay(c, gen.x, gen.y, gen.s, &cs[i].rng, &cs[i].ray, nullptr);
+    }
+    IntersectCameraRays(
+        c, cs.data(), total, rays,
+        c.hitRect.Outside(r.cols().begin(), r.rows().begin(), r.cols().end(), r.rows().end()));
+    aoRays.Clear();
+    open.assign(total, 0);
+    Cursor at(r, s0);
+    const int spp = s1 - s0;
+    for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
+        CameraSample& p = cs[i];
+        HitRecord& h = records[(size_t(at.y) * size_t(c.opt.width) + size_t(at.x)) * size_t(spp) +
+                               size_t(at.s - s0)];
+        if (!p.found || p.hit.object < 0) {
+            h.mesh = !p.found ? PassTexels::kMiss : PassTexels::kLight;
+            continue;
+        }
+        const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit);
+        const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
+        const MeshGrids& g = c.tsc->Grids(mesh);
+        // Eq. 1 with the pixel's footprint taken as a disc across the ray (the minor axis of
+        // its ellipse on the surface, which eq. 1's minimum picks): its size in (u,v) along
+        // each parameter direction.
+        const float w = c.camera.FootprintAt(p.hit.t);
+        const int texelLevel = ComputeMip(g.Log2Res(face), w / glm::length(si.dPdu), 0.0f, 0.0f,
+                                          w / glm::length(si.dPdv), c.opt.texture.cache.lodBias);
+        for (int k = 0; k < 2; ++k) {
+            const int level = g.ClampMip(face, texelLevel + bias + k);
+            const int res = g.Res(face, level);
+            keys[2 * i + size_t(k)] = {g.FaceOffset() + uint32_t(face), uint8_t(level),
+                                       uint16_t(QuantizeCoord(si.ptex.u, res)),
+                                       uint16_t(QuantizeCoord(si.ptex.v, res))};
+        }
+        // The sample reads the upper level with probability `blend`, the lower one otherwise
+        // (stochastic filtering: in expectation the blend of the two, for one reconstruction
+        // instead of two), decided by a hash of its pixel and index rather than its random
+        // stream, which stays the one per-hit AO draws its rays from.
+        const uint64_t u = MixBits(PixelSeed(c.opt.seed, at.x, at.y, c.opt.width) ^
+                                   (uint64_t(at.s) * 0xD1B54A32D192ED03ull));
+        const bool upper = float(u >> 40) * (1.0f / float(1u << 24)) < blend;
+        h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
+             uint32_t(face) << 4 | keys[2 * i + (upper ? 1 : 0)].mip};
+        aoRays.Queue(c, p.ray, si, p.rng, uint32_t(i));
+    }
+    aoRays.Trace(c, open.data(), rays);
+    HitBins::Batch batch(bins);
+    for (size_t i = 0; i < total; ++i) {
+        const CameraSample& p = cs[i];
+        if (!p.found || p.hit.object < 0) continue;
+        batch.Add(keys[2 * i], open[i], uint32_t(c.opt.aoSamples));
+        if (!(keys[2 * i + 1] == keys[2 * i]))  // not clamped to the same level
+            batch.Add(keys[2 * i + 1], open[i], uint32_t(c.opt.aoSamples));
+    }
+}
+
+/// The bilinear reconstruction of hit-binned AO at a camera sample: the 2x2 bins around its
+/// (u,v) at one of its bin levels, across face edges through the Ptex adjacency, each weighted
+/// by its bilinear weight and its ray count.
+///
+/// Neighbouring samples mostly read the same 2x2 bins (a bin spans 4x4 pixels or more), so a
+/// sample whose cell is the previous sample's reuses its counts (BinCell); other cells' bins
+/// are found through a small memo of the tile (BinMemo), keyed by the bin's coordinates before
+/// any edge crossing: a hit there saves the crossing and the probe of the shared table.
+struct BinMemo {
+    static constexpr int kLog2 = 8;
+    struct Entry {
+        uint64_t key = TexelKey::kEmpty;
+        HitBins::Counts n;
+    } at[1 << kLog2];
+};
+struct BinCell {
+    int32_t mesh = -1, face = -1, level = -1, i0 = 0, j0 = 0;
+    HitBins::Counts n[4];  ///< bins (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
+};
+/// The counts of the 2x2 bins from (i0, j0) of a face at `level` (res a side) into `cell`.
+void FetchCell(const MeshGrids& g, const HitBins& bins, int face, int level, int res, int i0,
+               int j0, BinMemo& memo, BinCell* cell) {
+    for (int k = 0; k < 4; ++k) {
+        HitBins::Counts& out = cell->n[k];
+        out = {};
+        const int i = i0 + (k & 1), j = j0 + (k >> 1);
+        const bool outU = i < 0 || i >= res, outV = j < 0 || j >= res;
+        if (outU && outV) continue;  // a corner bin: diagonal across a vertex
+        // Coordinates shifted by one (-1 and res are the neighbours across the edges).
+        const uint64_t local = TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
+                                        uint16_t(i + 1), uint16_t(j + 1)}
+                                   .Pack();
+        BinMemo::Entry& m = memo.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - BinMemo::kLog2)];
+        if (m.key == local) {
+            out = m.n;
+            continue;
+        }
+        TexelKey key;
+        if (!outU && !outV) {
+            key = {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(i), uint16_t(j)};
+        } else {
+            const int edge = j < 0 ? 0 : i >= res ? 1 : j >= res ? 2 : 3;
+            float along, inward;
+            UvToEdge(edge, (float(i) + 0.5f) / float(res), (float(j) + 0.5f) / float(res), &along,
+                     &inward);
+            int nf, ne;
+            float nu, nv, scale;
+            if (!g.Topology().Cross(face, edge, along, -inward, &nf, &nu, &nv, &ne, &scale)) {
+                m = {local, {}};  // a boundary: no bin
+                continue;
+            }
+            const int nl = g.ClampMip(nf, level);
+            const int nres = g.Res(nf, nl);
+            key = {g.FaceOffset() + uint32_t(nf), uint8_t(nl), uint16_t(QuantizeCoord(nu, nres)),
+                   uint16_t(QuantizeCoord(nv, nres))};
+        }
+        out = bins.Find(key);
+        m = {local, out};
+    }
+}
+float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
+                    BinMemo& memo, BinCell& cell) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level();
+    const int res = g.Res(face, level);
+    const float x = h.U() * float(res) - 0.5f, y = h.V() * float(res) - 0.5f;
+    const float fi = std::floor(x), fj = std::floor(y);
+    const int i0 = int(fi), j0 = int(fj);
+    const float fx = x - fi, fy = y - fj;
+    if (cell.mesh != h.mesh || cell.face != face || cell.level != level || cell.i0 != i0 ||
+        cell.j0 != j0) {
+        FetchCell(g, bins, face, level, res, i0, j0, memo, &cell);
+        cell.mesh = h.mesh, cell.face = face, cell.level = level, cell.i0 = i0, cell.j0 = j0;
+    }
+    const float w[4] = {(1.0f - fx) * (1.0f - fy), fx * (1.0f - fy), (1.0f - fx) * fy, fx * fy};
+    double num = 0.0, den = 0.0;
+    for (int k = 0; k < 4; ++k)
+        num += double(w[k]) * cell.n[k].successes, den += double(w[k]) * cell.n[k].trials;
+    return den > 0.0 ? float(num / den) : 0.0f;
+}
+
+/// Hit-binned AO, phase 2 of a pass, for one tile: each camera sample's reconstruction, added to
+/// its pixel in sample order.
+void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                   const HitRecord* records, const HitBins& bins, double* sum) {
+    const int spp = s1 - s0;
+    BinMemo memo;
+    BinCell cell;
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+            const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
+            double acc = 0.0;
+            for (int s = 0; s < spp; ++s) {
+                const HitRecord& h = records[pixel * size_t(spp) + size_t(s)];
+                acc += h.mesh == PassTexels::kMiss ? 0.0
+                       : h.mesh == PassTexels::kLight
+                           ? 1.0
+                           : double(ReconstructAo(*c.tsc, bins, h, memo, cell));
+            }
+            double* px = &sum[3 * pixel];
+            px[0] += acc, px[1] += acc, px[2] += acc;
+        }
+}
+
 /// A frame's per-pixel sums while its passes run.
 struct FrameSums {
     std::vector<double> rgb;      // 3 per pixel
     std::vector<PixelAovs> aovs;  // empty unless AOVs were asked for
+    uint64_t hitBinsDropped = 0;  // see RenderStats
+    size_t hitBinBytes = 0;
 };
 
 /// Samples [s0, s1) of every pixel of a tile, added to the frame's sums. The camera rays go
@@ -619,10 +825,15 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const bool prepassAo = twoPhaseAo && fc.Visible() != nullptr;
     constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
+    const bool hits = twoPhaseAo && ShadesAtHits(c);
+    // Hit bins: no table grows past 256 MiB (car AO, 480x270, 4 spp: 2.2 MiB).
+    constexpr size_t kMaxBinBlocks = (size_t(256) << 20) / HitBins::BytesFor(1);
+    size_t binBlocksUsed = 0;
     while (done < sppCap) {
         const int s0 = done, s1 = std::min(sppCap, done + passSpp);
         const size_t passSamples = size_t(W) * size_t(opt.height) * size_t(s1 - s0);
-        const bool fromPrepass = opt.visibilityPrepass != VisibilityPrepass::Only && prepassAo &&
+        const bool fromPrepass = !hits && opt.visibilityPrepass != VisibilityPrepass::Only &&
+                                 prepassAo &&
                                  passSamples * PassTexels::kBytesPerSample <= kMaxPassTexelBytes;
         if (fromPrepass) {
             PassScratch& store = c.tsc->PassTexelScratch();
@@ -654,24 +865,61 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         // Nothing to find in a cache emptied by this pass or not used since it was emptied.
         passTexels.cacheEmptied =
             newPass || !c.tsc || !c.tsc->MayHoldTexels();  // per hit: no cache
-        if (VisibleTexels* visible = fc.Visible())
+        if (hits) {
+            // Hit-binned AO (TextureSamples::Hits): bin every hit of the pass, then read the
+            // bins back at every camera sample. A table too small for the pass's bins (an add
+            // found no room) is doubled and the pass binned again, so no hit is ever lost; the
+            // bins, and so the image, do not depend on the table's size.
+            HitRecord* const records = c.tsc->HitRecords(passSamples);
+            const float levels =
+                TextureSpaceCache::HitBinLevels(opt.aoSamples, s1 - s0, c.tsc->Pass());
+            const int bias = int(std::floor(levels));
+            const float blend = levels - float(bias);
+            // At most half full: twice the blocks the last pass used, or a first guess of four
+            // per Ptex face (a face seen at a few levels, two bin levels each) plus the pixels'
+            // bins, 16 to a block (car AO, 480x270: 5.6k blocks used 2 and 3 levels up, 19k 1 and
+            // 2 levels up; the guesses 7.6k and 10.6k).
+            const size_t pixels = size_t(W) * size_t(y1 - y0);
+            const size_t guess =
+                4 * c.tsc->NumFaces() + 2 * pixels / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
+            size_t blocks =
+                std::clamp(2 * std::max(guess, binBlocksUsed), size_t(1024), kMaxBinBlocks);
+            for (;;) {
+                HitBins& bins = c.tsc->Bins(blocks);
+                bins.Clear();
+                forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                    AoHitsBin(c, r, s0, s1, bias, blend, records, bins, rc);
+                });
+                if (bins.Dropped() == 0 || bins.NumBlocks() >= kMaxBinBlocks) break;
+                blocks = 2 * bins.NumBlocks();
+            }
+            const HitBins& bins = c.tsc->Bins(blocks);
+            binBlocksUsed = bins.BlocksUsed();
+            sums.hitBinsDropped += bins.Dropped();
+            sums.hitBinBytes = bins.BytesUsed();
+            forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts&) {
+                AoHitsResolve(c, r, s0, s1, records, bins, sums.rgb.data());
+                pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+            });
+        } else if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
             });
-        forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-            if (opt.visibilityPrepass == VisibilityPrepass::Only) return;  // marks only
-            if (fromPrepass) {
-                AoTileFromPrepass(c, r, passTexels, rc);
-            } else if (twoPhaseAo) {
-                AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
-                               r.cols().end(), s0, s1, sums.rgb, rc);
-            } else {
-                // The thread's cache counters, read around each pixel for its heat-map counts.
-                CacheStats* pixelStats = c.pixelCache ? &fc.Stats().local() : nullptr;
-                ShadeTile(c, r, s0, s1, sums, pixelStats, rc);
-            }
-            pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
-        });
+        if (!hits)
+            forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                if (opt.visibilityPrepass == VisibilityPrepass::Only) return;  // marks only
+                if (fromPrepass) {
+                    AoTileFromPrepass(c, r, passTexels, rc);
+                } else if (twoPhaseAo) {
+                    AoTileTwoPhase(c, r.rows().begin(), r.rows().end(), r.cols().begin(),
+                                   r.cols().end(), s0, s1, sums.rgb, rc);
+                } else {
+                    // The thread's cache counters, read around each pixel for its heat-map counts.
+                    CacheStats* pixelStats = c.pixelCache ? &fc.Stats().local() : nullptr;
+                    ShadeTile(c, r, s0, s1, sums, pixelStats, rc);
+                }
+                pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+            });
         if (c.tsc && opt.visibilityPrepass != VisibilityPrepass::Only) c.tsc->NoteLookups();
         done = s1;
         ++passesRun;
@@ -822,6 +1070,8 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     for (const RecordStats& ps : psrStats) result.stats.psr.Merge(ps);
     result.stats.psrBytes = psrCache ? psrCache->BytesUsed() : 0;
     result.stats.sppDone = done;
+    result.stats.hitBinsDropped = sums.hitBinsDropped;
+    result.stats.hitBinBytes = sums.hitBinBytes;
     result.stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
     return result;

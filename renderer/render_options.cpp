@@ -11,6 +11,8 @@ namespace {
 constexpr EnumName<FootprintMode> kFootprintModes[] = {{"auto", FootprintMode::Auto},
                                                        {"visible", FootprintMode::Visible},
                                                        {"all", FootprintMode::All}};
+constexpr EnumName<TextureSamples> kTextureSamples[] = {{"grid", TextureSamples::Grid},
+                                                        {"hits", TextureSamples::Hits}};
 constexpr EnumName<LightSampling> kLightSamplings[] = {
     {"mis", LightSampling::Mis}, {"pis", LightSampling::Pis}, {"cpis", LightSampling::Cpis}};
 }  // namespace
@@ -25,6 +27,10 @@ std::string LightSamplingNames() {
 
 const char* LightSamplingName(LightSampling s) {
     return EnumToName(kLightSamplings, s);
+}
+
+TextureSamples ParseTextureSamples(const std::string& name, const std::string& where) {
+    return ParseEnum(kTextureSamples, name, where, "texture-space sample source");
 }
 
 FootprintMode ParseFootprintMode(const std::string& name, const std::string& where) {

@@ -42,6 +42,25 @@ FootprintMode ParseFootprintMode(const std::string& name, const std::string& whe
 /// "auto, visible, all" (for help texts and menus).
 std::string FootprintModeNames();
 
+/// Where texture-space ambient occlusion shades (--ts-samples):
+///   Grid  the paper's: a sample per texel of the footprint, at its limit point (found again
+///         with a snap ray), shaded on demand and reconstructed by the material's filter.
+///   Hits  at the camera's own hits, as per-hit AO shades them (same rays, same random numbers),
+///         added up per bin of a coarser level of the same grids and read back by a bilinear
+///         reconstruction over the 2x2 bins around each hit (render.cpp, AoHitsBin): no limit
+///         evaluation, snap ray or footprint gather, and every ray traced lands in some bin.
+///         The bins lie HitBinLevels above the hit's texel (fewer as rays per pixel grow;
+///         texture_space.h argues why the result converges).
+/// The command line's `--ts-samples auto` (its default) takes Hits for AO unless a filter, a
+/// filter radius or temporal accumulation is asked for (those belong to the grid); the API's
+/// default is the paper's Grid.
+/// `texcache experiment speed-vs-error --only car-ao --out DIR`, budget 1 (480x270, 4 spp,
+/// 1 ray per hit or per sample): hits relMSE 0.032 at 0.124 s CPU, grid ts-normal 0.052 at
+/// 0.40 s, per hit 0.254 at 0.080 s (figures from the commit that added hits).
+enum class TextureSamples { Grid, Hits };
+/// "grid" or "hits"; throws InputError naming `where` and the valid names otherwise.
+TextureSamples ParseTextureSamples(const std::string& name, const std::string& where);
+
 /// How the direct and path integrators sample an environment light at camera hits on glossy
 /// materials (Munkberg et al. 2016, Sec. 6; renderer/product_sampling.h):
 ///   Mis   light sampling (the map's luminance) and BSDF sampling, combined by MIS;
@@ -87,6 +106,8 @@ struct TextureSpaceOptions {
     /// 13x13: 0.0142, 1x1: 0.0183, the stage's own spatial filter: 0.0163) at 80% of the 13x13's
     /// cost (`texcache experiment disocclusion --out DIR`; results/disocclusion.md).
     int visibilityRadius = 2;
+    /// Where AO shades: see TextureSamples. --ts-samples auto|grid|hits.
+    TextureSamples samples = TextureSamples::Grid;
     /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.
     FootprintMode footprint = FootprintMode::Auto;
     /// Temporal accumulation across frames (eq. 6): weight of the history, 0 = off. Texels then
@@ -203,6 +224,10 @@ struct RenderStats {
     CacheStats cache;     ///< texture-space shading only
     RecordStats psr;      ///< cached product sampling records (light sampling cpis) only
     size_t psrBytes = 0;  ///< bytes of the product record cache (0 unless cpis)
+    /// Hit-binned AO (TextureSamples::Hits): hits whose bin found no room in the largest table
+    /// allowed (256 MiB), left out of the reconstruction. 0 unless a frame is enormous.
+    uint64_t hitBinsDropped = 0;
+    size_t hitBinBytes = 0;  ///< bytes of the hit bins (0 unless hits)
 };
 
 /// A scene file's render settings as options: size, spp, time budget, integrator, seed, depth,

@@ -153,6 +153,12 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
           Case{"render " + cube + " --shading texture --filter-radius -2", "--filter-radius"},
           Case{"render " + cube + " --shading texture --filter-radius 33", "--filter-radius"},
           Case{"render " + cube + " --shading texture --shadow-samples 0", "--shadow-samples"},
+          Case{"render " + cube + " --shading texture --ts-samples texels",
+               "--ts-samples: unknown texture-space sample source 'texels' (valid: grid, hits)"},
+          Case{"render " + cube +
+                   " --shading texture --ts-samples hits --frames 3 "
+                   "--temporal-alpha 0.7",
+               "--ts-samples: hits has no temporal accumulation"},
           Case{"render " + cube + " --shading texture --frames 3 --temporal-alpha 1.5",
                "--temporal-alpha: must be in [0, 1)"},
           Case{"render " + cube + " --shading texture --temporal-alpha 0.7", "give --frames"},
@@ -533,14 +539,20 @@ double StatsField(const fs::path& stats, const std::string& name) {
 }
 
 // Without --sample-cache-mb/--texel-cache-mb the caches are sized to the frame (4 MiB floor at
-// this size, SizeCachesToFrame), not the 64 MiB a large frame takes; a given size is kept.
+// this size, SizeCachesToFrame), not the 64 MiB a large frame takes; a given size is kept. AO
+// shaded at the hits (the default for AO) never fills them: they take 64 KiB each.
 TEST(Cli, CachesAreSizedToTheFrameUnlessGiven) {
     const fs::path out = Dir() / "sized.exr", stats = Dir() / "sized.json";
-    const std::string render = "render " + test::SceneDir() +
-                               "/car.json --integrator ao --resolution 64x36 --spp 1 --shading "
-                               "texture -q --no-png -o " +
-                               out.string() + " --stats " + stats.string();
-    CliRun r = Texcache(render);
+    const std::string hits = "render " + test::SceneDir() +
+                             "/car.json --integrator ao --resolution 64x36 --spp 1 --shading "
+                             "texture -q --no-png -o " +
+                             out.string() + " --stats " + stats.string();
+    CliRun r = Texcache(hits);
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(StatsField(stats, "sample_cache_bytes"), double(64 << 10));
+    EXPECT_EQ(StatsField(stats, "texel_cache_bytes"), double(64 << 10));
+    const std::string render = hits + " --ts-samples grid";
+    r = Texcache(render);
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_EQ(StatsField(stats, "sample_cache_bytes"), double(4 << 20));
     EXPECT_EQ(StatsField(stats, "texel_cache_bytes"), double(4 << 20));

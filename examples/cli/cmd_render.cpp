@@ -59,6 +59,7 @@ struct RenderArgs {
     std::string filter = "normal";
     int filterRadius = -1;  // not given: the filter's own default (DefaultFilterRadius)
     std::string footprint = "auto";
+    std::string tsSamples = "auto";
     int shadowSamples = 4;
     float temporalAlpha = 0.0f;
     int passSpp = TextureSpaceOptions{}.passSpp;
@@ -100,6 +101,18 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a) {
     if (a.Given("--filter-radius")) CheckFilterRadius(a.filterRadius, "--filter-radius");
     t.radius = a.Given("--filter-radius") ? a.filterRadius : -1;
     t.footprint = ParseFootprintMode(a.footprint, "--footprint");
+    // auto: AO shades at the hits, unless something only the grid has is asked for.
+    bool gridAsked = a.temporalAlpha != 0.0f;
+    for (const char* o :
+         {"--filter", "--filter-radius", "--footprint", "--stereo", "--overshading",
+          "--reference-cache", "--direct-mapped", "--sample-cache-mb", "--texel-cache-mb"})
+        gridAsked = gridAsked || a.Given(o);
+    t.samples = a.tsSamples == "auto" ? (gridAsked ? TextureSamples::Grid : TextureSamples::Hits)
+                                      : ParseTextureSamples(a.tsSamples, "--ts-samples");
+    if (t.samples == TextureSamples::Hits && a.temporalAlpha != 0.0f)
+        throw InputError("--ts-samples",
+                         "hits has no temporal accumulation (--temporal-alpha): "
+                         "use grid");
     t.shadowSamples = CheckRange("--shadow-samples", a.shadowSamples, 1, 1 << 16);
     if (a.temporalAlpha != 0.0f) {
         if (!(a.temporalAlpha > 0.0f && a.temporalAlpha < 1.0f))
@@ -475,6 +488,11 @@ void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views) {
     // sized as a second view.
     const int terms = t.cachedVisibility ? 2 : 1;
     SizeCachesToFrame(&fit, opt->width, opt->height, views * terms, opt->integrator, t.footprint);
+    // AO shaded at the hits keeps its bins beside the grid caches, which it never fills: they
+    // take a token 64 KiB each instead of tens of MiB zeroed for nothing.
+    if (opt->integrator == IntegratorKind::AO && t.samples == TextureSamples::Hits &&
+        !opt->aovs.Any())
+        fit.sampleCacheBytes = fit.texelCacheBytes = size_t(64) << 10;
     if (!a.Given("--sample-cache-mb")) t.cache.sampleCacheBytes = fit.sampleCacheBytes;
     if (!a.Given("--texel-cache-mb")) t.cache.texelCacheBytes = fit.texelCacheBytes;
     const double mib = 1.0 / double(1 << 20);
@@ -813,6 +831,12 @@ int RunRender(const RenderArgs& a) {
             (unsigned long long)c.lookups, 100.0 * c.TexelHitRate(),
             (unsigned long long)c.samplesShaded, (unsigned long long)c.sampleEvictions,
             (unsigned long long)c.deferrals, double(cache->BytesUsed()) / (1 << 20));
+        if (r.stats.hitBinBytes > 0)
+            std::printf(
+                "hit bins (AO shaded at the camera hits): %.1f MiB, %llu hits left out "
+                "(no room)\n",
+                double(r.stats.hitBinBytes) / (1 << 20),
+                (unsigned long long)r.stats.hitBinsDropped);
         if (overshading >= 0.0)
             std::printf("overshading: %.2f%% more samples than an unbounded cache (%llu)\n",
                         100.0 * overshading, (unsigned long long)referenceShaded);
@@ -869,6 +893,14 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--filter-radius", args->filterRadius,
                     "Footprint radius r: (2r+1)^2 samples (default: the paper's for the filter: "
                     "none 0, normal 6, gaussian 10, regression 8, softshadow 8)");
+    cmd->add_option("--ts-samples", args->tsSamples,
+                    "Where texture-space AO shades: hits (at the camera's hits, binned per texel "
+                    "of a coarser level and read back bilinearly), grid (the paper's samples at "
+                    "texel centres, reconstructed by --filter) or auto (hits for AO unless an "
+                    "option of the grid's cache is given: --filter, --filter-radius, --footprint, "
+                    "--temporal-alpha, --stereo, --overshading, --reference-cache, "
+                    "--direct-mapped, --sample-cache-mb, --texel-cache-mb)")
+        ->capture_default_str();
     cmd->add_option("--footprint", args->footprint,
                     "Filter footprints: visible (only texels the camera rays reach, marked by a "
                     "prepass), all (every texel of the window, as the paper) or auto (visible "

@@ -24,6 +24,8 @@ struct Method {
     bool texture;
     TextureFilterKind filter;
     int radius = -1;  ///< footprint (2r+1)^2; -1: the filter's default
+    /// AO: the paper's samples on texel grids, or shading at the camera hits, binned.
+    TextureSamples samples = TextureSamples::Grid;
 };
 
 struct Case {
@@ -50,6 +52,9 @@ const Method kNormal7{"ts-normal-7x7", true, TextureFilterKind::Normal, 3};
 const Method kGaussian{"ts-gaussian", true, TextureFilterKind::Gaussian};
 const Method kRegression{"ts-regression", true, TextureFilterKind::Regression};
 const Method kSoftShadow{"ts-softshadow", true, TextureFilterKind::SoftShadow};
+// AO shaded at the camera's hits and binned per texel of a coarser level (TextureSamples::Hits,
+// the default of `--shading texture` for AO).
+const Method kHits{"ts-hits", true, TextureFilterKind::Normal, -1, TextureSamples::Hits};
 // Path cases: the per-hit terms alone. The renders of a case share their camera rays and the
 // per-hit light paths of a budget, so a texture-space render whose cached term is all but
 // converged (kConvergedPaths paths per cached sample) at budget 1 has the error of the terms
@@ -90,6 +95,7 @@ void ApplyBudget(RenderOptions* o, const Method& m, int budget, int cameraSpp) {
     o->texture.enabled = m.texture;
     o->texture.filter = m.filter;
     o->texture.radius = m.radius;
+    o->texture.samples = m.samples;
 }
 
 std::vector<int> Budgets(const Setup& s, bool texture) {
@@ -196,11 +202,11 @@ int SpeedVsError(const Setup& s) {
         {"car.json",
          IntegratorKind::AO,
          "car-ao",
-         {kPerHit, kNone, kNormal, kNormal7, kGaussian, kRegression}},
+         {kPerHit, kHits, kNone, kNormal, kNormal7, kGaussian, kRegression}},
         {"chess.json",
          IntegratorKind::AO,
          "chess-ao",
-         {kPerHit, kNone, kNormal, kGaussian, kRegression}},
+         {kPerHit, kHits, kNone, kNormal, kGaussian, kRegression}},
         {"car.json",
          IntegratorKind::Path,
          "car-indirect",
@@ -233,7 +239,7 @@ int SpeedVsError(const Setup& s) {
         {"car.json",
          IntegratorKind::AO,
          "car-lens-ao",
-         {kPerHit, kNone, kNormal},
+         {kPerHit, kHits, kNone, kNormal},
          false,
          0.08f,
          4.5f},

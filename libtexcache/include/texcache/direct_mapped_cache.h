@@ -54,11 +54,8 @@
 #include <string>
 #include <type_traits>
 
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
-
 #include "texcache/error.h"
+#include "texcache/huge_pages.h"
 #include "texcache/texel_key.h"
 
 namespace texcache {
@@ -283,17 +280,7 @@ private:
         }
     };
     static Slot* AllocateSlots(size_t n) {
-        constexpr size_t kHuge = size_t(2) << 20;
-        const size_t bytes = (n * sizeof(Slot) + 63) / 64 * 64;
-        // aligned_alloc wants a size that is a multiple of the alignment (ASan checks it): a
-        // huge-page table that is not one (e.g. 584-byte record slots in 16 MiB) asks for the
-        // next multiple; the tail past the slots is never touched, so it takes no memory.
-        const size_t align = bytes >= kHuge ? kHuge : 64;
-        void* mem = std::aligned_alloc(align, (bytes + align - 1) / align * align);
-        if (!mem) throw std::bad_alloc();
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-        if (bytes >= kHuge) madvise(mem, bytes, MADV_HUGEPAGE);
-#endif
+        void* mem = AllocateHugePages((n * sizeof(Slot) + 63) / 64 * 64);
         Slot* slots = static_cast<Slot*>(mem);
         for (size_t i = 0; i < n; ++i) new (&slots[i]) Slot();
         return slots;

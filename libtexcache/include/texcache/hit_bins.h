@@ -1,0 +1,195 @@
+// SPDX-License-Identifier: Apache-2.0
+// Texel bins of binary shading estimates (ambient occlusion, visibility): shading computed at the
+// camera's own hits, added up per texel of a grid level, for a reconstruction that reads bins
+// instead of shading samples of its own.
+//
+// Design note — concurrency and determinism
+// -----------------------------------------
+// Render threads add to the bins during one phase of a pass and read them in the next; the two
+// phases are separated by the renderer (a barrier: every Add happens before any Find). So:
+//   * Add is lock-free and wait-free but for the insertion of a new block: a block is claimed by
+//     one compare-and-swap of its key from kEmpty; a thread that loses the race to the same key
+//     adds to the winner's block, one that loses to another key probes on (linear probing).
+//   * A bin is one 64-bit word, (trials << 32) | successes, updated by a compare-and-swap loop
+//     that saturates each half at 2^32 - 1. Integer sums do not depend on the order of the adds
+//     (a saturating sum of non-negative terms is min(total, cap) in any order), so the bins,
+//     and every image read from them, are the same for any thread count and schedule: float
+//     atomics would not be.
+//   * The table is fixed-size (the blocks given at construction, never more). An Add that finds
+//     no free block within kMaxProbes is dropped and counted (Dropped()); the renderer keeps the
+//     table at most half full (BlocksUsed()) and bins a pass again into a larger table when an
+//     add was dropped, up to a byte budget.
+//   * Find is a plain read (relaxed atomics: the phase barrier orders it after every Add), and
+//     never returns another key's bin: keys are compared in full.
+// Bins are grouped in blocks of 4x4 of one face and level (136 bytes with the key), so the 2x2
+// bins a bilinear reconstruction reads mostly share one block.
+#pragma once
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <memory>
+#include <new>
+
+#include "texcache/huge_pages.h"
+#include "texcache/texel_key.h"
+
+namespace texcache {
+
+class HitBins {
+public:
+    /// A bin's counts: successes (e.g. AO rays that escape) out of trials (rays traced).
+    struct Counts {
+        uint32_t successes = 0, trials = 0;
+    };
+    static constexpr int kMaxProbes = 32;
+
+    /// A table of `minBlocks` blocks of 4x4 bins or more (a power of two, at least 8):
+    /// BytesFor(NumBlocks()) bytes, allocated once.
+    explicit HitBins(size_t minBlocks) {
+        size_t blocks = 8;
+        int log2 = 3;
+        while (blocks < minBlocks) blocks *= 2, ++log2;
+        blocks_ = blocks;
+        shift_ = 64 - log2;
+        bins_.reset(static_cast<Block*>(AllocateHugePages(blocks * sizeof(Block))));
+        for (size_t i = 0; i < blocks; ++i) new (&bins_[i]) Block;
+        Clear();
+    }
+
+    /// Empties every bin (between passes; never while Add or Find run).
+    void Clear() {
+        for (size_t i = 0; i < blocks_; ++i) {
+            bins_[i].key.store(TexelKey::kEmpty, std::memory_order_relaxed);
+            for (auto& w : bins_[i].w) w.store(0, std::memory_order_relaxed);
+        }
+        dropped_.store(0, std::memory_order_relaxed);
+        used_.store(0, std::memory_order_relaxed);
+    }
+
+    /// Adds `successes` of `trials` to bin `key` (a TexelKey of the bin's face, level and
+    /// coordinates). False when the table had no room (the add is dropped and counted).
+    bool Add(const TexelKey& key, uint32_t successes, uint32_t trials) {
+        const uint64_t bk = BlockKey(key);
+        size_t i = Home(bk);
+        for (int p = 0; p < kMaxProbes; ++p, i = (i + 1) & (blocks_ - 1)) {
+            std::atomic<uint64_t>& slot = bins_[i].key;
+            uint64_t k = slot.load(std::memory_order_acquire);
+            if (k == TexelKey::kEmpty) {
+                if (slot.compare_exchange_strong(k, bk, std::memory_order_acq_rel)) {
+                    k = bk;  // claimed
+                    used_.fetch_add(1, std::memory_order_relaxed);
+                }  // else lost the race: `k` now holds the winner's key
+            }
+            if (k != bk) continue;
+            std::atomic<uint64_t>& w = bins_[i].w[Lane(key)];
+            uint64_t old = w.load(std::memory_order_relaxed), next;
+            do {
+                next = (uint64_t(SatAdd(uint32_t(old >> 32), trials)) << 32) |
+                       SatAdd(uint32_t(old), successes);
+            } while (!w.compare_exchange_weak(old, next, std::memory_order_relaxed));
+            return true;
+        }
+        dropped_.fetch_add(1, std::memory_order_relaxed);
+        return false;
+    }
+
+    /// The counts of bin `key` (zero when nothing was added to it).
+    Counts Find(const TexelKey& key) const {
+        const uint64_t bk = BlockKey(key);
+        size_t i = Home(bk);
+        for (int p = 0; p < kMaxProbes; ++p, i = (i + 1) & (blocks_ - 1)) {
+            const uint64_t k = bins_[i].key.load(std::memory_order_relaxed);
+            if (k == bk) {
+                const uint64_t w = bins_[i].w[Lane(key)].load(std::memory_order_relaxed);
+                return {uint32_t(w), uint32_t(w >> 32)};
+            }
+            if (k == TexelKey::kEmpty) break;
+        }
+        return {};
+    }
+
+    /// A thread's adds, gathered in a small local table and added to the shared bins once per
+    /// bin: a tile's hits fall into a few dozen bins, and one atomic add per hit had been most of
+    /// the cost of binning (`perf` on hit-binned AO). Flush (or destroy) before the bins are
+    /// read. The sums are the same as adding one by one (integer sums, any order).
+    class Batch {
+    public:
+        explicit Batch(HitBins& bins) : bins_(&bins) {
+            for (Entry& e : local_) e.key = TexelKey::kEmpty;
+        }
+        ~Batch() { Flush(); }
+        Batch(const Batch&) = delete;
+        Batch& operator=(const Batch&) = delete;
+
+        void Add(const TexelKey& key, uint32_t successes, uint32_t trials) {
+            const uint64_t k = key.Pack();
+            Entry& e = local_[(k * 0x9E3779B97F4A7C15ull) >> (64 - kLog2Local)];
+            if (e.key != k) {
+                if (e.key != TexelKey::kEmpty)
+                    bins_->Add(TexelKey::Unpack(e.key), e.successes, e.trials);
+                e = {k, 0, 0};
+            }
+            e.successes = SatAdd(e.successes, successes);
+            e.trials = SatAdd(e.trials, trials);
+        }
+        void Flush() {
+            for (Entry& e : local_)
+                if (e.key != TexelKey::kEmpty) {
+                    bins_->Add(TexelKey::Unpack(e.key), e.successes, e.trials);
+                    e.key = TexelKey::kEmpty;
+                }
+        }
+
+    private:
+        static constexpr int kLog2Local = 8;
+        struct Entry {
+            uint64_t key;
+            uint32_t successes, trials;
+        };
+        HitBins* bins_;
+        Entry local_[1 << kLog2Local];
+    };
+
+    /// Blocks of 4x4 bins in use since the last Clear. Probes stay short while at most half
+    /// the blocks are: a renderer sizes the next table from this (render.cpp).
+    size_t BlocksUsed() const { return used_.load(std::memory_order_relaxed); }
+    /// Bytes of `blocks` blocks.
+    static constexpr size_t BytesFor(size_t blocks) { return blocks * kBytesPerBlock; }
+    /// Adds that found no room since the last Clear.
+    uint64_t Dropped() const { return dropped_.load(std::memory_order_relaxed); }
+    size_t NumBlocks() const { return blocks_; }
+    size_t BytesUsed() const { return blocks_ * kBytesPerBlock; }
+
+private:
+    // The key beside its bins: a lookup touches the block's first line for the key and, for
+    // most lanes, the next one or two (a separate key array had cost a second miss per lookup).
+    struct Block {
+        std::atomic<uint64_t> key;
+        std::atomic<uint64_t> w[16];
+    };
+    static constexpr size_t kBytesPerBlock = sizeof(Block);
+
+    static uint32_t SatAdd(uint32_t a, uint32_t b) {
+        const uint32_t s = a + b;
+        return s < a ? UINT32_MAX : s;
+    }
+    static uint64_t BlockKey(const TexelKey& k) {
+        TexelKey b = k;
+        b.iu = uint16_t(k.iu >> 2), b.iv = uint16_t(k.iv >> 2);
+        return b.Pack();
+    }
+    static int Lane(const TexelKey& k) { return (k.iv & 3) * 4 + (k.iu & 3); }
+    size_t Home(uint64_t bk) const { return size_t((bk * 0x9E3779B97F4A7C15ull) >> shift_); }
+
+    size_t blocks_ = 0;
+    int shift_ = 61;
+    struct Free {
+        void operator()(Block* p) const { std::free(p); }  // Block is trivially destructible
+    };
+    std::unique_ptr<Block[], Free> bins_;
+    std::atomic<uint64_t> dropped_{0};
+    std::atomic<size_t> used_{0};
+};
+
+}  // namespace texcache
