@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <ctime>
 #include <memory>
@@ -828,9 +829,16 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const bool hits = twoPhaseAo && ShadesAtHits(c);
     // Hit bins: no table grows past 256 MiB (car AO, 480x270, 4 spp: 2.2 MiB).
     constexpr size_t kMaxBinBlocks = (size_t(256) << 20) / HitBins::BytesFor(1);
+    constexpr size_t kMaxHitRecordBytes = size_t(256) << 20;
     size_t binBlocksUsed = 0;
+    // Hit-binned AO keeps a record per camera sample of a pass: a pass holds at most 256 MiB of
+    // them (1920x1080: 10 samples a pixel), and a longer one runs as several.
+    const size_t framePixels = std::max<size_t>(1, size_t(W) * size_t(opt.height));
+    const int hitSpp = int(std::clamp<size_t>(
+        kMaxHitRecordBytes / (sizeof(HitRecord) * framePixels), 1, size_t(INT_MAX)));
     while (done < sppCap) {
-        const int s0 = done, s1 = std::min(sppCap, done + passSpp);
+        const int s0 = done,
+                  s1 = std::min(sppCap, done + (hits ? std::min(passSpp, hitSpp) : passSpp));
         const size_t passSamples = size_t(W) * size_t(opt.height) * size_t(s1 - s0);
         const bool fromPrepass = !hits && opt.visibilityPrepass != VisibilityPrepass::Only &&
                                  prepassAo &&

@@ -551,6 +551,8 @@ TEST(Cli, CachesAreSizedToTheFrameUnlessGiven) {
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_EQ(StatsField(stats, "sample_cache_bytes"), double(64 << 10));
     EXPECT_EQ(StatsField(stats, "texel_cache_bytes"), double(64 << 10));
+    EXPECT_GT(StatsField(stats, "hit_bin_bytes"), 0.0);
+    EXPECT_EQ(StatsField(stats, "hit_bins_dropped"), 0.0);
     const std::string render = hits + " --ts-samples grid";
     r = Texcache(render);
     ASSERT_EQ(r.code, 0) << r.out;

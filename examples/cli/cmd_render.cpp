@@ -195,6 +195,8 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     add("psr_cache_bytes", double(s.psrBytes));
     add("sample_cache_bytes", cache ? double(cache->SampleCacheBytes()) : 0.0);
     add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
+    add("hit_bin_bytes", double(s.hitBinBytes));  // AO shaded at the hits (--ts-samples hits)
+    add("hit_bins_dropped", double(s.hitBinsDropped));
     add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes));
     // The scene: its size and the meshes Embree could not take (render_scene.cpp's design note).
     const RenderScene::TessellationStats t = rs.LimitTessellated();
