@@ -91,7 +91,8 @@ struct HitRecord {
     float U() const { return (float(u) + 0.5f) / kUvScale; }
     float V() const { return (float(v) + 0.5f) / kUvScale; }
     static uint16_t Quantize(float x) {
-        return uint16_t(std::clamp(int(x * kUvScale), 0, int(kUvScale) - 1));
+        if (!(x > 0.0f)) return 0;  // NaN too
+        return uint16_t(std::min(x * kUvScale, kUvScale - 1.0f));
     }
 };
 /// What the visibility prepass keeps of a pass for its shading pass (render.cpp's PassTexels).

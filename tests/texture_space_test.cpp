@@ -660,6 +660,20 @@ TEST(HitBins, LevelsShrinkWithTheRaysPerPixel) {
     EXPECT_TRUE(std::isfinite(TextureSpaceCache::HitBinLevels(1 << 16, 1 << 10, UINT32_MAX)));
 }
 
+// A hit's (u,v) is kept in 16 bits; NaN, infinite and out-of-range coordinates land on the
+// face's edge instead of wrapping (a NaN cast to an integer is undefined).
+TEST(HitBins, RecordCoordinatesAreClamped) {
+    using internal::HitRecord;
+    EXPECT_EQ(HitRecord::Quantize(std::nanf("")), 0);
+    EXPECT_EQ(HitRecord::Quantize(-1.0f), 0);
+    EXPECT_EQ(HitRecord::Quantize(INFINITY), 65535);
+    EXPECT_EQ(HitRecord::Quantize(1.0f), 65535);
+    EXPECT_EQ(HitRecord::Quantize(0.5f), 32768);
+    HitRecord h{HitRecord::Quantize(0.25f), HitRecord::Quantize(0.75f), 0, 0};
+    EXPECT_NEAR(h.U(), 0.25f, 1.0f / 65536.0f);
+    EXPECT_NEAR(h.V(), 0.75f, 1.0f / 65536.0f);
+}
+
 // Hit-binned AO lowers the error of per-hit AO at equal rays (the bins average the rays of many
 // hits) and keeps converging with the rays: same camera rays (4 spp, same seed) as the
 // reference of 1024 rays per hit; 1 ray per hit against 16. Measured on the torus and plane:
