@@ -41,7 +41,7 @@ sanitizer_build() {
 }
 
 phase "ThreadSanitizer: libtexcache tests (build-tsan/)"
-sanitizer_build "$root/build-tsan" thread --target cache_test record_cache_test
+sanitizer_build "$root/build-tsan" thread --target cache_test record_cache_test hit_bins_test
 took "TSan build"
 t0=$SECONDS
 # halt_on_error: a race fails the test instead of only printing a report.
