@@ -542,8 +542,9 @@ bool ShadesAtHits(const Context& c) {
 
 /// Hit-binned texture-space AO, phase 1 of a pass, for one tile: traces its camera rays, shades
 /// AO at each hit exactly as per-hit AO does (same rays, same random numbers, 16-ray packets
-/// across the tile's hits), and adds each hit's escaped rays to the bin of its texel at its bin
-/// level. Records where each camera sample hit, for phase 2.
+/// across the tile's hits), and adds each hit's escaped rays to its bins at the two levels
+/// `bias` and `bias` + 1 above its texel's. Records where each camera sample hit and which of
+/// the two levels it reads, for phase 2 (AoHitsResolve).
 void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
                float blend, HitRecord* records, HitBins& bins, RayCounts& rays) {
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
