@@ -99,8 +99,7 @@ public:
         // Footprints of visible texels only: the prepass of each pass marks them. AO shaded at
         // the hits has no footprints (render.cpp, AoHitsBin; a render with AOVs shades on the
         // grid).
-        const bool hits = k == IntegratorKind::AO && opt.texture.samples == TextureSamples::Hits &&
-                          !opt.aovs.Any();
+        const bool hits = ShadesAoAtHits(opt);
         if (prepass == Prepass::Allowed && !hits && VisibleOnly(opt.texture.footprint, k) &&
             opt.texture.constantTerm < 0.0f && cache->AnyFootprint()) {
             visible_ = &cache->Visibility(opt.width, opt.height,

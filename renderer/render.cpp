@@ -534,12 +534,6 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
     }
 }
 
-/// Whether this render's texture-space AO shades at the camera hits (TextureSamples).
-bool ShadesAtHits(const Context& c) {
-    return c.tsc && c.opt.integrator == IntegratorKind::AO && c.opt.texture.constantTerm < 0.0f &&
-           c.opt.texture.samples == TextureSamples::Hits;
-}
-
 /// Hit-binned texture-space AO, phase 1 of a pass, for one tile: traces its camera rays, shades
 /// AO at each hit exactly as per-hit AO does (same rays, same random numbers, 16-ray packets
 /// across the tile's hits), and adds each hit's escaped rays to its bins at the two levels
@@ -827,7 +821,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const bool prepassAo = twoPhaseAo && fc.Visible() != nullptr;
     constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
-    const bool hits = twoPhaseAo && ShadesAtHits(c);
+    const bool hits = c.tsc && ShadesAoAtHits(opt);
     // Hit bins: no table grows past 256 MiB (car AO, 480x270, 4 spp: 2.2 MiB).
     constexpr size_t kMaxBinBlocks = (size_t(256) << 20) / HitBins::BytesFor(1);
     constexpr size_t kMaxHitRecordBytes = size_t(256) << 20;

@@ -235,4 +235,10 @@ struct RenderStats {
 /// starts from this and overrides what its own options say.
 RenderOptions RenderOptionsFrom(const RenderSettings& settings);
 
+/// Whether a render with these options shades its texture-space AO at the camera hits
+/// (TextureSamples::Hits): the AO integrator with samples at the hits, no AOV layers (they take
+/// the per-sample shading path, on the grid) and a cached term (not a benchmark's constant). The
+/// renderer, its frame set-up and the command line's cache sizes all ask this one question.
+bool ShadesAoAtHits(const RenderOptions& o);
+
 }  // namespace texcache

@@ -492,9 +492,7 @@ void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views) {
     SizeCachesToFrame(&fit, opt->width, opt->height, views * terms, opt->integrator, t.footprint);
     // AO shaded at the hits keeps its bins beside the grid caches, which it never fills: they
     // take a token 64 KiB each instead of tens of MiB zeroed for nothing.
-    if (opt->integrator == IntegratorKind::AO && t.samples == TextureSamples::Hits &&
-        !opt->aovs.Any())
-        fit.sampleCacheBytes = fit.texelCacheBytes = size_t(64) << 10;
+    if (ShadesAoAtHits(*opt)) fit.sampleCacheBytes = fit.texelCacheBytes = size_t(64) << 10;
     if (!a.Given("--sample-cache-mb")) t.cache.sampleCacheBytes = fit.sampleCacheBytes;
     if (!a.Given("--texel-cache-mb")) t.cache.texelCacheBytes = fit.texelCacheBytes;
     const double mib = 1.0 / double(1 << 20);
