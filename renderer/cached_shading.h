@@ -96,10 +96,10 @@ public:
         }
         ctx.tsc = cache_ = cache;
         ctx.cacheStats = &stats_;
-        // Footprints of visible texels only: the prepass of each pass marks them. AO shaded at
-        // the hits has no footprints (render.cpp, AoHitsBin; a render with AOVs shades on the
-        // grid).
-        const bool hits = ShadesAoAtHits(opt);
+        // Footprints of visible texels only: the prepass of each pass marks them. Shading at
+        // the hits has no footprints (render.cpp, AoHitsBin, PathHitsBin; a render with AOVs
+        // shades on the grid).
+        const bool hits = ShadesAtHits(opt);
         if (prepass == Prepass::Allowed && !hits && VisibleOnly(opt.texture.footprint, k) &&
             opt.texture.constantTerm < 0.0f && cache->AnyFootprint()) {
             visible_ = &cache->Visibility(opt.width, opt.height,

@@ -199,6 +199,16 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
     return storage->valid ? storage : nullptr;
 }
 
+/// What a caller that bins diffuse light at camera hits (render.cpp, PathHitsBin) asks LiPath
+/// for: the first hit's light for a white diffuse surface (the caller applies the hit's albedo,
+/// so a textured surface keeps its detail), with its interaction computed already, and the
+/// direct part of that light (NEE at the first hit, and emission the first BSDF ray finds, MIS-
+/// weighted) added to `direct` so that it can stay per hit while the indirect rest is binned.
+struct FirstHitLight {
+    const SurfaceInteraction* si;
+    glm::vec3* direct;
+};
+
 /// Direct lighting (depth 1) and path tracing: NEE with MIS against BSDF sampling.
 /// `emitFirst` = false drops emission seen by the first ray (a cached indirect sample must not
 /// count what NEE at the camera hit already did). `cached(si, ray, &term)` may replace light at
@@ -207,12 +217,13 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
 /// `firstDiff` (the camera ray's differentials) says the first hit is a camera hit: with light
 /// sampling pis or cpis it then samples the environment from its product sampling record
 /// (CameraHitRecord; the differentials pick a cached record's texel), MIS-combined with BSDF
-/// sampling as the map's own sampling is.
+/// sampling as the map's own sampling is. `split`: see FirstHitLight.
 template <typename CachedIndirect = NoCachedTerm>
 glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, Rng& rng,
                  int maxDepth, RayCounts& rays, bool emitFirst = true,
                  const CachedIndirect& cached = CachedIndirect(),
-                 const RayDifferentials* firstDiff = nullptr) {
+                 const RayDifferentials* firstDiff = nullptr,
+                 const FirstHitLight* split = nullptr) {
     glm::vec3 L(0.0f), beta(1.0f);
     float prevPdf = 0.0f;   // BSDF pdf of the ray being traced (0: camera ray, no MIS)
     glm::vec3 prevN(0.0f);  // shading normal where it left (the environment's pdf depends on it)
@@ -236,6 +247,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                     w = PowerHeuristic(1, prevPdf, 1, pl * c.PickPdf());
                 }
                 L += beta * Le * w;
+                if (split && depth == 1) *split->direct += beta * Le * w;
             }
             break;
         }
@@ -245,11 +257,17 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
             if (prevPdf > 0.0f)
                 w = PowerHeuristic(1, prevPdf, 1, c.QuadPdf(hit.light, ray.dir, hit.t));
             L += beta * Le * w;
+            if (split && depth == 1) *split->direct += beta * Le * w;
             break;
         }
         if (depth >= maxDepth) break;
-        const SurfaceInteraction si = c.rs.Interact(ray, hit, depth == 0 ? firstDiff : nullptr);
-        const Bsdf bsdf = MakeBsdf(c, si);
+        const SurfaceInteraction si =
+            depth == 0 && split ? *split->si
+                                : c.rs.Interact(ray, hit, depth == 0 ? firstDiff : nullptr);
+        // White at a split first hit: the caller multiplies by the albedo.
+        const Bsdf bsdf = depth == 0 && split ? Bsdf(si.N, si.Ng, glm::vec3(1.0f), false,
+                                                     glm::vec2(1.0f), glm::vec3(0.0f))
+                                              : MakeBsdf(c, si);
         const glm::vec3 wo = -ray.dir;
         const ProductRecord* record =
             depth == 0 && firstDiff ? CameraHitRecord(c, si, bsdf, wo, &psr) : nullptr;
@@ -270,12 +288,15 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                 ++rays.shadow;
                 if (!c.rs.Occluded(ShadowRay(si, ls, ray.time))) {
                     const float cosi = std::abs(glm::dot(ls.wi, si.N));
+                    glm::vec3 Ld;
                     if (ls.delta) {
-                        L += beta * f * ls.Li * cosi;
+                        Ld = beta * f * ls.Li * cosi;
                     } else {
                         const float w = PowerHeuristic(1, ls.pdf, 1, bsdf.Pdf(wo, ls.wi));
-                        L += beta * f * ls.Li * (cosi * w / ls.pdf);
+                        Ld = beta * f * ls.Li * (cosi * w / ls.pdf);
                     }
+                    L += Ld;
+                    if (split && depth == 0) *split->direct += Ld;
                 }
             }
         }

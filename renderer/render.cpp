@@ -534,6 +534,55 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
     }
 }
 
+/// The camera rays of a hit-binned tile, traced: per-hit shading's rays and random streams,
+/// without differentials unless `diff` (product sampling at camera hits needs them): the bins'
+/// level needs only the footprint's size (BinHit).
+void HitsCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                    CameraSample* cs, size_t total, bool diff, RayCounts& rays) {
+    Cursor gen(r, s0);
+    if (c.camera.IsPinhole() && !c.cameraMoves && !diff) {
+        for (size_t b = 0; b < total; b += kCameraBlock)
+            PinholeCameraRays(c, r, s0, s1, gen, cs + b, std::min(kCameraBlock, total - b));
+    } else {
+        for (size_t i = 0; i < total; ++i, gen.Next(r, s0, s1))
+            CameraRay(c, gen.x, gen.y, gen.s, &cs[i].rng, &cs[i].ray, diff ? &cs[i].diff : nullptr);
+    }
+    IntersectCameraRays(
+        c, cs, total, rays,
+        c.hitRect.Outside(r.cols().begin(), r.rows().begin(), r.cols().end(), r.rows().end()));
+}
+
+/// Where camera sample (x, y, s), hitting `si` at distance `t`, adds its shading: its bins at
+/// the two levels `bias` and `bias` + 1 above its texel's (keys[0], keys[1]); and its record,
+/// the level its reconstruction reads.
+void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, float blend, int x,
+            int y, int s, TexelKey keys[2], HitRecord* h) {
+    const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
+    const MeshGrids& g = c.tsc->Grids(mesh);
+    // Eq. 1 with the pixel's footprint taken as a disc across the ray (the minor axis of its
+    // ellipse on the surface, which eq. 1's minimum picks): its size in (u,v) along each
+    // parameter direction.
+    const float w = c.camera.FootprintAt(t);
+    const int texelLevel = ComputeMip(g.Log2Res(face), w / glm::length(si.dPdu), 0.0f, 0.0f,
+                                      w / glm::length(si.dPdv), c.opt.texture.cache.lodBias);
+    for (int k = 0; k < 2; ++k) {
+        const int level = g.ClampMip(face, texelLevel + bias + k);
+        const int res = g.Res(face, level);
+        keys[k] = {g.FaceOffset() + uint32_t(face), uint8_t(level),
+                   uint16_t(QuantizeCoord(si.ptex.u, res)),
+                   uint16_t(QuantizeCoord(si.ptex.v, res))};
+    }
+    // The sample reads the upper level with probability `blend`, the lower one otherwise
+    // (stochastic filtering: in expectation the blend of the two, for one reconstruction
+    // instead of two), decided by a hash of its pixel and index rather than its random stream,
+    // which stays the one per-hit shading draws from.
+    const uint64_t u =
+        MixBits(PixelSeed(c.opt.seed, x, y, c.opt.width) ^ (uint64_t(s) * 0xD1B54A32D192ED03ull));
+    const bool upper = float(u >> 40) * (1.0f / float(1u << 24)) < blend;
+    *h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
+          uint32_t(face) << 4 | keys[upper ? 1 : 0].mip};
+}
+
 /// Hit-binned texture-space AO, phase 1 of a pass, for one tile: traces its camera rays, shades
 /// AO at each hit exactly as per-hit AO does (same rays, same random numbers, 16-ray packets
 /// across the tile's hits), and adds each hit's escaped rays to its bins at the two levels
@@ -548,19 +597,7 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     thread_local std::vector<uint32_t> open;
     if (cs.size() < total) cs.resize(total);
     keys.resize(2 * total);
-    // The camera rays of per-hit AO (AoSamplesTwoPhase), without differentials: the bins' level
-    // needs only the footprint's size (below).
-    Cursor gen(r, s0);
-    if (c.camera.IsPinhole() && !c.cameraMoves) {
-        for (size_t b = 0; b < total; b += kCameraBlock)
-            PinholeCameraRays(c, r, s0, s1, gen, cs.data() + b, std::min(kCameraBlock, total - b));
-    } else {
-        for (size_t i = 0; i < total; ++i, gen.Next(r, s0, s1))
-            CameraRay(c, gen.x, gen.y, gen.s, &cs[i].rng, &cs[i].ray, nullptr);
-    }
-    IntersectCameraRays(
-        c, cs.data(), total, rays,
-        c.hitRect.Outside(r.cols().begin(), r.rows().begin(), r.cols().end(), r.rows().end()));
+    HitsCameraRays(c, r, s0, s1, cs.data(), total, false, rays);
     aoRays.Clear();
     open.assign(total, 0);
     Cursor at(r, s0);
@@ -574,30 +611,7 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
             continue;
         }
         const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit);
-        const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
-        const MeshGrids& g = c.tsc->Grids(mesh);
-        // Eq. 1 with the pixel's footprint taken as a disc across the ray (the minor axis of
-        // its ellipse on the surface, which eq. 1's minimum picks): its size in (u,v) along
-        // each parameter direction.
-        const float w = c.camera.FootprintAt(p.hit.t);
-        const int texelLevel = ComputeMip(g.Log2Res(face), w / glm::length(si.dPdu), 0.0f, 0.0f,
-                                          w / glm::length(si.dPdv), c.opt.texture.cache.lodBias);
-        for (int k = 0; k < 2; ++k) {
-            const int level = g.ClampMip(face, texelLevel + bias + k);
-            const int res = g.Res(face, level);
-            keys[2 * i + size_t(k)] = {g.FaceOffset() + uint32_t(face), uint8_t(level),
-                                       uint16_t(QuantizeCoord(si.ptex.u, res)),
-                                       uint16_t(QuantizeCoord(si.ptex.v, res))};
-        }
-        // The sample reads the upper level with probability `blend`, the lower one otherwise
-        // (stochastic filtering: in expectation the blend of the two, for one reconstruction
-        // instead of two), decided by a hash of its pixel and index rather than its random
-        // stream, which stays the one per-hit AO draws its rays from.
-        const uint64_t u = MixBits(PixelSeed(c.opt.seed, at.x, at.y, c.opt.width) ^
-                                   (uint64_t(at.s) * 0xD1B54A32D192ED03ull));
-        const bool upper = float(u >> 40) * (1.0f / float(1u << 24)) < blend;
-        h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
-             uint32_t(face) << 4 | keys[2 * i + (upper ? 1 : 0)].mip};
+        BinHit(c, si, p.hit.t, bias, blend, at.x, at.y, at.s, &keys[2 * i], &h);
         aoRays.Queue(c, p.ray, si, p.rng, uint32_t(i));
     }
     aoRays.Trace(c, open.data(), rays);
@@ -605,36 +619,110 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     for (size_t i = 0; i < total; ++i) {
         const CameraSample& p = cs[i];
         if (!p.found || p.hit.object < 0) continue;
-        batch.Add(keys[2 * i], open[i], uint32_t(c.opt.aoSamples));
-        if (!(keys[2 * i + 1] == keys[2 * i]))  // not clamped to the same level
-            batch.Add(keys[2 * i + 1], open[i], uint32_t(c.opt.aoSamples));
+        const CountBin::Value v{open[i], uint32_t(c.opt.aoSamples)};
+        batch.Add(keys[2 * i], v);
+        if (!(keys[2 * i + 1] == keys[2 * i])) batch.Add(keys[2 * i + 1], v);  // not clamped
     }
 }
 
-/// The bilinear reconstruction of hit-binned AO at a camera sample: the 2x2 bins around its
+/// Hit-binned diffuse light (the path integrator), phase 1 of a pass, for one tile. Every camera
+/// sample is path traced as per hit (same rays, same random streams, opt.hitSamples paths at its
+/// hit), but at a diffuse hit the first surface is white (LiPath's FirstHitLight): the light it
+/// receives, E, is binned as AO's escaped rays are, at two levels above its texel, and the
+/// hit's albedo kept beside its record; phase 2 (PathHitsResolve) adds albedo x the bins'
+/// reconstruction. With opt.texture.cacheDirect false, only E's indirect part is binned and its
+/// direct part (NEE and the first bounce's MIS-weighted emission: sharp shadows) stays per hit.
+/// Everything else stays per hit, summed per pixel into `perHit` (misses, lights, and glossy
+/// materials, which are view-dependent), which phase 2 adds with the binned part: each pixel's
+/// sum then does not depend on the tiles, and a pass binned again (its table overflowed) just
+/// writes it again.
+void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
+                 float blend, HitRecord* records, glm::vec3* albedos, RadianceBins& bins,
+                 glm::dvec3* perHit, RayCounts& rays) {
+    const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
+    thread_local std::vector<CameraSample> cs;
+    if (cs.size() < total) cs.resize(total);
+    const bool productDiff = c.lightSampling != LightSampling::Mis;
+    HitsCameraRays(c, r, s0, s1, cs.data(), total, productDiff, rays);
+    const bool all = c.opt.texture.cacheDirect;
+    const int spp = s1 - s0, paths = std::max(c.opt.hitSamples, 1);
+    RadianceBins::Batch batch(bins);
+    Cursor at(r, s0);
+    glm::dvec3 acc(0.0);
+    for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
+        CameraSample& p = cs[i];
+        const size_t pixel = size_t(at.y) * size_t(c.opt.width) + size_t(at.x);
+        const size_t index = pixel * size_t(spp) + size_t(at.s - s0);
+        HitRecord& h = records[index];
+        h.mesh = PassTexels::kMiss;  // nothing binned to read (unless below)
+        if (at.s == s0) acc = glm::dvec3(0.0);
+        const RayDifferentials* diff = productDiff ? &p.diff : nullptr;
+        glm::vec3 L(0.0f);
+        if (!p.found) {
+            L = c.env ? c.env->Eval(p.ray.dir) : glm::vec3(0.0f);
+        } else if (p.hit.object < 0 ||
+                   c.scene.materials[c.scene.objects[p.hit.object].material].type !=
+                       Material::Type::Diffuse) {
+            L = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng) {
+                return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
+                              NoCachedTerm(), diff);
+            });
+        } else {
+            const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit, diff);
+            glm::vec3 direct(0.0f);
+            const FirstHitLight split{&si, &direct};
+            const glm::vec3 E = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng) {
+                return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
+                              NoCachedTerm(), diff, &split);
+            });
+            direct /= float(paths);
+            const glm::vec3 albedo = c.rs.Albedo(si);
+            if (!all) L = albedo * direct;
+            const glm::vec3 binned = all ? E : glm::max(E - direct, glm::vec3(0.0f));
+            RadianceBin::Value v;
+            // A NaN or infinite estimate is dropped, as per-hit drops such a sample.
+            if (RadianceBin::FromRadiance(&binned.x, &v)) {
+                TexelKey keys[2];
+                BinHit(c, si, p.hit.t, bias, blend, at.x, at.y, at.s, keys, &h);
+                albedos[index] = albedo;
+                batch.Add(keys[0], v);
+                if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
+            }
+        }
+        // A NaN/Inf sample would poison the pixel forever: drop it (as ShadeTile does).
+        if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z)) acc += glm::dvec3(L);
+        if (at.s == s1 - 1) perHit[pixel] = acc;
+    }
+}
+
+/// The bilinear reconstruction of hit-binned shading at a camera sample: the 2x2 bins around its
 /// (u,v) at one of its bin levels, across face edges through the Ptex adjacency, each weighted
-/// by its bilinear weight and its ray count.
+/// by its bilinear weight and its count.
 ///
 /// Neighbouring samples mostly read the same 2x2 bins (a bin spans 4x4 pixels or more), so a
-/// sample whose cell is the previous sample's reuses its counts (BinCell); other cells' bins
+/// sample whose cell is the previous sample's reuses its values (BinCell); other cells' bins
 /// are found through a small memo of the tile (BinMemo), keyed by the bin's coordinates before
 /// any edge crossing: a hit there saves the crossing and the probe of the shared table.
+template <typename Bin>
 struct BinMemo {
     static constexpr int kLog2 = 8;
     struct Entry {
         uint64_t key = TexelKey::kEmpty;
-        HitBins::Counts n;
+        typename Bin::Value n;
     } at[1 << kLog2];
 };
+template <typename Bin>
 struct BinCell {
     int32_t mesh = -1, face = -1, level = -1, i0 = 0, j0 = 0;
-    HitBins::Counts n[4];  ///< bins (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
+    typename Bin::Value n[4];  ///< bins (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
+    float w[4];                ///< the current sample's bilinear weights
 };
-/// The counts of the 2x2 bins from (i0, j0) of a face at `level` (res a side) into `cell`.
-void FetchCell(const MeshGrids& g, const HitBins& bins, int face, int level, int res, int i0,
-               int j0, BinMemo& memo, BinCell* cell) {
+/// The values of the 2x2 bins from (i0, j0) of a face at `level` (res a side) into `cell`.
+template <typename Bin>
+void FetchCell(const MeshGrids& g, const BinTable<Bin>& bins, int face, int level, int res, int i0,
+               int j0, BinMemo<Bin>& memo, BinCell<Bin>* cell) {
     for (int k = 0; k < 4; ++k) {
-        HitBins::Counts& out = cell->n[k];
+        typename Bin::Value& out = cell->n[k];
         out = {};
         const int i = i0 + (k & 1), j = j0 + (k >> 1);
         const bool outU = i < 0 || i >= res, outV = j < 0 || j >= res;
@@ -643,7 +731,7 @@ void FetchCell(const MeshGrids& g, const HitBins& bins, int face, int level, int
         const uint64_t local = TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
                                         uint16_t(i + 1), uint16_t(j + 1)}
                                    .Pack();
-        BinMemo::Entry& m = memo.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - BinMemo::kLog2)];
+        auto& m = memo.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - BinMemo<Bin>::kLog2)];
         if (m.key == local) {
             out = m.n;
             continue;
@@ -659,7 +747,7 @@ void FetchCell(const MeshGrids& g, const HitBins& bins, int face, int level, int
             int nf, ne;
             float nu, nv, scale;
             if (!g.Topology().Cross(face, edge, along, -inward, &nf, &nu, &nv, &ne, &scale)) {
-                m = {local, {}};  // a boundary: no bin
+                m.key = local, m.n = {};  // a boundary: no bin
                 continue;
             }
             const int nl = g.ClampMip(nf, level);
@@ -668,11 +756,14 @@ void FetchCell(const MeshGrids& g, const HitBins& bins, int face, int level, int
                    uint16_t(QuantizeCoord(nv, nres))};
         }
         out = bins.Find(key);
-        m = {local, out};
+        m.key = local, m.n = out;
     }
 }
-float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
-                    BinMemo& memo, BinCell& cell) {
+/// The 2x2 bins around record `h` in `cell` (fetched unless they are the cell's already), and
+/// the record's bilinear weights in cell.w.
+template <typename Bin>
+const BinCell<Bin>& CellAt(const TextureSpaceCache& tsc, const BinTable<Bin>& bins,
+                           const HitRecord& h, BinMemo<Bin>& memo, BinCell<Bin>& cell) {
     const MeshGrids& g = tsc.Grids(h.mesh);
     const int face = h.Face(), level = h.Level();
     const int res = g.Res(face, level);
@@ -685,11 +776,31 @@ float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const Hit
         FetchCell(g, bins, face, level, res, i0, j0, memo, &cell);
         cell.mesh = h.mesh, cell.face = face, cell.level = level, cell.i0 = i0, cell.j0 = j0;
     }
-    const float w[4] = {(1.0f - fx) * (1.0f - fy), fx * (1.0f - fy), (1.0f - fx) * fy, fx * fy};
+    cell.w[0] = (1.0f - fx) * (1.0f - fy), cell.w[1] = fx * (1.0f - fy);
+    cell.w[2] = (1.0f - fx) * fy, cell.w[3] = fx * fy;
+    return cell;
+}
+float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
+                    BinMemo<CountBin>& memo, BinCell<CountBin>& cell) {
+    CellAt(tsc, bins, h, memo, cell);
     double num = 0.0, den = 0.0;
     for (int k = 0; k < 4; ++k)
-        num += double(w[k]) * cell.n[k].successes, den += double(w[k]) * cell.n[k].trials;
+        num += double(cell.w[k]) * cell.n[k].successes, den += double(cell.w[k]) * cell.n[k].trials;
     return den > 0.0 ? float(num / den) : 0.0f;
+}
+glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const RadianceBins& bins,
+                              const HitRecord& h, BinMemo<RadianceBin>& memo,
+                              BinCell<RadianceBin>& cell) {
+    CellAt(tsc, bins, h, memo, cell);
+    glm::dvec3 num(0.0);
+    double den = 0.0;
+    for (int k = 0; k < 4; ++k) {
+        const RadianceBin::Value& n = cell.n[k];
+        const double w = double(cell.w[k]);
+        num += w * glm::dvec3(double(n.sum[0]), double(n.sum[1]), double(n.sum[2]));
+        den += w * double(n.count);
+    }
+    return den > 0.0 ? glm::vec3(num / (den * RadianceBin::kScale)) : glm::vec3(0.0f);
 }
 
 /// Hit-binned AO, phase 2 of a pass, for one tile: each camera sample's reconstruction, added to
@@ -697,8 +808,8 @@ float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const Hit
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                    const HitRecord* records, const HitBins& bins, double* sum) {
     const int spp = s1 - s0;
-    BinMemo memo;
-    BinCell cell;
+    BinMemo<CountBin> memo;
+    BinCell<CountBin> cell;
     for (int y = r.rows().begin(); y < r.rows().end(); ++y)
         for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
             const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
@@ -712,6 +823,29 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
             }
             double* px = &sum[3 * pixel];
             px[0] += acc, px[1] += acc, px[2] += acc;
+        }
+}
+
+/// Hit-binned diffuse light, phase 2 of a pass, for one tile: each pixel's per-hit part, then
+/// albedo x the reconstruction of each binned camera sample, in sample order.
+void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                     const HitRecord* records, const glm::vec3* albedos, const glm::dvec3* perHit,
+                     const RadianceBins& bins, double* sum) {
+    const int spp = s1 - s0;
+    BinMemo<RadianceBin> memo;
+    BinCell<RadianceBin> cell;
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+            const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
+            glm::dvec3 acc = perHit[pixel];
+            for (int s = 0; s < spp; ++s) {
+                const size_t i = pixel * size_t(spp) + size_t(s);
+                if (records[i].mesh < 0) continue;
+                acc += glm::dvec3(albedos[i] *
+                                  ReconstructRadiance(*c.tsc, bins, records[i], memo, cell));
+            }
+            double* px = &sum[3 * pixel];
+            px[0] += acc.x, px[1] += acc.y, px[2] += acc.z;
         }
 }
 
@@ -821,16 +955,22 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const bool prepassAo = twoPhaseAo && fc.Visible() != nullptr;
     constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
-    const bool hits = c.tsc && ShadesAoAtHits(opt);
+    const bool hits = c.tsc && ShadesAtHits(opt);
+    const bool pathHits = hits && opt.integrator == IntegratorKind::Path;
     // Hit bins: no table grows past 256 MiB (car AO, 480x270, 4 spp: 2.2 MiB).
-    constexpr size_t kMaxBinBlocks = (size_t(256) << 20) / HitBins::BytesFor(1);
+    constexpr size_t kMaxBinBytes = size_t(256) << 20;
     constexpr size_t kMaxHitRecordBytes = size_t(256) << 20;
     size_t binBlocksUsed = 0;
-    // Hit-binned AO keeps a record per camera sample of a pass: a pass holds at most 256 MiB of
-    // them (1920x1080: 10 samples a pixel), and a longer one runs as several.
+    // Hit binning keeps a record per camera sample of a pass (and for diffuse light its
+    // albedo): a pass holds at most 256 MiB of them (1920x1080, AO: 10 samples a pixel), and a
+    // longer one runs as several.
     const size_t framePixels = std::max<size_t>(1, size_t(W) * size_t(opt.height));
-    const int hitSpp = int(std::clamp<size_t>(
-        kMaxHitRecordBytes / (sizeof(HitRecord) * framePixels), 1, size_t(INT_MAX)));
+    const size_t recordBytes = sizeof(HitRecord) + (pathHits ? sizeof(glm::vec3) : 0);
+    const int hitSpp = int(
+        std::clamp<size_t>(kMaxHitRecordBytes / (recordBytes * framePixels), 1, size_t(INT_MAX)));
+    // Hit-binned diffuse light: each pixel's per-hit part of a pass (misses, lights, glossy
+    // hits, unbinned direct light), written by the binning phase, added by the resolve.
+    std::vector<glm::dvec3> perHit(pathHits ? framePixels : 0);
     while (done < sppCap) {
         const int s0 = done,
                   s1 = std::min(sppCap, done + (hits ? std::min(passSpp, hitSpp) : passSpp));
@@ -869,13 +1009,15 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         passTexels.cacheEmptied =
             newPass || !c.tsc || !c.tsc->MayHoldTexels();  // per hit: no cache
         if (hits) {
-            // Hit-binned AO (TextureSamples::Hits): bin every hit of the pass, then read the
-            // bins back at every camera sample. A table too small for the pass's bins (an add
-            // found no room) is doubled and the pass binned again, so no hit is ever lost; the
-            // bins, and so the image, do not depend on the table's size.
+            // Hit binning (TextureSamples::Hits): bin every hit of the pass, then read the bins
+            // back at every camera sample. A table too small for the pass's bins (an add found no
+            // room) is doubled and the pass binned again, so no hit is ever lost; the bins, and
+            // so the image, do not depend on the table's size.
             HitRecord* const records = c.tsc->HitRecords(passSamples);
-            const float levels =
-                TextureSpaceCache::HitBinLevels(opt.aoSamples, s1 - s0, c.tsc->Pass());
+            glm::vec3* const albedos = pathHits ? c.tsc->HitAlbedos(passSamples) : nullptr;
+            const float levels = TextureSpaceCache::HitBinLevels(
+                pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples, s1 - s0, c.tsc->Pass(),
+                pathHits ? TextureSpaceCache::HitTerm::Light : TextureSpaceCache::HitTerm::Ao);
             const int bias = int(std::floor(levels));
             const float blend = levels - float(bias);
             // At most half full: twice the blocks the last pass used, or a first guess of four
@@ -885,25 +1027,52 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             const size_t pixels = size_t(W) * size_t(y1 - y0);
             const size_t guess =
                 4 * c.tsc->NumFaces() + 2 * pixels / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
-            size_t blocks =
-                std::clamp(2 * std::max(guess, binBlocksUsed), size_t(1024), kMaxBinBlocks);
-            for (;;) {
-                HitBins& bins = c.tsc->Bins(blocks);
-                bins.Clear();
-                forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-                    AoHitsBin(c, r, s0, s1, bias, blend, records, bins, rc);
+            // Bins one phase, reads them back in the next; `table(blocks)` is the cache's table
+            // of the pass's kind.
+            auto binAndResolve = [&](auto&& table, auto&& bin, auto&& resolve) {
+                using Table = std::remove_reference_t<decltype(table(size_t(0)))>;
+                const size_t maxBlocks = kMaxBinBytes / Table::BytesFor(1);
+                size_t blocks =
+                    std::clamp(2 * std::max(guess, binBlocksUsed), size_t(1024), maxBlocks);
+                for (;;) {
+                    Table& bins = table(blocks);
+                    bins.Clear();
+                    forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                        bin(r, bins, rc);
+                    });
+                    if (bins.Dropped() == 0 || bins.NumBlocks() >= maxBlocks) break;
+                    blocks = 2 * bins.NumBlocks();
+                }
+                const Table& bins = table(blocks);
+                binBlocksUsed = bins.BlocksUsed();
+                sums.hitBinsDropped += bins.Dropped();
+                sums.hitBinBytes = bins.BytesUsed();
+                forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts&) {
+                    resolve(r, bins);
+                    pixelSamplesDone +=
+                        uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
                 });
-                if (bins.Dropped() == 0 || bins.NumBlocks() >= kMaxBinBlocks) break;
-                blocks = 2 * bins.NumBlocks();
-            }
-            const HitBins& bins = c.tsc->Bins(blocks);
-            binBlocksUsed = bins.BlocksUsed();
-            sums.hitBinsDropped += bins.Dropped();
-            sums.hitBinBytes = bins.BytesUsed();
-            forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts&) {
-                AoHitsResolve(c, r, s0, s1, records, bins, sums.rgb.data());
-                pixelSamplesDone += uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
-            });
+            };
+            if (pathHits)
+                binAndResolve(
+                    [&](size_t blocks) -> RadianceBins& { return c.tsc->LightBins(blocks); },
+                    [&](const tbb::blocked_range2d<int>& r, RadianceBins& bins, RayCounts& rc) {
+                        PathHitsBin(c, r, s0, s1, bias, blend, records, albedos, bins,
+                                    perHit.data(), rc);
+                    },
+                    [&](const tbb::blocked_range2d<int>& r, const RadianceBins& bins) {
+                        PathHitsResolve(c, r, s0, s1, records, albedos, perHit.data(), bins,
+                                        sums.rgb.data());
+                    });
+            else
+                binAndResolve(
+                    [&](size_t blocks) -> HitBins& { return c.tsc->Bins(blocks); },
+                    [&](const tbb::blocked_range2d<int>& r, HitBins& bins, RayCounts& rc) {
+                        AoHitsBin(c, r, s0, s1, bias, blend, records, bins, rc);
+                    },
+                    [&](const tbb::blocked_range2d<int>& r, const HitBins& bins) {
+                        AoHitsResolve(c, r, s0, s1, records, bins, sums.rgb.data());
+                    });
         } else if (VisibleTexels* visible = fc.Visible())
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);

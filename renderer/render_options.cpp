@@ -63,9 +63,10 @@ void CheckFilterRadius(int radius, const std::string& where) {
             where, "filter radius must be between 0 and 32 texels, got " + std::to_string(radius));
 }
 
-bool ShadesAoAtHits(const RenderOptions& o) {
-    return o.integrator == IntegratorKind::AO && o.texture.samples == TextureSamples::Hits &&
-           !o.aovs.Any() && o.texture.constantTerm < 0.0f;
+bool ShadesAtHits(const RenderOptions& o) {
+    return (o.integrator == IntegratorKind::AO || o.integrator == IntegratorKind::Path) &&
+           o.texture.samples == TextureSamples::Hits && !o.aovs.Any() &&
+           o.texture.constantTerm < 0.0f;
 }
 
 bool VisibleOnly(FootprintMode mode, IntegratorKind integrator) {

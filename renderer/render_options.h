@@ -42,18 +42,21 @@ FootprintMode ParseFootprintMode(const std::string& name, const std::string& whe
 /// "auto, visible, all" (for help texts and menus).
 std::string FootprintModeNames();
 
-/// Where texture-space ambient occlusion shades (--ts-samples):
+/// Where texture-space ambient occlusion and path-traced diffuse light shade (--ts-samples):
 ///   Grid  the paper's: a sample per texel of the footprint, at its limit point (found again
 ///         with a snap ray), shaded on demand and reconstructed by the material's filter.
-///   Hits  at the camera's own hits, as per-hit AO shades them (same rays, same random numbers),
-///         added up per bin of a coarser level of the same grids and read back by a bilinear
-///         reconstruction over the 2x2 bins around each hit (render.cpp, AoHitsBin): no limit
-///         evaluation, snap ray or footprint gather, and every ray traced lands in some bin.
-///         The bins lie HitBinLevels above the hit's texel (fewer as rays per pixel grow;
-///         texture_space.h argues why the result converges).
-/// The command line's `--ts-samples auto` (its default) takes Hits for AO unless a filter, a
-/// filter radius or temporal accumulation is asked for (those belong to the grid); the API's
-/// default is the paper's Grid.
+///   Hits  at the camera's own hits, as per-hit shading shades them (same rays, same random
+///         numbers), added up per bin of a coarser level of the same grids and read back by a
+///         bilinear reconstruction over the 2x2 bins around each hit (render.cpp, AoHitsBin,
+///         PathHitsBin): no limit evaluation, snap ray or footprint gather, and every ray traced
+///         lands in some bin. The path integrator bins the light its diffuse hits receive (all
+///         of it, or its indirect part: TextureSpaceOptions::cacheDirect) and applies each hit's
+///         albedo when it reads the bins; glossy hits stay per hit. The bins lie HitBinLevels
+///         above the hit's texel (fewer as rays per pixel grow; texture_space.h argues why the
+///         result converges).
+/// The command line's `--ts-samples auto` (its default) takes Hits for AO and path unless a
+/// filter, a filter radius or temporal accumulation is asked for (those belong to the grid); the
+/// API's default is the paper's Grid.
 /// `texcache experiment speed-vs-error --only car-ao --out DIR`, budget 1 (480x270, 4 spp,
 /// 1 ray per hit or per sample): hits relMSE 0.032 at 0.124 s CPU, grid ts-normal 0.052 at
 /// 0.40 s, per hit 0.254 at 0.080 s (figures from the commit that added hits).
@@ -235,10 +238,11 @@ struct RenderStats {
 /// starts from this and overrides what its own options say.
 RenderOptions RenderOptionsFrom(const RenderSettings& settings);
 
-/// Whether a render with these options shades its texture-space AO at the camera hits
-/// (TextureSamples::Hits): the AO integrator with samples at the hits, no AOV layers (they take
-/// the per-sample shading path, on the grid) and a cached term (not a benchmark's constant). The
-/// renderer, its frame set-up and the command line's cache sizes all ask this one question.
-bool ShadesAoAtHits(const RenderOptions& o);
+/// Whether a render with these options shades its texture-space term at the camera hits
+/// (TextureSamples::Hits): the AO or path integrator with samples at the hits, no AOV layers
+/// (they take the per-sample shading path, on the grid) and a cached term (not a benchmark's
+/// constant). The renderer, its frame set-up and the command line's cache sizes all ask this one
+/// question.
+bool ShadesAtHits(const RenderOptions& o);
 
 }  // namespace texcache

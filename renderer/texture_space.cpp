@@ -112,9 +112,9 @@ int TextureSpaceCache::PassRadius(int radius, uint32_t pass) {
     return int(std::lround(float(radius) * std::pow(float(pass) + 1.0f, -1.0f / 6.0f)));
 }
 
-float TextureSpaceCache::HitBinLevels(int raysPerHit, int passSpp, uint32_t pass) {
+float TextureSpaceCache::HitBinLevels(int raysPerHit, int passSpp, uint32_t pass, HitTerm term) {
     const double n = std::max(1.0, double(raysPerHit) * double(passSpp) * (double(pass) + 1.0));
-    return float(2.5 - std::log2(n / 4.0) / 3.0);
+    return float((term == HitTerm::Ao ? 2.5 : 3.5) - std::log2(n / 4.0) / 3.0);
 }
 
 void TextureSpaceCache::BeginPass(uint32_t pass) {

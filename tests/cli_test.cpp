@@ -159,6 +159,8 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
                    " --shading texture --ts-samples hits --frames 3 "
                    "--temporal-alpha 0.7",
                "--ts-samples: hits has no temporal accumulation"},
+          Case{"render " + cube + " --shading texture --cached-light some",
+               "--cached-light: unknown value 'some' (valid: auto, all, indirect)"},
           Case{"render " + cube + " --shading texture --frames 3 --temporal-alpha 1.5",
                "--temporal-alpha: must be in [0, 1)"},
           Case{"render " + cube + " --shading texture --temporal-alpha 0.7", "give --frames"},
@@ -562,6 +564,23 @@ TEST(Cli, CachesAreSizedToTheFrameUnlessGiven) {
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_EQ(StatsField(stats, "sample_cache_bytes"), double(4 << 20));
     EXPECT_EQ(StatsField(stats, "texel_cache_bytes"), double(8 << 20));
+}
+
+// Path tracing with --shading texture bins diffuse light at the hits by default (its grid caches
+// then take 64 KiB); an option of the grid's cache (here --filter) takes the grid instead.
+TEST(Cli, PathTracingShadesAtTheHitsByDefault) {
+    const fs::path out = Dir() / "path_hits.exr", stats = Dir() / "path_hits.json";
+    const std::string render = "render " + test::SceneDir() +
+                               "/car.json --integrator path --resolution 64x36 --spp 2 "
+                               "--shading texture -q --no-png -o " +
+                               out.string() + " --stats " + stats.string();
+    CliRun r = Texcache(render);
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_GT(StatsField(stats, "hit_bin_bytes"), 0.0);
+    EXPECT_EQ(StatsField(stats, "texel_cache_bytes"), double(64 << 10));
+    r = Texcache(render + " --filter normal");
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(StatsField(stats, "hit_bin_bytes"), 0.0);
 }
 
 // Cached product sampling: --stats reports the record cache (its bytes counted in bytes_used);

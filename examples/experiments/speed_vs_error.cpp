@@ -52,8 +52,8 @@ const Method kNormal7{"ts-normal-7x7", true, TextureFilterKind::Normal, 3};
 const Method kGaussian{"ts-gaussian", true, TextureFilterKind::Gaussian};
 const Method kRegression{"ts-regression", true, TextureFilterKind::Regression};
 const Method kSoftShadow{"ts-softshadow", true, TextureFilterKind::SoftShadow};
-// AO shaded at the camera's hits and binned per texel of a coarser level (TextureSamples::Hits,
-// the default of `--shading texture` for AO).
+// Shading at the camera's hits, binned per texel of a coarser level (TextureSamples::Hits, the
+// default of `--shading texture` for AO and path tracing): AO, or a path tracer's diffuse light.
 const Method kHits{"ts-hits", true, TextureFilterKind::Normal, -1, TextureSamples::Hits};
 // Path cases: the per-hit terms alone. The renders of a case share their camera rays and the
 // per-hit light paths of a budget, so a texture-space render whose cached term is all but
@@ -210,28 +210,28 @@ int SpeedVsError(const Setup& s) {
         {"car.json",
          IntegratorKind::Path,
          "car-indirect",
-         {kPerHit, kNone, kNormal, kGaussian, kRegression}},
+         {kPerHit, kHits, kNone, kNormal, kGaussian, kRegression}},
         {"chess.json",
          IntegratorKind::Path,
          "chess-indirect",
-         {kPerHit, kNone, kNormal, kGaussian, kRegression}},
+         {kPerHit, kHits, kNone, kNormal, kGaussian, kRegression}},
         // The same two with diffuse direct light cached and filtered too (--cached-light all).
         {"car.json",
          IntegratorKind::Path,
          "car-diffuse",
-         {kPerHit, kNone, kNormal, kRegression},
+         {kPerHit, kHits, kNone, kNormal, kRegression},
          true},
         {"chess.json",
          IntegratorKind::Path,
          "chess-diffuse",
-         {kPerHit, kNone, kNormal, kRegression},
+         {kPerHit, kHits, kNone, kNormal, kRegression},
          true},
         // The diffuse-indirect scene: a clay car under a sun (a delta light: direct lighting has
         // no noise but shadow-edge aliasing), so indirect light is what the budget buys.
         {"sunlit.json",
          IntegratorKind::Path,
          "sunlit-indirect",
-         {kPerHit, kNone, kNormal, kGaussian, kRegression}},
+         {kPerHit, kHits, kNone, kNormal, kGaussian, kRegression}},
         {"chess.json", IntegratorKind::Direct, "chess-softshadow", {kPerHit, kSoftShadow}},
         // A camera the bundled scenes do not have (issue 16: "the default car with a thin
         // lens"): camera samples land on different texels through each lens point, and the

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
-// Texel bins of binary shading estimates (ambient occlusion, visibility): shading computed at the
-// camera's own hits, added up per texel of a grid level, for a reconstruction that reads bins
-// instead of shading samples of its own.
+// Texel bins of shading estimates computed at the camera's own hits, added up per texel of a grid
+// level, for a reconstruction that reads bins instead of shading samples of its own: binary
+// estimates (ambient occlusion: rays that escape out of rays traced, HitBins) and radiance
+// (diffuse light: RGB sums in fixed point and their count, RadianceBins).
 //
 // Design note — concurrency and determinism
 // -----------------------------------------
@@ -10,10 +11,12 @@
 //   * Add is lock-free and wait-free but for the insertion of a new block: a block is claimed by
 //     one compare-and-swap of its key from kEmpty; a thread that loses the race to the same key
 //     adds to the winner's block, one that loses to another key probes on (linear probing).
-//   * A bin is one 64-bit word, (trials << 32) | successes, updated by a compare-and-swap loop
-//     that saturates each half at 2^32 - 1. Integer sums do not depend on the order of the adds
-//     (a saturating sum of non-negative terms is min(total, cap) in any order), so the bins,
-//     and every image read from them, are the same for any thread count and schedule: float
+//   * A bin is made of 64-bit words updated by compare-and-swap loops that saturate: a count bin
+//     is one word, (trials << 32) | successes, each half saturating at 2^32 - 1; a radiance bin
+//     is four, R, G and B in fixed point (RadianceBin::kScale units per unit) and the count,
+//     each saturating at 2^64 - 1. Integer sums do not depend on the order of the adds (a
+//     saturating sum of non-negative terms is min(total, cap) in any order), so the bins, and
+//     every image read from them, are the same for any thread count and schedule: float
 //     atomics would not be.
 //   * The table is fixed-size (the blocks given at construction, never more). An Add that finds
 //     no free block within kMaxProbes is dropped and counted (Dropped()); the renderer keeps the
@@ -21,9 +24,10 @@
 //     add was dropped, up to a byte budget.
 //   * Find is a plain read (relaxed atomics: the phase barrier orders it after every Add), and
 //     never returns another key's bin: keys are compared in full.
-// Bins are grouped in blocks of 4x4 of one face and level (136 bytes with the key), so the 2x2
-// bins a bilinear reconstruction reads mostly share one block.
+// Bins are grouped in blocks of 4x4 of one face and level (136 bytes with the key for counts, 520
+// for radiance), so the 2x2 bins a bilinear reconstruction reads mostly share one block.
 #pragma once
+#include <algorithm>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -36,17 +40,94 @@
 
 namespace texcache {
 
-class HitBins {
-public:
-    /// A bin's counts: successes (e.g. AO rays that escape) out of trials (rays traced).
-    struct Counts {
+/// A bin of binary estimates: successes (e.g. AO rays that escape) out of trials (rays traced),
+/// one word: (trials << 32) | successes, each half saturating.
+struct CountBin {
+    struct Value {
         uint32_t successes = 0, trials = 0;
     };
+    static constexpr int kWords = 1;
+    static void Accumulate(Value* a, const Value& b) {
+        a->successes = SatAdd(a->successes, b.successes);
+        a->trials = SatAdd(a->trials, b.trials);
+    }
+    static void AddTo(std::atomic<uint64_t>* w, const Value& v) {
+        uint64_t old = w->load(std::memory_order_relaxed), next;
+        do {
+            next = (uint64_t(SatAdd(uint32_t(old >> 32), v.trials)) << 32) |
+                   SatAdd(uint32_t(old), v.successes);
+        } while (!w->compare_exchange_weak(old, next, std::memory_order_relaxed));
+    }
+    static Value Load(const std::atomic<uint64_t>* w) {
+        const uint64_t x = w->load(std::memory_order_relaxed);
+        return {uint32_t(x), uint32_t(x >> 32)};
+    }
+    static uint32_t SatAdd(uint32_t a, uint32_t b) {
+        const uint32_t s = a + b;
+        return s < a ? UINT32_MAX : s;
+    }
+};
+
+/// A bin of radiance estimates: the sums of R, G and B in fixed point (kScale units per unit of
+/// radiance, rounded to nearest) and how many estimates they hold, four words each saturating
+/// at 2^64 - 1. An estimate is clamped to kMaxValue per channel (2^24: far above any radiance a
+/// scene's diffuse light reaches, so nothing real is clipped) so that 2^20 of them fit before a
+/// sum can saturate; the resolution, 2^-20, is a millionth of a white surface's light.
+struct RadianceBin {
+    struct Value {
+        uint64_t sum[3] = {0, 0, 0};
+        uint64_t count = 0;
+    };
+    static constexpr int kWords = 4;
+    static constexpr double kScale = double(1 << 20);
+    static constexpr double kMaxValue = double(1 << 24);
+    /// One estimate in fixed point; false (nothing to add) for a NaN, infinite or negative one,
+    /// which would otherwise poison every read of the bin.
+    static bool FromRadiance(const float rgb[3], Value* v) {
+        for (int k = 0; k < 3; ++k) {
+            const float x = rgb[k];
+            if (!(x >= 0.0f) || !(x <= 3.0e38f)) return false;  // NaN, -x, +inf
+            v->sum[k] = uint64_t(std::min(double(x), kMaxValue) * kScale + 0.5);
+        }
+        v->count = 1;
+        return true;
+    }
+    static void Accumulate(Value* a, const Value& b) {
+        for (int k = 0; k < 3; ++k) a->sum[k] = SatAdd(a->sum[k], b.sum[k]);
+        a->count = SatAdd(a->count, b.count);
+    }
+    static void AddTo(std::atomic<uint64_t>* w, const Value& v) {
+        for (int k = 0; k < 4; ++k) {
+            const uint64_t add = k < 3 ? v.sum[k] : v.count;
+            if (add == 0) continue;
+            uint64_t old = w[k].load(std::memory_order_relaxed);
+            while (!w[k].compare_exchange_weak(old, SatAdd(old, add), std::memory_order_relaxed)) {
+            }
+        }
+    }
+    static Value Load(const std::atomic<uint64_t>* w) {
+        Value v;
+        for (int k = 0; k < 3; ++k) v.sum[k] = w[k].load(std::memory_order_relaxed);
+        v.count = w[3].load(std::memory_order_relaxed);
+        return v;
+    }
+    static uint64_t SatAdd(uint64_t a, uint64_t b) {
+        const uint64_t s = a + b;
+        return s < a ? UINT64_MAX : s;
+    }
+};
+
+/// A fixed-size, lock-free table of bins (see the design note above), keyed by TexelKey, of one
+/// kind: CountBin (HitBins) or RadianceBin (RadianceBins).
+template <typename Bin>
+class BinTable {
+public:
+    using Value = typename Bin::Value;
     static constexpr int kMaxProbes = 32;
 
     /// A table of `minBlocks` blocks of 4x4 bins or more (a power of two, at least 8):
     /// BytesFor(NumBlocks()) bytes, allocated once.
-    explicit HitBins(size_t minBlocks) {
+    explicit BinTable(size_t minBlocks) {
         size_t blocks = 8;
         int log2 = 3;
         while (blocks < minBlocks) blocks *= 2, ++log2;
@@ -67,9 +148,9 @@ public:
         used_.store(0, std::memory_order_relaxed);
     }
 
-    /// Adds `successes` of `trials` to bin `key` (a TexelKey of the bin's face, level and
-    /// coordinates). False when the table had no room (the add is dropped and counted).
-    bool Add(const TexelKey& key, uint32_t successes, uint32_t trials) {
+    /// Adds `v` to bin `key` (a TexelKey of the bin's face, level and coordinates). False when
+    /// the table had no room (the add is dropped and counted).
+    bool Add(const TexelKey& key, const Value& v) {
         const uint64_t bk = BlockKey(key);
         size_t i = Home(bk);
         for (int p = 0; p < kMaxProbes; ++p, i = (i + 1) & (blocks_ - 1)) {
@@ -82,28 +163,20 @@ public:
                 }  // else lost the race: `k` now holds the winner's key
             }
             if (k != bk) continue;
-            std::atomic<uint64_t>& w = bins_[i].w[Lane(key)];
-            uint64_t old = w.load(std::memory_order_relaxed), next;
-            do {
-                next = (uint64_t(SatAdd(uint32_t(old >> 32), trials)) << 32) |
-                       SatAdd(uint32_t(old), successes);
-            } while (!w.compare_exchange_weak(old, next, std::memory_order_relaxed));
+            Bin::AddTo(&bins_[i].w[Lane(key) * Bin::kWords], v);
             return true;
         }
         dropped_.fetch_add(1, std::memory_order_relaxed);
         return false;
     }
 
-    /// The counts of bin `key` (zero when nothing was added to it).
-    Counts Find(const TexelKey& key) const {
+    /// The value of bin `key` (zero when nothing was added to it).
+    Value Find(const TexelKey& key) const {
         const uint64_t bk = BlockKey(key);
         size_t i = Home(bk);
         for (int p = 0; p < kMaxProbes; ++p, i = (i + 1) & (blocks_ - 1)) {
             const uint64_t k = bins_[i].key.load(std::memory_order_relaxed);
-            if (k == bk) {
-                const uint64_t w = bins_[i].w[Lane(key)].load(std::memory_order_relaxed);
-                return {uint32_t(w), uint32_t(w >> 32)};
-            }
+            if (k == bk) return Bin::Load(&bins_[i].w[Lane(key) * Bin::kWords]);
             if (k == TexelKey::kEmpty) break;
         }
         return {};
@@ -115,28 +188,26 @@ public:
     /// read. The sums are the same as adding one by one (integer sums, any order).
     class Batch {
     public:
-        explicit Batch(HitBins& bins) : bins_(&bins) {
+        explicit Batch(BinTable& bins) : bins_(&bins) {
             for (Entry& e : local_) e.key = TexelKey::kEmpty;
         }
         ~Batch() { Flush(); }
         Batch(const Batch&) = delete;
         Batch& operator=(const Batch&) = delete;
 
-        void Add(const TexelKey& key, uint32_t successes, uint32_t trials) {
+        void Add(const TexelKey& key, const Value& v) {
             const uint64_t k = key.Pack();
             Entry& e = local_[(k * 0x9E3779B97F4A7C15ull) >> (64 - kLog2Local)];
             if (e.key != k) {
-                if (e.key != TexelKey::kEmpty)
-                    bins_->Add(TexelKey::Unpack(e.key), e.successes, e.trials);
-                e = {k, 0, 0};
+                if (e.key != TexelKey::kEmpty) bins_->Add(TexelKey::Unpack(e.key), e.v);
+                e.key = k, e.v = Value();
             }
-            e.successes = SatAdd(e.successes, successes);
-            e.trials = SatAdd(e.trials, trials);
+            Bin::Accumulate(&e.v, v);
         }
         void Flush() {
             for (Entry& e : local_)
                 if (e.key != TexelKey::kEmpty) {
-                    bins_->Add(TexelKey::Unpack(e.key), e.successes, e.trials);
+                    bins_->Add(TexelKey::Unpack(e.key), e.v);
                     e.key = TexelKey::kEmpty;
                 }
         }
@@ -145,9 +216,9 @@ public:
         static constexpr int kLog2Local = 8;
         struct Entry {
             uint64_t key;
-            uint32_t successes, trials;
+            Value v;
         };
-        HitBins* bins_;
+        BinTable* bins_;
         Entry local_[1 << kLog2Local];
     };
 
@@ -166,14 +237,10 @@ private:
     // most lanes, the next one or two (a separate key array had cost a second miss per lookup).
     struct Block {
         std::atomic<uint64_t> key;
-        std::atomic<uint64_t> w[16];
+        std::atomic<uint64_t> w[16 * Bin::kWords];
     };
     static constexpr size_t kBytesPerBlock = sizeof(Block);
 
-    static uint32_t SatAdd(uint32_t a, uint32_t b) {
-        const uint32_t s = a + b;
-        return s < a ? UINT32_MAX : s;
-    }
     static uint64_t BlockKey(const TexelKey& k) {
         TexelKey b = k;
         b.iu = uint16_t(k.iu >> 2), b.iv = uint16_t(k.iv >> 2);
@@ -191,5 +258,10 @@ private:
     std::atomic<uint64_t> dropped_{0};
     std::atomic<size_t> used_{0};
 };
+
+/// Bins of binary estimates (hit-binned AO).
+using HitBins = BinTable<CountBin>;
+/// Bins of radiance estimates (hit-binned diffuse light).
+using RadianceBins = BinTable<RadianceBin>;
 
 }  // namespace texcache
