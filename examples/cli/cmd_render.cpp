@@ -703,6 +703,9 @@ int RunRender(const RenderArgs& a) {
         fbo.integrator = IntegratorKind::Path;
         fbo.seconds = 0.0f;
         fbo.texture = ParseTextureOptions(a, false);  // the stage's split: direct per hit
+        // The frame buffers' renderer caches on the grid only (its caches must not be sized
+        // for hits, which never fill them).
+        fbo.texture.samples = TextureSamples::Grid;
         SizeCaches(a, &fbo, 1);
         fbo.progress = false;
         int first = 0, last = 0;
