@@ -706,9 +706,12 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
 template <typename Bin>
 struct BinMemo {
     static constexpr int kLog2 = 8;
-    struct Entry {
+    struct Entry {  // the value is uninitialised until the key is set (see HitBins::Batch)
+        Entry() {}
         uint64_t key = TexelKey::kEmpty;
-        typename Bin::Value n;
+        union {
+            typename Bin::Value n;
+        };
     } at[1 << kLog2];
 };
 template <typename Bin>

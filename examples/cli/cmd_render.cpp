@@ -844,7 +844,7 @@ int RunRender(const RenderArgs& a) {
             (unsigned long long)c.deferrals, double(cache->BytesUsed()) / (1 << 20));
         if (r.stats.hitBinBytes > 0)
             std::printf(
-                "hit bins (AO shaded at the camera hits): %.1f MiB, %llu hits left out "
+                "hit bins (shading at the camera hits): %.1f MiB, %llu hits left out "
                 "(no room)\n",
                 double(r.stats.hitBinBytes) / (1 << 20),
                 (unsigned long long)r.stats.hitBinsDropped);
