@@ -806,27 +806,37 @@ glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const RadianceBins& 
     return den > 0.0 ? glm::vec3(num / (den * RadianceBin::kScale)) : glm::vec3(0.0f);
 }
 
+/// Phase 2 of hit binning for one tile: each pixel's sum, from `start(pixel)` on, of
+/// `shade(i)` for the records i of its spp camera samples of the pass, in sample order, added to
+/// the frame's sums once.
+template <typename Start, typename Shade>
+void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, double* sum,
+                 Start&& start, Shade&& shade) {
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+            const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
+            glm::dvec3 acc = start(pixel);
+            for (int s = 0; s < spp; ++s) acc += shade(pixel * size_t(spp) + size_t(s));
+            double* px = &sum[3 * pixel];
+            px[0] += acc.x, px[1] += acc.y, px[2] += acc.z;
+        }
+}
+
 /// Hit-binned AO, phase 2 of a pass, for one tile: each camera sample's reconstruction, added to
 /// its pixel in sample order.
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                    const HitRecord* records, const HitBins& bins, double* sum) {
-    const int spp = s1 - s0;
     BinMemo<CountBin> memo;
     BinCell<CountBin> cell;
-    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
-        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
-            const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
-            double acc = 0.0;
-            for (int s = 0; s < spp; ++s) {
-                const HitRecord& h = records[pixel * size_t(spp) + size_t(s)];
-                acc += h.mesh == PassTexels::kMiss ? 0.0
-                       : h.mesh == PassTexels::kLight
-                           ? 1.0
-                           : double(ReconstructAo(*c.tsc, bins, h, memo, cell));
-            }
-            double* px = &sum[3 * pixel];
-            px[0] += acc, px[1] += acc, px[2] += acc;
-        }
+    ResolveTile(
+        c, r, s1 - s0, sum, [](size_t) { return glm::dvec3(0.0); },
+        [&](size_t i) {
+            const HitRecord& h = records[i];
+            return glm::dvec3(h.mesh == PassTexels::kMiss ? 0.0
+                              : h.mesh == PassTexels::kLight
+                                  ? 1.0
+                                  : double(ReconstructAo(*c.tsc, bins, h, memo, cell)));
+        });
 }
 
 /// Hit-binned diffuse light, phase 2 of a pass, for one tile: each pixel's per-hit part, then
@@ -834,22 +844,15 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
 void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                      const HitRecord* records, const glm::vec3* albedos, const glm::dvec3* perHit,
                      const RadianceBins& bins, double* sum) {
-    const int spp = s1 - s0;
     BinMemo<RadianceBin> memo;
     BinCell<RadianceBin> cell;
-    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
-        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
-            const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
-            glm::dvec3 acc = perHit[pixel];
-            for (int s = 0; s < spp; ++s) {
-                const size_t i = pixel * size_t(spp) + size_t(s);
-                if (records[i].mesh < 0) continue;
-                acc += glm::dvec3(albedos[i] *
-                                  ReconstructRadiance(*c.tsc, bins, records[i], memo, cell));
-            }
-            double* px = &sum[3 * pixel];
-            px[0] += acc.x, px[1] += acc.y, px[2] += acc.z;
-        }
+    ResolveTile(
+        c, r, s1 - s0, sum, [&](size_t pixel) { return perHit[pixel]; },
+        [&](size_t i) {
+            if (records[i].mesh < 0) return glm::dvec3(0.0);
+            return glm::dvec3(albedos[i] *
+                              ReconstructRadiance(*c.tsc, bins, records[i], memo, cell));
+        });
 }
 
 /// A frame's per-pixel sums while its passes run.
