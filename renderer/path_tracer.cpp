@@ -67,8 +67,8 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
     if (env) lightSampling = o.lightSampling;
 }
 
-glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
-               RayCounts& rays) {
+glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si,
+               const AoSequence& seq, uint64_t first, RayCounts& rays) {
     // The rays leave one point: traced as packets of up to 16 (RenderScene::Occluded16).
     Ray batch[16];
     bool blocked[16];
@@ -79,7 +79,7 @@ glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si, R
         rays.shadow += uint64_t(queued);
         queued = 0;
     };
-    ForEachAoRay(c, ray, si, rng, [&]() -> Ray& {
+    ForEachAoRay(c, ray, si, seq, first, [&]() -> Ray& {
         if (queued == 16) flush();
         return batch[queued++];
     });

@@ -180,7 +180,7 @@ void PinholeCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int
 
 /// What camera sample `cs` (pixel (x, y), sample s) sees, its ray already traced.
 glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample& cs, PixelAovs* aov,
-                            RayCounts& rays) {
+                            const AoSequence& ao, RayCounts& rays) {
     const bool needDiff = NeedsDifferentials(c);
     const Ray& ray = cs.ray;
     const Hit& hit = cs.hit;
@@ -247,7 +247,7 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
                 return CachedLookup(
                     c, si, [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
                     c.opt.aoSamples);
-            return LiAO(c, ray, si, rng, rays);
+            return LiAO(c, ray, si, ao, ao.First(x, y, s), rays);
         default:
             return glm::vec3(0.0f);
     }
@@ -260,10 +260,10 @@ struct AoRayBatch {
     std::vector<uint32_t> owner;  // the hit of each ray
 
     void Clear() { rays.clear(), owner.clear(); }
-    /// Queues hit `hit`'s AO rays (ForEachAoRay: its random stream, its rays).
-    void Queue(const Context& c, const Ray& ray, const SurfaceInteraction& si, Rng& rng,
-               uint32_t hit) {
-        ForEachAoRay(c, ray, si, rng, [&]() -> Ray& {
+    /// Queues hit `hit`'s AO rays (ForEachAoRay: its points of the pass's sequence from `first`).
+    void Queue(const Context& c, const Ray& ray, const SurfaceInteraction& si,
+               const AoSequence& seq, uint64_t first, uint32_t hit) {
+        ForEachAoRay(c, ray, si, seq, first, [&]() -> Ray& {
             owner.push_back(hit);
             return rays.emplace_back();
         });
@@ -284,7 +284,7 @@ struct AoRayBatch {
 /// Same samples, same random numbers, same result as Sample(); tracing like rays together keeps
 /// Embree's working set (and the traversal's caches) warm, as a wavefront renderer would.
 void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
-                       std::vector<double>& sum, RayCounts& rays);
+                       const AoSequence& seq, std::vector<double>& sum, RayCounts& rays);
 
 /// AoSamplesTwoPhase over samples [s0, s1) of a tile, at most kMaxQueued camera samples at a
 /// time: a tile's queue had held every sample of the pass, and a 1024-spp per-hit reference of
@@ -293,20 +293,21 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
 /// which moved that reference by relMSE 5e-11.
 void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
                     std::vector<double>& sum, RayCounts& rays) {
+    const AoSequence seq(c.opt, s0, s1);
     constexpr size_t kMaxQueued = 4096;
     const size_t pixels = size_t(y1 - y0) * size_t(x1 - x0);
     const int chunk = int(std::max<size_t>(1, kMaxQueued / std::max<size_t>(pixels, 1)));
     for (int a = s0; a < s1; a += chunk)
-        AoSamplesTwoPhase(c, y0, y1, x0, x1, a, std::min(s1, a + chunk), sum, rays);
+        AoSamplesTwoPhase(c, y0, y1, x0, x1, a, std::min(s1, a + chunk), seq, sum, rays);
 }
 
 void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
-                       std::vector<double>& sum, RayCounts& rays) {
+                       const AoSequence& seq, std::vector<double>& sum, RayCounts& rays) {
     struct Pending {
         Ray ray;
         Hit hit;
         Rng rng{0, 0};
-        int pixel = 0;
+        int pixel = 0, s = 0;
         bool found = false;
         RayDifferentials diff;
     };
@@ -324,7 +325,7 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
             for (int s = s0; s < s1; ++s) {
                 // Written in place, not built on the stack and copied (see ForEachAoRay).
                 Pending& p = queue[next++];
-                p.pixel = y * c.opt.width + x;
+                p.pixel = y * c.opt.width + x, p.s = s;
                 if (!pinhole) CameraRay(c, x, y, s, &p.rng, &p.ray, c.tsc ? &p.diff : nullptr);
             }
     if (pinhole) {
@@ -348,7 +349,9 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
         for (size_t i = 0; i < n; ++i) {
             Pending& p = queue[i];
             if (!p.found || p.hit.object < 0) continue;
-            batch.Queue(c, p.ray, c.rs.Interact(p.ray, p.hit), p.rng, uint32_t(i));
+            const int x = p.pixel % c.opt.width, y = p.pixel / c.opt.width;
+            batch.Queue(c, p.ray, c.rs.Interact(p.ray, p.hit), seq, seq.First(x, y, p.s),
+                        uint32_t(i));
         }
         batch.Trace(c, open.data(), rays);
         const float inv = 1.0f / float(c.opt.aoSamples);
@@ -602,6 +605,7 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     open.assign(total, 0);
     Cursor at(r, s0);
     const int spp = s1 - s0;
+    const AoSequence seq(c.opt, s0, s1);
     for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
         CameraSample& p = cs[i];
         HitRecord& h = records[(size_t(at.y) * size_t(c.opt.width) + size_t(at.x)) * size_t(spp) +
@@ -612,7 +616,7 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
         }
         const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit);
         BinHit(c, si, p.hit.t, bias, blend, at.x, at.y, at.s, &keys[2 * i], &h);
-        aoRays.Queue(c, p.ray, si, p.rng, uint32_t(i));
+        aoRays.Queue(c, p.ray, si, seq, seq.First(at.x, at.y, at.s), uint32_t(i));
     }
     aoRays.Trace(c, open.data(), rays);
     HitBins::Batch batch(bins);
@@ -874,6 +878,7 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     const int W = c.opt.width;
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     const bool needDiff = NeedsDifferentials(c);
+    const AoSequence ao(c.opt, s0, s1);
     CameraSample block[kCameraBlock];
     Cursor gen(r, s0), shade = gen;
     // A tile outside the scene's projection: every camera ray misses (Context::hitRect).
@@ -901,7 +906,7 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
                 if (pixelStats) before = CacheSnapshot(*pixelStats);
             }
             const glm::vec3 L =
-                ShadeCameraSample(c, shade.x, shade.y, shade.s, block[i], aov, rays);
+                ShadeCameraSample(c, shade.x, shade.y, shade.s, block[i], aov, ao, rays);
             // A NaN/Inf sample would poison the pixel forever: drop it.
             if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z))
                 acc += glm::dvec3(L);
@@ -916,8 +921,9 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
 
 /// Renders passes of whole sample indices from opt.firstSample until opt.spp samples are done
 /// or, with a time budget (counted from `start`), until the next pass would not fit in it;
-/// returns the sample index reached. A pixel's result depends only on its sample indices, so the
-/// image is the same for any thread count or pass split.
+/// returns the sample index reached. A pixel's result depends only on its sample indices and the
+/// passes (AO's directions are a net per pass: AoSequence), so the image is the same for any
+/// thread count.
 int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
               tbb::enumerable_thread_specific<RayCounts>& counts,
               std::chrono::steady_clock::time_point start) {
@@ -1162,6 +1168,7 @@ std::vector<ImageLayer> AovLayers(const std::vector<PixelAovs>& aovs, const AovF
 void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<Ray>* camera,
                   std::vector<Ray>* occlusion) {
     const Context c(rs, opt);
+    const AoSequence seq(opt, 0, opt.spp);  // a render's single pass
     for (int y = 0; y < opt.height; ++y)
         for (int x = 0; x < opt.width; ++x)
             for (int s = 0; s < opt.spp; ++s) {
@@ -1171,7 +1178,7 @@ void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<R
                 camera->push_back(ray);
                 Hit hit;
                 if (!rs.Intersect(ray, &hit) || hit.object < 0) continue;
-                ForEachAoRay(c, ray, rs.Interact(ray, hit), rng,
+                ForEachAoRay(c, ray, rs.Interact(ray, hit), seq, seq.First(x, y, s),
                              [&]() -> Ray& { return occlusion->emplace_back(); });
             }
 }

@@ -12,6 +12,8 @@
 #include "renderer/distribution.h"
 #include "renderer/envmap.h"
 #include "renderer/image.h"
+#include "renderer/path_tracer.h"
+#include "renderer/render_options.h"
 #include "renderer/sampling.h"
 #include "test_util.h"
 #include "texcache/error.h"
@@ -68,6 +70,98 @@ TEST(Sampling, Sobol02PointsFormNetsForAnyShift) {
     EXPECT_NEAR(my, 0.5, 0.01);
     EXPECT_NEAR(vx, 1.0 / 12.0, 0.1 / 12.0);
     EXPECT_NEAR(vy, 1.0 / 12.0, 0.1 / 12.0);
+}
+
+// Counts of points per elementary box of 2^-a x 2^-(m-a), for every a: each count 1 is a
+// (0,m,2)-net.
+bool IsNet(const std::vector<glm::vec2>& pts) {
+    const size_t n = pts.size();
+    int m = 0;
+    while ((size_t(1) << m) < n) ++m;
+    if ((size_t(1) << m) != n) return false;
+    for (int a = 0; a <= m; ++a) {
+        std::vector<int> count(n, 0);
+        for (const glm::vec2& p : pts) {
+            if (!(p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f)) return false;
+            const int bx = int(p.x * float(1 << a)), by = int(p.y * float(1 << (m - a)));
+            if (++count[size_t(by * (1 << a) + bx)] > 1) return false;
+        }
+    }
+    return true;
+}
+
+// OwenSobol02: the table of Sobol's second dimension gives Sobol02's points (no shift); every
+// 2^m consecutive points from a multiple of 2^m form a (0,m,2)-net for any seed; over seeds a
+// point is uniform (mean 1/2, variance 1/12: within 0.01 and 10% for 20000 seeds), and two
+// points of one net, in opposite halves by the net property, are uncorrelated within them
+// (|correlation| < 0.03 over 20000 seeds), which a single digital shift for all points is not.
+TEST(Sampling, OwenSobol02PointsFormNetsAndAreUniform) {
+    const auto& t = detail::kSobolSecondDimension.table;
+    for (uint32_t j : {0u, 1u, 2u, 3u, 77u, 1000u, 65537u, 0x12345678u, 0xffffffffu}) {
+        const uint32_t y = ReverseBits32(t[0][j & 255u] ^ t[1][j >> 8 & 255u] ^
+                                         t[2][j >> 16 & 255u] ^ t[3][j >> 24]);
+        EXPECT_EQ(float(y >> 8) / float(1u << 24), Sobol02(j, 0, 0).y) << j;
+    }
+    Rng rng(13, 2);
+    for (int trial = 0; trial < 200; ++trial) {
+        const uint32_t seed = rng.NextU32();
+        for (int m = 0; m <= 8; ++m) {
+            const uint32_t n = 1u << m, start = n * (rng.NextU32() >> 12);
+            std::vector<glm::vec2> pts;
+            for (uint32_t j = start; j < start + n; ++j) pts.push_back(OwenSobol02(j, seed));
+            ASSERT_TRUE(IsNet(pts)) << "m " << m << " trial " << trial;
+        }
+    }
+    const int seeds = 20000;
+    double mx = 0.0, vx = 0.0, my = 0.0, vy = 0.0;
+    double a = 0.0, b = 0.0, aa = 0.0, bb = 0.0, ab = 0.0;
+    for (int i = 0; i < seeds; ++i) {
+        const uint32_t seed = rng.NextU32();
+        const glm::vec2 p = OwenSobol02(5, seed);
+        mx += p.x, vx += double(p.x) * p.x, my += p.y, vy += double(p.y) * p.y;
+        // Points 0 and 1: x in opposite halves; where in its half is each?
+        const double u = std::fmod(2.0 * OwenSobol02(0, seed).x, 1.0),
+                     v = std::fmod(2.0 * OwenSobol02(1, seed).x, 1.0);
+        a += u, b += v, aa += u * u, bb += v * v, ab += u * v;
+    }
+    mx /= seeds, my /= seeds, vx = vx / seeds - mx * mx, vy = vy / seeds - my * my;
+    EXPECT_NEAR(mx, 0.5, 0.01);
+    EXPECT_NEAR(my, 0.5, 0.01);
+    EXPECT_NEAR(vx, 1.0 / 12.0, 0.1 / 12.0);
+    EXPECT_NEAR(vy, 1.0 / 12.0, 0.1 / 12.0);
+    a /= seeds, b /= seeds;
+    const double corr =
+        (ab / seeds - a * b) / std::sqrt((aa / seeds - a * a) * (bb / seeds - b * b));
+    EXPECT_LT(std::abs(corr), 0.03) << corr;
+}
+
+// AoSequence: a pass's AO directions; each pixel's samples, each aligned 2x2 and 4x4 block of
+// pixels (the extent of a hit bin) take a net of the pass's sequence; another pass takes other
+// points; past 2^32 points the sequence is scrambled anew, not repeated.
+TEST(Sampling, AoSequenceStratifiesPixelsAndBlocks) {
+    RenderOptions opt;
+    opt.seed = 3;
+    opt.aoSamples = 2;
+    const internal::AoSequence seq(opt, 8, 12);  // a pass of samples 8..11
+    auto points = [&](int x0, int y0, int side) {
+        std::vector<glm::vec2> pts;
+        for (int y = y0; y < y0 + side; ++y)
+            for (int x = x0; x < x0 + side; ++x)
+                for (int s = 8; s < 12; ++s)
+                    for (int i = 0; i < opt.aoSamples; ++i)
+                        pts.push_back(seq.At(seq.First(x, y, s) + uint64_t(i)));
+        return pts;
+    };
+    for (int side : {1, 2, 4})
+        for (int y0 = 16; y0 < 24; y0 += side)
+            for (int x0 = 36; x0 < 44; x0 += side)
+                EXPECT_TRUE(IsNet(points(x0, y0, side))) << side << " " << x0 << " " << y0;
+    const internal::AoSequence next(opt, 12, 16);
+    EXPECT_NE(seq.At(seq.First(5, 5, 8)), next.At(next.First(5, 5, 12)));
+    const uint64_t j = seq.First(65535, 65535, 11);
+    ASSERT_GT(j, uint64_t(1) << 32);
+    EXPECT_NE(seq.At(j), seq.At(j & 0xffffffffu));
+    EXPECT_TRUE(IsNet({seq.At(j), seq.At(j + 1)}));  // a hit's two rays
 }
 
 // The polynomial sin/cos used by the concentric map: within 1e-7 of libm on [-pi/4, pi/4], and
