@@ -68,7 +68,7 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
 }
 
 glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si,
-               const AoSequence& seq, uint64_t first, RayCounts& rays) {
+               const PixelSequence& seq, uint64_t first, RayCounts& rays) {
     // The rays leave one point: traced as packets of up to 16 (RenderScene::Occluded16).
     Ray batch[16];
     bool blocked[16];

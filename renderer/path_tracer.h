@@ -200,6 +200,44 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
     return storage->valid ? storage : nullptr;
 }
 
+/// Where a pass's first-bounce directions come from (AO rays, and the light and BSDF samples at
+/// the camera hits of the direct and path integrators): one Owen-scrambled Sobol' (0,2)-sequence
+/// per dimension pair over the image (OwenSobol02), its points dealt out in Morton order of the
+/// pixels, then sample by sample, then ray (or path) by ray. Every aligned 2^k x 2^k block of
+/// pixels so gets the consecutive points of a (0,m,2)-net: a pixel's samples of the pass
+/// stratify its hemisphere together, and so do a block's, which is what a bin of hit-binned
+/// shading averages (a bin spans 4x4 pixels or more). With a random shift per hit, as before,
+/// only one hit's own rays were stratified: car AO, 480x270, 4 spp, relMSE against the shading
+/// reference, 1 ray per hit: per hit 0.254 -> 0.174, at the hits 0.0340 -> 0.0246; 4 rays:
+/// 0.0441 -> 0.0294, 0.0092 -> 0.0068; at no measurable cost (the grid's cache samples keep their
+/// own nets: CosineRays). Each pass has its own scramble, so passes are independent and a
+/// pixel's result depends on its samples and the pass split (a render with --spp is one pass
+/// unless shaded in texture space); never on the threads or tiles.
+struct PixelSequence {
+    uint32_t seed = 0;     ///< the pass's scramble
+    int s0 = 0;            ///< the pass's first sample index
+    uint32_t samples = 1;  ///< points per pixel sample slot: the pass's samples, a power of two
+    uint32_t perHit = 1;   ///< points per camera sample, rounded up to a power of two
+
+    PixelSequence() = default;
+    /// Samples [passS0, passS1) of a pass: opt.aoSamples points (rays) per camera sample for AO,
+    /// opt.hitSamples (paths) for the others.
+    PixelSequence(const RenderOptions& opt, int passS0, int passS1)
+        : seed(uint32_t(MixBits(opt.seed * 0xA24BAED4963EE407ull + uint64_t(passS0) + 1u))),
+          s0(passS0),
+          samples(std::bit_ceil(uint32_t(std::max(passS1 - passS0, 1)))),
+          perHit(std::bit_ceil(uint32_t(std::max(
+              opt.integrator == IntegratorKind::AO ? opt.aoSamples : opt.hitSamples, 1)))) {}
+    /// Index of the first point of camera sample (x, y, s).
+    uint64_t First(int x, int y, int s) const {
+        return (uint64_t(Morton2(uint32_t(x), uint32_t(y))) * samples + uint64_t(s - s0)) * perHit;
+    }
+    /// Point j of dimension pair `pair`: past 2^32 points (e.g. 4096x4096 pixels x 64 samples x
+    /// 4 rays) the sequence restarts with another scramble, so no two pixels share their points.
+    glm::vec2 At(uint64_t j, uint32_t pair = 0) const {
+        return OwenSobol02(uint32_t(j), seed ^ uint32_t(MixBits(j >> 32)) ^ pair * 0x9E3779B9u);
+    }
+};
 /// What a caller that bins diffuse light at camera hits (render.cpp, PathHitsBin) asks LiPath
 /// for: the first hit's light for a white diffuse surface (the caller applies the hit's albedo,
 /// so a textured surface keeps its detail), with its interaction computed already, and the
@@ -210,6 +248,15 @@ struct FirstHitLight {
     glm::vec3* direct;
 };
 
+/// A camera hit's light sample and BSDF sample, from the pass's PixelSequence (dimension pairs
+/// kLightPair and kBsdfPair): stratified across the pixel's samples and its neighbours'.
+struct FirstBounce {
+    static constexpr uint32_t kLightPair = 1, kBsdfPair = 2;
+    glm::vec2 light, bsdf;
+    FirstBounce(const PixelSequence& seq, uint64_t j)
+        : light(seq.At(j, kLightPair)), bsdf(seq.At(j, kBsdfPair)) {}
+};
+
 /// Direct lighting (depth 1) and path tracing: NEE with MIS against BSDF sampling.
 /// `emitFirst` = false drops emission seen by the first ray (a cached indirect sample must not
 /// count what NEE at the camera hit already did). `cached(si, ray, &term)` may replace light at
@@ -218,13 +265,14 @@ struct FirstHitLight {
 /// `firstDiff` (the camera ray's differentials) says the first hit is a camera hit: with light
 /// sampling pis or cpis it then samples the environment from its product sampling record
 /// (CameraHitRecord; the differentials pick a cached record's texel), MIS-combined with BSDF
-/// sampling as the map's own sampling is. `split`: see FirstHitLight.
+/// sampling as the map's own sampling is. `split`: see FirstHitLight. `first`: the first hit's
+/// light and BSDF samples (else drawn from `rng`, as every later bounce's are).
 template <typename CachedIndirect = NoCachedTerm>
 glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, Rng& rng,
                  int maxDepth, RayCounts& rays, bool emitFirst = true,
                  const CachedIndirect& cached = CachedIndirect(),
-                 const RayDifferentials* firstDiff = nullptr,
-                 const FirstHitLight* split = nullptr) {
+                 const RayDifferentials* firstDiff = nullptr, const FirstHitLight* split = nullptr,
+                 const FirstBounce* first = nullptr) {
     glm::vec3 L(0.0f), beta(1.0f);
     float prevPdf = 0.0f;   // BSDF pdf of the ray being traced (0: camera ray, no MIS)
     glm::vec3 prevN(0.0f);  // shading normal where it left (the environment's pdf depends on it)
@@ -283,7 +331,9 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         }
 
         LightSample ls;
-        if (c.SampleLight(si.P, si.N, rng.Next1D(), rng.Next2D(), &ls, record)) {
+        const float uPick = rng.Next1D();
+        const glm::vec2 uLight = depth == 0 && first ? first->light : rng.Next2D();
+        if (c.SampleLight(si.P, si.N, uPick, uLight, &ls, record)) {
             const glm::vec3 f = bsdf.Eval(wo, ls.wi);
             if (f != glm::vec3(0.0f)) {
                 ++rays.shadow;
@@ -305,7 +355,8 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         glm::vec3 wi, weight;
         float pdf;
         const float uChoice = rng.Next1D();
-        if (!bsdf.Sample(wo, uChoice, rng.Next2D(), &wi, &weight, &pdf)) break;
+        const glm::vec2 uBsdf = depth == 0 && first ? first->bsdf : rng.Next2D();
+        if (!bsdf.Sample(wo, uChoice, uBsdf, &wi, &weight, &pdf)) break;
         beta *= weight;
         prevPdf = pdf;
         prevN = si.N;
@@ -325,43 +376,8 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
     return L;
 }
 
-/// Where a pass's AO directions come from: one Owen-scrambled Sobol' (0,2)-sequence over the
-/// image (OwenSobol02), its points dealt out in Morton order of the pixels, then sample by
-/// sample, then ray by ray. Every aligned 2^k x 2^k block of pixels so gets the consecutive
-/// points of a (0,m,2)-net: a pixel's samples of the pass stratify its hemisphere together, and
-/// so do a block's, which is what a bin of hit-binned AO averages (a bin spans 4x4 pixels or
-/// more). With a random shift per hit, as before, only one hit's own rays were stratified: car
-/// AO, 480x270, 4 spp, relMSE against the shading reference, 1 ray per hit: per hit 0.254 ->
-/// 0.174, at the hits 0.0340 -> 0.0246; 4 rays: 0.0441 -> 0.0294, 0.0092 -> 0.0068; at no
-/// measurable cost (the grid's cache samples keep their own nets: CosineRays). Each pass has its
-/// own scramble, so passes are independent and a pixel's result depends on its samples and the
-/// pass split (a render with --spp is one pass unless shaded in texture space); never on the
-/// threads or tiles.
-struct AoSequence {
-    uint32_t seed = 0;     ///< the pass's scramble
-    int s0 = 0;            ///< the pass's first sample index
-    uint32_t samples = 1;  ///< points per pixel sample slot: the pass's samples, a power of two
-    uint32_t rays = 1;     ///< points per hit: opt.aoSamples rounded up to a power of two
-
-    AoSequence() = default;
-    AoSequence(const RenderOptions& opt, int passS0, int passS1)
-        : seed(uint32_t(MixBits(opt.seed * 0xA24BAED4963EE407ull + uint64_t(passS0) + 1u))),
-          s0(passS0),
-          samples(std::bit_ceil(uint32_t(std::max(passS1 - passS0, 1)))),
-          rays(std::bit_ceil(uint32_t(std::max(opt.aoSamples, 1)))) {}
-    /// Index of the first point of camera sample (x, y, s).
-    uint64_t First(int x, int y, int s) const {
-        return (uint64_t(Morton2(uint32_t(x), uint32_t(y))) * samples + uint64_t(s - s0)) * rays;
-    }
-    /// Point j: past 2^32 points (e.g. 4096x4096 pixels x 64 samples x 4 rays) the sequence
-    /// restarts with another scramble, so no two pixels share their directions.
-    glm::vec2 At(uint64_t j) const {
-        return OwenSobol02(uint32_t(j), seed ^ uint32_t(MixBits(j >> 32)));
-    }
-};
-
 /// The AO rays of a camera hit, in order: opt.aoSamples directions from `first` on in the
-/// pass's AoSequence, cosine-distributed about the shading normal, those below the tessellated
+/// pass's PixelSequence, cosine-distributed about the shading normal, those below the tessellated
 /// surface left out (they count as blocked). Each is written field by field into the Ray& that
 /// slot() returns: building a Ray on the stack and copying it out made the copy's 16-byte loads
 /// wait on its 4-byte stores (failed store forwarding: 21% of a per-hit AO render's samples on
@@ -369,7 +385,7 @@ struct AoSequence {
 /// bench rays` records them for its raw Embree loop.
 template <typename Slot>
 void ForEachAoRay(const Context& c, const Ray& ray, const SurfaceInteraction& si,
-                  const AoSequence& seq, uint64_t first, Slot&& slot) {
+                  const PixelSequence& seq, uint64_t first, Slot&& slot) {
     const Frame frame = Frame::FromZ(si.N);
     for (int i = 0; i < c.opt.aoSamples; ++i) {
         const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(seq.At(first + uint64_t(i))));
@@ -386,7 +402,7 @@ void ForEachAoRay(const Context& c, const Ray& ray, const SurfaceInteraction& si
 /// Ambient occlusion at a camera hit: the fraction of opt.aoSamples cosine-distributed rays
 /// (up to opt.aoDistance) that escape.
 glm::vec3 LiAO(const Context& c, const Ray& ray, const SurfaceInteraction& si,
-               const AoSequence& seq, uint64_t first, RayCounts& rays);
+               const PixelSequence& seq, uint64_t first, RayCounts& rays);
 
 }  // namespace internal
 }  // namespace texcache

@@ -61,18 +61,18 @@ void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInt
     }
 }
 
-/// The mean of `hitSamples` estimates `li(rng)` from one camera hit: the first continues the
-/// camera sample's own random stream (so hitSamples = 1 is the plain path tracer), the others get
-/// streams of their own.
+/// The mean of `hitSamples` estimates `li(rng, h)` from one camera hit: the first (h = 0)
+/// continues the camera sample's own random stream (so hitSamples = 1 is the plain path tracer),
+/// the others get streams of their own; h is also the path's point in the pass's PixelSequence.
 template <typename LiFn>
 glm::vec3 SplitAtHit(const Context& c, int x, int y, int s, Rng& rng, LiFn&& li) {
     const int n = std::max(c.opt.hitSamples, 1);
-    glm::vec3 sum = li(rng);
+    glm::vec3 sum = li(rng, 0);
     if (n == 1) return sum;  // the common case: no division on every camera sample
     for (int h = 1; h < n; ++h) {
         Rng split(MixBits(PixelSeed(c.opt.seed, x, y, c.opt.width) ^ (uint64_t(h) << 40)),
                   uint64_t(s));
-        sum += li(split);
+        sum += li(split, h);
     }
     return sum / float(n);
 }
@@ -180,7 +180,7 @@ void PinholeCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int
 
 /// What camera sample `cs` (pixel (x, y), sample s) sees, its ray already traced.
 glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample& cs, PixelAovs* aov,
-                            const AoSequence& ao, RayCounts& rays) {
+                            const PixelSequence& seq, RayCounts& rays) {
     const bool needDiff = NeedsDifferentials(c);
     const Ray& ray = cs.ray;
     const Hit& hit = cs.hit;
@@ -215,18 +215,20 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
                 *term = c.rs.Albedo(si0) * E;
                 return all ? CachedTerm::All : CachedTerm::Indirect;
             };
-            return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+            return SplitAtHit(c, x, y, s, rng, [&](Rng& r, int h) {
+                const FirstBounce first(seq, seq.First(x, y, s) + uint64_t(h));
                 return LiPath(c, ray, hit, found, r, c.opt.maxDepth, rays, true, cached,
-                              productDiff);
+                              productDiff, nullptr, &first);
             });
         }
         if (c.tsc && k == IntegratorKind::Direct)
-            return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+            return SplitAtHit(c, x, y, s, rng, [&](Rng& r, int) {
                 return LiDirectCachedShadows(c, ray, hit, found, r, diff, rays);
             });
-        return SplitAtHit(c, x, y, s, rng, [&](Rng& r) {
+        return SplitAtHit(c, x, y, s, rng, [&](Rng& r, int h) {
+            const FirstBounce first(seq, seq.First(x, y, s) + uint64_t(h));
             return LiPath(c, ray, hit, found, r, k == IntegratorKind::Direct ? 1 : c.opt.maxDepth,
-                          rays, true, NoCachedTerm(), productDiff);
+                          rays, true, NoCachedTerm(), productDiff, nullptr, &first);
         });
     }
     if (!found) return glm::vec3(0.0f);
@@ -247,7 +249,7 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
                 return CachedLookup(
                     c, si, [&](const SampleRequest& r) { return ShadeAoSample(c, r, rays); },
                     c.opt.aoSamples);
-            return LiAO(c, ray, si, ao, ao.First(x, y, s), rays);
+            return LiAO(c, ray, si, seq, seq.First(x, y, s), rays);
         default:
             return glm::vec3(0.0f);
     }
@@ -262,7 +264,7 @@ struct AoRayBatch {
     void Clear() { rays.clear(), owner.clear(); }
     /// Queues hit `hit`'s AO rays (ForEachAoRay: its points of the pass's sequence from `first`).
     void Queue(const Context& c, const Ray& ray, const SurfaceInteraction& si,
-               const AoSequence& seq, uint64_t first, uint32_t hit) {
+               const PixelSequence& seq, uint64_t first, uint32_t hit) {
         ForEachAoRay(c, ray, si, seq, first, [&]() -> Ray& {
             owner.push_back(hit);
             return rays.emplace_back();
@@ -284,7 +286,7 @@ struct AoRayBatch {
 /// Same samples, same random numbers, same result as Sample(); tracing like rays together keeps
 /// Embree's working set (and the traversal's caches) warm, as a wavefront renderer would.
 void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
-                       const AoSequence& seq, std::vector<double>& sum, RayCounts& rays);
+                       const PixelSequence& seq, std::vector<double>& sum, RayCounts& rays);
 
 /// AoSamplesTwoPhase over samples [s0, s1) of a tile, at most kMaxQueued camera samples at a
 /// time: a tile's queue had held every sample of the pass, and a 1024-spp per-hit reference of
@@ -293,7 +295,7 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
 /// which moved that reference by relMSE 5e-11.
 void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
                     std::vector<double>& sum, RayCounts& rays) {
-    const AoSequence seq(c.opt, s0, s1);
+    const PixelSequence seq(c.opt, s0, s1);
     constexpr size_t kMaxQueued = 4096;
     const size_t pixels = size_t(y1 - y0) * size_t(x1 - x0);
     const int chunk = int(std::max<size_t>(1, kMaxQueued / std::max<size_t>(pixels, 1)));
@@ -302,7 +304,7 @@ void AoTileTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, in
 }
 
 void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0, int s1,
-                       const AoSequence& seq, std::vector<double>& sum, RayCounts& rays) {
+                       const PixelSequence& seq, std::vector<double>& sum, RayCounts& rays) {
     struct Pending {
         Ray ray;
         Hit hit;
@@ -605,7 +607,7 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     open.assign(total, 0);
     Cursor at(r, s0);
     const int spp = s1 - s0;
-    const AoSequence seq(c.opt, s0, s1);
+    const PixelSequence seq(c.opt, s0, s1);
     for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
         CameraSample& p = cs[i];
         HitRecord& h = records[(size_t(at.y) * size_t(c.opt.width) + size_t(at.x)) * size_t(spp) +
@@ -651,6 +653,7 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
     const bool all = c.opt.texture.cacheDirect;
     const int spp = s1 - s0, paths = std::max(c.opt.hitSamples, 1);
     RadianceBins::Batch batch(bins);
+    const PixelSequence seq(c.opt, s0, s1);
     Cursor at(r, s0);
     glm::dvec3 acc(0.0);
     for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
@@ -667,17 +670,19 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
         } else if (p.hit.object < 0 ||
                    c.scene.materials[c.scene.objects[p.hit.object].material].type !=
                        Material::Type::Diffuse) {
-            L = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng) {
+            L = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
+                const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
                 return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
-                              NoCachedTerm(), diff);
+                              NoCachedTerm(), diff, nullptr, &first);
             });
         } else {
             const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit, diff);
             glm::vec3 direct(0.0f);
             const FirstHitLight split{&si, &direct};
-            const glm::vec3 E = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng) {
+            const glm::vec3 E = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
+                const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
                 return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
-                              NoCachedTerm(), diff, &split);
+                              NoCachedTerm(), diff, &split, &first);
             });
             direct /= float(paths);
             const glm::vec3 albedo = c.rs.Albedo(si);
@@ -878,7 +883,7 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     const int W = c.opt.width;
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     const bool needDiff = NeedsDifferentials(c);
-    const AoSequence ao(c.opt, s0, s1);
+    const PixelSequence seq(c.opt, s0, s1);
     CameraSample block[kCameraBlock];
     Cursor gen(r, s0), shade = gen;
     // A tile outside the scene's projection: every camera ray misses (Context::hitRect).
@@ -906,7 +911,7 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
                 if (pixelStats) before = CacheSnapshot(*pixelStats);
             }
             const glm::vec3 L =
-                ShadeCameraSample(c, shade.x, shade.y, shade.s, block[i], aov, ao, rays);
+                ShadeCameraSample(c, shade.x, shade.y, shade.s, block[i], aov, seq, rays);
             // A NaN/Inf sample would poison the pixel forever: drop it.
             if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z))
                 acc += glm::dvec3(L);
@@ -922,7 +927,7 @@ void ShadeTile(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
 /// Renders passes of whole sample indices from opt.firstSample until opt.spp samples are done
 /// or, with a time budget (counted from `start`), until the next pass would not fit in it;
 /// returns the sample index reached. A pixel's result depends only on its sample indices and the
-/// passes (AO's directions are a net per pass: AoSequence), so the image is the same for any
+/// passes (first bounces are a net per pass: PixelSequence), so the image is the same for any
 /// thread count.
 int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
               tbb::enumerable_thread_specific<RayCounts>& counts,
@@ -1168,7 +1173,7 @@ std::vector<ImageLayer> AovLayers(const std::vector<PixelAovs>& aovs, const AovF
 void RecordAoRays(const RenderScene& rs, const RenderOptions& opt, std::vector<Ray>* camera,
                   std::vector<Ray>* occlusion) {
     const Context c(rs, opt);
-    const AoSequence seq(opt, 0, opt.spp);  // a render's single pass
+    const PixelSequence seq(opt, 0, opt.spp);  // a render's single pass
     for (int y = 0; y < opt.height; ++y)
         for (int x = 0; x < opt.width; ++x)
             for (int s = 0; s < opt.spp; ++s) {

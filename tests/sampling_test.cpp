@@ -135,14 +135,15 @@ TEST(Sampling, OwenSobol02PointsFormNetsAndAreUniform) {
     EXPECT_LT(std::abs(corr), 0.03) << corr;
 }
 
-// AoSequence: a pass's AO directions; each pixel's samples, each aligned 2x2 and 4x4 block of
+// PixelSequence: a pass's AO directions; each pixel's samples, each aligned 2x2 and 4x4 block of
 // pixels (the extent of a hit bin) take a net of the pass's sequence; another pass takes other
 // points; past 2^32 points the sequence is scrambled anew, not repeated.
-TEST(Sampling, AoSequenceStratifiesPixelsAndBlocks) {
+TEST(Sampling, PixelSequenceStratifiesPixelsAndBlocks) {
     RenderOptions opt;
     opt.seed = 3;
+    opt.integrator = IntegratorKind::AO;
     opt.aoSamples = 2;
-    const internal::AoSequence seq(opt, 8, 12);  // a pass of samples 8..11
+    const internal::PixelSequence seq(opt, 8, 12);  // a pass of samples 8..11
     auto points = [&](int x0, int y0, int side) {
         std::vector<glm::vec2> pts;
         for (int y = y0; y < y0 + side; ++y)
@@ -156,7 +157,7 @@ TEST(Sampling, AoSequenceStratifiesPixelsAndBlocks) {
         for (int y0 = 16; y0 < 24; y0 += side)
             for (int x0 = 36; x0 < 44; x0 += side)
                 EXPECT_TRUE(IsNet(points(x0, y0, side))) << side << " " << x0 << " " << y0;
-    const internal::AoSequence next(opt, 12, 16);
+    const internal::PixelSequence next(opt, 12, 16);
     EXPECT_NE(seq.At(seq.First(5, 5, 8)), next.At(next.First(5, 5, 12)));
     const uint64_t j = seq.First(65535, 65535, 11);
     ASSERT_GT(j, uint64_t(1) << 32);
