@@ -216,12 +216,11 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
 /// a pixel's result depends on its samples and the pass split (a render with --spp is one pass
 /// unless shaded in texture space); never on the threads or tiles.
 struct PixelSequence {
-    uint32_t seed = 0;     ///< the pass's scramble
-    int s0 = 0;            ///< the pass's first sample index
-    uint32_t samples = 1;  ///< points per pixel sample slot: the pass's samples, a power of two
-    uint32_t perHit = 1;   ///< points per camera sample, rounded up to a power of two
+    uint32_t seed;     ///< the pass's scramble
+    int s0;            ///< the pass's first sample index
+    uint32_t samples;  ///< points per pixel sample slot: the pass's samples, a power of two
+    uint32_t perHit;   ///< points per camera sample, rounded up to a power of two
 
-    PixelSequence() = default;
     /// Samples [passS0, passS1) of a pass: opt.aoSamples points (rays) per camera sample for AO,
     /// opt.hitSamples (paths) for the others.
     PixelSequence(const RenderOptions& opt, int passS0, int passS1)
@@ -234,10 +233,16 @@ struct PixelSequence {
     uint64_t First(int x, int y, int s) const {
         return (uint64_t(Morton2(uint32_t(x), uint32_t(y))) * samples + uint64_t(s - s0)) * perHit;
     }
-    /// Point j of dimension pair `pair`: past 2^32 points (e.g. 4096x4096 pixels x 64 samples x
-    /// 4 rays) the sequence restarts with another scramble, so no two pixels share their points.
+    /// The scramble of point j of dimension pair `pair`: past 2^32 points (e.g. 4096x4096
+    /// pixels x 64 samples x 4 rays) the sequence restarts with another scramble, so no two
+    /// pixels share their points. A camera sample's points share one (they are an aligned block
+    /// of perHit <= 2^32 points): ForEachAoRay mixes it once per hit.
+    OwenScramble ScrambleOf(uint64_t j, uint32_t pair = 0) const {
+        return OwenScramble(seed ^ uint32_t(MixBits(j >> 32)) ^ pair * 0x9E3779B9u);
+    }
+    /// Point j of dimension pair `pair`.
     glm::vec2 At(uint64_t j, uint32_t pair = 0) const {
-        return OwenSobol02(uint32_t(j), seed ^ uint32_t(MixBits(j >> 32)) ^ pair * 0x9E3779B9u);
+        return OwenSobol02(uint32_t(j), ScrambleOf(j, pair));
     }
 };
 /// What a caller that bins diffuse light at camera hits (render.cpp, PathHitsBin) asks LiPath
@@ -389,8 +394,10 @@ template <typename Slot>
 void ForEachAoRay(const Context& c, const Ray& ray, const SurfaceInteraction& si,
                   const PixelSequence& seq, uint64_t first, Slot&& slot) {
     const Frame frame = Frame::FromZ(si.N);
+    const OwenScramble key = seq.ScrambleOf(first);
     for (int i = 0; i < c.opt.aoSamples; ++i) {
-        const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(seq.At(first + uint64_t(i))));
+        const glm::vec2 u = OwenSobol02(uint32_t(first) + uint32_t(i), key);
+        const glm::vec3 wi = frame.FromLocal(SampleCosineHemisphere(u));
         if (glm::dot(wi, si.Ng) <= 0.0f) continue;
         Ray& r = slot();
         r.org = OffsetOrigin(si.P, si.Ng, wi);

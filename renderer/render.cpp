@@ -309,7 +309,8 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
         Ray ray;
         Hit hit;
         Rng rng{0, 0};
-        int pixel = 0, s = 0;
+        uint64_t first = 0;  // its first point in the pass's PixelSequence
+        int pixel = 0;
         bool found = false;
         RayDifferentials diff;
     };
@@ -327,7 +328,7 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
             for (int s = s0; s < s1; ++s) {
                 // Written in place, not built on the stack and copied (see ForEachAoRay).
                 Pending& p = queue[next++];
-                p.pixel = y * c.opt.width + x, p.s = s;
+                p.pixel = y * c.opt.width + x, p.first = seq.First(x, y, s);
                 if (!pinhole) CameraRay(c, x, y, s, &p.rng, &p.ray, c.tsc ? &p.diff : nullptr);
             }
     if (pinhole) {
@@ -351,9 +352,7 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
         for (size_t i = 0; i < n; ++i) {
             Pending& p = queue[i];
             if (!p.found || p.hit.object < 0) continue;
-            const int x = p.pixel % c.opt.width, y = p.pixel / c.opt.width;
-            batch.Queue(c, p.ray, c.rs.Interact(p.ray, p.hit), seq, seq.First(x, y, p.s),
-                        uint32_t(i));
+            batch.Queue(c, p.ray, c.rs.Interact(p.ray, p.hit), seq, p.first, uint32_t(i));
         }
         batch.Trace(c, open.data(), rays);
         const float inv = 1.0f / float(c.opt.aoSamples);

@@ -97,8 +97,7 @@ inline glm::vec3 SampleCosineHemisphere(glm::vec2 u) {
 }
 /// The bits of x in reverse order.
 inline uint32_t ReverseBits32(uint32_t x) {
-    x = (x << 16) | (x >> 16);
-    x = ((x & 0x00ff00ffu) << 8) | ((x & 0xff00ff00u) >> 8);
+    x = __builtin_bswap32(x);  // one instruction for the bytes, then the bits within them
     x = ((x & 0x0f0f0f0fu) << 4) | ((x & 0xf0f0f0f0u) >> 4);
     x = ((x & 0x33333333u) << 2) | ((x & 0xccccccccu) >> 2);
     return ((x & 0x55555555u) << 1) | ((x & 0xaaaaaaaau) >> 1);
@@ -150,20 +149,31 @@ struct SobolSecondDimension {
 inline constexpr SobolSecondDimension kSobolSecondDimension{};
 }  // namespace detail
 
-/// Point j of the 2D Sobol' (0,2)-sequence, Owen-scrambled by `seed` (hash-based nested uniform
+/// The keys of one Owen scramble of OwenSobol02 (one per axis), mixed from a seed once: a
+/// caller drawing several points of one scramble (a hit's rays) mixes them once.
+struct OwenScramble {
+    uint32_t x, y;
+    explicit OwenScramble(uint32_t seed)
+        : x(uint32_t(MixBits(seed))), y(uint32_t(MixBits(~uint64_t(seed)))) {}
+};
+
+/// Point j of the 2D Sobol' (0,2)-sequence, Owen-scrambled (hash-based nested uniform
 /// scrambling, Burley 2020): like Sobol02, each 2^m consecutive points from a multiple of 2^m
 /// form a (0,m,2)-net and every point alone is uniform, but the scramble is random per digit,
 /// not one shift for all: an Owen-scrambled net's error falls faster on smooth integrands.
-/// Two hashes and table lookups: as cheap as drawing two random numbers.
-inline glm::vec2 OwenSobol02(uint32_t j, uint32_t seed) {
+/// Two hashes, two bit reversals and four table lookups.
+inline glm::vec2 OwenSobol02(uint32_t j, const OwenScramble& key) {
     const auto& t = detail::kSobolSecondDimension.table;
     const uint32_t yReversed =
         t[0][j & 255u] ^ t[1][j >> 8 & 255u] ^ t[2][j >> 16 & 255u] ^ t[3][j >> 24];
     // The first dimension is j bit-reversed: scrambling reversed bits is hashing j itself.
-    const uint32_t x = ReverseBits32(detail::LaineKarras(j, uint32_t(MixBits(seed))));
-    const uint32_t y = ReverseBits32(detail::LaineKarras(yReversed, uint32_t(MixBits(~seed))));
+    const uint32_t x = ReverseBits32(detail::LaineKarras(j, key.x));
+    const uint32_t y = ReverseBits32(detail::LaineKarras(yReversed, key.y));
     constexpr float kScale = 1.0f / float(1u << 24);
     return {float(x >> 8) * kScale, float(y >> 8) * kScale};
+}
+inline glm::vec2 OwenSobol02(uint32_t j, uint32_t seed) {
+    return OwenSobol02(j, OwenScramble(seed));
 }
 
 /// The Morton (Z-order) index of (x, y), 16 bits each: pixels of every aligned 2^k x 2^k block
