@@ -208,10 +208,11 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
 /// stratify its hemisphere together, and so do a block's, which is what a bin of hit-binned
 /// shading averages (a bin spans 4x4 pixels or more). With a random shift per hit, as before,
 /// only one hit's own rays were stratified: car AO, 480x270, 4 spp, relMSE against the shading
-/// reference, 1 ray per hit: per hit 0.254 -> 0.174, at the hits 0.0340 -> 0.0246; 4 rays:
-/// 0.0441 -> 0.0294, 0.0092 -> 0.0068; car path traced (car-diffuse of `texcache experiment
-/// speed-vs-error`), 1 path: per hit 1.037 -> 0.506, at the hits 0.316 -> 0.234; at no
-/// measurable cost (the grid's cache samples keep their own nets: CosineRays; later bounces draw
+/// reference, 1 ray per hit: per hit 0.254 -> 0.177, at the hits 0.0340 -> 0.0237; 4 rays:
+/// 0.0441 -> 0.0309, 0.0092 -> 0.0067; car path traced (car-diffuse of `texcache experiment
+/// speed-vs-error`), 1 path: per hit 1.037 -> 0.447, at the hits 0.316 -> 0.214; `texcache bench
+/// rays` 87.5-89.1% against 88.6-91.5% before (the grid's cache samples keep their own nets:
+/// CosineRays; later bounces draw
 /// from the sample's random stream). Each pass has its own scramble, so passes are independent and
 /// a pixel's result depends on its samples and the pass split (a render with --spp is one pass
 /// unless shaded in texture space); never on the threads or tiles.
