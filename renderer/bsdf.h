@@ -114,6 +114,18 @@ public:
         }
     }
 
+    /// The diffuse lobe for a white albedo: 1/pi where Eval() shades wiW at all, else 0
+    /// (DiffuseReflectance() x this is the diffuse lobe). It does not depend on the view.
+    float DiffuseWhite(glm::vec3 wiW) const {
+        return glm::dot(wiW, ng_) > 0.0f && glm::dot(wiW, frame_.n) > 0.0f ? kInvPi : 0.0f;
+    }
+    /// The specular lobe alone (Eval() = DiffuseReflectance() x DiffuseWhite() + this).
+    glm::vec3 EvalSpecular(glm::vec3 woW, glm::vec3 wiW) const {
+        glm::vec3 d, s;
+        EvalLobes(woW, wiW, &d, &s);
+        return s;
+    }
+
     /// Solid-angle pdf of SampleSpecular() producing wiW.
     float PdfSpecular(glm::vec3 woW, glm::vec3 wiW) const {
         if (!ggx_) return 0.0f;
@@ -147,11 +159,16 @@ public:
 
     const Frame& frame() const { return frame_; }
 
+    /// Sample() picks the specular lobe at least this often (in [0.1, 0.9]; 0.1 by default).
+    /// A caller that averages the diffuse lobe's light over many hits (binning at camera hits)
+    /// but not the specular lobe's spends more of its samples on the latter.
+    void SetMinSpecularProbability(float p) { minSpecular_ = std::clamp(p, 0.1f, 0.9f); }
+
 private:
     float SpecularProbability(glm::vec3 wo) const {
         const float s = Luminance(FresnelSchlick(f0_, wo.z));
         const float d = kd_ * Luminance(albedo_);
-        return std::clamp(s / std::max(s + d, 1e-6f), 0.1f, 0.9f);
+        return std::clamp(s / std::max(s + d, 1e-6f), minSpecular_, 0.9f);
     }
     static constexpr float kInvPi = 0.31830988618379067f;
 
@@ -161,6 +178,7 @@ private:
     glm::vec3 f0_;
     glm::vec2 alpha_;
     float kd_;
+    float minSpecular_ = 0.1f;
 };
 
 }  // namespace texcache

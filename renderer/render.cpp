@@ -200,18 +200,25 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
             c.lightSampling != LightSampling::Mis ? &diff : nullptr;
         if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
         if (c.tsc && k == IntegratorKind::Path) {
-            // Diffuse indirect from the cache; glossy materials stay per hit (view-dependent).
             // Diffuse light is view-independent: diffuse materials take it from the cache
-            // (direct + indirect, or indirect only); glossy ones stay per hit.
+            // (direct + indirect, or indirect only). A glossy material's diffuse base takes
+            // all its light from the cache when direct light is cached too, its specular lobe
+            // staying per hit (view-dependent); with indirect light alone cached, glossy
+            // materials stay per hit (the base's indirect light would need the first BSDF ray
+            // to stop for one lobe and go on for the other).
             auto cached = [&](const SurfaceInteraction& si0, const Ray& r0, glm::vec3* term) {
-                if (c.scene.materials[si0.material].type != Material::Type::Diffuse)
-                    return CachedTerm::None;
-                const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
                 const bool all = c.opt.texture.cacheDirect;
+                const bool glossy = c.scene.materials[si0.material].type != Material::Type::Diffuse;
+                if (glossy && !all) return CachedTerm::None;
+                const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
                 const glm::vec3 E = CachedLookup(
                     c, sd,
                     [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, all, rays); },
                     c.opt.texture.indirectSamples);
+                if (glossy) {
+                    *term = MakeBsdf(c, si0).DiffuseReflectance() * E;
+                    return CachedTerm::DiffuseBase;
+                }
                 *term = c.rs.Albedo(si0) * E;
                 return all ? CachedTerm::All : CachedTerm::Indirect;
             };
@@ -637,8 +644,10 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
 /// hit's albedo kept beside its record; phase 2 (PathHitsResolve) adds albedo x the bins'
 /// reconstruction. With opt.texture.cacheDirect false, only E's indirect part is binned and its
 /// direct part (NEE and the first bounce's MIS-weighted emission: sharp shadows) stays per hit.
-/// Everything else stays per hit, summed per pixel into `perHit` (misses, lights, and glossy
-/// materials, which are view-dependent), which phase 2 adds with the binned part: each pixel's
+/// A glossy material's diffuse base is binned the same way (its albedo x (1 - F0) applied in
+/// phase 2); its specular lobe, which depends on the view, is estimated by the same path
+/// (FirstHitLight::specular) and stays per hit. Everything per hit is summed per pixel into
+/// `perHit` (misses, lights, specular lobes), which phase 2 adds with the binned part: each pixel's
 /// sum then does not depend on the tiles, and a pass binned again (its table overflowed) just
 /// writes it again.
 void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
@@ -666,9 +675,7 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
         glm::vec3 L(0.0f);
         if (!p.found) {
             L = c.env ? c.env->Eval(p.ray.dir) : glm::vec3(0.0f);
-        } else if (p.hit.object < 0 ||
-                   c.scene.materials[c.scene.objects[p.hit.object].material].type !=
-                       Material::Type::Diffuse) {
+        } else if (p.hit.object < 0) {
             L = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
                 const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
                 return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
@@ -676,16 +683,20 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
             });
         } else {
             const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit, diff);
-            glm::vec3 direct(0.0f);
-            const FirstHitLight split{&si, &direct};
+            const bool glossy = c.scene.materials[si.material].type != Material::Type::Diffuse;
+            glm::vec3 direct(0.0f), specular(0.0f);
+            const FirstHitLight split{&si, &direct, glossy ? &specular : nullptr};
             const glm::vec3 E = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
                 const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
                 return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
                               NoCachedTerm(), diff, &split, &first);
             });
             direct /= float(paths);
-            const glm::vec3 albedo = c.rs.Albedo(si);
-            if (!all) L = albedo * direct;
+            // The glossy layer's specular lobe stays per hit; its diffuse base is binned.
+            const glm::vec3 albedo =
+                glossy ? MakeBsdf(c, si).DiffuseReflectance() : c.rs.Albedo(si);
+            L = specular / float(paths);
+            if (!all) L += albedo * direct;
             const glm::vec3 binned = all ? E : glm::max(E - direct, glm::vec3(0.0f));
             RadianceBin::Value v;
             // A NaN or infinite estimate is dropped, as per-hit drops such a sample.

@@ -950,10 +950,11 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Paths (and NEE samples) per cached diffuse sample")
         ->capture_default_str();
     cmd->add_option("--cached-light", args->cachedLight,
-                    "Path integrator, diffuse materials: indirect (direct light stays per hit), "
-                    "all (direct light cached and filtered too: for soft lighting; blurs hard "
-                    "shadows) or auto (all when shaded at the hits and the scene has no distant "
-                    "light, else indirect)")
+                    "Path integrator, diffuse light (diffuse materials, and the diffuse base of "
+                    "glossy ones; specular lobes stay per hit): indirect (direct light stays per "
+                    "hit; on the grid, glossy materials stay per hit), all (direct light cached "
+                    "and filtered too: for soft lighting; blurs hard shadows) or auto (all when "
+                    "shaded at the hits and the scene has no distant light, else indirect)")
         ->capture_default_str();
     cmd->add_flag("--reference-cache", args->referenceCache,
                   "Unbounded caches (the overshading baseline)");
