@@ -637,19 +637,19 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     }
 }
 
-/// Hit-binned diffuse light (the path integrator), phase 1 of a pass, for one tile. Every camera
-/// sample is path traced as per hit (same rays, same random streams, opt.hitSamples paths at its
-/// hit), but at a diffuse hit the first surface is white (LiPath's FirstHitLight): the light it
-/// receives, E, is binned as AO's escaped rays are, at two levels above its texel, and the
-/// hit's albedo kept beside its record; phase 2 (PathHitsResolve) adds albedo x the bins'
-/// reconstruction. With opt.texture.cacheDirect false, only E's indirect part is binned and its
-/// direct part (NEE and the first bounce's MIS-weighted emission: sharp shadows) stays per hit.
-/// A glossy material's diffuse base is binned the same way (its albedo x (1 - F0) applied in
-/// phase 2); its specular lobe, which depends on the view, is estimated by the same path
-/// (FirstHitLight::specular) and stays per hit. Everything per hit is summed per pixel into
-/// `perHit` (misses, lights, specular lobes), which phase 2 adds with the binned part: each pixel's
-/// sum then does not depend on the tiles, and a pass binned again (its table overflowed) just
-/// writes it again.
+/// Hit-binned diffuse light (the path integrator, or the direct one: paths of one bounce), phase
+/// 1 of a pass, for one tile. Every camera sample is path traced as per hit (same rays, same
+/// random streams, opt.hitSamples paths at its hit), but at a diffuse hit the first surface is
+/// white (LiPath's FirstHitLight): the light it receives, E, is binned as AO's escaped rays are, at
+/// two levels above its texel, and the hit's albedo kept beside its record; phase 2
+/// (PathHitsResolve) adds albedo x the bins' reconstruction. With opt.texture.cacheDirect false,
+/// only E's indirect part is binned and its direct part (NEE and the first bounce's MIS-weighted
+/// emission: sharp shadows) stays per hit. A glossy material's diffuse base is binned the same way
+/// (its albedo x (1 - F0) applied in phase 2); its specular lobe, which depends on the view, is
+/// estimated by the same path (FirstHitLight::specular) and stays per hit. Everything per hit is
+/// summed per pixel into `perHit` (misses, lights, specular lobes), which phase 2 adds with the
+/// binned part: each pixel's sum then does not depend on the tiles, and a pass binned again (its
+/// table overflowed) just writes it again.
 void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
                  float blend, HitRecord* records, glm::vec3* albedos, RadianceBins& bins,
                  glm::dvec3* perHit, RayCounts& rays) {
@@ -660,6 +660,7 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
     HitsCameraRays(c, r, s0, s1, cs.data(), total, productDiff, rays);
     const bool all = c.opt.texture.cacheDirect;
     const int spp = s1 - s0, paths = std::max(c.opt.hitSamples, 1);
+    const int maxDepth = c.opt.integrator == IntegratorKind::Direct ? 1 : c.opt.maxDepth;
     RadianceBins::Batch batch(bins);
     const PixelSequence seq(c.opt, s0, s1);
     Cursor at(r, s0);
@@ -678,8 +679,8 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
         } else if (p.hit.object < 0) {
             L = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
                 const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
-                return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
-                              NoCachedTerm(), diff, nullptr, &first);
+                return LiPath(c, p.ray, p.hit, true, rng, maxDepth, rays, true, NoCachedTerm(),
+                              diff, nullptr, &first);
             });
         } else {
             const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit, diff);
@@ -688,8 +689,8 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
             const FirstHitLight split{&si, &direct, glossy ? &specular : nullptr};
             const glm::vec3 E = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
                 const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
-                return LiPath(c, p.ray, p.hit, true, rng, c.opt.maxDepth, rays, true,
-                              NoCachedTerm(), diff, &split, &first);
+                return LiPath(c, p.ray, p.hit, true, rng, maxDepth, rays, true, NoCachedTerm(),
+                              diff, &split, &first);
             });
             direct /= float(paths);
             // The glossy layer's specular lobe stays per hit; its diffuse base is binned.
@@ -983,7 +984,8 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
     const bool hits = c.tsc && ShadesAtHits(opt);
-    const bool pathHits = hits && opt.integrator == IntegratorKind::Path;
+    // Light binned at the hits: the path integrator's, or the direct one's (PathHitsBin).
+    const bool pathHits = hits && opt.integrator != IntegratorKind::AO;
     // Hit bins: no table grows past 256 MiB (car AO, 480x270, 4 spp: 2.2 MiB).
     constexpr size_t kMaxBinBytes = size_t(256) << 20;
     constexpr size_t kMaxHitRecordBytes = size_t(256) << 20;
@@ -1042,9 +1044,14 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             // so the image, do not depend on the table's size.
             HitRecord* const records = c.tsc->HitRecords(passSamples);
             glm::vec3* const albedos = pathHits ? c.tsc->HitAlbedos(passSamples) : nullptr;
+            // The direct integrator's light at AO's levels: its noise is AO's kind (a shadow
+            // ray per sample), and its bins 1 level finer than paths' divide its relMSE at
+            // budget 1 by 1.5 (chess, soft shadows of the area light, 480x360, 4 spp: 0.049 ->
+            // 0.033; levels 2 / 3 give 0.050 / 0.040).
             const float levels = TextureSpaceCache::HitBinLevels(
                 pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples, s1 - s0, c.tsc->Pass(),
-                pathHits ? TextureSpaceCache::HitTerm::Light : TextureSpaceCache::HitTerm::Ao);
+                opt.integrator == IntegratorKind::Path ? TextureSpaceCache::HitTerm::Light
+                                                       : TextureSpaceCache::HitTerm::Ao);
             const int bias = int(std::floor(levels));
             const float blend = levels - float(bias);
             // At most half full: twice the blocks the last pass used, or a first guess of four

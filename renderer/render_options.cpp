@@ -64,7 +64,8 @@ void CheckFilterRadius(int radius, const std::string& where) {
 }
 
 bool ShadesAtHits(const RenderOptions& o) {
-    return (o.integrator == IntegratorKind::AO || o.integrator == IntegratorKind::Path) &&
+    return (o.integrator == IntegratorKind::AO || o.integrator == IntegratorKind::Path ||
+            (o.integrator == IntegratorKind::Direct && o.texture.cacheDirect)) &&
            o.texture.samples == TextureSamples::Hits && !o.aovs.Any() &&
            o.texture.constantTerm < 0.0f;
 }

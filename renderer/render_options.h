@@ -239,7 +239,8 @@ struct RenderStats {
 RenderOptions RenderOptionsFrom(const RenderSettings& settings);
 
 /// Whether a render with these options shades its texture-space term at the camera hits
-/// (TextureSamples::Hits): the AO or path integrator with samples at the hits, no AOV layers
+/// (TextureSamples::Hits): the AO or path integrator, or the direct one with its light cached
+/// (TextureSpaceOptions::cacheDirect), with samples at the hits, no AOV layers
 /// (they take the per-sample shading path, on the grid) and a cached term (not a benchmark's
 /// constant). The renderer, its frame set-up and the command line's cache sizes all ask this one
 /// question.

@@ -191,7 +191,8 @@ public:
     /// The footprint radius of pass `pass` for a material radius `radius`:
     /// round(radius (pass + 1)^(-1/6)), the schedule the note at the top argues for.
     static int PassRadius(int radius, uint32_t pass);
-    /// What hit binning bins: AO rays, or a path tracer's diffuse light.
+    /// What hit binning bins: AO rays or direct light (one visibility ray per sample: the
+    /// direct integrator's light takes AO's levels), or a path tracer's diffuse light.
     enum class HitTerm { Ao, Light };
     /// Hit binning (TextureSamples::Hits): how many levels above a hit's texel its bins lie,
     /// for `raysPerHit` AO rays or light paths per hit, `passSpp` camera samples a pass and pass

@@ -129,7 +129,7 @@ TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
     std::string line;
     std::getline(f, line);
     while (std::getline(f, line)) ++rowsPerCase[line.substr(0, line.find(','))];
-    EXPECT_EQ(rowsPerCase["chess-softshadow"], 2 * 2);  // per-hit + softshadow, 2 budgets
+    EXPECT_EQ(rowsPerCase["chess-softshadow"], 3 * 2);  // per-hit, hits, softshadow; 2 budgets
     EXPECT_EQ(rowsPerCase["car-ao"], 7 * 2);
     std::ifstream md(out / "speed_vs_error.md");
     std::stringstream text;
@@ -145,7 +145,7 @@ TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
     const auto size = fs::file_size(out / "speed_vs_error.csv");
     r = Texcache("experiment speed-vs-error --quick --only chess-ao --out " + out.string());
     EXPECT_EQ(r.code, 2) << r.out;
-    EXPECT_NE(r.out.find("speed_vs_error.csv:20"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("speed_vs_error.csv:22"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("3 values, expected 11"), std::string::npos) << r.out;
     EXPECT_EQ(fs::file_size(out / "speed_vs_error.csv"), size);
     fs::remove_all(out);

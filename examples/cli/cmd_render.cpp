@@ -904,14 +904,15 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--filter-radius", args->filterRadius,
                     "Footprint radius r: (2r+1)^2 samples (default: the paper's for the filter: "
                     "none 0, normal 6, gaussian 10, regression 8, softshadow 8)");
-    cmd->add_option("--ts-samples", args->tsSamples,
-                    "Where texture-space AO and path-traced diffuse light shade: hits (at the "
-                    "camera's hits, binned per texel of a coarser level and read back "
-                    "bilinearly), grid (the paper's samples at texel centres, reconstructed by "
-                    "--filter) or auto (hits for AO and path unless an option of the grid's "
-                    "cache is given: --filter, --filter-radius, --footprint, "
-                    "--temporal-alpha, --stereo, --overshading, --reference-cache, "
-                    "--direct-mapped, --sample-cache-mb, --texel-cache-mb, --indirect-samples)")
+    cmd->add_option(
+           "--ts-samples", args->tsSamples,
+           "Where texture-space AO and diffuse light (path, or direct with "
+           "--cached-light all) shade: hits (at the camera's hits, binned per texel of a "
+           "coarser level and read back bilinearly), grid (the paper's samples at texel "
+           "centres, reconstructed by --filter) or auto (hits unless an option of the grid's "
+           "cache is given: --filter, --filter-radius, --footprint, "
+           "--temporal-alpha, --stereo, --overshading, --reference-cache, "
+           "--direct-mapped, --sample-cache-mb, --texel-cache-mb, --indirect-samples)")
         ->capture_default_str();
     cmd->add_option("--footprint", args->footprint,
                     "Filter footprints: visible (only texels the camera rays reach, marked by a "

@@ -53,7 +53,8 @@ const Method kGaussian{"ts-gaussian", true, TextureFilterKind::Gaussian};
 const Method kRegression{"ts-regression", true, TextureFilterKind::Regression};
 const Method kSoftShadow{"ts-softshadow", true, TextureFilterKind::SoftShadow};
 // Shading at the camera's hits, binned per texel of a coarser level (TextureSamples::Hits, the
-// default of `--shading texture` for AO and path tracing): AO, or a path tracer's diffuse light.
+// default of `--shading texture` for AO, path tracing and soft direct light): AO, or a path
+// tracer's (or the direct integrator's) diffuse light.
 const Method kHits{"ts-hits", true, TextureFilterKind::Normal, -1, TextureSamples::Hits};
 // Path cases: the per-hit terms alone. The renders of a case share their camera rays and the
 // per-hit light paths of a budget, so a texture-space render whose cached term is all but
@@ -232,7 +233,14 @@ int SpeedVsError(const Setup& s) {
          IntegratorKind::Path,
          "sunlit-indirect",
          {kPerHit, kHits, kNone, kNormal, kGaussian, kRegression}},
-        {"chess.json", IntegratorKind::Direct, "chess-softshadow", {kPerHit, kSoftShadow}},
+        // Direct light alone, soft shadows of the area light: the paper's axis-aligned filter on
+        // the grid, and the light binned at the hits (cacheDirect: the direct integrator's light
+        // is all direct).
+        {"chess.json",
+         IntegratorKind::Direct,
+         "chess-softshadow",
+         {kPerHit, kHits, kSoftShadow},
+         true},
         // A camera the bundled scenes do not have (issue 16: "the default car with a thin
         // lens"): camera samples land on different texels through each lens point, and the
         // blurred surfaces take texels of their circle of confusion (RenderScene::Interact).
