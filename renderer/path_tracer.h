@@ -180,9 +180,11 @@ inline Ray ShadowRay(const SurfaceInteraction& si, const LightSample& ls, float 
 }
 
 /// What a cached term at a camera hit replaces (LiPath's `cached`): nothing; the indirect
-/// light of a diffuse surface (direct light still per hit); all its light; or all the light
-/// of a glossy material's diffuse base, the path going on with the specular lobe alone.
-enum class CachedTerm { None, Indirect, All, DiffuseBase };
+/// light of a diffuse surface (direct light still per hit); all its light; all the light of a
+/// glossy material's diffuse base, the path going on with the specular lobe alone; or the
+/// indirect light of a glossy material's diffuse base (both lobes' direct light per hit, the
+/// path going on past the first BSDF ray's hit with the specular lobe's weight alone).
+enum class CachedTerm { None, Indirect, All, DiffuseBase, BaseIndirect };
 
 struct NoCachedTerm {
     CachedTerm operator()(const SurfaceInteraction&, const Ray&, glm::vec3*) const {
@@ -316,6 +318,9 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
     // ray; the path on from there is traced with beta = 1 into L (as after a white first hit)
     // and split by the two weights at the end.
     const bool lobes = split && split->specular;
+    // CachedTerm::BaseIndirect: the first BSDF ray's specular weight, the path's beta after it.
+    bool baseIndirect = false;
+    glm::vec3 specularBeta(0.0f);
     glm::vec3 lobeL(0.0f), lobeS(0.0f), lobeBetaD(0.0f), lobeBetaS(0.0f);
     auto finish = [&](glm::vec3 l) {
         if (!lobes) return l;
@@ -352,6 +357,12 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
             break;
         }
         if (depth >= maxDepth) break;
+        if (depth == 1 && baseIndirect) {
+            // The first BSDF ray found its direct light for both lobes; the diffuse base's
+            // indirect light is cached, so only the specular lobe's path goes on.
+            beta = specularBeta;
+            if (beta == glm::vec3(0.0f)) break;
+        }
         const SurfaceInteraction si =
             depth == 0 && split ? *split->si
                                 : c.rs.Interact(ray, hit, depth == 0 ? firstDiff : nullptr);
@@ -367,6 +378,10 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
             if (t == CachedTerm::DiffuseBase) {
                 L += term;
                 specularOnly = true;
+            }
+            if (t == CachedTerm::BaseIndirect) {
+                L += term;
+                baseIndirect = true;
             }
         }
         // White at a split first hit: the caller multiplies by the albedo.
@@ -409,6 +424,8 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         const float uChoice = rng.Next1D();
         const glm::vec2 uBsdf = depth == 0 && first ? first->bsdf : rng.Next2D();
         if (!bsdf.Sample(wo, uChoice, uBsdf, &wi, &weight, &pdf)) break;
+        if (baseIndirect && depth == 0)
+            specularBeta = bsdf.EvalSpecular(wo, wi) * (std::abs(glm::dot(wi, si.N)) / pdf);
         if (lobes && depth == 0) {
             const float cosOverPdf = std::abs(glm::dot(wi, si.N)) / pdf;
             lobeBetaD = glm::vec3(bsdf.DiffuseWhite(wi) * cosOverPdf);

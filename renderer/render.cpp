@@ -200,16 +200,12 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
             c.lightSampling != LightSampling::Mis ? &diff : nullptr;
         if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
         if (c.tsc && k == IntegratorKind::Path) {
-            // Diffuse light is view-independent: diffuse materials take it from the cache
-            // (direct + indirect, or indirect only). A glossy material's diffuse base takes
-            // all its light from the cache when direct light is cached too, its specular lobe
-            // staying per hit (view-dependent); with indirect light alone cached, glossy
-            // materials stay per hit (the base's indirect light would need the first BSDF ray
-            // to stop for one lobe and go on for the other).
+            // Diffuse light is view-independent: diffuse materials and the diffuse base of
+            // glossy ones take it from the cache (direct + indirect, or indirect only); the
+            // specular lobe stays per hit (view-dependent).
             auto cached = [&](const SurfaceInteraction& si0, const Ray& r0, glm::vec3* term) {
                 const bool all = c.opt.texture.cacheDirect;
                 const bool glossy = c.scene.materials[si0.material].type != Material::Type::Diffuse;
-                if (glossy && !all) return CachedTerm::None;
                 const SurfaceInteraction sd = c.rs.Interact(r0, hit, &diff);
                 const glm::vec3 E = CachedLookup(
                     c, sd,
@@ -217,7 +213,7 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
                     c.opt.texture.indirectSamples);
                 if (glossy) {
                     *term = MakeBsdf(c, si0).DiffuseReflectance() * E;
-                    return CachedTerm::DiffuseBase;
+                    return all ? CachedTerm::DiffuseBase : CachedTerm::BaseIndirect;
                 }
                 *term = c.rs.Albedo(si0) * E;
                 return all ? CachedTerm::All : CachedTerm::Indirect;

@@ -460,8 +460,9 @@ void MakePlaneGlossy(Scene* s) {
 
 // Texture-space diffuse light (path integrator; direct + indirect, or indirect only): finite, and
 // close to per-hit path tracing in the mean (same estimator up to texel quantization and
-// filtering). With a GGX plane, its diffuse base is cached when direct light is (the specular
-// lobe per hit: CachedTerm::DiffuseBase), and it stays per hit otherwise.
+// filtering). With a GGX plane, its diffuse base's light is cached (all of it: the specular
+// lobe per hit, CachedTerm::DiffuseBase; or its indirect part: both lobes' direct light per hit
+// and the specular lobe's indirect light, CachedTerm::BaseIndirect).
 TEST(TextureSpace, CachedIndirectIsFiniteAndUnbiasedInTheMean) {
     for (bool glossy : {false, true}) {
         Scene s = TorusOnPlane();

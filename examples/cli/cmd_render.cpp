@@ -950,12 +950,14 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--indirect-samples", args->indirectSamples,
                     "Paths (and NEE samples) per cached diffuse sample")
         ->capture_default_str();
-    cmd->add_option("--cached-light", args->cachedLight,
-                    "Path integrator, diffuse light (diffuse materials, and the diffuse base of "
-                    "glossy ones; specular lobes stay per hit): indirect (direct light stays per "
-                    "hit; on the grid, glossy materials stay per hit), all (direct light cached "
-                    "and filtered too: for soft lighting; blurs hard shadows) or auto (all when "
-                    "shaded at the hits and the scene has no distant light, else indirect)")
+    cmd->add_option(
+           "--cached-light", args->cachedLight,
+           "Path (and direct) integrator, which diffuse light is cached (diffuse "
+           "materials, and the diffuse base of glossy ones; specular lobes stay per "
+           "hit): indirect (direct light stays per hit; the direct integrator then "
+           "caches its shadows on the grid), all (direct light cached and filtered too: for soft "
+           "lighting; blurs hard shadows) or auto (all when shaded at the hits and the "
+           "scene has no distant light, else indirect)")
         ->capture_default_str();
     cmd->add_flag("--reference-cache", args->referenceCache,
                   "Unbounded caches (the overshading baseline)");
