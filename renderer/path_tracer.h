@@ -253,7 +253,7 @@ struct PixelSequence {
         return OwenSobol02(uint32_t(j), ScrambleOf(j, pair));
     }
 };
-/// What a caller that bins diffuse light at camera hits (render.cpp, PathHitsBin) asks LiPath
+/// What a caller that bins diffuse light at camera hits (render.cpp, PathHitsTrace) asks LiPath
 /// for: the first hit's light for a white diffuse surface (the caller applies the hit's albedo,
 /// so a textured surface keeps its detail), with its interaction computed already, and the
 /// direct part of that light (NEE at the first hit, and emission the first BSDF ray finds, MIS-

@@ -562,32 +562,42 @@ void HitsCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int s0
 /// Where camera sample (x, y, s), hitting `si` at distance `t`, adds its shading: its bins at
 /// the two levels `bias` and `bias` + 1 above its texel's (keys[0], keys[1]); and its record,
 /// the level its reconstruction reads.
-void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, float blend, int x,
-            int y, int s, TexelKey keys[2], HitRecord* h) {
-    const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
+/// The level of the texel a camera hit at distance `t` lands on (eq. 1 with the pixel's
+/// footprint taken as a disc across the ray: the minor axis of its ellipse on the surface, which
+/// eq. 1's minimum picks), on the grids of `mesh`.
+int HitTexelLevel(const Context& c, const SurfaceInteraction& si, float t, int mesh) {
     const MeshGrids& g = c.tsc->Grids(mesh);
-    // Eq. 1 with the pixel's footprint taken as a disc across the ray (the minor axis of its
-    // ellipse on the surface, which eq. 1's minimum picks): its size in (u,v) along each
-    // parameter direction.
     const float w = c.camera.FootprintAt(t);
-    const int texelLevel = ComputeMip(g.Log2Res(face), w / glm::length(si.dPdu), 0.0f, 0.0f,
-                                      w / glm::length(si.dPdv), c.opt.texture.cache.lodBias);
+    return ComputeMip(g.Log2Res(si.ptex.face), w / glm::length(si.dPdu), 0.0f, 0.0f,
+                      w / glm::length(si.dPdv), c.opt.texture.cache.lodBias);
+}
+/// The bins of point (u,v) of `face` at the levels `bias` and `bias` + 1 above `texelLevel`.
+void BinKeys(const MeshGrids& g, int face, float u, float v, int texelLevel, int bias,
+             TexelKey keys[2]) {
     for (int k = 0; k < 2; ++k) {
         const int level = g.ClampMip(face, texelLevel + bias + k);
         const int res = g.Res(face, level);
-        keys[k] = {g.FaceOffset() + uint32_t(face), uint8_t(level),
-                   uint16_t(QuantizeCoord(si.ptex.u, res)),
-                   uint16_t(QuantizeCoord(si.ptex.v, res))};
+        keys[k] = {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(QuantizeCoord(u, res)),
+                   uint16_t(QuantizeCoord(v, res))};
     }
-    // The sample reads the upper level with probability `blend`, the lower one otherwise
-    // (stochastic filtering: in expectation the blend of the two, for one reconstruction
-    // instead of two), decided by a hash of its pixel and index rather than its random stream,
-    // which stays the one per-hit shading draws from.
+}
+/// Whether camera sample (x, y, s) reads its upper bin level: with probability `blend`, the
+/// lower one otherwise (stochastic filtering: in expectation the blend of the two, for one
+/// reconstruction instead of two), decided by a hash of its pixel and index rather than its
+/// random stream, which stays the one per-hit shading draws from.
+bool ReadsUpperLevel(const Context& c, int x, int y, int s, float blend) {
     const uint64_t u =
         MixBits(PixelSeed(c.opt.seed, x, y, c.opt.width) ^ (uint64_t(s) * 0xD1B54A32D192ED03ull));
-    const bool upper = float(u >> 40) * (1.0f / float(1u << 24)) < blend;
+    return float(u >> 40) * (1.0f / float(1u << 24)) < blend;
+}
+
+void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, float blend, int x,
+            int y, int s, TexelKey keys[2], HitRecord* h) {
+    const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
+    BinKeys(c.tsc->Grids(mesh), face, si.ptex.u, si.ptex.v, HitTexelLevel(c, si, t, mesh), bias,
+            keys);
     *h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
-          uint32_t(face) << 4 | keys[upper ? 1 : 0].mip};
+          uint32_t(face) << 4 | keys[ReadsUpperLevel(c, x, y, s, blend) ? 1 : 0].mip};
 }
 
 /// Hit-binned texture-space AO, phase 1 of a pass, for one tile: traces its camera rays, shades
@@ -646,9 +656,14 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
 /// summed per pixel into `perHit` (misses, lights, specular lobes), which phase 2 adds with the
 /// binned part: each pixel's sum then does not depend on the tiles, and a pass binned again (its
 /// table overflowed) just writes it again.
-void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
-                 float blend, HitRecord* records, glm::vec3* albedos, RadianceBins& bins,
-                 glm::dvec3* perHit, RayCounts& rays) {
+///
+/// The bins' level depends on the pass's noise, known only once every hit is shaded: this
+/// phase keeps each binned hit's light and texel level (`binned`) and each pixel's noise
+/// (`noise`: the variance of its samples' binned luminance, and their mean squared), and
+/// PathHitsAdd bins them.
+void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                   HitRecord* records, BinnedHit* binnedHits, glm::dvec3* perHit, glm::dvec2* noise,
+                   RayCounts& rays) {
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     thread_local std::vector<CameraSample> cs;
     if (cs.size() < total) cs.resize(total);
@@ -657,17 +672,18 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
     const bool all = c.opt.texture.cacheDirect;
     const int spp = s1 - s0, paths = std::max(c.opt.hitSamples, 1);
     const int maxDepth = c.opt.integrator == IntegratorKind::Direct ? 1 : c.opt.maxDepth;
-    RadianceBins::Batch batch(bins);
     const PixelSequence seq(c.opt, s0, s1);
     Cursor at(r, s0);
     glm::dvec3 acc(0.0);
+    double sum = 0.0, sum2 = 0.0;  // the pixel's binned luminances
+    int count = 0;
     for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
         CameraSample& p = cs[i];
         const size_t pixel = size_t(at.y) * size_t(c.opt.width) + size_t(at.x);
         const size_t index = pixel * size_t(spp) + size_t(at.s - s0);
         HitRecord& h = records[index];
         h.mesh = PassTexels::kMiss;  // nothing binned to read (unless below)
-        if (at.s == s0) acc = glm::dvec3(0.0);
+        if (at.s == s0) acc = glm::dvec3(0.0), sum = sum2 = 0.0, count = 0;
         const RayDifferentials* diff = productDiff ? &p.diff : nullptr;
         glm::vec3 L(0.0f);
         if (!p.found) {
@@ -698,17 +714,52 @@ void PathHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
             RadianceBin::Value v;
             // A NaN or infinite estimate is dropped, as per-hit drops such a sample.
             if (RadianceBin::FromRadiance(&binned.x, &v)) {
-                TexelKey keys[2];
-                BinHit(c, si, p.hit.t, bias, blend, at.x, at.y, at.s, keys, &h);
-                albedos[index] = albedo;
-                batch.Add(keys[0], v);
-                if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
+                const int mesh = c.tsc->MeshOf(si.object, si.backFacing);
+                h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
+                     uint32_t(si.ptex.face) << 4};
+                binnedHits[index] = {binned, albedo, HitTexelLevel(c, si, p.hit.t, mesh)};
+                const double e = double(Luminance(binned));
+                sum += e, sum2 += e * e, ++count;
             }
         }
         // A NaN/Inf sample would poison the pixel forever: drop it (as ShadeTile does).
         if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z)) acc += glm::dvec3(L);
-        if (at.s == s1 - 1) perHit[pixel] = acc;
+        if (at.s == s1 - 1) {
+            perHit[pixel] = acc;
+            const double mean = count ? sum / count : 0.0;
+            noise[pixel] =
+                count >= 2
+                    ? glm::dvec2(std::max(0.0, sum2 - count * mean * mean) / double(count - 1),
+                                 mean * mean)
+                    : glm::dvec2(0.0);
+        }
     }
+}
+
+/// Hit-binned diffuse light, phase 1 of a pass continued (PathHitsTrace shaded the hits): adds
+/// each binned hit of the tile to its bins at the levels `bias` and `bias` + 1 above its texel's,
+/// and sets the level its record reads. Binning again (the table overflowed) adds the same.
+void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
+                 float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins) {
+    RadianceBins::Batch batch(bins);
+    const int spp = s1 - s0;
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x)
+            for (int s = s0; s < s1; ++s) {
+                const size_t index =
+                    (size_t(y) * size_t(c.opt.width) + size_t(x)) * size_t(spp) + size_t(s - s0);
+                HitRecord& h = records[index];
+                if (h.mesh < 0) continue;
+                const BinnedHit& b = binnedHits[index];
+                TexelKey keys[2];
+                BinKeys(c.tsc->Grids(h.mesh), h.Face(), h.U(), h.V(), b.texelLevel, bias, keys);
+                RadianceBin::Value v;
+                RadianceBin::FromRadiance(&b.light.x, &v);  // finite: checked when shaded
+                batch.Add(keys[0], v);
+                if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
+                h.faceLevel =
+                    uint32_t(h.Face()) << 4 | keys[ReadsUpperLevel(c, x, y, s, blend) ? 1 : 0].mip;
+            }
 }
 
 /// The bilinear reconstruction of hit-binned shading at a camera sample: the 2x2 bins around its
@@ -858,15 +909,15 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
 /// Hit-binned diffuse light, phase 2 of a pass, for one tile: each pixel's per-hit part, then
 /// albedo x the reconstruction of each binned camera sample, in sample order.
 void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
-                     const HitRecord* records, const glm::vec3* albedos, const glm::dvec3* perHit,
-                     const RadianceBins& bins, double* sum) {
+                     const HitRecord* records, const BinnedHit* binnedHits,
+                     const glm::dvec3* perHit, const RadianceBins& bins, double* sum) {
     BinMemo<RadianceBin> memo;
     BinCell<RadianceBin> cell;
     ResolveTile(
         c, r, s1 - s0, sum, [&](size_t pixel) { return perHit[pixel]; },
         [&](size_t i) {
             if (records[i].mesh < 0) return glm::dvec3(0.0);
-            return glm::dvec3(albedos[i] *
+            return glm::dvec3(binnedHits[i].albedo *
                               ReconstructRadiance(*c.tsc, bins, records[i], memo, cell));
         });
 }
@@ -980,7 +1031,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
     const bool hits = c.tsc && ShadesAtHits(opt);
-    // Light binned at the hits: the path integrator's, or the direct one's (PathHitsBin).
+    // Light binned at the hits: the path integrator's, or the direct one's (PathHitsTrace).
     const bool pathHits = hits && opt.integrator != IntegratorKind::AO;
     // Hit bins: no table grows past 256 MiB (car AO, 480x270, 4 spp: 2.2 MiB).
     constexpr size_t kMaxBinBytes = size_t(256) << 20;
@@ -990,12 +1041,13 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     // albedo): a pass holds at most 256 MiB of them (1920x1080, AO: 10 samples a pixel), and a
     // longer one runs as several.
     const size_t framePixels = std::max<size_t>(1, size_t(W) * size_t(opt.height));
-    const size_t recordBytes = sizeof(HitRecord) + (pathHits ? sizeof(glm::vec3) : 0);
+    const size_t recordBytes = sizeof(HitRecord) + (pathHits ? sizeof(BinnedHit) : 0);
     const int hitSpp = int(
         std::clamp<size_t>(kMaxHitRecordBytes / (recordBytes * framePixels), 1, size_t(INT_MAX)));
     // Hit-binned diffuse light: each pixel's per-hit part of a pass (misses, lights, glossy
     // hits, unbinned direct light), written by the binning phase, added by the resolve.
     std::vector<glm::dvec3> perHit(pathHits ? framePixels : 0);
+    std::vector<glm::dvec2> pixelNoise(pathHits ? framePixels : 0);  // see PathHitsTrace
     while (done < sppCap) {
         const int s0 = done,
                   s1 = std::min(sppCap, done + (hits ? std::min(passSpp, hitSpp) : passSpp));
@@ -1039,15 +1091,30 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             // room) is doubled and the pass binned again, so no hit is ever lost; the bins, and
             // so the image, do not depend on the table's size.
             HitRecord* const records = c.tsc->HitRecords(passSamples);
-            glm::vec3* const albedos = pathHits ? c.tsc->HitAlbedos(passSamples) : nullptr;
+            BinnedHit* const binnedHits = pathHits ? c.tsc->BinnedHits(passSamples) : nullptr;
+            // Diffuse light: every hit shaded first, its bins' level then picked from the pass's
+            // noise (the variance of the binned light among each pixel's samples, summed over
+            // the pixels in order, so the same for any thread count, over their means squared).
+            double noiseVar = 0.0, noiseMean2 = 0.0;
+            if (pathHits) {
+                forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                    PathHitsTrace(c, r, s0, s1, records, binnedHits, perHit.data(),
+                                  pixelNoise.data(), rc);
+                });
+                for (size_t p = size_t(y0) * size_t(W); p < size_t(y1) * size_t(W); ++p)
+                    noiseVar += pixelNoise[p].x, noiseMean2 += pixelNoise[p].y;
+            }
             // The direct integrator's light at AO's levels: its noise is AO's kind (a shadow
             // ray per sample), and its bins 1 level finer than paths' divide its relMSE at
             // budget 1 by 1.5 (chess, soft shadows of the area light, 480x360, 4 spp: 0.049 ->
             // 0.033; levels 2 / 3 give 0.050 / 0.040).
-            const float levels = TextureSpaceCache::HitBinLevels(
-                pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples, s1 - s0, c.tsc->Pass(),
-                opt.integrator == IntegratorKind::Path ? TextureSpaceCache::HitTerm::Light
-                                                       : TextureSpaceCache::HitTerm::Ao);
+            const float levels =
+                opt.integrator == IntegratorKind::Path
+                    ? TextureSpaceCache::HitLightLevels(
+                          noiseVar, noiseMean2, std::max(opt.hitSamples, 1), s1 - s0, c.tsc->Pass())
+                    : TextureSpaceCache::HitBinLevels(
+                          pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples, s1 - s0,
+                          c.tsc->Pass());
             const int bias = int(std::floor(levels));
             const float blend = levels - float(bias);
             // At most half full: twice the blocks the last pass used, or a first guess of four
@@ -1086,12 +1153,11 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             if (pathHits)
                 binAndResolve(
                     [&](size_t blocks) -> RadianceBins& { return c.tsc->LightBins(blocks); },
-                    [&](const tbb::blocked_range2d<int>& r, RadianceBins& bins, RayCounts& rc) {
-                        PathHitsBin(c, r, s0, s1, bias, blend, records, albedos, bins,
-                                    perHit.data(), rc);
+                    [&](const tbb::blocked_range2d<int>& r, RadianceBins& bins, RayCounts&) {
+                        PathHitsAdd(c, r, s0, s1, bias, blend, records, binnedHits, bins);
                     },
                     [&](const tbb::blocked_range2d<int>& r, const RadianceBins& bins) {
-                        PathHitsResolve(c, r, s0, s1, records, albedos, perHit.data(), bins,
+                        PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), bins,
                                         sums.rgb.data());
                     });
             else

@@ -48,7 +48,7 @@ std::string FootprintModeNames();
 ///   Hits  at the camera's own hits, as per-hit shading shades them (same rays, same random
 ///         numbers), added up per bin of a coarser level of the same grids and read back by a
 ///         bilinear reconstruction over the 2x2 bins around each hit (render.cpp, AoHitsBin,
-///         PathHitsBin): no limit evaluation, snap ray or footprint gather, and every ray traced
+///         PathHitsTrace): no limit evaluation, snap ray or footprint gather, and every ray traced
 ///         lands in some bin. The path integrator bins the light its diffuse hits receive (all
 ///         of it, or its indirect part: TextureSpaceOptions::cacheDirect) and applies each hit's
 ///         albedo when it reads the bins; glossy hits stay per hit. The bins lie HitBinLevels

@@ -117,6 +117,16 @@ float TextureSpaceCache::HitBinLevels(int raysPerHit, int passSpp, uint32_t pass
     return float((term == HitTerm::Ao ? 2.5 : 3.5) - std::log2(n / 4.0) / 3.0);
 }
 
+float TextureSpaceCache::HitLightLevels(double noiseVar, double noiseMean2, int pathsPerHit,
+                                        int passSpp, uint32_t pass) {
+    if (!(noiseVar > 0.0 && noiseMean2 > 0.0 && std::isfinite(noiseVar / noiseMean2)))
+        return HitBinLevels(pathsPerHit, passSpp, pass, HitTerm::Light);
+    // See the note at the top: 3.6 + log2(relative variance) / 4 - log2(n / 4) / 3.
+    const double rel = std::clamp(noiseVar / noiseMean2, 1e-9, 1e9);
+    const double n = double(passSpp) * (double(pass) + 1.0);
+    return float(std::clamp(3.6 + 0.25 * std::log2(rel) - std::log2(n / 4.0) / 3.0, 0.0, 12.0));
+}
+
 void TextureSpaceCache::BeginPass(uint32_t pass) {
     if (pass != pass_) Invalidate();
     pass_ = pass;

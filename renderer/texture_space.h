@@ -31,12 +31,22 @@
 // balances them asymptotically). We take k = 1/3 from 2.5 levels at 4 rays per pixel: at the
 // budgets speed-vs-error measures the bias of the coarser bins dominates sooner than the
 // asymptotic rate assumes (car AO 480x270, 4 spp, 16 rays per hit: relMSE 0.0044 with bins 2
-// levels up, 0.0028 with 1; at 1 ray per hit 2 levels up 0.032, 1 level 0.071). Diffuse light
-// starts a level higher (3.5): one path's estimate of it is noisier for its mean than one AO
-// ray's, and the light is smoother (480x270, 4 spp, 1 path per hit, relMSE at 2.5 / 3.5 / 4.5
-// levels: car, all diffuse light binned, 0.346 / 0.316 / 0.316 against 0.292 for the per-hit
-// terms alone; chess 0.165 / 0.164 / 0.225; sunlit, indirect binned, 0.0188 / 0.0081 / 0.0066;
-// per hit 1.04, 0.43, 0.17). A level picked per sample from the data instead (the intersection
+// levels up, 0.0028 with 1; at 1 ray per hit 2 levels up 0.032, 1 level 0.071). AO's noise is
+// about the same on any scene (a ray escapes or not); a path's estimate of diffuse light is not:
+// its variance for its mean ranges over 100x from a clay object under a white sky to a glossy
+// car under a courtyard map, and the best level with it. A fixed 3.5 levels (tuned on the
+// scenes/ cases) left OpenSubdiv's bishop under a white sky at relMSE 0.0085 against per hit's
+// 0.0090 at one path per hit, where 2 levels give 0.0011. So a pass of diffuse light first shades
+// every hit, measures V, the variance of the binned light among each pixel's camera samples over
+// their mean squared (summed over the pixels), and bins at 3.6 + log2(V) / 4 - log2(n / 4) / 3
+// levels (HitLightLevels; n = camera samples per pixel so far; V already falls with the paths per
+// hit). 480x270 (bishop 640x360), 4 spp, 1 path per hit, relMSE with the fixed 3.5 levels ->
+// these: car (all diffuse light binned, V 1.3) 0.0613 -> 0.0598, chess (V 0.81) 0.0373 -> 0.0376,
+// sunlit (indirect binned, V 2.1) 0.0061 -> 0.0056, bishop (V 0.014) 0.0085 -> 0.0011; with a
+// slope of 1/5 or 1/3 instead of 1/4 the bishop's 0.0013 / 0.0014, the others within 1%. The
+// direct integrator's light keeps AO's levels: its best level did not follow V (chess soft
+// shadows, V 0.76, and the bishop, V 0.028, both best near 2.5-3). A level picked per sample
+// from the data instead (the intersection
 // of confidence intervals over six levels, with variances from the bins' second moments) did
 // not beat this schedule on the torus tests: AO at 1 ray per hit relMSE 0.020-0.042 against
 // 0.016, at 16 rays 0.0012-0.0028 against 0.0009. The bias
@@ -103,6 +113,13 @@ struct HitRecord {
         if (!(x > 0.0f)) return 0;  // NaN too
         return uint16_t(std::min(x * kUvScale, kUvScale - 1.0f));
     }
+};
+/// A binned diffuse hit of a pass of hit-binned light (render.cpp, PathHitsTrace): the light it
+/// bins, the albedo its reconstruction is multiplied by, and the level of its texel (its bins lie
+/// levels above it, chosen once the pass's noise is known).
+struct BinnedHit {
+    glm::vec3 light, albedo;
+    int32_t texelLevel;
 };
 /// What the visibility prepass keeps of a pass for its shading pass (render.cpp's PassTexels).
 struct PassScratch {
@@ -197,11 +214,18 @@ public:
     /// Hit binning (TextureSamples::Hits): how many levels above a hit's texel its bins lie,
     /// for `raysPerHit` AO rays or light paths per hit, `passSpp` camera samples a pass and pass
     /// `pass`: c - log2(n / 4) / 3 for n = raysPerHit * passSpp * (pass + 1) rays per pixel (see
-    /// the note at the top), c = 2.5 for AO and 3.5 for diffuse light. A fractional offset b
+    /// the note at the top), c = 2.5 for AO (and the direct integrator's light) and 3.5 for
+    /// diffuse light whose noise was not measured (HitLightLevels). A fractional offset b
     /// blends the bins of levels floor(b) and floor(b) + 1 above the texel's, weighted
     /// 1 - frac(b) and frac(b).
     static float HitBinLevels(int raysPerHit, int passSpp, uint32_t pass,
                               HitTerm term = HitTerm::Ao);
+    /// The same for a path tracer's diffuse light, from the pass's noise: `noiseVar` / `noiseMean2`
+    /// is the relative variance of one camera sample's binned light (the variance among each
+    /// pixel's samples over their mean squared, summed over the pixels); see the note at the top.
+    /// Without a measure (fewer than two binned samples a pixel) HitBinLevels(HitTerm::Light).
+    static float HitLightLevels(double noiseVar, double noiseMean2, int pathsPerHit, int passSpp,
+                                uint32_t pass);
     /// Cache mesh id of a scene object's front side, or of its back side (open surfaces are
     /// seen from both sides and shade differently on each; closed ones have no back mesh).
     int MeshOf(int object, bool backFacing = false) const {
@@ -253,13 +277,13 @@ public:
         }
         return hitRecords_.get();
     }
-    /// At least `n` albedos of binned diffuse hits, beside their records (as HitRecords).
-    glm::vec3* HitAlbedos(size_t n) {
+    /// At least `n` binned diffuse hits' light and albedo, beside their records (as HitRecords).
+    internal::BinnedHit* BinnedHits(size_t n) {
         if (n > hitAlbedoCount_) {
-            hitAlbedos_.reset(static_cast<glm::vec3*>(AllocateHugePages(n * sizeof(glm::vec3))));
+            hitAlbedos_.reset(AllocateHugePages(n * sizeof(internal::BinnedHit)));
             hitAlbedoCount_ = n;
         }
-        return static_cast<glm::vec3*>(hitAlbedos_.get());
+        return static_cast<internal::BinnedHit*>(hitAlbedos_.get());
     }
     /// The grids of a cache mesh (resolutions, Ptex adjacency).
     const MeshGrids& Grids(int mesh) const { return cache_.Mesh(mesh); }
@@ -293,7 +317,8 @@ public:
         return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0) +
                (visible_ ? visible_->Bytes() : 0) + passTexels_.Bytes() +
                (bins_ ? bins_->BytesUsed() : 0) + (lightBins_ ? lightBins_->BytesUsed() : 0) +
-               hitRecordCount_ * sizeof(internal::HitRecord) + hitAlbedoCount_ * sizeof(glm::vec3);
+               hitRecordCount_ * sizeof(internal::HitRecord) +
+               hitAlbedoCount_ * sizeof(internal::BinnedHit);
     }
     size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
     size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }

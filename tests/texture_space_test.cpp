@@ -710,6 +710,31 @@ TEST(HitBins, LevelsShrinkWithTheRaysPerPixel) {
     EXPECT_TRUE(std::isfinite(TextureSpaceCache::HitBinLevels(1 << 16, 1 << 10, UINT32_MAX)));
 }
 
+// Diffuse light's levels follow the pass's measured noise: 3.6 + log2(V) / 4 at 4 samples a pixel
+// (V = 1: 3.6; 16x less variance: a level finer), rising with V, falling with the passes, the
+// unmeasured rule without a measure (no noise, no signal, NaN), and within [0, 12] for any V.
+TEST(HitBins, LightLevelsFollowTheMeasuredNoise) {
+    using TSC = TextureSpaceCache;
+    EXPECT_NEAR(TSC::HitLightLevels(1.0, 1.0, 1, 4, 0), 3.6f, 1e-5f);
+    EXPECT_NEAR(TSC::HitLightLevels(1.0, 16.0, 1, 4, 0), 2.6f, 1e-5f);
+    EXPECT_NEAR(TSC::HitLightLevels(1.0, 1.0, 1, 4, 7), 2.6f, 1e-5f);  // 8 passes
+    float prev = -1.0f;
+    for (double v = 1e-6; v < 1e6; v *= 10.0) {
+        const float b = TSC::HitLightLevels(v, 1.0, 1, 4, 0);
+        EXPECT_GE(b, prev);
+        EXPECT_GE(b, 0.0f);
+        EXPECT_LE(b, 12.0f);
+        prev = b;
+    }
+    const float unmeasured = TSC::HitBinLevels(2, 4, 0, TSC::HitTerm::Light);
+    EXPECT_FLOAT_EQ(TSC::HitLightLevels(0.0, 1.0, 2, 4, 0), unmeasured);
+    EXPECT_FLOAT_EQ(TSC::HitLightLevels(1.0, 0.0, 2, 4, 0), unmeasured);
+    EXPECT_FLOAT_EQ(TSC::HitLightLevels(NAN, 1.0, 2, 4, 0), unmeasured);
+    EXPECT_FLOAT_EQ(TSC::HitLightLevels(INFINITY, 1.0, 2, 4, 0), unmeasured);
+    EXPECT_TRUE(std::isfinite(TSC::HitLightLevels(1e300, 1e-300, 1, 1 << 20, UINT32_MAX)));
+    EXPECT_GE(TSC::HitLightLevels(1e-300, 1.0, 1, 1 << 20, UINT32_MAX), 0.0f);
+}
+
 // A hit's (u,v) is kept in 16 bits; NaN, infinite and out-of-range coordinates land on the
 // face's edge instead of wrapping (a NaN cast to an integer is undefined).
 TEST(HitBins, RecordCoordinatesAreClamped) {
@@ -820,12 +845,12 @@ RenderOptions PathOptions(int spp, int hitSamples, bool hits, bool cacheDirect, 
     return o;
 }
 
-// Diffuse light binned at the camera hits (render.cpp, PathHitsBin): all of it under the white
+// Diffuse light binned at the camera hits (render.cpp, PathHitsTrace): all of it under the white
 // sky, its indirect part under the sun (direct light per hit, without noise). 128x96 pixels
 // (bins lie levels above pixel-sized texels: on a smaller image they would span too much of the
 // torus). Against per-hit path tracing of the same camera rays with 256 paths per hit, 1 path
-// per hit has under a quarter of per-hit's relMSE (measured 1/7.8 under the sky, 1/19 under the
-// sun) and 16 paths under 1/3 of 1 path's (measured 1/8.1 and 1/4.0). Under the sun the noise
+// per hit has under a quarter of per-hit's relMSE (measured 1/15 under the sky, 1/19 under the
+// sun) and 16 paths under 1/3 of 1 path's (measured 1/7.5 and 1/5.0). Under the sun the noise
 // dominates, and with bins of side h ~ n^(-1/3) it falls as n^(-1/3) (texture_space.h): 16x the
 // paths then divide relMSE by ~2.5 plus what the bias loses (bias^2 ~ n^(-4/3)).
 // Nothing is shaded on the grids, and the paths are per-hit's (the same rays).
@@ -933,9 +958,9 @@ TEST(HitLight, GlossyLobesSplitPerHitsEstimateExactly) {
 // A glossy plane: its diffuse base is binned while its specular lobe stays per hit (view-
 // dependent). The image's mean is per hit's (within 2%; binning is unbiased but for the bins'
 // blur), every pixel is finite and non-negative, and one path per hit has under half per hit's
-// relMSE against 256 paths on the same camera rays (measured 1/3.3: the specular lobe's noise
+// relMSE against 256 paths on the same camera rays (measured 1/5.9: the specular lobe's noise
 // stays, and it dominates the plane's dark green and blue channels), and 16 paths under 1/3 of
-// one path's (measured 1/17.4).
+// one path's (measured 1/12.9).
 TEST(HitLight, GlossyMaterialsBinTheirDiffuseBase) {
     const RenderScene& rs = LitTorus(true);
     const Image perHit = Render(rs, PathOptions(16, 4, false, true)).beauty;
