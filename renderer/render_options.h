@@ -51,12 +51,14 @@ std::string FootprintModeNames();
 ///         PathHitsTrace): no limit evaluation, snap ray or footprint gather, and every ray traced
 ///         lands in some bin. The path integrator bins the light its diffuse hits receive (all
 ///         of it, or its indirect part: TextureSpaceOptions::cacheDirect) and applies each hit's
-///         albedo when it reads the bins; glossy hits stay per hit. The bins lie HitBinLevels
-///         above the hit's texel (fewer as rays per pixel grow; texture_space.h argues why the
-///         result converges).
-/// The command line's `--ts-samples auto` (its default) takes Hits for AO and path unless a
-/// filter, a filter radius or temporal accumulation is asked for (those belong to the grid); the
-/// API's default is the paper's Grid.
+///         albedo when it reads the bins; a glossy hit bins its diffuse base's light and keeps
+///         its specular lobe per hit; the direct integrator bins its light when cacheDirect.
+///         The bins lie HitBinLevels above the hit's texel (HitLightLevels for diffuse light:
+///         from the pass's measured noise; fewer as rays per pixel grow; texture_space.h argues
+///         why the result converges).
+/// The command line's `--ts-samples auto` (its default) takes Hits for AO, path and cached direct
+/// light unless a filter, a filter radius or temporal accumulation is asked for (those belong to
+/// the grid); the API's default is the paper's Grid.
 /// `texcache experiment speed-vs-error --only car-ao --out DIR`, budget 1 (480x270, 4 spp,
 /// 1 ray per hit or per sample): hits relMSE 0.032 at 0.124 s CPU, grid ts-normal 0.052 at
 /// 0.40 s, per hit 0.254 at 0.080 s (figures from the commit that added hits).
