@@ -318,9 +318,9 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
     // ray; the path on from there is traced with beta = 1 into L (as after a white first hit)
     // and split by the two weights at the end.
     const bool lobes = split && split->specular;
-    // CachedTerm::BaseIndirect: the first BSDF ray's specular weight, the path's beta after it.
+    // CachedTerm::BaseIndirect: past the first BSDF ray's hit the path goes on with that ray's
+    // specular weight (lobeBetaS) alone.
     bool baseIndirect = false;
-    glm::vec3 specularBeta(0.0f);
     glm::vec3 lobeL(0.0f), lobeS(0.0f), lobeBetaD(0.0f), lobeBetaS(0.0f);
     auto finish = [&](glm::vec3 l) {
         if (!lobes) return l;
@@ -360,7 +360,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         if (depth == 1 && baseIndirect) {
             // The first BSDF ray found its direct light for both lobes; the diffuse base's
             // indirect light is cached, so only the specular lobe's path goes on.
-            beta = specularBeta;
+            beta = lobeBetaS;
             if (beta == glm::vec3(0.0f)) break;
         }
         const SurfaceInteraction si =
@@ -424,13 +424,14 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         const float uChoice = rng.Next1D();
         const glm::vec2 uBsdf = depth == 0 && first ? first->bsdf : rng.Next2D();
         if (!bsdf.Sample(wo, uChoice, uBsdf, &wi, &weight, &pdf)) break;
-        if (baseIndirect && depth == 0)
-            specularBeta = bsdf.EvalSpecular(wo, wi) * (std::abs(glm::dot(wi, si.N)) / pdf);
-        if (lobes && depth == 0) {
+        if (depth == 0 && (lobes || baseIndirect)) {
+            // The first BSDF ray's weight per lobe (f cos / pdf of the mixture).
             const float cosOverPdf = std::abs(glm::dot(wi, si.N)) / pdf;
-            lobeBetaD = glm::vec3(bsdf.DiffuseWhite(wi) * cosOverPdf);
             lobeBetaS = bsdf.EvalSpecular(wo, wi) * cosOverPdf;
-            weight = glm::vec3(1.0f);
+            if (lobes) {
+                lobeBetaD = glm::vec3(bsdf.DiffuseWhite(wi) * cosOverPdf);
+                weight = glm::vec3(1.0f);
+            }
         }
         beta *= weight;
         prevPdf = pdf;
