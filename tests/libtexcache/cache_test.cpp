@@ -59,6 +59,25 @@ TEST(TexelKey, PackUnpackRoundTripsAtTheLimits) {
     }
 }
 
+// ComputeMip's exponent from the float's bits is std::ilogb's for every positive finite float
+// kind: subnormal, normal, each power of two and its neighbours, the largest.
+TEST(Addressing, FloatExponentMatchesIlogb) {
+    for (float x = std::numeric_limits<float>::denorm_min(); std::isfinite(x);
+         x = std::max(x * 1.37f, std::nextafter(x, INFINITY)))  // subnormals round x * 1.37 to x
+        for (float y : {x, std::nextafter(x, 0.0f), std::nextafter(x, INFINITY)})
+            if (y > 0.0f && std::isfinite(y)) {
+                ASSERT_EQ(FloatExponent(y), std::ilogb(y)) << y;
+            }
+    for (int p = -149; p <= 127; ++p) {
+        const float x = std::ldexp(1.0f, p);
+        ASSERT_EQ(FloatExponent(x), p);
+        if (p > -149) {
+            ASSERT_EQ(FloatExponent(std::nextafter(x, 0.0f)), p - 1);
+        }
+    }
+    EXPECT_EQ(FloatExponent(std::numeric_limits<float>::max()), 127);
+}
+
 TEST(Addressing, MipFromDifferentialsFollowsEquation1) {
     // 256-texel face; a pixel covering 1/64 of the face in x and 1/16 in y: min(4, 16) -> log2 4
     // = 2.

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 
 namespace texcache {
 
@@ -39,6 +40,16 @@ struct TexelKey {
     }
 };
 
+/// std::ilogb(x) for a finite x > 0, read from the float's exponent bits (std::ilogb is a libm
+/// call: 3% of a hit-binned AO frame, where every camera hit picks its texel's level); a
+/// subnormal x (exponent field 0) takes the call.
+inline int FloatExponent(float x) {
+    uint32_t bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    const int e = int(bits >> 23) & 0xFF;
+    return e ? e - 127 : std::ilogb(x);
+}
+
 /// Mip level of eq. 1, floored as the paper does (biasing towards higher resolution), plus a
 /// global LOD bias, clamped to [0, numLevels - 1]. `log2Res` is the face's base resolution
 /// (square, power of two); derivatives are d(u,v)/d(pixel x,y). Non-finite footprints map to
@@ -54,7 +65,7 @@ inline int ComputeMip(int log2Res, float dudx, float dvdx, float dudy, float dvd
     int l;
     if (lodBias == std::floor(lodBias)) {
         // floor(log2(sqrt(m2))) = floor(ilogb(m2) / 2): exact, from the float's exponent.
-        const int k = std::ilogb(m2);
+        const int k = FloatExponent(m2);
         l = (k >= 0 ? k / 2 : -((1 - k) / 2)) + int(lodBias);
     } else {
         l = int(std::floor(0.5f * std::log2(m2) + lodBias));
