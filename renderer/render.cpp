@@ -559,9 +559,6 @@ void HitsCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int s0
         c.hitRect.Outside(r.cols().begin(), r.rows().begin(), r.cols().end(), r.rows().end()));
 }
 
-/// Where camera sample (x, y, s), hitting `si` at distance `t`, adds its shading: its bins at
-/// the two levels `bias` and `bias` + 1 above its texel's (keys[0], keys[1]); and its record,
-/// the level its reconstruction reads.
 /// The level of the texel a camera hit at distance `t` lands on (eq. 1 with the pixel's
 /// footprint taken as a disc across the ray: the minor axis of its ellipse on the surface, which
 /// eq. 1's minimum picks), on the grids of `mesh`.
@@ -591,22 +588,25 @@ bool ReadsUpperLevel(const Context& c, int x, int y, int s, float blend) {
     return float(u >> 40) * (1.0f / float(1u << 24)) < blend;
 }
 
-void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, float blend, int x,
-            int y, int s, TexelKey keys[2], HitRecord* h) {
+/// Where a camera sample hitting `si` at distance `t` adds its AO: its bins at the two levels
+/// `bias` and `bias` + 1 above its texel's (keys[0], keys[1]); and its record, which names the
+/// finer (the reconstruction reads both, ReconstructAo).
+void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, TexelKey keys[2],
+            HitRecord* h) {
     const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
     BinKeys(c.tsc->Grids(mesh), face, si.ptex.u, si.ptex.v, HitTexelLevel(c, si, t, mesh), bias,
             keys);
     *h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
-          uint32_t(face) << 4 | keys[ReadsUpperLevel(c, x, y, s, blend) ? 1 : 0].mip};
+          uint32_t(face) << 4 | keys[0].mip};
 }
 
 /// Hit-binned texture-space AO, phase 1 of a pass, for one tile: traces its camera rays, shades
 /// AO at each hit exactly as per-hit AO does (same rays, same random numbers, 16-ray packets
 /// across the tile's hits), and adds each hit's escaped rays to its bins at the two levels
-/// `bias` and `bias` + 1 above its texel's. Records where each camera sample hit and which of
-/// the two levels it reads, for phase 2 (AoHitsResolve).
+/// `bias` and `bias` + 1 above its texel's. Records where each camera sample hit, for phase 2
+/// (AoHitsResolve).
 void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
-               float blend, HitRecord* records, HitBins& bins, RayCounts& rays) {
+               HitRecord* records, HitBins& bins, RayCounts& rays) {
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     thread_local std::vector<CameraSample> cs;
     thread_local std::vector<TexelKey> keys;
@@ -629,7 +629,7 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
             continue;
         }
         const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit);
-        BinHit(c, si, p.hit.t, bias, blend, at.x, at.y, at.s, &keys[2 * i], &h);
+        BinHit(c, si, p.hit.t, bias, &keys[2 * i], &h);
         aoRays.Queue(c, p.ray, si, seq, seq.First(at.x, at.y, at.s), uint32_t(i));
     }
     aoRays.Trace(c, open.data(), rays);
@@ -850,27 +850,90 @@ const BinCell<Bin>& CellAt(const TextureSpaceCache& tsc, const BinTable<Bin>& bi
     cell.w[2] = (1.0f - fx) * fy, cell.w[3] = fx * fy;
     return cell;
 }
-float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
-                    BinMemo<CountBin>& memo, BinCell<CountBin>& cell) {
-    CellAt(tsc, bins, h, memo, cell);
-    double num = 0.0, den = 0.0;
-    for (int k = 0; k < 4; ++k)
-        num += double(cell.w[k]) * cell.n[k].successes, den += double(cell.w[k]) * cell.n[k].trials;
-    return den > 0.0 ? float(num / den) : 0.0f;
+/// The cells a tile's reconstructions read: a record's level and the one above it.
+template <typename Bin>
+struct LevelCells {
+    BinCell<Bin> fine, coarse;
+};
+/// The 2x2 bins one level above record `h`'s, in `cell`; null when h's level is its face's
+/// coarsest (the bins were clamped there: both levels are the same bins).
+template <typename Bin>
+const BinCell<Bin>* CoarseCellAt(const TextureSpaceCache& tsc, const BinTable<Bin>& bins,
+                                 const HitRecord& h, BinMemo<Bin>& memo, BinCell<Bin>& cell) {
+    const int face = h.Face(), level = h.Level();
+    const int up = tsc.Grids(h.mesh).ClampMip(face, level + 1);
+    if (up == level) return nullptr;
+    HitRecord above = h;
+    above.faceLevel = uint32_t(face) << 4 | uint32_t(up);
+    return &CellAt(tsc, bins, above, memo, cell);
 }
+/// A cell's bilinear estimate: the weighted mean of its bins, the weighted count (sum w n) and
+/// the squared-weight count (sum w^2 n): its variance is a sample's variance x count2 / count^2.
+struct CellEstimate {
+    glm::dvec3 mean{0.0};
+    double count = 0.0, count2 = 0.0;
+};
+CellEstimate EstimateOf(const BinCell<CountBin>& c) {
+    CellEstimate e;
+    double num = 0.0;
+    for (int k = 0; k < 4; ++k) {
+        const double w = double(c.w[k]), n = double(c.n[k].trials);
+        num += w * double(c.n[k].successes), e.count += w * n, e.count2 += w * w * n;
+    }
+    e.mean = glm::dvec3(e.count > 0.0 ? num / e.count : 0.0);
+    return e;
+}
+CellEstimate EstimateOf(const BinCell<RadianceBin>& c) {
+    CellEstimate e;
+    glm::dvec3 num(0.0);
+    for (int k = 0; k < 4; ++k) {
+        const RadianceBin::Value& n = c.n[k];
+        const double w = double(c.w[k]), count = double(n.count);
+        num += w * glm::dvec3(double(n.sum[0]), double(n.sum[1]), double(n.sum[2]));
+        e.count += w * count, e.count2 += w * w * count;
+    }
+    if (e.count > 0.0) e.mean = num / (e.count * RadianceBin::kScale);
+    return e;
+}
+/// The reconstruction at record `h` from its level's bins and the level above (the note at the
+/// top of texture_space.h): fine + alpha (coarse - fine), alpha = CoarseWeight of their
+/// luminance difference and of the fine estimate's variance, `variance(fine, coarse)`. Without
+/// `variance`, h's level alone (its record then names the level of a stochastic blend).
+template <typename Bin, typename Variance>
+glm::dvec3 Reconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins, const HitRecord& h,
+                       BinMemo<Bin>& memo, LevelCells<Bin>& cells, double k, Variance&& variance) {
+    const CellEstimate fine = EstimateOf(CellAt(tsc, bins, h, memo, cells.fine));
+    if (!(k > 0.0)) return fine.mean;
+    const BinCell<Bin>* up = CoarseCellAt(tsc, bins, h, memo, cells.coarse);
+    if (!up) return fine.mean;
+    const CellEstimate coarse = EstimateOf(*up);
+    if (!(coarse.count > 0.0)) return fine.mean;
+    if (!(fine.count > 0.0)) return coarse.mean;
+    const glm::dvec3 d = coarse.mean - fine.mean;
+    return fine.mean + CoarseWeight(Luminance(d), variance(fine, coarse), k) * d;
+}
+float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
+                    BinMemo<CountBin>& memo, LevelCells<CountBin>& cells) {
+    return float(Reconstruct(tsc, bins, h, memo, cells, kAoCoarseWeightK,
+                             [](const CellEstimate& fine, const CellEstimate& coarse) {
+                                 // Binomial, with the coarse level's steadier mean (kept off 0
+                                 // and 1, where one bin's count would claim no noise at all).
+                                 const double p = std::clamp(coarse.mean.x, 0.02, 0.98);
+                                 return p * (1.0 - p) * fine.count2 / (fine.count * fine.count);
+                             })
+                     .x);
+}
+/// `relativeVariance`: one binned sample's variance over its mean squared, measured over the
+/// pass (PathHitsTrace); 0 when not measured.
 glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const RadianceBins& bins,
                               const HitRecord& h, BinMemo<RadianceBin>& memo,
-                              BinCell<RadianceBin>& cell) {
-    CellAt(tsc, bins, h, memo, cell);
-    glm::dvec3 num(0.0);
-    double den = 0.0;
-    for (int k = 0; k < 4; ++k) {
-        const RadianceBin::Value& n = cell.n[k];
-        const double w = double(cell.w[k]);
-        num += w * glm::dvec3(double(n.sum[0]), double(n.sum[1]), double(n.sum[2]));
-        den += w * double(n.count);
-    }
-    return den > 0.0 ? glm::vec3(num / (den * RadianceBin::kScale)) : glm::vec3(0.0f);
+                              LevelCells<RadianceBin>& cells, double relativeVariance) {
+    return glm::vec3(
+        Reconstruct(tsc, bins, h, memo, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
+                    [&](const CellEstimate& fine, const CellEstimate& coarse) {
+                        const double y = Luminance(coarse.mean);
+                        return relativeVariance * y * y * fine.count2 / (fine.count * fine.count);
+                    }));
 }
 
 /// Phase 2 of hit binning for one tile: each pixel's sum, from `start(pixel)` on, of
@@ -894,7 +957,7 @@ void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, 
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                    const HitRecord* records, const HitBins& bins, double* sum) {
     BinMemo<CountBin> memo;
-    BinCell<CountBin> cell;
+    LevelCells<CountBin> cells;
     ResolveTile(
         c, r, s1 - s0, sum, [](size_t) { return glm::dvec3(0.0); },
         [&](size_t i) {
@@ -902,23 +965,26 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
             return glm::dvec3(h.mesh == PassTexels::kMiss ? 0.0
                               : h.mesh == PassTexels::kLight
                                   ? 1.0
-                                  : double(ReconstructAo(*c.tsc, bins, h, memo, cell)));
+                                  : double(ReconstructAo(*c.tsc, bins, h, memo, cells)));
         });
 }
 
 /// Hit-binned diffuse light, phase 2 of a pass, for one tile: each pixel's per-hit part, then
-/// albedo x the reconstruction of each binned camera sample, in sample order.
+/// albedo x the reconstruction of each binned camera sample, in sample order
+/// (`relativeVariance`: see ReconstructRadiance).
 void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                      const HitRecord* records, const BinnedHit* binnedHits,
-                     const glm::dvec3* perHit, const RadianceBins& bins, double* sum) {
+                     const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
+                     double* sum) {
     BinMemo<RadianceBin> memo;
-    BinCell<RadianceBin> cell;
+    LevelCells<RadianceBin> cells;
     ResolveTile(
         c, r, s1 - s0, sum, [&](size_t pixel) { return perHit[pixel]; },
         [&](size_t i) {
             if (records[i].mesh < 0) return glm::dvec3(0.0);
-            return glm::dvec3(binnedHits[i].albedo *
-                              ReconstructRadiance(*c.tsc, bins, records[i], memo, cell));
+            return glm::dvec3(binnedHits[i].albedo * ReconstructRadiance(*c.tsc, bins, records[i],
+                                                                         memo, cells,
+                                                                         relativeVariance));
         });
 }
 
@@ -1115,8 +1181,16 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     : TextureSpaceCache::HitBinLevels(
                           pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples, s1 - s0,
                           c.tsc->Pass());
+            // The bins lie floor(levels) and one more levels up. Each sample reads the finer
+            // and moves towards the coarser by their difference and its noise (Reconstruct),
+            // AO's noise from its counts, the light's from the pass's V; light whose noise was
+            // not measured reads one of the two at random, the coarser with probability
+            // frac(levels).
+            const double relativeVariance = noiseMean2 > 0.0 && std::isfinite(noiseVar / noiseMean2)
+                                                ? noiseVar / noiseMean2
+                                                : 0.0;
             const int bias = int(std::floor(levels));
-            const float blend = levels - float(bias);
+            const float blend = relativeVariance > 0.0 ? 0.0f : levels - float(bias);
             // At most half full: twice the blocks the last pass used, or a first guess of four
             // per Ptex face (a face seen at a few levels, two bin levels each) plus the pixels'
             // bins, 16 to a block (car AO, 480x270: 5.6k blocks used 2 and 3 levels up, 19k 1 and
@@ -1158,13 +1232,13 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     },
                     [&](const tbb::blocked_range2d<int>& r, const RadianceBins& bins) {
                         PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), bins,
-                                        sums.rgb.data());
+                                        relativeVariance, sums.rgb.data());
                     });
             else
                 binAndResolve(
                     [&](size_t blocks) -> HitBins& { return c.tsc->Bins(blocks); },
                     [&](const tbb::blocked_range2d<int>& r, HitBins& bins, RayCounts& rc) {
-                        AoHitsBin(c, r, s0, s1, bias, blend, records, bins, rc);
+                        AoHitsBin(c, r, s0, s1, bias, records, bins, rc);
                     },
                     [&](const tbb::blocked_range2d<int>& r, const HitBins& bins) {
                         AoHitsResolve(c, r, s0, s1, records, bins, sums.rgb.data());

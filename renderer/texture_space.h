@@ -25,10 +25,10 @@
 // shades every camera hit as per-hit shading would (AO rays; or, for the path integrator, the
 // light a diffuse hit receives, its albedo applied after) and adds the result to the bins of
 // its point at two levels above its texel's (HitBinLevels); each camera sample then reads the
-// 2x2 bins around it at each level, bilinearly, and blends the two. Bins of side h average a smooth
-// signal with a bias of O(h^2) and hold O(h^2 n) rays for n rays per pixel, so with h ~ n^(-k):
-// bias^2 ~ n^(-4k) and variance ~ n^(2k-1), and both vanish for any 0 < k < 1/2 (k = 1/6
-// balances them asymptotically). We take k = 1/3 from 2.5 levels at 4 rays per pixel: at the
+// 2x2 bins around it at each level, bilinearly, and combines the two (below). Bins of side h
+// average a smooth signal with a bias of O(h^2) and hold O(h^2 n) rays for n rays per pixel, so
+// with h ~ n^(-k): bias^2 ~ n^(-4k) and variance ~ n^(2k-1), and both vanish for any 0 < k < 1/2 (k
+// = 1/6 balances them asymptotically). We take k = 1/3 from 2.5 levels at 4 rays per pixel: at the
 // budgets speed-vs-error measures the bias of the coarser bins dominates sooner than the
 // asymptotic rate assumes (car AO 480x270, 4 spp, 16 rays per hit: relMSE 0.0044 with bins 2
 // levels up, 0.0028 with 1; at 1 ray per hit 2 levels up 0.032, 1 level 0.071). AO's noise is
@@ -45,11 +45,32 @@
 // sunlit (indirect binned, V 2.1) 0.0061 -> 0.0056, bishop (V 0.014) 0.0085 -> 0.0011; with a
 // slope of 1/5 or 1/3 instead of 1/4 the bishop's 0.0013 / 0.0014, the others within 1%. The
 // direct integrator's light keeps AO's levels: its best level did not follow V (chess soft
-// shadows, V 0.76, and the bishop, V 0.028, both best near 2.5-3). A level picked per sample
-// from the data instead (the intersection
-// of confidence intervals over six levels, with variances from the bins' second moments) did
-// not beat this schedule on the torus tests: AO at 1 ray per hit relMSE 0.020-0.042 against
-// 0.016, at 16 rays 0.0012-0.0028 against 0.0009. The bias
+// shadows, V 0.76, and the bishop, V 0.028, both best near 2.5-3).
+//
+// Combining the two levels. The schedule's level b is fractional; the bins lie floor(b) and
+// floor(b) + 1 levels up. A sample had read one of the two at random (the coarser with
+// probability frac(b)), which blends them whatever the data say. Instead it reads both and
+// moves from the finer estimate f towards the coarser c by alpha (render.cpp, Reconstruct):
+// f + alpha (c - f). A fine bin holds about a quarter of its coarse bin's samples, so with s^2
+// f's variance, Var(c) ~ cov(f, c) ~ s^2 / 4, and for a coarse bias B = E[c - f] the MSE of
+// f + alpha (c - f) is s^2 - 1.5 alpha s^2 + alpha^2 (0.75 s^2 + B^2), least at
+// alpha = 0.75 s^2 / E[(c - f)^2]. With the observed (c - f)^2 for its expectation, alpha =
+// min(1, k s^2 / (c - f)^2) (CoarseWeight): the coarse bins where the levels agree within the
+// noise (a flat region), the fine ones where they do not (a crease, a contact shadow's edge).
+// AO's s^2 is binomial from the bins' counts, k = 3/4. The light's comes from the pass's V (one
+// relative variance for the whole image, which underestimates it where the light changes
+// fastest): k = 4, measured best among 0.3-8 (all of 2-8 beat the random pick). The bins'
+// level is then floor(b) (half a level finer on average than the random pick; floor(b) + 1/2
+// lost on every case). 480x270 (chess 480x360, bishop 640x360), 4 spp, one ray or path per hit,
+// relMSE random pick -> combined: AO car 0.0237 -> 0.0176, chess 0.0079 -> 0.0069, car through
+// a thin lens 0.0173 -> 0.0139, the bishop 0.0042 -> 0.0037; light car 0.0598 -> 0.0550, chess
+// 0.0376 -> 0.0290, sunlit 0.0056 -> 0.0053, chess soft shadows (direct) 0.0329 -> 0.0271, the
+// bishop 0.0011 -> 0.00081; 16 paths: chess 0.0068 -> 0.0050, sunlit 0.0012 -> 0.0011, soft
+// shadows 0.0080 -> 0.0051. alpha stays in [0, 1], so the estimate lies between two consistent
+// ones and stays consistent. An earlier try picked one level per sample from six (the
+// intersection of confidence intervals, variances from the bins' second moments) and lost to
+// the schedule on the torus tests (AO at 1 ray per hit relMSE 0.020-0.042 against 0.016): a
+// hard choice among many noisy levels, where this one shrinks between two neighbours. The bias
 // vanishes until the bins reach level 0 (texels of texelFraction of the object's size), below
 // which it stays that of level 0's bins. The bins hold integer counts, whose sums do not depend
 // on the order of the adds (see texcache/hit_bins.h), so the image is the same for any thread
@@ -121,6 +142,26 @@ struct BinnedHit {
     glm::vec3 light, albedo;
     int32_t texelLevel;
 };
+/// Hit binning's reconstruction (the note at the top): how far a sample's estimate moves from
+/// its bins' level towards the level above, given the two estimates' (luminance) difference `d`
+/// and the finer one's variance `fineVariance`: alpha = min(1, k fineVariance / d^2), 1 when
+/// they agree exactly or the variance is not a number. Always in [0, 1], so the estimate stays
+/// between the two levels'.
+inline double CoarseWeight(double d, double fineVariance, double k) {
+    const double d2 = d * d;
+    const double v = k * fineVariance;
+    if (!(v >= 0.0)) return 1.0;  // NaN or negative: no evidence either way
+    return d2 > v ? v / d2 : 1.0;
+}
+/// k of CoarseWeight for AO, whose fine variance is binomial from the bins' counts: 3/4, the
+/// MSE-optimal weight for a finer bin holding a quarter of the coarser one's samples (note at
+/// the top).
+constexpr double kAoCoarseWeightK = 0.75;
+/// k for binned light (the path and direct integrators), whose fine variance comes from the
+/// pass's mean relative variance V:
+/// measured best near 4 (2-8 all beat the fixed blend; note at the top).
+constexpr double kLightCoarseWeightK = 4.0;
+
 /// What the visibility prepass keeps of a pass for its shading pass (render.cpp's PassTexels).
 struct PassScratch {
     std::vector<PassTexel> texels;  ///< per camera sample of the pass
@@ -215,9 +256,10 @@ public:
     /// for `raysPerHit` AO rays or light paths per hit, `passSpp` camera samples a pass and pass
     /// `pass`: c - log2(n / 4) / 3 for n = raysPerHit * passSpp * (pass + 1) rays per pixel (see
     /// the note at the top), c = 2.5 for AO (and the direct integrator's light) and 3.5 for
-    /// diffuse light whose noise was not measured (HitLightLevels). A fractional offset b
-    /// blends the bins of levels floor(b) and floor(b) + 1 above the texel's, weighted
-    /// 1 - frac(b) and frac(b).
+    /// diffuse light whose noise was not measured (HitLightLevels). For an offset b the bins
+    /// lie floor(b) and floor(b) + 1 levels above the texel's, and a sample combines the two by
+    /// their noise (the note at the top); light whose noise was not measured reads one of them,
+    /// the coarser with probability frac(b).
     static float HitBinLevels(int raysPerHit, int passSpp, uint32_t pass,
                               HitTerm term = HitTerm::Ao);
     /// The same for a path tracer's diffuse light, from the pass's noise: `noiseVar` / `noiseMean2`
