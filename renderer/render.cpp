@@ -829,111 +829,108 @@ void FetchCell(const MeshGrids& g, const BinTable<Bin>& bins, int face, int leve
         m.key = local, m.n = out;
     }
 }
-/// The 2x2 bins around record `h` in `cell` (fetched unless they are the cell's already), and
-/// the record's bilinear weights in cell.w.
+/// The 2x2 bins around point (u,v) of `face` at `level` of mesh `mesh` (grids `g`) in `cell`
+/// (fetched unless they are the cell's already), and the point's bilinear weights in cell.w.
 template <typename Bin>
-const BinCell<Bin>& CellAt(const TextureSpaceCache& tsc, const BinTable<Bin>& bins,
-                           const HitRecord& h, BinMemo<Bin>& memo, BinCell<Bin>& cell) {
-    const MeshGrids& g = tsc.Grids(h.mesh);
-    const int face = h.Face(), level = h.Level();
+const BinCell<Bin>& CellAt(const MeshGrids& g, const BinTable<Bin>& bins, int mesh, int face,
+                           int level, float u, float v, BinMemo<Bin>& memo, BinCell<Bin>& cell) {
     const int res = g.Res(face, level);
-    const float x = h.U() * float(res) - 0.5f, y = h.V() * float(res) - 0.5f;
-    const float fi = std::floor(x), fj = std::floor(y);
-    const int i0 = int(fi), j0 = int(fj);
-    const float fx = x - fi, fy = y - fj;
-    if (cell.mesh != h.mesh || cell.face != face || cell.level != level || cell.i0 != i0 ||
+    const float x = u * float(res) - 0.5f, y = v * float(res) - 0.5f;
+    // floor() by hand: std::floor is a libm call on baseline x86-64 (no SSE4.1 roundss), and
+    // was a tenth of this function in `perf`; x and y lie in [-0.5, res).
+    int i0 = int(x), j0 = int(y);
+    i0 -= float(i0) > x ? 1 : 0, j0 -= float(j0) > y ? 1 : 0;
+    const float fx = x - float(i0), fy = y - float(j0);
+    if (cell.mesh != mesh || cell.face != face || cell.level != level || cell.i0 != i0 ||
         cell.j0 != j0) {
         FetchCell(g, bins, face, level, res, i0, j0, memo, &cell);
-        cell.mesh = h.mesh, cell.face = face, cell.level = level, cell.i0 = i0, cell.j0 = j0;
+        cell.mesh = mesh, cell.face = face, cell.level = level, cell.i0 = i0, cell.j0 = j0;
     }
     cell.w[0] = (1.0f - fx) * (1.0f - fy), cell.w[1] = fx * (1.0f - fy);
     cell.w[2] = (1.0f - fx) * fy, cell.w[3] = fx * fy;
     return cell;
 }
-/// The cells a tile's reconstructions read: a record's level and the one above it.
+/// What a tile's reconstructions keep between samples: the cells of a record's level and of the
+/// one above it, each level with its own memo (sharing one, the two levels' bins evicted each
+/// other's).
 template <typename Bin>
 struct LevelCells {
+    BinMemo<Bin> fineMemo, coarseMemo;
     BinCell<Bin> fine, coarse;
 };
-/// The 2x2 bins one level above record `h`'s, in `cell`; null when h's level is its face's
-/// coarsest (the bins were clamped there: both levels are the same bins).
-template <typename Bin>
-const BinCell<Bin>* CoarseCellAt(const TextureSpaceCache& tsc, const BinTable<Bin>& bins,
-                                 const HitRecord& h, BinMemo<Bin>& memo, BinCell<Bin>& cell) {
-    const int face = h.Face(), level = h.Level();
-    const int up = tsc.Grids(h.mesh).ClampMip(face, level + 1);
-    if (up == level) return nullptr;
-    HitRecord above = h;
-    above.faceLevel = uint32_t(face) << 4 | uint32_t(up);
-    return &CellAt(tsc, bins, above, memo, cell);
-}
 /// A cell's bilinear estimate: the weighted mean of its bins, the weighted count (sum w n) and
 /// the squared-weight count (sum w^2 n): its variance is a sample's variance x count2 / count^2.
 struct CellEstimate {
-    glm::dvec3 mean{0.0};
-    double count = 0.0, count2 = 0.0;
+    glm::vec3 mean{0.0f};
+    float count = 0.0f, count2 = 0.0f;
 };
 CellEstimate EstimateOf(const BinCell<CountBin>& c) {
     CellEstimate e;
-    double num = 0.0;
+    float num = 0.0f;
     for (int k = 0; k < 4; ++k) {
-        const double w = double(c.w[k]), n = double(c.n[k].trials);
-        num += w * double(c.n[k].successes), e.count += w * n, e.count2 += w * w * n;
+        const float w = c.w[k], n = float(c.n[k].trials);
+        num += w * float(c.n[k].successes), e.count += w * n, e.count2 += w * w * n;
     }
-    e.mean = glm::dvec3(e.count > 0.0 ? num / e.count : 0.0);
+    e.mean = glm::vec3(e.count > 0.0f ? num / e.count : 0.0f);
     return e;
 }
 CellEstimate EstimateOf(const BinCell<RadianceBin>& c) {
     CellEstimate e;
-    glm::dvec3 num(0.0);
+    glm::dvec3 num(0.0);  // fixed-point sums: up to 2^64, beyond a float's precision
     for (int k = 0; k < 4; ++k) {
         const RadianceBin::Value& n = c.n[k];
-        const double w = double(c.w[k]), count = double(n.count);
+        const double w = double(c.w[k]);
         num += w * glm::dvec3(double(n.sum[0]), double(n.sum[1]), double(n.sum[2]));
-        e.count += w * count, e.count2 += w * w * count;
+        e.count += c.w[k] * float(n.count), e.count2 += c.w[k] * c.w[k] * float(n.count);
     }
-    if (e.count > 0.0) e.mean = num / (e.count * RadianceBin::kScale);
+    if (e.count > 0.0f) e.mean = glm::vec3(num / (double(e.count) * RadianceBin::kScale));
     return e;
 }
 /// The reconstruction at record `h` from its level's bins and the level above (the note at the
 /// top of texture_space.h): fine + alpha (coarse - fine), alpha = CoarseWeight of their
-/// luminance difference and of the fine estimate's variance, `variance(fine, coarse)`. Without
-/// `variance`, h's level alone (its record then names the level of a stochastic blend).
+/// luminance difference and of the fine estimate's variance, `variance(fine, coarse)`. With
+/// k = 0, h's level alone (its record then names the level of a stochastic blend); the same
+/// where h's level is its face's coarsest (both levels' bins were clamped to it).
 template <typename Bin, typename Variance>
-glm::dvec3 Reconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins, const HitRecord& h,
-                       BinMemo<Bin>& memo, LevelCells<Bin>& cells, double k, Variance&& variance) {
-    const CellEstimate fine = EstimateOf(CellAt(tsc, bins, h, memo, cells.fine));
-    if (!(k > 0.0)) return fine.mean;
-    const BinCell<Bin>* up = CoarseCellAt(tsc, bins, h, memo, cells.coarse);
-    if (!up) return fine.mean;
-    const CellEstimate coarse = EstimateOf(*up);
-    if (!(coarse.count > 0.0)) return fine.mean;
-    if (!(fine.count > 0.0)) return coarse.mean;
-    const glm::dvec3 d = coarse.mean - fine.mean;
-    return fine.mean + CoarseWeight(Luminance(d), variance(fine, coarse), k) * d;
+glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins, const HitRecord& h,
+                      LevelCells<Bin>& cells, double k, Variance&& variance) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level();
+    const float u = h.U(), v = h.V();
+    const CellEstimate fine =
+        EstimateOf(CellAt(g, bins, h.mesh, face, level, u, v, cells.fineMemo, cells.fine));
+    const int up = g.ClampMip(face, level + 1);
+    if (!(k > 0.0) || up == level) return fine.mean;
+    const CellEstimate coarse =
+        EstimateOf(CellAt(g, bins, h.mesh, face, up, u, v, cells.coarseMemo, cells.coarse));
+    if (!(coarse.count > 0.0f)) return fine.mean;
+    if (!(fine.count > 0.0f)) return coarse.mean;
+    const glm::vec3 d = coarse.mean - fine.mean;
+    return fine.mean + float(CoarseWeight(Luminance(d), variance(fine, coarse), k)) * d;
 }
 float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
-                    BinMemo<CountBin>& memo, LevelCells<CountBin>& cells) {
-    return float(Reconstruct(tsc, bins, h, memo, cells, kAoCoarseWeightK,
-                             [](const CellEstimate& fine, const CellEstimate& coarse) {
-                                 // Binomial, with the coarse level's steadier mean (kept off 0
-                                 // and 1, where one bin's count would claim no noise at all).
-                                 const double p = std::clamp(coarse.mean.x, 0.02, 0.98);
-                                 return p * (1.0 - p) * fine.count2 / (fine.count * fine.count);
-                             })
-                     .x);
+                    LevelCells<CountBin>& cells) {
+    return Reconstruct(tsc, bins, h, cells, kAoCoarseWeightK,
+                       [](const CellEstimate& fine, const CellEstimate& coarse) {
+                           // Binomial, with the coarse level's steadier mean (kept off 0 and 1,
+                           // where one bin's count would claim no noise at all).
+                           const double p = std::clamp(double(coarse.mean.x), 0.02, 0.98);
+                           return p * (1.0 - p) * double(fine.count2) /
+                                  (double(fine.count) * double(fine.count));
+                       })
+        .x;
 }
 /// `relativeVariance`: one binned sample's variance over its mean squared, measured over the
 /// pass (PathHitsTrace); 0 when not measured.
 glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const RadianceBins& bins,
-                              const HitRecord& h, BinMemo<RadianceBin>& memo,
-                              LevelCells<RadianceBin>& cells, double relativeVariance) {
-    return glm::vec3(
-        Reconstruct(tsc, bins, h, memo, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
-                    [&](const CellEstimate& fine, const CellEstimate& coarse) {
-                        const double y = Luminance(coarse.mean);
-                        return relativeVariance * y * y * fine.count2 / (fine.count * fine.count);
-                    }));
+                              const HitRecord& h, LevelCells<RadianceBin>& cells,
+                              double relativeVariance) {
+    return Reconstruct(tsc, bins, h, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
+                       [&](const CellEstimate& fine, const CellEstimate& coarse) {
+                           const double y = Luminance(coarse.mean);
+                           return relativeVariance * y * y * double(fine.count2) /
+                                  (double(fine.count) * double(fine.count));
+                       });
 }
 
 /// Phase 2 of hit binning for one tile: each pixel's sum, from `start(pixel)` on, of
@@ -956,7 +953,6 @@ void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, 
 /// its pixel in sample order.
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                    const HitRecord* records, const HitBins& bins, double* sum) {
-    BinMemo<CountBin> memo;
     LevelCells<CountBin> cells;
     ResolveTile(
         c, r, s1 - s0, sum, [](size_t) { return glm::dvec3(0.0); },
@@ -965,7 +961,7 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
             return glm::dvec3(h.mesh == PassTexels::kMiss ? 0.0
                               : h.mesh == PassTexels::kLight
                                   ? 1.0
-                                  : double(ReconstructAo(*c.tsc, bins, h, memo, cells)));
+                                  : double(ReconstructAo(*c.tsc, bins, h, cells)));
         });
 }
 
@@ -976,15 +972,13 @@ void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s
                      const HitRecord* records, const BinnedHit* binnedHits,
                      const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
                      double* sum) {
-    BinMemo<RadianceBin> memo;
     LevelCells<RadianceBin> cells;
     ResolveTile(
         c, r, s1 - s0, sum, [&](size_t pixel) { return perHit[pixel]; },
         [&](size_t i) {
             if (records[i].mesh < 0) return glm::dvec3(0.0);
             return glm::dvec3(binnedHits[i].albedo * ReconstructRadiance(*c.tsc, bins, records[i],
-                                                                         memo, cells,
-                                                                         relativeVariance));
+                                                                         cells, relativeVariance));
         });
 }
 
