@@ -137,6 +137,25 @@ TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
     EXPECT_NE(text.str().find("- chess-softshadow: "), std::string::npos);
     EXPECT_NE(text.str().find("- car-ao: "), std::string::npos);
 
+    // --methods reruns some methods of a case and keeps its other methods' rows; an unknown
+    // method is a clear error naming the valid ones.
+    r = Texcache(
+        "experiment speed-vs-error --quick --only car-ao --methods ts-hits,per-hit --out " +
+        out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("keeping 16 rows"), std::string::npos) << r.out;  // 6 + 5 x 2 not rerun
+    rowsPerCase.clear();
+    std::ifstream again(out / "speed_vs_error.csv");
+    std::getline(again, line);
+    while (std::getline(again, line)) ++rowsPerCase[line.substr(0, line.find(','))];
+    EXPECT_EQ(rowsPerCase["chess-softshadow"], 3 * 2);
+    EXPECT_EQ(rowsPerCase["car-ao"], 7 * 2);
+    r = Texcache("experiment speed-vs-error --quick --only car-ao --methods ts-nothing --out " +
+                 out.string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("no method named 'ts-nothing'"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("ts-hits"), std::string::npos) << r.out;
+
     // A damaged CSV: the run stops before rendering and the file is kept.
     {
         std::ofstream bad(out / "speed_vs_error.csv", std::ios::app);

@@ -20,6 +20,7 @@ struct ExperimentArgs {
     std::string scenes = TEXCACHE_SCENES_DIR;
     bool quick = false;
     std::string only;
+    std::string methods;
     int cameraSpp = 0;
     bool ablation = false;
 };
@@ -61,7 +62,7 @@ int RunExperiment(const ExperimentArgs& a) {
     if (a.cameraSpp < 0 || a.cameraSpp > 1024)
         throw InputError("--camera-spp",
                          "must be in 1..1024 (got " + std::to_string(a.cameraSpp) + ")");
-    experiments::Setup s{a.out, a.scenes, a.quick, a.only, a.cameraSpp, a.ablation};
+    experiments::Setup s{a.out, a.scenes, a.quick, a.only, a.methods, a.cameraSpp, a.ablation};
     const double t0 = NowSeconds();
     int code = 0;
     for (const auto& [name, fn] : all)
@@ -83,6 +84,9 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--only", args->only,
                     "speed-vs-error: run only these cases (comma separated, e.g. car-ao,chess-ao); "
                     "temporal: only these scenes (e.g. anim_shadow,anim_glossy)");
+    cmd->add_option("--methods", args->methods,
+                    "speed-vs-error: run only these methods (comma separated, e.g. "
+                    "per-hit,ts-hits); an earlier run's other rows in --out are kept");
     cmd->add_option("--camera-spp", args->cameraSpp,
                     "speed-vs-error: camera samples per pixel, the same rays for every render "
                     "(default 4; Munkberg et al. Fig. 7 use 16)");

@@ -23,6 +23,9 @@ struct Setup {
     bool quick = false;  ///< test size: small images, few budgets, under a minute on 2 cores
     /// Comma-separated subset to run (empty: all): speed-vs-error case labels, temporal scenes.
     std::string only;
+    /// speed-vs-error: comma-separated methods to run (empty: all), e.g. per-hit,ts-hits; the
+    /// other methods' rows of an earlier run in the same directory are kept.
+    std::string methods;
     /// speed-vs-error: camera samples per pixel (0: the experiment's default, 16).
     int cameraSpp = 0;
     /// temporal: also Reliable (demodulation on) with the paper's alpha 0.1, with the glossy

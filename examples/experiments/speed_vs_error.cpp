@@ -8,6 +8,8 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <set>
+#include <sstream>
 
 #include "experiment_util.h"
 #include "renderer/metrics.h"
@@ -271,6 +273,10 @@ int SpeedVsError(const Setup& s) {
     auto isSelected = [&](const std::string& label) {
         return s.only.empty() || ("," + s.only + ",").find("," + label + ",") != std::string::npos;
     };
+    auto isMethodSelected = [&](const std::string& method) {
+        return s.methods.empty() ||
+               ("," + s.methods + ",").find("," + method + ",") != std::string::npos;
+    };
     for (const Case& c : cases)
         if (isSelected(c.label)) selected.push_back(c);
     if (selected.empty()) {
@@ -278,15 +284,30 @@ int SpeedVsError(const Setup& s) {
         for (const Case& c : cases) valid += (valid.empty() ? "" : ", ") + c.label;
         throw InputError("--only", "no case named '" + s.only + "' (valid: " + valid + ")");
     }
-    // A run of some cases keeps the other cases' rows of an earlier run in the same directory:
-    // the CSV and summary then cover every case measured so far.
+    if (!s.methods.empty()) {
+        std::set<std::string> valid;
+        for (const Case& c : selected)
+            for (const Method& m : c.methods) valid.insert(m.name);
+        std::stringstream ss(s.methods);
+        for (std::string name; std::getline(ss, name, ',');)
+            if (!valid.count(name)) {
+                std::string list;
+                for (const std::string& v : valid) list += (list.empty() ? "" : ", ") + v;
+                throw InputError("--methods", "no method named '" + name +
+                                                  "' in these cases (valid: " + list + ")");
+            }
+    }
+    // A run of some cases or methods keeps the other rows of an earlier run in the same
+    // directory: the CSV and summary then cover everything measured so far. The per-hit terms'
+    // bound (kUncachedOnly) is measured again only with every method.
     const std::string csv = (fs::path(s.outDir) / "speed_vs_error.csv").string();
-    if (!s.only.empty() && fs::exists(csv)) {
+    if ((!s.only.empty() || !s.methods.empty()) && fs::exists(csv)) {
         const Table old = Table::Read(csv, columns);
         size_t kept = 0;
         for (size_t i = 0; i < old.NumRows(); ++i) {
             const std::vector<std::string>& r = old.RowAt(i);
-            if (isSelected(r[0])) continue;
+            const bool rerun = r[1] == kUncachedOnly ? s.methods.empty() : isMethodSelected(r[1]);
+            if (isSelected(r[0]) && rerun) continue;
             table.Row();
             for (const std::string& v : r) table.Add(v);
             if (r[1] == kUncachedOnly)
@@ -296,8 +317,7 @@ int SpeedVsError(const Setup& s) {
                          {std::stod(r[10]), std::stod(r[6]), std::stod(r[7]), std::stod(r[9])});
             ++kept;
         }
-        if (kept)
-            Say("[speed-vs-error] keeping %zu rows of other cases from %s", kept, csv.c_str());
+        if (kept) Say("[speed-vs-error] keeping %zu rows not rerun from %s", kept, csv.c_str());
     }
 
     std::map<std::string, std::unique_ptr<LoadedScene>> scenes;
@@ -341,6 +361,7 @@ int SpeedVsError(const Setup& s) {
             Reference(s, Format("%s_%dx%d", refTag.c_str(), W, H), *ls.rs, imageOpt);
 
         for (const Method& m : c.methods) {
+            if (!isMethodSelected(m.name)) continue;
             const std::vector<int> budgets = Budgets(s, m.texture);
             for (int b : budgets) {
                 RenderOptions o = base;
@@ -371,7 +392,7 @@ int SpeedVsError(const Setup& s) {
                                r.image);
             }
         }
-        if (c.integrator == IntegratorKind::Path) {
+        if (c.integrator == IntegratorKind::Path && s.methods.empty()) {
             RenderOptions o = base;
             ApplyBudget(&o, kNormal, 1, CameraSpp(s));
             o.texture.cacheDirect = c.cacheDirect;
