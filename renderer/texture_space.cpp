@@ -129,6 +129,10 @@ float TextureSpaceCache::HitLightLevels(double noiseVar, double noiseMean2, int 
 
 void TextureSpaceCache::BeginPass(uint32_t pass) {
     if (pass != pass_) Invalidate();
+    BeginPassRadii(pass);
+}
+
+void TextureSpaceCache::BeginPassRadii(uint32_t pass) {
     pass_ = pass;
     passRadiusOf_.resize(radiusOf_.size());
     for (size_t o = 0; o < radiusOf_.size(); ++o) passRadiusOf_[o] = PassRadius(radiusOf_[o], pass);

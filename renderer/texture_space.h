@@ -241,6 +241,11 @@ public:
     /// Starts pass `pass` of a progressive render (see the note at the top): evicts every
     /// sample and texel unless `pass` is the current one, and sets the filter radii of the pass.
     void BeginPass(uint32_t pass);
+    /// Back to pass 0 (its footprints, its random streams) for a new accumulation, keeping
+    /// what is cached: each sample and texel is an estimate of its own, whichever pass shaded
+    /// it. The preview calls it when the view moves after a still view re-shaded the cache for
+    /// many passes: the moving view would otherwise keep the last pass's shrunken footprints.
+    void RestartPasses() { BeginPassRadii(0); }
     /// The current pass: 0 for a new cache, after Reconfigure and after BeginFrame.
     uint32_t Pass() const { return pass_; }
     /// Whether renders through this cache run progressive passes (options.passSpp > 0, no
@@ -368,6 +373,8 @@ public:
 
 private:
     void AssignFilters(const Scene& scene);
+    /// Sets the pass and its filter radii (BeginPass without the eviction).
+    void BeginPassRadii(uint32_t pass);
     /// The mean of the cached texels among the 8 around `texel` on its face and level; false
     /// when none is cached (see ReuseNeighbourTexels).
     bool FindNeighbourTexel(const SampleRequest& texel, glm::vec3* value) const;

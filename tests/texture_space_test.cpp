@@ -417,6 +417,27 @@ TEST(TextureSpace, PrepassFindsTexelsOnlyInACacheThatMayHoldThem) {
     EXPECT_FALSE(cache.MayHoldTexels());
 }
 
+// RestartPasses (the preview, when the view moves after a still view re-shaded its cache for
+// many passes) goes back to pass 0 and keeps what is cached: the next render of the view finds
+// its texels, and once emptied the cache renders pass 0's image again (its full footprints),
+// not pass 40's (radius 6 -> 3).
+TEST(TextureSpace, RestartPassesKeepsTheCacheAndPassZerosFootprints) {
+    const RenderScene& rs = TorusAo();
+    RenderOptions o = CachedAo(2, 1, TextureFilterKind::Normal);
+    o.texture.radius = 6;
+    TextureSpaceCache cache(rs, o.texture);
+    const Image pass0 = Render(rs, o, &cache).beauty;
+    cache.BeginPass(40);
+    const Image pass40 = Render(rs, o, &cache).beauty;
+    EXPECT_NE(pass0.data, pass40.data);
+    cache.RestartPasses();
+    EXPECT_EQ(cache.Pass(), 0u);
+    const RenderResult kept = Render(rs, o, &cache);
+    EXPECT_GE(double(kept.stats.cache.texelHits), 0.99 * double(kept.stats.cache.lookups));
+    cache.Invalidate();
+    EXPECT_EQ(Render(rs, o, &cache).beauty.data, pass0.data);
+}
+
 // Reconfigure keeps the storage but starts empty with the new options: the render after it
 // equals a render with a freshly built cache (bit-exact: samples draw from per-key streams), for
 // a change of filter and radius. A different layout (cache size) is refused and changes nothing.

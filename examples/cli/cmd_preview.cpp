@@ -49,6 +49,7 @@ struct PreviewCliArgs {
     std::string benchOut = "out/preview_bench";
     bool stereo = false;
     std::optional<float> eyeSeparation;  // none: the scene camera's, else 1/30 of the orbit's
+    bool noReshade = false;
 };
 
 int RunPreview(const PreviewCliArgs& a) {
@@ -73,6 +74,7 @@ int RunPreview(const PreviewCliArgs& a) {
     s.texelCacheMb = float(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0));
     s.exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
     s.view = preview::ParseViewMode(a.view, "--view");
+    s.refineCacheWhenStill = !a.noReshade;
     s.denoise = a.denoise != "off";
     if (s.denoise) {
         try {
@@ -183,6 +185,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->add_option("--texel-cache-mb", a->texelCacheMb, "Texel cache size (MiB)")
         ->capture_default_str();
+    cmd->add_flag("--no-reshade", a->noReshade,
+                  "Keep the first frame's cache while the view is still (by default every "
+                  "accumulated frame re-shades it, so texture-space noise converges too)");
     cmd->add_option("--exposure", a->exposure, "Display exposure in stops")->capture_default_str();
     cmd->add_option("--view", a->view,
                     "What the window shows: beauty, faceid, mip, texels, hitmiss (texel-cache hits "

@@ -583,6 +583,10 @@ void ProgressiveRenderer::Run() {
                 // shading, jittered samples, smaller footprints; see texture_space.h).
                 if (cur.refineCacheWhenStill && accumulated > 0 && opt.texture.enabled)
                     cache->BeginPass(uint32_t(accumulated));
+                // A new accumulation (the view moved) starts at pass 0's footprints again,
+                // keeping the cache, the point of the preview.
+                if (accumulated == 0 && opt.texture.enabled && cache->Pass() > 0)
+                    cache->RestartPasses();
                 TextureSpaceCache* tsc = opt.texture.enabled ? cache.get() : nullptr;
                 RenderResult r;
                 if (stereo) {

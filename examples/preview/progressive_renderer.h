@@ -74,9 +74,11 @@ struct PreviewSettings {
     ViewMode view = ViewMode::Beauty;
     int maxFrames = 256;  ///< accumulation stops here (the CPU then idles)
     float time = 0.0f;    ///< scene time rendered (seconds); a change starts a cache frame
-    /// Re-shade the cache on every accumulated frame of a still view, so texture-space noise
-    /// converges too (otherwise only anti-aliasing improves while still).
-    bool refineCacheWhenStill = false;
+    /// Re-shade the cache on every accumulated frame of a still view (a progressive pass:
+    /// fresh random numbers, jittered sample positions, smaller footprints; texture_space.h),
+    /// so texture-space noise and bias converge too; off, the first frame's cache is reused
+    /// and only anti-aliasing improves while still (test Preview.StillViewConverges).
+    bool refineCacheWhenStill = true;
     uint64_t seed = 0;
     /// The screen-space stage on the preview's frames (see the top of this file): off, or this
     /// method, with demodulation as `texcache render --demodulate`. While it is on, frames are
