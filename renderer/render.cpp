@@ -867,6 +867,22 @@ struct LevelCells {
     BinMemo<Bin> fineMemo, coarseMemo;
     CellSet<Bin> fine, coarse;
 };
+/// The calling thread's LevelCells for reading `bins`: kept from tile to tile while the table
+/// holds the same bins (its Generation), so that a tile finds the bins its neighbours, read
+/// before on this thread, fetched already; emptied when the table changed.
+template <typename Bin>
+LevelCells<Bin>& ThreadCells(const BinTable<Bin>& bins) {
+    thread_local uint64_t generation = 0;
+    thread_local std::unique_ptr<LevelCells<Bin>> cells;
+    if (!cells || generation != bins.Generation()) {
+        if (cells)
+            *cells = LevelCells<Bin>();
+        else
+            cells = std::make_unique<LevelCells<Bin>>();
+        generation = bins.Generation();
+    }
+    return *cells;
+}
 /// A cell's bilinear estimate: the weighted mean of its bins, the weighted count (sum w n) and
 /// the squared-weight count (sum w^2 n): its variance is a sample's variance x count2 / count^2.
 struct CellEstimate {
@@ -962,7 +978,7 @@ void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, 
 /// its pixel in sample order.
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                    const HitRecord* records, const HitBins& bins, double* sum) {
-    LevelCells<CountBin> cells;
+    LevelCells<CountBin>& cells = ThreadCells(bins);
     ResolveTile(
         c, r, s1 - s0, sum, [](size_t) { return glm::dvec3(0.0); },
         [&](size_t i) {
@@ -981,7 +997,7 @@ void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s
                      const HitRecord* records, const BinnedHit* binnedHits,
                      const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
                      double* sum) {
-    LevelCells<RadianceBin> cells;
+    LevelCells<RadianceBin>& cells = ThreadCells(bins);
     ResolveTile(
         c, r, s1 - s0, sum, [&](size_t pixel) { return perHit[pixel]; },
         [&](size_t i) {

@@ -49,6 +49,23 @@ TEST(HitBins, AddsAndFindsPerBinWithinABlock) {
     EXPECT_EQ(bins.BlocksUsed(), 0u);
 }
 
+// Generation names a table's contents: a new number at each Clear, never one another table or
+// earlier contents had, so a reader may keep what it read while it stays the same.
+TEST(HitBins, GenerationChangesAtEachClearAndDiffersBetweenTables) {
+    HitBins a(8);
+    RadianceBins b(8);
+    const uint64_t a0 = a.Generation(), b0 = b.Generation();
+    EXPECT_NE(a0, 0u);
+    EXPECT_NE(a0, b0);
+    ASSERT_TRUE(a.Add(Key(1, 0, 0, 0), {1, 1}));
+    EXPECT_EQ(a.Generation(), a0);  // adds do not change it (readers run after every add)
+    a.Clear();
+    EXPECT_NE(a.Generation(), a0);
+    EXPECT_NE(a.Generation(), b0);
+    const HitBins c(8);
+    EXPECT_NE(c.Generation(), a.Generation());
+}
+
 // Concurrent adds from 4 threads into keys that share blocks and probe chains (a table of 64
 // blocks for 40 blocks' keys): every bin ends with exactly the sum of its adds, whichever
 // thread claimed its block. Run under ThreadSanitizer by scripts/test.sh (label "cache").

@@ -117,6 +117,14 @@ struct RadianceBin {
     }
 };
 
+namespace internal {
+/// A number no earlier call returned, process-wide (every kind of table draws from it).
+inline uint64_t NextGeneration() {
+    static std::atomic<uint64_t> last{0};
+    return last.fetch_add(1, std::memory_order_relaxed) + 1;
+}
+}  // namespace internal
+
 /// A fixed-size, lock-free table of bins (see the design note above), keyed by TexelKey, of one
 /// kind: CountBin (HitBins) or RadianceBin (RadianceBins).
 template <typename Bin>
@@ -146,6 +154,7 @@ public:
         }
         dropped_.store(0, std::memory_order_relaxed);
         used_.store(0, std::memory_order_relaxed);
+        generation_ = internal::NextGeneration();
     }
 
     /// Adds `v` to bin `key` (a TexelKey of the bin's face, level and coordinates). False when
@@ -232,6 +241,10 @@ public:
     size_t BlocksUsed() const { return used_.load(std::memory_order_relaxed); }
     /// Bytes of `blocks` blocks.
     static constexpr size_t BytesFor(size_t blocks) { return blocks * kBytesPerBlock; }
+    /// What the table holds, as a number no other table's contents and no earlier contents of
+    /// this one had (a new one at each Clear, process-wide): a reader may keep what it read
+    /// from the table while the generation stays (render.cpp's per-thread reconstruction memo).
+    uint64_t Generation() const { return generation_; }
     /// Adds that found no room since the last Clear.
     uint64_t Dropped() const { return dropped_.load(std::memory_order_relaxed); }
     size_t NumBlocks() const { return blocks_; }
@@ -261,6 +274,7 @@ private:
     };
     std::unique_ptr<Block[], Free> bins_;
     std::atomic<uint64_t> dropped_{0};
+    uint64_t generation_ = 0;
     std::atomic<size_t> used_{0};
 };
 
