@@ -768,9 +768,10 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
 /// by its bilinear weight and its count.
 ///
 /// Neighbouring samples mostly read the same 2x2 bins, so a sample whose cell is one its level
-/// kept (CellSet) reuses its values (BinCell); other cells' bins
-/// are found through a small memo of the tile (BinMemo), keyed by the bin's coordinates before
-/// any edge crossing: a hit there saves the crossing and the probe of the shared table.
+/// kept (CellSet) reuses its values (BinCell); other cells' bins are found through a small memo
+/// of the thread's (BinMemo, kept from tile to tile: ThreadCells), keyed by the bin's
+/// coordinates before any edge crossing: a hit there saves the crossing and the probe of the
+/// shared table.
 template <typename Bin>
 struct BinMemo {
     static constexpr int kLog2 = 8;
@@ -859,7 +860,7 @@ const BinCell<Bin>& CellAt(const MeshGrids& g, const BinTable<Bin>& bins, int me
     cell.w[2] = (1.0f - fx) * fy, cell.w[3] = fx * fy;
     return cell;
 }
-/// What a tile's reconstructions keep between samples: the cells of a record's level and of the
+/// What a thread's reconstructions keep between samples: the cells of a record's level and of the
 /// one above it, each level with its own memo (sharing one, the two levels' bins evicted each
 /// other's).
 template <typename Bin>
