@@ -124,11 +124,16 @@ TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
     ASSERT_EQ(r.code, 0) << r.out;
     r = Texcache("experiment speed-vs-error --quick --only car-ao --out " + out.string());
     ASSERT_EQ(r.code, 0) << r.out;
-    std::map<std::string, int> rowsPerCase;
-    std::ifstream f(out / "speed_vs_error.csv");
-    std::string line;
-    std::getline(f, line);
-    while (std::getline(f, line)) ++rowsPerCase[line.substr(0, line.find(','))];
+    // Rows of the CSV per case (its first column), after the header.
+    auto rowsPerCaseOf = [](const fs::path& csv) {
+        std::map<std::string, int> rows;
+        std::ifstream f(csv);
+        std::string line;
+        std::getline(f, line);
+        while (std::getline(f, line)) ++rows[line.substr(0, line.find(','))];
+        return rows;
+    };
+    std::map<std::string, int> rowsPerCase = rowsPerCaseOf(out / "speed_vs_error.csv");
     EXPECT_EQ(rowsPerCase["chess-softshadow"], 3 * 2);  // per-hit, hits, softshadow; 2 budgets
     EXPECT_EQ(rowsPerCase["car-ao"], 7 * 2);
     std::ifstream md(out / "speed_vs_error.md");
@@ -144,10 +149,7 @@ TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
         out.string());
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_NE(r.out.find("keeping 16 rows"), std::string::npos) << r.out;  // 6 + 5 x 2 not rerun
-    rowsPerCase.clear();
-    std::ifstream again(out / "speed_vs_error.csv");
-    std::getline(again, line);
-    while (std::getline(again, line)) ++rowsPerCase[line.substr(0, line.find(','))];
+    rowsPerCase = rowsPerCaseOf(out / "speed_vs_error.csv");
     EXPECT_EQ(rowsPerCase["chess-softshadow"], 3 * 2);
     EXPECT_EQ(rowsPerCase["car-ao"], 7 * 2);
     r = Texcache("experiment speed-vs-error --quick --only car-ao --methods ts-nothing --out " +
