@@ -11,7 +11,7 @@ endif()
 
 add_library(texcache_sanitizers INTERFACE)
 if(NOT TEXCACHE_SANITIZE STREQUAL "")
-  # One ISA for the screen-space kernels (filters/screen_space/internal.h says why).
+  # One ISA for the screen-space kernels (screen_space/internal.h says why).
   target_compile_definitions(texcache_sanitizers INTERFACE TEXCACHE_NO_ISA_CLONES)
 endif()
 if(TEXCACHE_SANITIZE STREQUAL "address")

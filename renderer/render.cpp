@@ -20,9 +20,9 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
-#include "renderer/cached_shading.h"
-#include "renderer/path_tracer.h"
+#include "renderer/integrators/path_tracer.h"
 #include "renderer/progress.h"
+#include "renderer/texture_space/cached_shading.h"
 #include "texcache/error.h"
 
 namespace texcache {

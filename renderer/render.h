@@ -6,10 +6,10 @@
 #include <string>
 #include <vector>
 
-#include "renderer/image.h"
-#include "renderer/integrator_kind.h"
-#include "renderer/render_scene.h"
-#include "renderer/texture_space.h"
+#include "renderer/image/image.h"
+#include "renderer/integrators/integrator_kind.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/texture_space/texture_space.h"
 
 namespace texcache {
 

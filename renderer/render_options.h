@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "filters/texture_filters.h"
-#include "renderer/integrator_kind.h"
-#include "renderer/scene.h"
+#include "renderer/integrators/integrator_kind.h"
+#include "renderer/scene/scene.h"
 #include "texcache/record_cache.h"
 #include "texcache/shading_cache.h"
 
@@ -67,7 +67,7 @@ enum class TextureSamples { Grid, Hits };
 TextureSamples ParseTextureSamples(const std::string& name, const std::string& where);
 
 /// How the direct and path integrators sample an environment light at camera hits on glossy
-/// materials (Munkberg et al. 2016, Sec. 6; renderer/product_sampling.h):
+/// materials (Munkberg et al. 2016, Sec. 6; renderer/integrators/product_sampling.h):
 ///   Mis   light sampling (the map's luminance) and BSDF sampling, combined by MIS;
 ///   Pis   product importance sampling: a product sampling record (PSR) of lobe x environment
 ///         built at every hit, MIS-combined with BSDF sampling;
@@ -168,8 +168,9 @@ struct PixelCacheCounts {
 ///   Own   the set starts empty and holds this render's texels (a mono render);
 ///   Keep  this render marks its texels on top of the set an earlier render left;
 ///   Only  as Keep, and nothing is shaded (the image stays black): marks for a render to come.
-/// Stereo (renderer/stereo.h) marks the right eye's texels (Only), then renders the left eye
-/// (Keep), whose footprints then shade the samples the right eye will look up, then the right.
+/// Stereo (renderer/texture_space/stereo.h) marks the right eye's texels (Only), then renders the
+/// left eye (Keep), whose footprints then shade the samples the right eye will look up, then the
+/// right.
 enum class VisibilityPrepass { Own, Keep, Only };
 
 struct RenderOptions {
@@ -202,15 +203,15 @@ struct RenderOptions {
     /// Cpis: mip levels above the pixel-sized texel (eq. 1) at which records are cached, before
     /// the lobe's own term (see product_sampling.h, RecordLevelBias).
     float psrLodBias = 1.0f;
-    /// Stereo (renderer/stereo.h): this render is the eye `eyeOffset` along the camera's x axis
-    /// (0: the centred camera), its frustum converging at `eyeConvergence`.
+    /// Stereo (renderer/texture_space/stereo.h): this render is the eye `eyeOffset` along the
+    /// camera's x axis (0: the centred camera), its frustum converging at `eyeConvergence`.
     float eyeOffset = 0.0f, eyeConvergence = 1.0f;
     /// Renders samples [firstSample, spp) of each pixel (their random streams are those of a
     /// whole render), without beginning a progressive pass itself: a caller interleaving
     /// renders that share a cache pass by pass (stereo) begins the passes.
     int firstSample = 0;
     /// Renders only rows [rowBegin, rowEnd) of the image (rowEnd 0: to the last row); the other
-    /// rows stay black. Stereo takes turns band by band (renderer/stereo.h).
+    /// rows stay black. Stereo takes turns band by band (renderer/texture_space/stereo.h).
     int rowBegin = 0, rowEnd = 0;
     VisibilityPrepass visibilityPrepass = VisibilityPrepass::Own;
     /// When set, filled with width x height PixelCacheCounts of this frame's lookups (all zero

@@ -13,10 +13,10 @@
 
 #include "cli_run.h"
 #include "filters/visibility_filter.h"
-#include "renderer/camera.h"
 #include "renderer/render.h"
-#include "renderer/texture_space.h"
-#include "renderer/visibility_pass.h"
+#include "renderer/scene/camera.h"
+#include "renderer/texture_space/texture_space.h"
+#include "renderer/texture_space/visibility_pass.h"
 #include "test_util.h"
 
 namespace texcache {

@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "cli_run.h"
-#include "renderer/image.h"
+#include "renderer/image/image.h"
 #include "support/cages.h"
 #include "test_util.h"
 

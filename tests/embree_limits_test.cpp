@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // Cages past Embree's subdivision limits (a 16-gon aborts Embree; larger faces, valence 65+ and
 // 1-rings of over 128 vertices vanish) render their limit surface through OpenSubdiv's
-// tessellation (design note at the top of renderer/render_scene.cpp): hits decode to Ptex
+// tessellation (design note at the top of renderer/scene/render_scene.cpp): hits decode to Ptex
 // locations on OpenSubdiv's limit surface, closed cages have no holes where the large faces meet
 // their neighbours, the tessellation agrees with Embree on cages both can take, and texture-space
 // shading (footprints across every face edge) matches per-hit shading.
@@ -9,10 +9,10 @@
 
 #include <cmath>
 
-#include "renderer/metrics.h"
-#include "renderer/ptex_mapping.h"
+#include "renderer/image/metrics.h"
 #include "renderer/render.h"
-#include "renderer/render_scene.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/texture_space/ptex_mapping.h"
 #include "support/cages.h"
 #include "test_util.h"
 #include "texcache/topology.h"

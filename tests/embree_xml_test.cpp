@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
-// The Embree tutorial XML writer of `texcache bench peer` (renderer/embree_xml.h): what it writes
-// reads back as the same cage, and what Embree's path tracer cannot take is named.
+// The Embree tutorial XML writer of `texcache bench peer` (renderer/scene/embree_xml.h): what it
+// writes reads back as the same cage, and what Embree's path tracer cannot take is named.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "renderer/embree_xml.h"
+#include "renderer/scene/embree_xml.h"
 #include "test_util.h"
 
 namespace texcache {

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
-// The screen-space stage's input (renderer/frame_buffers_render.h): the camera projects the
-// guides onto pixel centres, "prev" points follow their own object's (or light's) motion, the
-// shadow ray's blocker exists exactly where the light sample is blocked, the split composes to
-// the path tracer's image, the animated scenes render, and the EXR files and the CLI round-trip.
+// The screen-space stage's input (renderer/frame_buffers/frame_buffers_render.h): the camera
+// projects the guides onto pixel centres, "prev" points follow their own object's (or light's)
+// motion, the shadow ray's blocker exists exactly where the light sample is blocked, the split
+// composes to the path tracer's image, the animated scenes render, and the EXR files and the CLI
+// round-trip.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
@@ -15,14 +16,14 @@
 #include <type_traits>
 
 #include "cli_run.h"
-#include "filters/screen_space/brdf_table.h"
-#include "filters/screen_space/screen_denoiser.h"
-#include "renderer/bsdf.h"
-#include "renderer/frame_buffers_render.h"
-#include "renderer/metrics.h"
-#include "renderer/polygon_light.h"
-#include "renderer/sampling.h"
-#include "renderer/scene_loader.h"
+#include "renderer/frame_buffers/frame_buffers_render.h"
+#include "renderer/image/metrics.h"
+#include "renderer/integrators/bsdf.h"
+#include "renderer/integrators/polygon_light.h"
+#include "renderer/integrators/sampling.h"
+#include "renderer/scene/scene_loader.h"
+#include "screen_space/brdf_table.h"
+#include "screen_space/screen_denoiser.h"
 #include "test_util.h"
 #include "texcache/error.h"
 
@@ -438,9 +439,9 @@ TEST(FrameBuffers, ShadingIsLowNoise) {
     EXPECT_LT(p99, 0.35);
 }
 
-// Lambert's formula (renderer/polygon_light.h): a quad covering the sky gives pi, a small one
-// straight above its area over the squared distance, either winding the same, one wholly below
-// the tangent plane 0, and a tilted quad crossing the plane what 400k cosine-distributed
+// Lambert's formula (renderer/integrators/polygon_light.h): a quad covering the sky gives pi, a
+// small one straight above its area over the squared distance, either winding the same, one wholly
+// below the tangent plane 0, and a tilted quad crossing the plane what 400k cosine-distributed
 // directions find (the fraction hitting it, times pi; standard error ~0.1% of the value).
 TEST(PolygonLight, ProjectedSolidAngleMatchesKnownValuesAndSampling) {
     // The edge factor's fit against theta / (2 pi sin theta) (relative error ~1.5e-6; 1e-5).

@@ -18,10 +18,10 @@
 #include <string>
 #include <vector>
 
-#include "renderer/frame_buffers_render.h"
-#include "renderer/image.h"
-#include "renderer/obj_loader.h"
-#include "renderer/scene_loader.h"
+#include "renderer/frame_buffers/frame_buffers_render.h"
+#include "renderer/image/image.h"
+#include "renderer/scene/obj_loader.h"
+#include "renderer/scene/scene_loader.h"
 #include "test_util.h"
 #include "texcache/error.h"
 

@@ -8,8 +8,8 @@
 #include <fstream>
 #include <random>
 
-#include "renderer/image.h"
-#include "renderer/metrics.h"
+#include "renderer/image/image.h"
+#include "renderer/image/metrics.h"
 #include "texcache/error.h"
 
 namespace texcache {

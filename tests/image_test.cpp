@@ -10,8 +10,8 @@
 #include <limits>
 #include <string>
 
-#include "renderer/atomic_files.h"
-#include "renderer/image.h"
+#include "renderer/image/atomic_files.h"
+#include "renderer/image/image.h"
 #include "test_util.h"
 #include "texcache/error.h"
 
@@ -154,7 +154,7 @@ TEST(ImageFiles, PngIsSrgbEncodedWithExposureAndSurvivesNonFinite) {
 }
 
 // The PNG beside every render's EXR is written with libpng: writing it loads none of
-// OpenImageIO's libraries (~0.3 s of CPU per process; renderer/image_file.h). CTest runs each
+// OpenImageIO's libraries (~0.3 s of CPU per process; renderer/image/image_file.h). CTest runs each
 // test in a process of its own, so nothing else here has loaded them.
 TEST(ImageFiles, WritingAPngLoadsNoOpenImageIO) {
     const fs::path dir = TempDir();

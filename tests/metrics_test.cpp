@@ -12,8 +12,8 @@
 #include <random>
 #include <string>
 
-#include "renderer/image.h"
-#include "renderer/metrics.h"
+#include "renderer/image/image.h"
+#include "renderer/image/metrics.h"
 #include "texcache/error.h"
 
 namespace texcache {

@@ -7,7 +7,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "renderer/obj_loader.h"
+#include "renderer/scene/obj_loader.h"
 #include "test_util.h"
 #include "texcache/error.h"
 

@@ -18,12 +18,12 @@
 #include <gtest/gtest.h>
 
 #include "progressive_renderer.h"
-#include "renderer/image.h"
-#include "renderer/metrics.h"
+#include "renderer/image/image.h"
+#include "renderer/image/metrics.h"
 #include "renderer/render.h"
-#include "renderer/render_scene.h"
-#include "renderer/scene_loader.h"
-#include "renderer/texture_space.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/scene/scene_loader.h"
+#include "renderer/texture_space/texture_space.h"
 #include "support/cages.h"
 #include "test_util.h"
 

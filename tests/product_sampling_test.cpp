@@ -1,20 +1,20 @@
 // SPDX-License-Identifier: Apache-2.0
 // Anisotropic GGX (against the isotropic functions, furnace) and product sampling records
-// (renderer/product_sampling.h): the inverse warp, pdf normalisation, chi-square of samples
-// against the pdf, and the fallbacks (black environment, mirror lobe, non-finite input).
+// (renderer/integrators/product_sampling.h): the inverse warp, pdf normalisation, chi-square of
+// samples against the pdf, and the fallbacks (black environment, mirror lobe, non-finite input).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
 #include <vector>
 
-#include "renderer/bsdf.h"
-#include "renderer/envmap.h"
-#include "renderer/image.h"
-#include "renderer/product_sampling.h"
+#include "renderer/image/image.h"
+#include "renderer/integrators/bsdf.h"
+#include "renderer/integrators/product_sampling.h"
+#include "renderer/integrators/sampling.h"
 #include "renderer/render.h"
-#include "renderer/sampling.h"
-#include "renderer/scene_loader.h"
+#include "renderer/scene/envmap.h"
+#include "renderer/scene/scene_loader.h"
 
 namespace texcache {
 namespace {

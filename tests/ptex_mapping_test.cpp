@@ -7,8 +7,8 @@
 #include <thread>
 #include <vector>
 
-#include "renderer/ptex_mapping.h"
-#include "renderer/render_scene.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/texture_space/ptex_mapping.h"
 #include "test_util.h"
 #include "texcache/error.h"
 #include "texcache/topology.h"

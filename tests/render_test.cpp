@@ -8,10 +8,10 @@
 
 #include <tbb/global_control.h>
 
-#include "renderer/camera.h"
-#include "renderer/metrics.h"
+#include "renderer/image/metrics.h"
+#include "renderer/integrators/sampling.h"
 #include "renderer/render.h"
-#include "renderer/sampling.h"
+#include "renderer/scene/camera.h"
 #include "test_util.h"
 
 namespace texcache {

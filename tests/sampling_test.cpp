@@ -8,13 +8,13 @@
 #include <filesystem>
 #include <vector>
 
-#include "renderer/bsdf.h"
-#include "renderer/distribution.h"
-#include "renderer/envmap.h"
-#include "renderer/image.h"
-#include "renderer/path_tracer.h"
+#include "renderer/image/image.h"
+#include "renderer/integrators/bsdf.h"
+#include "renderer/integrators/distribution.h"
+#include "renderer/integrators/path_tracer.h"
+#include "renderer/integrators/sampling.h"
 #include "renderer/render_options.h"
-#include "renderer/sampling.h"
+#include "renderer/scene/envmap.h"
 #include "test_util.h"
 #include "texcache/error.h"
 

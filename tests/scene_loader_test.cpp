@@ -10,7 +10,7 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
-#include "renderer/scene_loader.h"
+#include "renderer/scene/scene_loader.h"
 #include "test_util.h"
 #include "texcache/error.h"
 

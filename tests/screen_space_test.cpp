@@ -10,10 +10,10 @@
 #include <string>
 #include <vector>
 
-#include "filters/screen_space/brdf_table.h"
-#include "filters/screen_space/cone_overlap.h"
-#include "filters/screen_space/planes.h"
-#include "filters/screen_space/screen_denoiser.h"
+#include "screen_space/brdf_table.h"
+#include "screen_space/cone_overlap.h"
+#include "screen_space/planes.h"
+#include "screen_space/screen_denoiser.h"
 #include "tests/support/screen_space_scene.h"
 #include "texcache/error.h"
 

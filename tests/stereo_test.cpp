@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
-// Stereo rendering (renderer/stereo.h): the off-axis eyes, the second eye's reuse of the first
-// eye's texture-space cache, convergence to per-eye references, and the command line's errors
-// and outputs.
+// Stereo rendering (renderer/texture_space/stereo.h): the off-axis eyes, the second eye's reuse of
+// the first eye's texture-space cache, convergence to per-eye references, and the command line's
+// errors and outputs.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -13,9 +13,9 @@
 #include <tbb/task_arena.h>
 
 #include "cli_run.h"
-#include "renderer/camera.h"
-#include "renderer/metrics.h"
-#include "renderer/stereo.h"
+#include "renderer/image/metrics.h"
+#include "renderer/scene/camera.h"
+#include "renderer/texture_space/stereo.h"
 #include "test_util.h"
 #include "texcache/error.h"
 
@@ -160,12 +160,12 @@ TEST_P(StereoReuseModes, EyesConvergeToPerEyeReferences) {
 }
 
 // Path-traced diffuse light with full-window footprints and a sample cache too small for the
-// frame: the eyes take turns band by band (renderer/stereo.h), and the second eye shades fewer
-// than 3/4 of the samples it shades when the first eye renders its whole frame first (measured:
-// 0.36-0.44 of it), while the left eye's image stays exactly its mono render (1e-6), for one thread
-// and for two. Texels reuse: the second eye's new samples are then fixed by the two eyes' texels
-// and the cache's evictions (with Neighbour, the texels the second eye filters serve its later
-// lookups, so the count follows the threads' order).
+// frame: the eyes take turns band by band (renderer/texture_space/stereo.h), and the second eye
+// shades fewer than 3/4 of the samples it shades when the first eye renders its whole frame first
+// (measured: 0.36-0.44 of it), while the left eye's image stays exactly its mono render (1e-6), for
+// one thread and for two. Texels reuse: the second eye's new samples are then fixed by the two
+// eyes' texels and the cache's evictions (with Neighbour, the texels the second eye filters serve
+// its later lookups, so the count follows the threads' order).
 TEST(Stereo, BandsKeepTheFirstEyesSamplesForTheSecond) {
     const Scene s = CubeOnGround();
     const RenderScene rs(s, {});

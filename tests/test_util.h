@@ -10,10 +10,10 @@
 #include <string>
 #include <vector>
 
-#include "renderer/image.h"
-#include "renderer/obj_loader.h"
-#include "renderer/render_scene.h"
-#include "renderer/scene.h"
+#include "renderer/image/image.h"
+#include "renderer/scene/obj_loader.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/scene/scene.h"
 #include "texcache/topology.h"
 
 namespace texcache::test {

@@ -10,10 +10,10 @@
 
 #include <tbb/global_control.h>
 
-#include "renderer/metrics.h"
-#include "renderer/path_tracer.h"
+#include "renderer/image/metrics.h"
+#include "renderer/integrators/path_tracer.h"
 #include "renderer/render.h"
-#include "renderer/scene_loader.h"
+#include "renderer/scene/scene_loader.h"
 #include "support/cages.h"
 #include "test_util.h"
 

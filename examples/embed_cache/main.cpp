@@ -7,11 +7,11 @@
 
 #include <cstdio>
 
-#include "renderer/camera.h"
-#include "renderer/image.h"
-#include "renderer/render_scene.h"
-#include "renderer/sampling.h"
-#include "renderer/scene_loader.h"
+#include "renderer/image/image.h"
+#include "renderer/integrators/sampling.h"
+#include "renderer/scene/camera.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/scene/scene_loader.h"
 #include "texcache/shading_cache.h"
 
 using namespace texcache;

@@ -16,8 +16,8 @@
 #include <glm/glm.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 
-#include "filters/screen_space/frame_buffers.h"
-#include "renderer/sampling.h"
+#include "renderer/integrators/sampling.h"
+#include "screen_space/frame_buffers.h"
 
 namespace texcache::test {
 

@@ -1,0 +1,237 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache preview`: command-line options -> PreviewSettings, then the window, the headless
+// test mode or the benchmark.
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <optional>
+
+#include "cli_util.h"
+#include "commands.h"
+#include "preview.h"
+#include "renderer/render.h"
+#include "renderer/scene/scene_loader.h"
+#include "renderer/texture_space/stereo.h"
+#include "renderer/texture_space/texture_space.h"
+
+namespace texcache::cli {
+
+namespace {
+
+struct PreviewCliArgs {
+    std::string scene;
+    int frames = 0;
+    std::string screenshot;
+    float orbit = 20.0f;
+    std::string resolution;
+    std::string integrator = "ao";
+    std::string shading = "texture";
+    std::string filter = "none";
+    int filterRadius = 0;
+    std::string footprint = "auto";
+    int aoSamples = 32;
+    int spp = 1;
+    float lodBias = 1.0f;  // half the shading rate (Sec. 6.2): ~1 texel per pixel, high reuse
+    double sampleCacheMb = 64.0, texelCacheMb = 64.0;
+    float exposure = 0.0f;
+    std::string view = "beauty";
+    float time = NAN;  // NAN: the scene's render.time
+    bool play = false;
+    float fps = 24.0f;
+    bool saveCamera = false;
+    std::string denoise = "off";
+    bool demodulate = false;
+    bool cachedVisibility = false;
+    std::string motion = "traditional";
+    bool bench = false;
+    int benchFrames = 36;
+    int referenceSpp = 0;  // 0: 32 (AO, x 16 rays) or 128 (--denoise: path traced)
+    std::string benchOut = "out/preview_bench";
+    bool stereo = false;
+    std::optional<float> eyeSeparation;  // none: the scene camera's, else 1/30 of the orbit's
+    bool noReshade = false;
+};
+
+int RunPreview(const PreviewCliArgs& a) {
+    std::vector<std::string> warnings;
+    Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    for (const std::string& w : warnings)
+        std::fprintf(stderr, "texcache: warning: %s\n", w.c_str());
+
+    preview::PreviewSettings s;
+    s.integrator = ParseIntegrator(a.integrator, "--integrator");
+    if (a.shading != "hit" && a.shading != "texture")
+        throw InputError("--shading", "unknown mode '" + a.shading + "' (valid: hit, texture)");
+    s.textureSpace = a.shading == "texture";
+    s.filter = ParseTextureFilter(a.filter, "--filter");
+    CheckFilterRadius(a.filterRadius, "--filter-radius");
+    s.radius = a.filterRadius;
+    s.footprint = ParseFootprintMode(a.footprint, "--footprint");
+    s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 4096);
+    s.sppPerFrame = CheckRange("--spp", a.spp, 1, 4096);
+    s.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
+    s.sampleCacheMb = float(CheckRange("--sample-cache-mb", a.sampleCacheMb, 1.0, 65536.0));
+    s.texelCacheMb = float(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0));
+    s.exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
+    s.view = preview::ParseViewMode(a.view, "--view");
+    s.refineCacheWhenStill = !a.noReshade;
+    s.denoise = a.denoise != "off";
+    if (s.denoise) {
+        try {
+            s.denoiseMethod = screen::ParseMethodKey(a.denoise, "--denoise");
+        } catch (const InputError&) {
+            throw InputError("--denoise", "unknown method '" + a.denoise + "' (valid: off, " +
+                                              screen::MethodKeys() + ")");
+        }
+    }
+    s.demodulate = a.demodulate;
+    if (a.demodulate && !s.denoise)
+        throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    s.cachedVisibility = a.cachedVisibility;
+    if (a.cachedVisibility && (!s.denoise || !s.textureSpace))
+        throw InputError("--cached-visibility",
+                         "applies to the screen-space stage with texture space: give --denoise "
+                         "and --shading texture");
+    s.motionKind = preview::ParseMotionKind(a.motion, "--motion");
+    s.stereo = a.stereo;
+    if (a.eyeSeparation) {
+        if (!a.stereo) throw InputError("--eye-separation", "sets the stereo rig: give --stereo");
+        CheckStereoRig({*a.eyeSeparation, 1.0f}, "--eye-separation");
+        s.eyeSeparation = *a.eyeSeparation;
+    } else if (scene.camera.eyeSeparation > 0.0f) {
+        s.eyeSeparation = scene.camera.eyeSeparation;
+    }
+    if (a.stereo && s.denoise)
+        throw InputError("--stereo", "cannot be combined with --denoise (not supported yet)");
+    if (a.stereo && a.bench) throw InputError("--stereo", "cannot be combined with --bench");
+    if (!std::isnan(a.time)) scene.settings.time = CheckRange("--time", a.time, -1e6f, 1e6f);
+    // The scene's settings that the preview keeps (its size, spp and AO rays are its own).
+    const RenderOptions fromScene = RenderOptionsFrom(scene.settings);
+    s.time = fromScene.frameTime;
+    s.aoDistance = fromScene.aoDistance;
+    s.maxDepth = fromScene.maxDepth;
+    s.seed = fromScene.seed;
+    s.tessellationRate = scene.settings.tessellationRate;
+    // The preview's default is the benchmark's 512x512, not the scene's final-render size.
+    s.width = s.height = 512;
+    if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
+
+    preview::PreviewArgs p;
+    p.scenePath = a.scene;
+    p.frames = CheckRange("--frames", a.frames, 0, 100000);
+    p.screenshot = a.screenshot;
+    p.orbitDegrees = CheckRange("--orbit", a.orbit, -3600.0f, 3600.0f);
+    p.filterName = a.filter;
+    p.saveCamera = a.saveCamera;
+    p.play = a.play;
+    p.fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
+    if (a.play && p.frames == 0)
+        throw InputError("--play", "needs --frames N (the window has a timeline for it)");
+    if (a.saveCamera && p.frames == 0)
+        throw InputError("--save-camera", "needs --frames N (the window has a button for it)");
+    if (a.saveCamera && std::filesystem::path(a.scene).extension() != ".json")
+        throw InputError("--save-camera", "needs a .json scene file, got '" + a.scene + "'");
+    if (!a.screenshot.empty() && p.frames == 0)
+        throw InputError("--screenshot", "needs --frames N (the headless test mode)");
+    if (a.bench) {
+        preview::BenchArgs b;
+        b.frames = CheckRange("--bench-frames", a.benchFrames, 1, 10000);
+        b.referenceSpp = a.referenceSpp == 0
+                             ? (s.denoise ? 128 : 32)
+                             : CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
+        b.out = a.benchOut;
+        return preview::RunPreviewBench(scene, s, p, b);
+    }
+    return preview::RunPreviewWindow(std::move(scene), s, p);
+}
+
+}  // namespace
+
+void AddPreviewCommand(CLI::App& app, int& exitCode) {
+    auto a = std::make_shared<PreviewCliArgs>();
+    CLI::App* cmd = app.add_subcommand(
+        "preview",
+        "Interactive progressive preview (GLFW + OpenGL window), headless test mode, "
+        "frame-rate benchmark");
+    cmd->add_option("scene", a->scene, "Scene file (.json) or OBJ control cage (.obj)")->required();
+    cmd->add_option("--frames", a->frames,
+                    "Headless test mode: render N frames along a scripted orbit, then exit");
+    cmd->add_option("--screenshot", a->screenshot,
+                    "Headless: write what the window shows after the last frame (PNG)");
+    cmd->add_flag("--save-camera", a->saveCamera,
+                  "Headless: write the camera after the orbit back into the scene file");
+    cmd->add_option("--orbit", a->orbit, "Degrees the scripted camera orbits (headless, bench)")
+        ->capture_default_str();
+    cmd->add_option("--resolution", a->resolution, "Render size WxH (default 512x512)");
+    cmd->add_option("--integrator", a->integrator, std::string("One of: ") + IntegratorNames())
+        ->capture_default_str();
+    cmd->add_option("--shading", a->shading, "hit or texture (cache AO / diffuse indirect)")
+        ->capture_default_str();
+    cmd->add_option("--filter", a->filter,
+                    std::string("Texture-space filter: ") + TextureFilterNames())
+        ->capture_default_str();
+    cmd->add_option("--filter-radius", a->filterRadius, "Footprint radius r: (2r+1)^2 samples")
+        ->capture_default_str();
+    cmd->add_option("--footprint", a->footprint,
+                    "Filter footprints: visible (texels the frame's camera rays reach), all, or "
+                    "auto (visible for AO, all for direct and path)")
+        ->capture_default_str();
+    cmd->add_option("--ao-samples", a->aoSamples, "AO rays per hit / per cached sample")
+        ->capture_default_str();
+    cmd->add_option("--spp", a->spp, "Camera samples per pixel per frame")->capture_default_str();
+    cmd->add_option("--lod-bias", a->lodBias, "Shading LOD bias (> 0: coarser)")
+        ->capture_default_str();
+    cmd->add_option("--sample-cache-mb", a->sampleCacheMb, "Sample cache size (MiB)")
+        ->capture_default_str();
+    cmd->add_option("--texel-cache-mb", a->texelCacheMb, "Texel cache size (MiB)")
+        ->capture_default_str();
+    cmd->add_flag("--no-reshade", a->noReshade,
+                  "Keep the first frame's cache while the view is still (by default every "
+                  "accumulated frame re-shades it, so texture-space noise converges too)");
+    cmd->add_option("--exposure", a->exposure, "Display exposure in stops")->capture_default_str();
+    cmd->add_option("--view", a->view,
+                    "What the window shows: beauty, faceid, mip, texels, hitmiss (texel-cache hits "
+                    "and misses of the frame), overshading (samples shaded per pixel), motion (the "
+                    "screen-space stage's motion vectors, --motion)")
+        ->capture_default_str();
+    cmd->add_option("--denoise", a->denoise,
+                    "The screen-space stage on the preview's frames (the path tracer's split, "
+                    "diffuse indirect light from the cache with --shading texture): off, spatial, "
+                    "baseline, clamp or reliable")
+        ->type_name("METHOD")
+        ->capture_default_str();
+    cmd->add_flag("--demodulate", a->demodulate,
+                  "With --denoise: filter glossy and diffuse indirect light divided by their "
+                  "pre-integrated BRDF / albedo");
+    cmd->add_flag("--cached-visibility", a->cachedVisibility,
+                  "With --denoise and --shading texture: cache the direct light's visibility in "
+                  "texture space too; the stage takes it where it has no history");
+    cmd->add_option("--motion", a->motion,
+                    "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())
+        ->capture_default_str();
+    cmd->add_option("--time", a->time, "Scene time to render (seconds; default: the scene's)");
+    cmd->add_flag("--play", a->play,
+                  "Headless: advance the scene time by 1/fps per frame (animated scenes)");
+    cmd->add_option("--fps", a->fps, "Frames per second of --play and of the timeline's steps")
+        ->capture_default_str();
+    cmd->add_flag("--bench", a->bench,
+                  "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
+                  "(no window); with --denoise, the stage's frames (texture-space vs per-hit "
+                  "indirect light, render and stage times, relMSE)");
+    cmd->add_option("--bench-frames", a->benchFrames, "Bench: timed orbit frames")
+        ->capture_default_str();
+    cmd->add_option("--reference-spp", a->referenceSpp,
+                    "Bench: spp of the reference (default 32 per-hit AO x 16 rays; with --denoise "
+                    "128 path traced)");
+    cmd->add_flag("--stereo", a->stereo,
+                  "Both eyes side by side, the right eye from the left eye's texture-space cache "
+                  "(converging at the orbit pivot)");
+    cmd->add_option("--eye-separation", a->eyeSeparation,
+                    "--stereo: distance between the eyes (default: the scene camera's, else 1/30 "
+                    "of the distance to the pivot)");
+    cmd->add_option("--bench-out", a->benchOut, "Bench: prefix of the images written")
+        ->capture_default_str();
+    cmd->callback([a, &exitCode] { exitCode = RunPreview(*a); });
+}
+
+}  // namespace texcache::cli

@@ -1,0 +1,145 @@
+// SPDX-License-Identifier: Apache-2.0
+// What every `texcache experiment` shares: scenes and references, timed renders (best of n, in
+// this process, so ratios compare runs made under the same machine load), CSV tables, gnuplot
+// PNG plots and the markdown summary. Everything is written with a temporary file + rename.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "renderer/image/image.h"
+#include "renderer/render.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/scene/scene.h"
+
+namespace texcache::experiments {
+
+/// Options common to every experiment.
+struct Setup {
+    std::string outDir;
+    std::string scenesDir;
+    bool quick = false;  ///< test size: small images, few budgets, under a minute on 2 cores
+    /// Comma-separated subset to run (empty: all): speed-vs-error case labels, temporal scenes.
+    std::string only;
+    /// speed-vs-error: comma-separated methods to run (empty: all), e.g. per-hit,ts-hits; the
+    /// other methods' rows of an earlier run in the same directory are kept.
+    std::string methods;
+    /// speed-vs-error: camera samples per pixel (0: the experiment's default, 16).
+    int cameraSpp = 0;
+    /// temporal: also Reliable (demodulation on) with the paper's alpha 0.1, with the glossy
+    /// jitter cap at 0 and 16 pixels and without clamping (issue 21: why Reliable trails the
+    /// baseline on some scenes).
+    bool ablation = false;
+};
+
+/// A scene file loaded and built once for a given integrator family. Not movable: the
+/// RenderScene refers to the Scene beside it.
+struct LoadedScene {
+    std::string name;  ///< file stem, e.g. "car"
+    Scene scene;
+    std::unique_ptr<RenderScene> rs;
+    /// The texture-space cache its timed renders share (see TimedRender).
+    std::unique_ptr<TextureSpaceCache> cache;
+    LoadedScene() = default;
+    LoadedScene(const LoadedScene&) = delete;
+    LoadedScene& operator=(const LoadedScene&) = delete;
+};
+/// Loads scenes/`file`; `edit`, if given, changes the scene (e.g. its camera) before it is built.
+std::unique_ptr<LoadedScene> LoadForExperiment(const Setup& s, const std::string& file,
+                                               bool needLights,
+                                               const std::function<void(Scene*)>& edit = {});
+
+/// Render options from a scene's settings at a given size and integrator.
+RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int width, int height);
+
+/// One timed render: the image, its render seconds (best of `repeats`) and statistics.
+struct Run {
+    Image image;
+    double seconds = 0.0;     ///< wall clock of the render with the least CPU time
+    double cpuSeconds = 0.0;  ///< its CPU time (all threads): the cost measure of the experiments
+    RenderStats stats;
+};
+/// With `warmUp`, one untimed render first: Embree tessellates subdivision patches lazily on
+/// first hit, and the first render of a scene would pay for it. Texture-space renders start
+/// from an empty cache every time, but reuse the scene's cache storage when its layout allows
+/// (TextureSpaceCache::Reconfigure): mapping fresh cache memory is a one-time set-up cost of a
+/// process, like building the BVH, and is not counted.
+Run TimedRender(LoadedScene& ls, const RenderOptions& o, int repeats = 1, bool warmUp = false);
+
+/// A high-sample reference, cached as OUT/ref_<tag>.exr and reused when it exists at this size
+/// (references cost minutes; re-running an experiment should not).
+Image Reference(const Setup& s, const std::string& tag, const RenderScene& rs,
+                const RenderOptions& o);
+
+/// A CSV table built row by row; numbers printed with 6 significant digits.
+class Table {
+public:
+    explicit Table(std::vector<std::string> columns) : columns_(std::move(columns)) {}
+    Table& Row();
+    Table& Add(const std::string& v);
+    Table& Add(double v);
+    void Write(const std::string& path) const;
+    size_t NumRows() const { return rows_.size(); }
+    const std::vector<std::string>& RowAt(size_t i) const { return rows_[i]; }
+    /// Reads a CSV that Write() made with these columns; throws InputError naming the file and
+    /// line when the header differs or a row has the wrong number of values.
+    static Table Read(const std::string& path, std::vector<std::string> columns);
+
+private:
+    std::vector<std::string> columns_;
+    std::vector<std::vector<std::string>> rows_;
+};
+
+/// A line plot drawn by gnuplot (pngcairo) from a CSV written beside it.
+struct Series {
+    std::string title;
+    std::string csv;       ///< data file (comma separated, with a header line)
+    int xColumn, yColumn;  ///< 1-based columns
+    std::string filter;    ///< optional gnuplot condition on the row, e.g. "strcol(2) eq 'car'"
+};
+struct Plot {
+    std::string png, title, xLabel, yLabel;
+    bool logX = false, logY = false;
+    std::vector<Series> series;
+    std::vector<std::string> extra;  ///< further gnuplot commands (e.g. reference lines)
+};
+/// Writes the gnuplot script beside the PNG and runs gnuplot; throws if it is missing or fails.
+void Draw(const Plot& p);
+
+/// Writes text atomically.
+void WriteText(const std::string& path, const std::string& text);
+/// printf into a std::string.
+std::string Format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+/// Progress line on stdout (flushed: experiments run for minutes).
+void Say(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+
+/// Log-log interpolation of y at x along a curve of increasing x (extrapolated linearly in
+/// log-log outside the range; `extrapolated` says so).
+double InterpolateLogLog(const std::vector<double>& xs, const std::vector<double>& ys, double x,
+                         bool* extrapolated);
+
+/// A pixel rectangle of an image.
+struct Rect {
+    int x = 0, y = 0, w = 0, h = 0;
+};
+/// The crop `r` of each image, magnified `scale` times (nearest neighbour: pixels stay visible),
+/// side by side with a white 2-pixel gap.
+Image SideBySide(const std::vector<const Image*>& images, Rect r, int scale);
+/// The crop `r` of an image.
+Image Crop(const Image& img, Rect r);
+
+// The experiments (each returns a process exit code).
+int SpeedVsError(const Setup& s);
+int CacheSize(const Setup& s);
+int FilterSize(const Setup& s);
+int Threads(const Setup& s);
+int LodBias(const Setup& s);
+int Temporal(const Setup& s);
+int Disocclusion(const Setup& s);
+int Cpis(const Setup& s);
+int Stereo(const Setup& s);
+int Blur(const Setup& s);
+
+}  // namespace texcache::experiments

@@ -1,0 +1,39 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache preview`: the interactive preview window, its headless test mode and its frame-rate
+// benchmark. The CLI registers the subcommand (apps/cli/cmd_preview.cpp).
+#pragma once
+#include <string>
+
+#include "progressive_renderer.h"
+#include "renderer/scene/scene.h"
+
+namespace texcache::preview {
+
+struct PreviewArgs {
+    std::string scenePath;            ///< the file given (a .json scene can take the camera back)
+    int frames = 0;                   ///< > 0: headless test mode, this many frames then exit
+    std::string screenshot;           ///< headless: PNG of the window after the last frame
+    float orbitDegrees = 20.0f;       ///< headless / bench: camera orbit spread over the frames
+    std::string filterName = "none";  ///< as given, for reports
+    bool saveCamera = false;          ///< headless: write the final camera into the scene file
+    bool play = false;                ///< headless: advance the scene time 1/fps per frame
+    float fps = 24.0f;                ///< frames per second of --play and the timeline's steps
+};
+
+/// Opens the window (or runs the headless frames); returns the exit code. Throws InputError when
+/// there is no display (exit 2 through main) or the window cannot be created.
+int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const PreviewArgs& args);
+
+struct BenchArgs {
+    int frames = 36;        ///< orbit frames timed per configuration (after one cold frame)
+    int referenceSpp = 32;  ///< per-hit AO reference: spp x aoSamples rays per pixel
+    int referenceAoSamples = 16;
+    std::string out = "out/preview_bench";  ///< prefix of the images written
+};
+
+/// Texture-space AO with a warm cache against per-hit AO at equal relMSE, while orbiting; prints
+/// frames per second and relMSE of each. No window needed.
+int RunPreviewBench(const Scene& scene, const PreviewSettings& settings, const PreviewArgs& args,
+                    const BenchArgs& bench);
+
+}  // namespace texcache::preview

@@ -1,0 +1,334 @@
+// SPDX-License-Identifier: Apache-2.0
+// `texcache preview SCENE --bench`: the preview's frame rate while orbiting, texture-space AO with
+// the trivial filter and a cache kept across frames against per-hit AO at the same relMSE. Both
+// run the same orbit in the same process; relMSE is measured at the orbit's last view against a
+// high-sample per-hit reference of that view.
+#include <time.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iterator>
+#include <memory>
+#include <string>
+
+#include "orbit_camera.h"
+#include "preview.h"
+#include "renderer/frame_buffers/frame_buffers_render.h"
+#include "renderer/image/metrics.h"
+#include "renderer/render.h"
+#include "renderer/scene/render_scene.h"
+#include "renderer/texture_space/texture_space.h"
+#include "texcache/error.h"
+
+namespace texcache::preview {
+
+namespace {
+
+struct OrbitRun {
+    double fps = 0.0, seconds = 0.0;
+    double hitRate = 0.0;  ///< texel hit rate over the timed frames
+    uint64_t samplesShaded = 0;
+    Image last;  ///< the last view's image
+};
+
+/// The bench's scene at its time and the orbit's views: view 0 at the scene camera, view n
+/// `orbitDegrees` around it (where relMSE is measured).
+struct BenchOrbit {
+    Scene scene;  // the RenderScene keeps a reference: SetView's camera edits are seen
+    float time = 0.0f;
+    int n = 1;
+    float degrees = 0.0f;
+    OrbitCamera home;
+    std::unique_ptr<RenderScene> rs;
+
+    BenchOrbit(const Scene& in, const PreviewSettings& s, const PreviewArgs& args, int frames,
+               bool lights)
+        : scene(in), time(in.settings.time), n(frames), degrees(args.orbitDegrees) {
+        scene.settings.tessellationRate = s.tessellationRate;
+        RenderSceneOptions ro;
+        ro.frameTime = time;
+        ro.needLights = ro.needEnvironment = lights;
+        rs = std::make_unique<RenderScene>(scene, ro);
+        home.FromScene(scene, time);
+    }
+    void SetView(int i) {
+        OrbitCamera c = home;
+        c.Orbit(degrees * float(i) / float(n), 0.0f);
+        c.ToCamera(&scene.camera);
+    }
+};
+
+double CpuSeconds() {
+    timespec t;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return double(t.tv_sec) + double(t.tv_nsec) * 1e-9;
+}
+
+// The stage's passes as the bench lists them.
+constexpr double screen::StageTimings::*kPasses[] = {
+    &screen::StageTimings::prepare,        &screen::StageTimings::traditionalMotion,
+    &screen::StageTimings::reliableMotion, &screen::StageTimings::temporal,
+    &screen::StageTimings::spatial,        &screen::StageTimings::cleanup,
+    &screen::StageTimings::compose};
+constexpr const char* kPassNames[] = {"prepare", "motion",  "reliable-motion", "temporal",
+                                      "a-trous", "cleanup", "compose"};
+
+/// One configuration of the stage bench: frame buffers (texture-space indirect or per hit) and
+/// the stage on them, with its times summed over the timed frames.
+struct StageRun {
+    const char* name;
+    bool textureSpace;
+    std::unique_ptr<TextureSpaceCache> cache;
+    screen::ScreenSpaceDenoiser denoiser;  // the preview's settings (StageSettingsFor)
+    screen::FrameBuffers fb;
+    std::vector<glm::vec3> image;
+    double renderWall = 0.0, renderCpu = 0.0, stageWall = 0.0, stageCpu = 0.0;
+    double maxStageWall = 0.0;
+    screen::StageTimings passCpu;  ///< each pass's CPU ms, summed over the timed frames
+    CacheStats cacheStats;
+
+    StageRun(const char* n, bool tex, int height)
+        : name(n), textureSpace(tex), denoiser(StageSettingsFor(height)) {}
+    double Fps(int frames) const { return double(frames) / (renderWall + 1e-3 * stageWall); }
+};
+
+/// `--bench --denoise METHOD`: the preview's stage frames while orbiting, texture-space indirect
+/// light from a warm cache against per-hit, each frame rendered as the stage's buffers and
+/// denoised; interleaved frame by frame, relMSE of the last view against a path-traced reference.
+int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewArgs& args,
+                  const BenchArgs& b) {
+    BenchOrbit orbit(sceneIn, s, args, b.frames, true);
+    const Scene& scene = orbit.scene;
+    const RenderScene& rs = *orbit.rs;
+    const float time = orbit.time;
+    const int n = b.frames;
+    auto setView = [&](int i) { orbit.SetView(i); };
+    const screen::Method method = s.denoiseMethod;
+    const screen::Demodulation demod =
+        s.demodulate ? screen::Demodulation::On : screen::Demodulation::Off;
+    std::printf(
+        "preview bench: %s, %dx%d, path tracer's split + %s stage%s, orbit of %.1f degrees in %d "
+        "frames\n",
+        scene.path.c_str(), s.width, s.height, screen::MethodName(method),
+        s.demodulate ? " (demodulated)" : "", args.orbitDegrees, n);
+
+    RenderOptions base;
+    base.integrator = IntegratorKind::Path;
+    base.width = s.width, base.height = s.height;
+    base.spp = s.sppPerFrame;
+    base.maxDepth = s.maxDepth;
+    base.frameTime = time;
+    base.progress = false;
+
+    setView(n);
+    RenderOptions refOpt = base;
+    refOpt.spp = b.referenceSpp;
+    refOpt.seed = 0xC0FFEE;
+    refOpt.progress = true;
+    const RenderResult ref = Render(rs, refOpt);
+    std::printf("reference       : path traced, %d spp, %.1f s\n", refOpt.spp, ref.stats.seconds);
+
+    StageRun runs[2] = {StageRun("texture space", true, s.height),
+                        StageRun("per hit", false, s.height)};
+    TextureSpaceOptions tex = TextureOptionsOf(s);
+    tex.enabled = true;
+    runs[0].cache = std::make_unique<TextureSpaceCache>(rs, tex);
+    // View 0 untimed (cold cache, lazy tessellation, the BRDF table), then views 1..n in turn.
+    for (int i = 0; i <= n; ++i) {
+        setView(i);
+        for (StageRun& r : runs) {
+            RenderOptions o = base;
+            o.seed = uint64_t(i);
+            if (r.textureSpace) o.texture = tex;
+            const double c0 = CpuSeconds();
+            const RenderStats st = RenderFrameBuffers(rs, o, time, &r.fb, r.cache.get());
+            const double c1 = CpuSeconds();
+            r.denoiser.Denoise(r.fb, method, demod, &r.image);
+            if (i == 0) continue;
+            r.renderWall += st.seconds, r.renderCpu += c1 - c0;
+            const screen::StageTimings& t = r.denoiser.Timings();
+            const screen::StageTimings& tc = r.denoiser.CpuTimings();
+            r.stageWall += t.total, r.stageCpu += tc.total;
+            for (double screen::StageTimings::*pass : kPasses) r.passCpu.*pass += tc.*pass;
+            r.maxStageWall = std::max(r.maxStageWall, t.total);
+            r.cacheStats.Merge(st.cache);
+        }
+    }
+    for (const StageRun& r : runs) {
+        const Image noisy = ToImage(r.fb.Compose(), s.width, s.height);
+        const Image img = ToImage(r.image, s.width, s.height);
+        std::printf(
+            "  %-13s: %5.1f fps (%.1f ms/frame): render %.1f ms (%.1f ms cpu) + stage %.1f ms "
+            "(%.1f ms cpu, %.0f %% of the frame, slowest %.1f ms)%s; relMSE %.5f denoised, %.5f "
+            "undenoised\n",
+            r.name, r.Fps(n), 1e3 / r.Fps(n), 1e3 * r.renderWall / n, 1e3 * r.renderCpu / n,
+            r.stageWall / n, r.stageCpu / n,
+            100.0 * 1e-3 * r.stageWall / (r.renderWall + 1e-3 * r.stageWall), r.maxStageWall,
+            r.textureSpace
+                ? (", hit rate " +
+                   std::to_string(int(std::lround(100.0 * r.cacheStats.TexelHitRate()))) + " %")
+                      .c_str()
+                : "",
+            RelMSE(img, ref.beauty), RelMSE(noisy, ref.beauty));
+        std::printf("  %-13s  stage passes, ms cpu a frame:", "");
+        for (size_t k = 0; k < std::size(kPasses); ++k)
+            std::printf(" %s %.1f", kPassNames[k], r.passCpu.*kPasses[k] / n);
+        std::printf("\n");
+        const std::string stem = b.out + (r.textureSpace ? "_stage_texture" : "_stage_hit");
+        WriteImage(stem + ".png", img);
+    }
+    WriteImage(b.out + "_stage_ref.png", ref.beauty);
+    const StageRun& t = runs[0];
+    std::printf("warm texture-space frame + %s stage: %.1f fps (goal >= 10) %s\n",
+                screen::MethodName(method), t.Fps(n), t.Fps(n) >= 10.0 ? "ok" : "MISSED");
+    std::printf("stage passes: %.1f ms a frame (goal < 25) %s\n", t.stageWall / n,
+                t.stageWall / n < 25.0 ? "ok" : "MISSED");
+    std::printf("wrote %s_stage_{ref,texture,hit}.png\n", b.out.c_str());
+    return 0;
+}
+
+}  // namespace
+
+int RunPreviewBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewArgs& args,
+                    const BenchArgs& b) {
+    if (const auto dir = std::filesystem::path(b.out).parent_path(); !dir.empty()) {
+        std::error_code ec;
+        std::filesystem::create_directories(dir, ec);
+        if (ec) throw InputError("--bench-out", "cannot create '" + dir.string() + "'");
+    }
+    if (s.denoise) return RunStageBench(sceneIn, s, args, b);
+    BenchOrbit orbitViews(sceneIn, s, args, b.frames, false);
+    const Scene& scene = orbitViews.scene;
+    const RenderScene& rs = *orbitViews.rs;
+    const float time = orbitViews.time;
+    const int n = b.frames;
+    auto setView = [&](int i) { orbitViews.SetView(i); };
+
+    RenderOptions base;
+    base.integrator = IntegratorKind::AO;
+    base.width = s.width, base.height = s.height;
+    base.spp = 1;
+    base.aoSamples = s.aoSamples;
+    base.aoDistance = s.aoDistance;
+    base.frameTime = time;
+    base.progress = false;
+
+    std::printf("preview bench: %s, %dx%d, AO, orbit of %.1f degrees in %d frames\n",
+                scene.path.c_str(), base.width, base.height, args.orbitDegrees, n);
+
+    setView(n);
+    RenderOptions refOpt = base;
+    refOpt.spp = b.referenceSpp;
+    refOpt.aoSamples = b.referenceAoSamples;
+    refOpt.seed = 0xC0FFEE;  // independent of the tested frames' seeds
+    refOpt.progress = true;
+    const RenderResult ref = Render(rs, refOpt);
+    std::printf("reference       : per-hit AO, %d spp x %d rays, %.1f s\n", refOpt.spp,
+                refOpt.aoSamples, ref.stats.seconds);
+
+    // Views 1..n after a cold frame at view 0; frame i gets seed i, as the preview's frames do.
+    auto orbit = [&](const RenderOptions& o, TextureSpaceCache* cache) {
+        OrbitRun run;
+        setView(0);
+        Render(rs, o, cache);  // texture space: the cold frame; per hit: warms code and BVH
+        CacheStats total;
+        for (int i = 1; i <= n; ++i) {
+            setView(i);
+            RenderOptions f = o;
+            f.seed = o.seed + uint64_t(i);
+            RenderResult r = Render(rs, f, cache);
+            run.seconds += r.stats.seconds;
+            total.Merge(r.stats.cache);
+            if (i == n) run.last = std::move(r.beauty);
+        }
+        run.fps = double(n) / run.seconds;
+        run.hitRate = total.TexelHitRate();
+        run.samplesShaded = total.samplesShaded / uint64_t(n);
+        return run;
+    };
+
+    // Texture space: the preview's settings (trivial filter by default), one cache for the orbit.
+    RenderOptions texOpt = base;
+    texOpt.texture = TextureOptionsOf(s);
+    texOpt.texture.enabled = true;
+    TextureSpaceCache cache(rs, texOpt.texture);
+    const OrbitRun tex = orbit(texOpt, &cache);
+    const double eTex = RelMSE(tex.last, ref.beauty);
+    std::printf(
+        "texture space (sets the relMSE to match): filter %s r=%d, %d rays/sample, 1 spp: "
+        "%.1f fps (%.1f ms/frame), "
+        "hit rate %.2f %%, %llu samples shaded/frame, relMSE %.5f\n",
+        args.filterName.c_str(), s.radius, s.aoSamples, tex.fps, 1e3 / tex.fps, 100.0 * tex.hitRate,
+        (unsigned long long)tex.samplesShaded, eTex);
+
+    // Per hit: the fewest AO rays per hit (1 spp: a camera ray shared by all of them is the
+    // cheapest way to buy AO quality) whose relMSE at the last view is no worse.
+    setView(n);
+    auto hitError = [&](int rays) {
+        RenderOptions o = base;
+        o.aoSamples = rays;
+        o.seed = uint64_t(n);
+        return RelMSE(Render(rs, o).beauty, ref.beauty);
+    };
+    int hi = 1;
+    double eHi = hitError(hi);
+    while (eHi > eTex && hi < 4096) eHi = hitError(hi *= 2);
+    int lo = hi / 2;  // relMSE(lo) > eTex (or lo == 0)
+    while (hi - lo > 1 && hi > 8) {
+        const int mid = (lo + hi) / 2;
+        if (hitError(mid) <= eTex)
+            hi = mid;
+        else
+            lo = mid;
+        if (hi - lo <= std::max(1, hi / 16)) break;  // within ~6%: fine enough for a rate
+    }
+    RenderOptions hitOpt = base;
+    hitOpt.aoSamples = hi;
+
+    // The timed run: both orbits frame by frame in turn (a fresh cache, cold frame untimed), so
+    // load from other processes on a shared machine slows both alike.
+    OrbitRun tex2, hit;
+    {
+        TextureSpaceCache fresh(rs, texOpt.texture);
+        setView(0);
+        Render(rs, texOpt, &fresh);
+        Render(rs, hitOpt);
+        CacheStats total;
+        for (int i = 1; i <= n; ++i) {
+            setView(i);
+            RenderOptions t = texOpt, h = hitOpt;
+            t.seed = h.seed = uint64_t(i);
+            RenderResult rt = Render(rs, t, &fresh);
+            RenderResult rh = Render(rs, h);
+            tex2.seconds += rt.stats.seconds;
+            hit.seconds += rh.stats.seconds;
+            total.Merge(rt.stats.cache);
+            if (i == n) tex2.last = std::move(rt.beauty), hit.last = std::move(rh.beauty);
+        }
+        tex2.fps = double(n) / tex2.seconds;
+        hit.fps = double(n) / hit.seconds;
+        tex2.hitRate = total.TexelHitRate();
+        tex2.samplesShaded = total.samplesShaded / uint64_t(n);
+    }
+    const double eTex2 = RelMSE(tex2.last, ref.beauty);
+    const double eHit = RelMSE(hit.last, ref.beauty);
+    std::printf("interleaved run (%d frames each):\n", n);
+    std::printf("  texture space : %6.1f fps (%.1f ms/frame), hit rate %.2f %%, relMSE %.5f\n",
+                tex2.fps, 1e3 / tex2.fps, 100.0 * tex2.hitRate, eTex2);
+    std::printf("  per hit       : %6.1f fps (%.1f ms/frame), %d rays/hit, relMSE %.5f\n", hit.fps,
+                1e3 / hit.fps, hi, eHit);
+    const double ratio = tex2.fps / hit.fps;
+    std::printf("texture space / per hit frame rate at equal relMSE: %.2f x (goal >= 3) %s\n",
+                ratio, ratio >= 3.0 ? "ok" : "MISSED");
+    std::printf("warm texture-space frame rate: %.1f fps (goal >= 10) %s\n", tex2.fps,
+                tex2.fps >= 10.0 ? "ok" : "MISSED");
+    WriteImage(b.out + "_ref.png", ref.beauty);
+    WriteImage(b.out + "_texture.png", tex2.last);
+    WriteImage(b.out + "_hit.png", hit.last);
+    std::printf("wrote %s_{ref,texture,hit}.png\n", b.out.c_str());
+    return 0;
+}
+
+}  // namespace texcache::preview

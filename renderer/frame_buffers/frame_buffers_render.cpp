@@ -1,0 +1,705 @@
+// SPDX-License-Identifier: Apache-2.0
+// The screen-space stage's frame buffers rendered with the path tracer's light sampling and paths
+// (path_tracer.h); what each buffer holds is stated in frame_buffers_render.h.
+#include "renderer/frame_buffers/frame_buffers_render.h"
+
+#include <pmmintrin.h>
+#include <xmmintrin.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <limits>
+#include <memory>
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "renderer/integrators/path_tracer.h"
+#include "renderer/integrators/polygon_light.h"
+#include "renderer/render.h"
+#include "renderer/texture_space/cached_shading.h"
+#include "texcache/error.h"
+
+namespace texcache {
+
+using namespace internal;
+
+screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, int height) {
+    screen::FrameCamera fc;
+    const glm::mat4 camToWorld = cam.pose.Eval(time);
+    // CameraModel looks down -Z with the vertical field of view over the height and square
+    // pixels; the near plane only sets clip z, which Project() does not use.
+    const glm::mat4 proj =
+        glm::perspective(glm::radians(cam.fovYDegrees), float(width) / float(height), 1e-3f, 1e6f);
+    fc.worldToClip = proj * glm::inverse(camToWorld);
+    fc.position = glm::vec3(camToWorld[3]);
+    fc.width = width;
+    fc.height = height;
+    return fc;
+}
+
+Image ToImage(const std::vector<glm::vec3>& colours, int width, int height) {
+    Image img(width, height, 3);
+    for (size_t p = 0; p < colours.size() && p < img.NumPixels(); ++p)
+        for (int k = 0; k < 3; ++k) img.data[3 * p + k] = colours[p][k];
+    return img;
+}
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+// Unshadowed light samples per frame-buffer sample for `shading` (no rays: BSDF and light
+// evaluations only). Measured noise: frame_buffers_render.h.
+constexpr int kShadingCandidates = 32;
+// Light samples per frame-buffer sample when `shading` has a closed form (ClosedFormShading):
+// they only pick the shadow ray and estimate the visibility ratio, whose noise the stage filters.
+// Picked in proportion to the lights' closed-form terms, 6 gave the error of 8 picked uniformly
+// (which spent half of them on anim_shadow's dim sky) with two candidates fewer: relMSE
+// undenoised 0.0966 vs 0.0973, denoised 0.01422 vs 0.01421 (`texcache preview
+// scenes/anim_shadow.json --bench --denoise reliable --resolution 640x360`; 4: 0.0987 / 0.01423,
+// 8: 0.0947 / 0.01424).
+constexpr int kRatioCandidates = 6;
+const glm::vec3 kNaN3(kNaN);
+
+/// Where everything that moves was at the previous frame: world at the frame time -> world at
+/// prevTime, per object and per quad light (T^-1 of Zeng eq. 1/3/5), and distant lights'
+/// direction rotations.
+struct FrameMotion {
+    std::vector<glm::mat4> object, light;
+    std::vector<glm::mat3> objectN, lightN;  // their normal matrices
+    std::vector<glm::mat3> distant;
+    float infinity = 1e4f;  // distance at which points of lights at infinity are put
+
+    FrameMotion(const RenderScene& rs, const RenderOptions& opt, float prevTime) {
+        const Scene& scene = rs.scene();
+        auto normalMatrix = [](const glm::mat4& m) {
+            return glm::transpose(glm::inverse(glm::mat3(m)));
+        };
+        float extent = glm::length(glm::vec3(scene.camera.pose.Eval(opt.frameTime)[3]));
+        for (size_t o = 0; o < scene.objects.size(); ++o) {
+            // The frame's pose is the render scene's (shutter time 0), so moved points start
+            // exactly where the rays found them.
+            const glm::mat4 now = rs.ObjectToWorld(int(o), 0.0f);
+            object.push_back(scene.objects[o].transform.Eval(prevTime) * glm::inverse(now));
+            objectN.push_back(normalMatrix(object.back()));
+            for (const auto& p : scene.meshes[scene.objects[o].mesh].positions)
+                extent = std::max(extent,
+                                  glm::length(glm::vec3(now * glm::vec4(p[0], p[1], p[2], 1.0f))));
+        }
+        for (const QuadLight& q : scene.quadLights) {
+            light.push_back(q.transform.Eval(prevTime) *
+                            glm::inverse(q.transform.Eval(opt.frameTime)));
+            lightN.push_back(normalMatrix(light.back()));
+        }
+        for (const DistantLight& d : scene.distantLights)
+            distant.push_back(glm::mat3(d.transform.Eval(prevTime)) *
+                              glm::inverse(glm::mat3(d.transform.Eval(opt.frameTime))));
+        // Far enough that the line from a blocker to it has the light's direction to ~1e-4.
+        infinity = 1e4f * std::max(extent, 1e-3f);
+    }
+
+    /// A point on what a ray hit, moved to the previous frame.
+    glm::vec3 Point(const Hit& h, glm::vec3 p) const {
+        const glm::mat4& m = h.object >= 0 ? object[h.object] : light[h.light];
+        return glm::vec3(m * glm::vec4(p, 1.0f));
+    }
+    glm::vec3 Normal(const Hit& h, glm::vec3 n) const {
+        return glm::normalize((h.object >= 0 ? objectN[h.object] : lightN[h.light]) * n);
+    }
+};
+
+/// One pixel's buffers while its samples are taken (but the shadow rays': PixelShadow).
+struct FramePixel {
+    glm::vec3 shadingSum{0.0f}, glossySum{0.0f}, diffuseSum{0.0f};
+    glm::vec3 glossyHit = kNaN3, prevGlossyHit = kNaN3;
+    std::array<glm::vec3, screen::kNumCones> coneSum{};
+    bool hasCones = false;  ///< a diffuse ray was traced
+};
+
+/// What a pixel's shadow rays make of its visibility and blocker, kept until its tile's shadow
+/// rays are traced.
+struct PixelShadow {
+    float weightSum, visibleWeightSum;
+    float blockerWeight;  // shading luminance of the recorded blocked sample
+    glm::vec3 blocker, prevBlocker, light, prevLight;
+
+    /// No sample yet: visible, no blocker. (Set field by field: a temporary's copy of the
+    /// whole struct per pixel showed in the profile.)
+    void Reset() {
+        weightSum = visibleWeightSum = 0.0f;
+        blockerWeight = -1.0f;
+        blocker = prevBlocker = light = prevLight = kNaN3;
+    }
+};
+
+glm::vec3 FiniteOrZero(glm::vec3 v) {
+    return std::isfinite(v.x + v.y + v.z) ? v : glm::vec3(0.0f);
+}
+
+/// Each light's share of a pixel's closed-form shading (the luminance of its term), indexed as
+/// SampleLight picks lights; n = 0 when the scene has more lights than kMax (then the pick stays
+/// uniform).
+struct LightWeights {
+    static constexpr int kMax = 16;
+    int n = 0;
+    float w[kMax];
+};
+
+/// The unshadowed direct light of every light, integrated in closed form, or false when some
+/// light and lobe have none here: a GGX lobe under an area light (quad or environment; LTCs and
+/// prefiltered maps would give one). The diffuse lobe under a quad light is Lambert's polygon
+/// formula (clipped to the shading normal's hemisphere), under the environment albedo / pi times
+/// its irradiance (exact for a constant one, degree-2 spherical harmonics for a map); a distant
+/// light's term is the BSDF times its irradiance. Unlike the light samples it ignores the
+/// geometric normal's cut-off (the BSDF's ng test) and, for a map, the harmonics' error: the
+/// visibility ratio below absorbs both in expectation.
+bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
+                       glm::vec3 wo, glm::vec3* out, LightWeights* weights) {
+    if (bsdf.HasSpecular() && (c.env || !c.quads.empty())) return false;
+    glm::vec3 S(0.0f);
+    weights->n = c.numLights <= LightWeights::kMax ? c.numLights : 0;
+    std::fill_n(weights->w, weights->n, 0.0f);
+    // Each light's term, in SampleLight's order (quads, distant lights, environment).
+    auto add = [&](int light, glm::vec3 term) {
+        S += term;
+        if (light < weights->n) weights->w[light] = Luminance(FiniteOrZero(term));
+    };
+    if (glm::dot(wo, si.N) > 0.0f) {  // the BSDF is 0 otherwise
+        constexpr float kInvPi = 0.31830988618379067f;
+        const glm::vec3 R = bsdf.DiffuseReflectance();
+        for (size_t i = 0; i < c.quads.size(); ++i) {
+            const Context::Quad& q = c.quads[i];
+            const glm::vec3 rel = q.corner - si.P;
+            if (!q.twoSided && glm::dot(q.n, rel) >= 0.0f) continue;  // behind a one-sided quad
+            const glm::vec3 v[4] = {rel, rel + q.e1, rel + q.e1 + q.e2, rel + q.e2};
+            add(int(i), R * q.L * (PolygonProjectedSolidAngle(v, 4, si.N) * kInvPi));
+        }
+        if (c.env) add(c.numLights - 1, R * c.env->Irradiance(si.N) * kInvPi);
+        const int firstDistant = int(c.quads.size());
+        for (size_t i = 0; i < c.distantDir.size(); ++i) {
+            glm::vec3 fd, fs;
+            bsdf.EvalLobes(wo, c.distantDir[i], &fd, &fs);
+            add(firstDistant + int(i),
+                (fd + fs) * c.distantE[i] * std::abs(glm::dot(c.distantDir[i], si.N)));
+        }
+    }
+    *out = FiniteOrZero(S);
+    return true;
+}
+
+/// A shadow ray of FrameDirectSample waiting for its packet (FinishShadow takes it from there):
+/// the ray, the light sample it goes to and the weight of its frame-buffer sample.
+struct PendingShadow {
+    Ray ray;
+    glm::vec3 P;   // the shading point: a quad's sampled point is P + dist wi
+    glm::vec3 wi;  // towards the light
+    float dist;
+    float w;  // luminance of the sample's unshadowed shading
+    int quad, distant;
+    int pixel;  // the pixel's index in its tile
+};
+
+/// The light sample of one frame-buffer sample: unshadowed shading into `px` from
+/// kShadingCandidates light samples, and one shadow ray to a candidate resampled in proportion to
+/// its shading's luminance, appended to `shadows` (for tile pixel `pixel`) for FinishShadow,
+/// which records the blocker and light point when blocked (see frame_buffers_render.h). With
+/// `exact` (ClosedFormShading, luminance > 0) the shading is that and kRatioCandidates light
+/// samples give the visibility as the ratio lum(mean of the candidates) * V / lum(exact), whose
+/// expectation is the shadowed over the unshadowed light.
+void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
+                       glm::vec3 wo, const glm::vec3* exact, const LightWeights& weights, Rng& rng,
+                       FramePixel& px, PixelShadow& sh, int pixel,
+                       std::vector<PendingShadow>& shadows) {
+    // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
+    // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
+    // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
+    constexpr int kMax = kShadingCandidates;
+    const int kN = exact ? kRatioCandidates : kShadingCandidates;
+    constexpr float kG1 = 0.75487766f, kG2 = 0.56984029f;  // 1/phi_2, 1/phi_2^2
+    const float pickShift = rng.Next1D();
+    const glm::vec2 shift = rng.Next2D();
+    const float uResample = rng.Next1D();
+    LightSample cand[kMax];
+    glm::vec3 S[kMax];
+    float lum[kMax];
+    glm::vec3 sum(0.0f);
+    float lumSum = 0.0f;
+    // With closed-form shading the pick follows each light's share of it instead of being
+    // uniform, so that the candidates go where the light is (none to a dim sky next to a lamp):
+    // candidate k's light is where (k + shift) / kN falls in the lights' cumulative shares.
+    float wSum = 0.0f;
+    if (exact)
+        for (int i = 0; i < weights.n; ++i) wSum += weights.w[i];
+    const bool weighted = wSum > 0.0f;
+    // A diffuse BSDF under quad lights (the common case of closed-form shading): the candidate in
+    // closed form below. wo is above the shading normal (the closed form is 0 otherwise).
+    const bool diffuseQuads = weighted && !bsdf.HasSpecular();
+    const glm::vec3 diffuseF = bsdf.DiffuseReflectance() * 0.31830988618379067f;
+    int light = 0;
+    float wAcc = weighted ? weights.w[0] : 0.0f;
+    for (int k = 0; k < kN; ++k) {
+        lum[k] = 0.0f, S[k] = glm::vec3(0.0f);
+        float uPick = (float(k) + pickShift) / float(kN);
+        float pickScale = 1.0f;  // SampleLight's pick probability over this one's
+        if (weighted) {
+            // The targets rise with k: the light index only moves on.
+            const float target = uPick * wSum;
+            while (light + 1 < weights.n && (wAcc <= target || weights.w[light] <= 0.0f))
+                wAcc += weights.w[++light];
+            while (weights.w[light] <= 0.0f) --light;  // rounding ran past the last share
+            uPick = (float(light) + 0.5f) / float(c.numLights);
+            pickScale = wSum / (weights.w[light] * float(c.numLights));
+        }
+        // x - floor(x) is fmod(x, 1) for x >= 0, exactly, without libm's fmodf (11% of the bench
+        // profile with 32 candidates).
+        const float rx = shift.x + kG1 * float(k), ry = shift.y + kG2 * float(k);
+        const glm::vec2 u(rx - std::floor(rx), ry - std::floor(ry));
+        LightSample& ls = cand[k];
+        if (diffuseQuads && light < int(c.quads.size())) {
+            // SampleLight's quad sample and the diffuse BSDF folded together (pdf and cosines
+            // from the unnormalized direction): one square root and one division instead of
+            // their six (a third of the frame buffers' render time went to these candidates).
+            const Context::Quad& q = c.quads[size_t(light)];
+            const glm::vec2 v = glm::min(u, glm::vec2(kOneMinusEpsilon));
+            const glm::vec3 d = q.corner + v.x * q.e1 + v.y * q.e2 - si.P;
+            const float dist2 = glm::dot(d, d);
+            const float cosLight = -glm::dot(q.n, d), cosSurface = glm::dot(si.N, d);
+            // Zero where SampleLight has no sample (behind a one-sided quad, pdf 0) or the
+            // BSDF is 0 (below the shading or the geometric normal).
+            if (!(dist2 > 0.0f) || !(cosSurface > 0.0f) || !(glm::dot(si.Ng, d) > 0.0f) ||
+                !(q.twoSided ? cosLight != 0.0f : cosLight > 0.0f))
+                continue;
+            // 1 / sqrt by the estimate and one Newton step (relative error ~1e-7): the square
+            // root and the division in a row were the loop's longest latency.
+            const float e = _mm_cvtss_f32(_mm_rsqrt_ss(_mm_set_ss(dist2)));
+            const float invDist = e * (1.5f - 0.5f * dist2 * e * e);
+            ls.wi = d * invDist;
+            ls.dist = dist2 * invDist;
+            ls.delta = false;
+            ls.quad = light;
+            // f Le cos / pdf, pdf = dist^2 / (area cosLight) * pick probability.
+            const float g = cosSurface * std::abs(cosLight) * (invDist * invDist) *
+                            (invDist * invDist) * (q.area * pickScale * float(c.numLights));
+            S[k] = FiniteOrZero(diffuseF * q.L * g);
+            lum[k] = Luminance(glm::abs(S[k]));
+            sum += S[k], lumSum += lum[k];
+            continue;
+        }
+        if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
+                           glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
+            continue;
+        glm::vec3 fd, fs;
+        bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
+        // The specular ray may find this light too (in `glossy`): MIS between the two for that
+        // lobe.
+        const float wSpec = ls.delta || !bsdf.HasSpecular()
+                                ? 1.0f
+                                : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
+        const float cosi = std::abs(glm::dot(ls.wi, si.N));
+        S[k] = FiniteOrZero((fd + wSpec * fs) * ls.Li *
+                            (pickScale * (ls.delta ? cosi : cosi / ls.pdf)));
+        lum[k] = Luminance(glm::abs(S[k]));
+        sum += S[k], lumSum += lum[k];
+    }
+    if (exact) {
+        px.shadingSum += *exact;
+        sh.weightSum += Luminance(glm::abs(*exact));
+        if (!(lumSum > 0.0f)) return;  // every candidate found 0: this sample's ratio is 0
+    } else if (!(lumSum > 0.0f)) {
+        return;  // no shadow ray: counts as visible (see the header)
+    }
+    const glm::vec3 Sbar = sum / float(kN);
+    const float w = Luminance(glm::abs(Sbar));
+    if (!exact) px.shadingSum += Sbar, sh.weightSum += w;
+    // The shadow ray's candidate: index j with probability lum_j / sum lum.
+    int j = 0;
+    float acc = lum[0], target = uResample * lumSum;
+    while (j + 1 < kN && (acc <= target || lum[j] <= 0.0f)) acc += lum[++j];
+    while (lum[j] <= 0.0f) --j;  // rounding ran past the last candidate with shading
+    const LightSample& ls = cand[j];
+    // Written in place, field by field (whole temporaries stalled on store forwarding).
+    PendingShadow& q = shadows.emplace_back();
+    const Ray r = ShadowRay(si, ls, 0.0f);
+    q.ray.org = r.org, q.ray.dir = r.dir;
+    q.ray.tnear = r.tnear, q.ray.tfar = r.tfar, q.ray.time = r.time;
+    q.P = si.P;
+    q.wi = ls.wi;
+    q.dist = ls.dist;
+    q.w = w;
+    q.quad = ls.quad;
+    q.distant = ls.distant;
+    q.pixel = pixel;
+}
+
+/// The outcome of a queued shadow ray (blocked: `bh` is its first hit) into its pixel's `sh`.
+void FinishShadow(const FrameMotion& motion, const PendingShadow& s, bool blocked, const Hit& bh,
+                  PixelShadow& sh) {
+    if (!blocked) {
+        sh.visibleWeightSum += s.w;
+        return;
+    }
+    if (s.w <= sh.blockerWeight) return;
+    sh.blockerWeight = s.w;
+    sh.blocker = s.ray.org + bh.t * s.ray.dir;
+    sh.prevBlocker = motion.Point(bh, sh.blocker);
+    if (s.quad >= 0) {
+        sh.light = s.P + s.dist * s.wi;  // the sampled point of the quad
+        sh.prevLight = glm::vec3(motion.light[s.quad] * glm::vec4(sh.light, 1.0f));
+    } else {
+        // At infinity: a far point along the light direction from the blocker, so the line from
+        // the light point through the blocker has the light's direction in both frames.
+        const glm::vec3 prevDir =
+            s.distant >= 0 ? glm::normalize(motion.distant[s.distant] * s.wi) : s.wi;
+        sh.light = sh.blocker + motion.infinity * s.wi;
+        sh.prevLight = sh.prevBlocker + motion.infinity * prevDir;
+    }
+}
+
+/// The specular lobe's path of one sample into px.glossySum (and its first hit).
+void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
+                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+    glm::vec3 wi, weight;
+    float pdf;
+    if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
+    const Ray ray = SpawnRay(si, wi);
+    Hit hit;
+    ++rays.bounce;
+    const bool found = c.rs.Intersect(ray, &hit);
+    glm::vec3 L(0.0f);
+    if (!found) {
+        // Direct light from the environment: the light sample's MIS partner.
+        if (c.env)
+            L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(si.N, wi) * c.PickPdf());
+    } else if (hit.light >= 0) {
+        L = c.QuadEmission(hit.light, wi) *
+            PowerHeuristic(1, pdf, 1, c.QuadPdf(hit.light, wi, hit.t));
+    } else {
+        // Light found at the hit (NEE) and beyond; emission at this hit was handled above.
+        L = LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+    }
+    px.glossySum += FiniteOrZero(weight * L);
+    if (found && !std::isfinite(px.glossyHit.x)) {
+        px.glossyHit = ray.org + hit.t * ray.dir;
+        px.prevGlossyHit = motion.Point(hit, px.glossyHit);
+    }
+}
+
+/// The diffuse lobe's path of one sample: incident indirect radiance into px.diffuseSum and its
+/// cone.
+void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
+                        const std::array<glm::vec3, screen::kNumCones>& axes, Rng& rng,
+                        FramePixel& px, RayCounts& rays) {
+    glm::vec3 wi;
+    glm::vec3 L(0.0f);
+    if (bsdf.SampleDiffuse(rng.Next2D(), &wi)) {
+        const Ray ray = SpawnRay(si, wi);
+        Hit hit;
+        ++rays.bounce;
+        const bool found = c.rs.Intersect(ray, &hit);
+        // Light hit directly is the light sample's: emitFirst = false.
+        L = FiniteOrZero(LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false));
+    }
+    px.diffuseSum += L;
+    // Cosine-sampled: L is this sample's estimate of irradiance / pi (see AddConeSample).
+    screen::AddConeSample(axes, wi, L, px.coneSum.data());
+    px.hasCones = true;
+}
+
+/// The values of a pixel that nothing was found at (background), in every buffer but the
+/// shadow rays' (WriteShadowBuffers): each pixel writes all of its entries, so the buffers need
+/// no clearing pass before a frame (a serial fill of ~40 MB at 640x360).
+void ClearPixel(screen::FrameBuffers& fb, size_t p) {
+    const glm::vec3 zero(0.0f);
+    fb.emitted[p] = zero;
+    fb.shading[p] = zero;
+    if (!fb.glossy.empty()) {
+        fb.glossy[p] = zero;
+        fb.glossyHit[p] = kNaN3;
+        fb.prevGlossyHit[p] = kNaN3;
+    }
+    fb.indirect[p] = zero;
+    fb.position[p] = kNaN3;
+    fb.normal[p] = kNaN3;
+    fb.depth[p] = INFINITY;
+    fb.roughness[p] = 0.0f;
+    fb.albedo[p] = zero;
+    fb.specular[p] = zero;
+    fb.objectId[p] = -1;
+    fb.prevPosition[p] = kNaN3;
+    fb.prevNormal[p] = kNaN3;
+    for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = kNaN3;
+    if (!fb.cachedVisibility.empty()) fb.cachedVisibility[p] = kNaN;
+}
+
+/// Visibility, blocker and light point of a pixel whose shadow rays are all finished (a pixel
+/// without any: visible, NaN points).
+void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& sh) {
+    fb.visibility[p] = sh.weightSum > 0.0f ? sh.visibleWeightSum / sh.weightSum : 1.0f;
+    // NaN unless a sample was blocked (the ratio can be < 1 without).
+    fb.blocker[p] = sh.blocker;
+    fb.prevBlocker[p] = sh.prevBlocker;
+    fb.lightSample[p] = sh.light;
+    fb.prevLightSample[p] = sh.prevLight;
+}
+
+/// Every buffer of pixel (x, y) from its camera ray and hit but the shadow rays' (see
+/// WriteShadowBuffers): the samples' shadow rays are appended to `shadows`, for pixel `pixel` of
+/// the tile, and `px` keeps what they need.
+void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int pixel,
+                const Ray& ray, const RayDifferentials* diff, bool found, const Hit& hit,
+                screen::FrameBuffers& fb, PixelShadow& sh, std::vector<PendingShadow>& shadows,
+                RayCounts& rays) {
+    const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
+    ClearPixel(fb, p);
+    if (!found) {
+        if (c.env) fb.emitted[p] = c.env->Eval(ray.dir);
+        return;
+    }
+    if (hit.light >= 0) {
+        fb.emitted[p] = c.QuadEmission(hit.light, ray.dir);
+        const glm::vec3 P = ray.org + hit.t * ray.dir;
+        glm::vec3 n = c.quads[hit.light].n;
+        if (glm::dot(n, ray.dir) > 0.0f) n = -n;
+        fb.position[p] = P;
+        fb.normal[p] = n;
+        fb.depth[p] = hit.t;
+        fb.prevPosition[p] = motion.Point(hit, P);
+        fb.prevNormal[p] = motion.Normal(hit, n);
+        return;
+    }
+    const SurfaceInteraction si = c.rs.Interact(ray, hit, diff);
+    const Bsdf bsdf = MakeBsdf(c, si);
+    const Material& m = c.scene.materials[si.material];
+    fb.position[p] = si.P;
+    fb.normal[p] = si.N;
+    fb.depth[p] = hit.t;
+    fb.roughness[p] = bsdf.Alpha();
+    fb.albedo[p] = bsdf.DiffuseReflectance();
+    fb.specular[p] = bsdf.HasSpecular() ? m.specular : glm::vec3(0.0f);
+    fb.objectId[p] = si.object;
+    fb.prevPosition[p] = motion.Point(hit, si.P);
+    fb.prevNormal[p] = motion.Normal(hit, si.N);
+    if (c.opt.maxDepth < 1) return;  // the path tracer sees emission only
+
+    const glm::vec3 wo = -ray.dir;
+    // The shading normal can face away from the camera where the tessellation does not: the
+    // BSDF is 0 there, and there is no diffuse ray (nor cone sample).
+    const bool diffuse = bsdf.DiffuseReflectance() != glm::vec3(0.0f) && c.opt.maxDepth >= 2 &&
+                         glm::dot(wo, si.N) > 0.0f;
+    // Diffuse materials take indirect light from the texture-space cache, as Render() does.
+    const bool cachedIndirect = diffuse && c.tsc && m.type == Material::Type::Diffuse;
+    if (cachedIndirect) {
+        const glm::vec3 E = CachedLookup(
+            c, si, [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, false, rays); },
+            c.opt.texture.indirectSamples);
+        fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
+        // The cache knows irradiance, not its direction: the same radiance in every cone, so
+        // that indirect = albedo * ShadeCones(cones) holds here too and the stage's cone
+        // history (Reliable) carries the cached light instead of finding no cones.
+        const glm::vec3 Epi = FiniteOrZero(E);
+        for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = Epi;
+    }
+    // The diffuse lobe's visibility from the cache (view-independent, so diffuse materials
+    // only; GGX ones keep NaN: none).
+    if (!fb.cachedVisibility.empty() && m.type == Material::Type::Diffuse &&
+        glm::dot(wo, si.N) > 0.0f) {
+        const SampleRequest texel = c.tsc->VisibilityTexelOf(si);
+        const glm::vec3 V = CachedLookup(
+            c, si, [&](const SampleRequest& r) { return ShadeVisibilitySample(c, r, rays); },
+            c.opt.texture.shadowSamples, nullptr, &texel);
+        fb.cachedVisibility[p] = std::isfinite(V.x) ? std::max(V.x, 0.0f) : kNaN;
+    }
+    const bool diffuseRay = diffuse && !cachedIndirect;
+    std::array<glm::vec3, screen::kNumCones> axes;
+    if (diffuseRay) axes = screen::ConeAxes(si.N);
+    glm::vec3 exactShading;
+    LightWeights weights;
+    const bool closedForm = ClosedFormShading(c, si, bsdf, wo, &exactShading, &weights) &&
+                            Luminance(glm::abs(exactShading)) > 0.0f;
+    FramePixel px;
+    const int spp = std::max(c.opt.spp, 1);
+    for (int s = 0; s < spp; ++s) {
+        Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
+        FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng, px,
+                          sh, pixel, shadows);
+        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
+        if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
+    }
+    const float inv = 1.0f / float(spp);
+    fb.shading[p] = px.shadingSum * inv;
+    if (bsdf.HasSpecular()) fb.glossy[p] = px.glossySum * inv;
+    if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
+    if (bsdf.HasSpecular()) fb.glossyHit[p] = px.glossyHit, fb.prevGlossyHit[p] = px.prevGlossyHit;
+    if (px.hasCones)
+        for (int k = 0; k < screen::kNumCones; ++k)
+            fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
+}
+
+// Frames are rendered in tiles of kTile x kTile pixels, fixed whatever the thread count (the
+// packets below are the same for any, and so is the image).
+constexpr int kTile = 8;
+constexpr int kTilePixels = kTile * kTile;
+
+/// A thread's scratch for its tiles (sized once: nothing is allocated per tile).
+struct TileScratch {
+    std::array<Ray, kTilePixels> ray;
+    std::array<RayDifferentials, kTilePixels> diff;
+    std::array<Hit, kTilePixels> hit;
+    std::array<bool, kTilePixels> found;
+    std::array<PixelShadow, kTilePixels> shadow;
+    std::vector<PendingShadow> shadows;
+};
+
+/// The tile with top-left pixel (x0, y0). Its camera rays and then its shadow rays are traced 16
+/// at a time (RenderScene::Intersect16): neighbouring pixels' camera rays share most of their
+/// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
+/// cheaper per ray for such rays than single rays.
+void RenderTile(const Context& c, const FrameMotion& motion, int x0, int y0,
+                screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
+    const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
+    int n = 0;
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x, ++n) {
+            // Pixel centre, lens centre, shutter open: exact guides (see the header).
+            const Ray r = c.camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f),
+                                            c.tsc ? &ts.diff[n] : nullptr);
+            // Field by field: copying the whole temporary stalled on store forwarding (8% of
+            // this function in the profile).
+            Ray& ray = ts.ray[n];
+            ray.org = r.org, ray.dir = r.dir;
+            ray.tnear = r.tnear, ray.tfar = r.tfar;
+            ray.time = 0.0f;
+        }
+    for (int i = 0; i < n; i += 16)
+        c.rs.Intersect16(&ts.ray[i], std::min(16, n - i), &ts.hit[i], &ts.found[i]);
+    rays.camera += uint64_t(n);
+
+    ts.shadows.clear();
+    for (int i = 0, y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x, ++i) {
+            ts.shadow[i].Reset();
+            ShadePixel(c, motion, x, y, i, ts.ray[i], c.tsc ? &ts.diff[i] : nullptr, ts.found[i],
+                       ts.hit[i], fb, ts.shadow[i], ts.shadows, rays);
+        }
+
+    // In queue order: a pixel's samples finish in their order, as if traced one by one.
+    Ray packet[16];
+    Hit hits[16];
+    bool blocked[16];
+    const size_t ns = ts.shadows.size();
+    for (size_t i = 0; i < ns; i += 16) {
+        const int m = int(std::min<size_t>(16, ns - i));
+        for (int j = 0; j < m; ++j) packet[j] = ts.shadows[i + size_t(j)].ray;
+        c.rs.Intersect16(packet, m, hits, blocked);
+        for (int j = 0; j < m; ++j) {
+            const PendingShadow& s = ts.shadows[i + size_t(j)];
+            FinishShadow(motion, s, blocked[j], hits[j], ts.shadow[s.pixel]);
+        }
+    }
+    rays.shadow += ns;
+    for (int i = 0, y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x, ++i)
+            WriteShadowBuffers(fb, size_t(y) * size_t(c.opt.width) + size_t(x), ts.shadow[i]);
+}
+
+}  // namespace
+
+std::string FrameBufferCameraProblem(const Camera& cam) {
+    // Only what a render would show: a lens or an open shutter the buffers would silently drop.
+    char buf[64];
+    if (cam.lensRadius > 0.0f) {
+        std::snprintf(buf, sizeof buf, "%g", cam.lensRadius);
+        return std::string("its camera has a lens (lens_radius ") + buf +
+               ") but frame buffers trace through the lens centre (no defocus blur): set "
+               "lens_radius 0 or render without the screen-space buffers";
+    }
+    if (cam.shutterClose > cam.shutterOpen) {
+        std::snprintf(buf, sizeof buf, "%g", cam.shutterClose - cam.shutterOpen);
+        return std::string("its camera shutter is open for ") + buf +
+               " s but frame buffers are traced at shutter open (no motion blur): close the "
+               "shutter or render without the screen-space buffers";
+    }
+    return "";
+}
+
+RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& options, float prevTime,
+                               screen::FrameBuffers* out, TextureSpaceCache* cache) {
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    const std::clock_t cpuStart = std::clock();
+    if (options.width <= 0 || options.height <= 0)
+        throw InputError("frame buffers", "frame size must be positive, got " +
+                                              std::to_string(options.width) + "x" +
+                                              std::to_string(options.height));
+    if (!std::isfinite(prevTime))
+        throw InputError("frame buffers", "the previous frame's time is not finite");
+    RenderOptions opt = options;
+    opt.integrator = IntegratorKind::Path;  // the Context builds the lights for it
+    Context ctx(rs, opt);
+    FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::None);
+    const FrameMotion motion(rs, opt, prevTime);
+
+    screen::FrameBuffers& fb = *out;
+    const int W = opt.width, H = opt.height;
+    fb.width = W;
+    fb.height = H;
+    fb.time = opt.frameTime;
+    fb.camera = MakeFrameCamera(rs.scene().camera, opt.frameTime, W, H);
+    const size_t n = fb.NumPixels();
+    // Sized only: every pixel writes all of its entries (ClearPixel), so a FrameBuffers reused
+    // across frames is neither cleared nor reallocated.
+    for (auto* v : {&fb.emitted, &fb.shading, &fb.indirect, &fb.position, &fb.normal, &fb.albedo,
+                    &fb.specular, &fb.prevPosition, &fb.prevNormal, &fb.blocker, &fb.prevBlocker,
+                    &fb.lightSample, &fb.prevLightSample})
+        v->resize(n);
+    for (auto* v : {&fb.visibility, &fb.depth, &fb.roughness}) v->resize(n);
+    fb.objectId.resize(n);
+    // Only what the scene has: without a GGX material `glossy` and its hits stay empty, and the
+    // stage skips that component (its motion vectors, history and a-trous channels: 17% of the
+    // stage's CPU time on anim_shadow at 640x360, `texcache preview --bench --denoise reliable`).
+    const Scene& scene = rs.scene();
+    bool anyGlossy = false;
+    for (const Object& o : scene.objects)
+        anyGlossy |= scene.materials[size_t(o.material)].type == Material::Type::GGX;
+    for (auto* v : {&fb.glossy, &fb.glossyHit, &fb.prevGlossyHit}) v->resize(anyGlossy ? n : 0);
+    fb.cones.resize(n * screen::kNumCones);
+    // Only when asked for and there is a cache to look it up in (ctx.tsc: texture shading).
+    if (ctx.tsc && opt.texture.cachedVisibility && !ctx.tsc->options().cachedVisibility)
+        throw InputError("frame buffers",
+                         "cached visibility asked for, but the texture-space cache was built "
+                         "without it (TextureSpaceOptions::cachedVisibility): it has no "
+                         "visibility grids");
+    fb.cachedVisibility.resize(ctx.tsc && opt.texture.cachedVisibility ? n : 0);
+
+    const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;
+    tbb::enumerable_thread_specific<RayCounts> counts;
+    tbb::enumerable_thread_specific<TileScratch> scratch;
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, tilesX * tilesY), [&](const tbb::blocked_range<int>& r) {
+            _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+            _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+            RayCounts& rc = counts.local();
+            TileScratch& ts = scratch.local();
+            for (int t = r.begin(); t < r.end(); ++t)
+                RenderTile(ctx, motion, (t % tilesX) * kTile, (t / tilesX) * kTile, fb, ts, rc);
+        });
+
+    RenderStats stats;
+    for (const RayCounts& rc : counts) {
+        stats.cameraRays += rc.camera;
+        stats.shadowRays += rc.shadow;
+        stats.bounceRays += rc.bounce;
+    }
+    for (const CacheStats& cs : frameCache.Stats()) stats.cache.Merge(cs);
+    stats.sppDone = std::max(opt.spp, 1);
+    stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
+    return stats;
+}
+
+}  // namespace texcache

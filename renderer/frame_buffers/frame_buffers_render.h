@@ -1,0 +1,147 @@
+// SPDX-License-Identifier: Apache-2.0
+// The renderer's side of the screen-space stage: a frame rendered as screen::FrameBuffers (see
+// screen_space/frame_buffers.h for what each buffer means), and their EXR files.
+//
+// What RenderFrameBuffers puts in the buffers (the decisions frame_buffers.h leaves open):
+//
+// * Samples. One camera ray per pixel through the pixel centre (no jitter, no lens, no motion
+//   blur: the guides are exact and noise-free, and projecting `position` with `camera` lands on
+//   the centre). Each of the `spp` samples (default 1: the papers' real-time setting) traces from
+//   that primary hit 32 light samples without rays + one shadow ray, one specular-lobe ray (GGX
+//   materials) and one diffuse-lobe ray, each continued by the path tracer below (NEE + MIS,
+//   max_depth).
+// * The split is unbiased: emitted + shading * visibility + glossy + indirect has the path
+//   tracer's expectation (at 1 spp exactly; with spp > 1 see `visibility`). Direct light is
+//   counted once: by the light sample, except that the specular lobe's share is MIS-weighted
+//   (power heuristic) between the light sample (in `shading`) and the specular ray hitting the
+//   light (in `glossy`, where a highlight moves like a reflection); the diffuse ray and the paths
+//   below the first bounce do not count light they hit directly at their first hit.
+// * shading: the unshadowed direct light (f_diffuse + w_mis f_specular) Le cos / pdf. In closed
+//   form where every light and lobe has one (ClosedFormShading in frame_buffers_render.cpp): the
+//   diffuse lobe under quad lights (Lambert's polygon formula,
+//   renderer/integrators/polygon_light.h), an environment (pi L for a constant one, degree-2
+//   spherical harmonics of a map: up to ~15% off next to a sun, which only the visibility ratio
+//   sees, EnvironmentMap::Irradiance) and distant lights, and a GGX lobe under distant lights only;
+//   the ratio estimator of Heitz et al. 2018 ("Combining analytic direct illumination and
+//   stochastic shadows"), with the analytic term Zhuang et al. and Zeng et al. take as the
+//   noise-free factor. Elsewhere (a GGX lobe under an area light or an environment) estimated
+//   per sample from 32 light samples without shadow rays (BSDF and light evaluations only): the
+//   light pick stratified (a distant light's term is exact) and the point on an area light or
+//   the environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
+//   noise-free; the light samples' relative per-pixel error at 1 spp is ~5% RMS
+//   (FrameBuffers.ShadingIsLowNoise; one light sample would be about sqrt(32) times noisier).
+//   0 where no light was sampled (no lights, one-sided quad seen from behind) or every sample
+//   lies below the surface.
+// * visibility: with light-sampled shading, the 0/1 of one shadow ray, to one of those light
+//   samples picked with probability proportional to its shading's luminance (resampling), so
+//   that shading * visibility keeps the path tracer's expectation (exactly for white light,
+//   consistent for coloured: the sample colours' chromaticities differ). A sample with zero
+//   shading traces no shadow ray and counts as visible (1): its product is 0 anyway, and a 1
+//   keeps the attached shadows of a surface turning away from the light from bleeding into lit
+//   pixels when the stage filters visibility. With closed-form shading, 6 light samples are
+//   taken instead of 32, their lights picked in proportion to each light's closed-form term
+//   (stratified; a dim sky beside a lamp gets none; with more than 16 lights the pick stays
+//   uniform), and visibility is the ratio lum(their mean) * V / lum(shading), V the
+//   0/1 of the shadow ray resampled as above: its expectation is the shadowed over the
+//   unshadowed light (the luminance of shading * visibility is unbiased; measured, the
+//   ComposeIsUnbiased test; taking V alone was visibly biased in penumbrae, z^2 1.54 there), so
+//   it is 0 where the ray was blocked and near 1, above or below, where not; it is 0 without a
+//   shadow ray when all 6 samples fell where the BSDF is 0. With spp > 1 it is the mean of the
+//   samples weighted by the luminance of their shading (the ratio estimator), so shading *
+//   visibility is the mean of the shadowed samples for white light (consistent, not unbiased,
+//   for coloured light).
+// * blocker / lightSample: the first surface the shadow ray hit (quad lights block too, as in the
+//   path tracer) and the sampled light point; NaN exactly where no shadow ray was blocked. With spp
+//   > 1 they are those of the blocked sample with the most shading. Lights at infinity (distant,
+//   environment) get the point 1e4 scene extents from the blocker along the light direction.
+//   prevBlocker / prevLightSample: moved to `prevTime` by the blocker's object (or light) and by
+//   the light's keyframes (distant lights: the direction rotated; the environment does not move).
+// * glossy: GGX materials only (0 elsewhere; empty, with glossyHit and prevGlossyHit, when the
+//   scene has no GGX material): the specular lobe's visible-normal-sampled ray,
+//   path-traced below (light hit directly MIS-weighted, see above). glossyHit: its first hit (a
+//   surface or a quad light; NaN when it left the scene or there is no specular lobe), of the
+//   first sample that hit something; prevGlossyHit: moved by that hit's object or light.
+// * indirect: the diffuse lobe's cosine-sampled path (direct light at its first hit excluded),
+//   times the diffuse reflectance. GGX materials have a diffuse base too: their indirect is that
+//   of the base, so `albedo` is the diffuse lobe's reflectance ((1 - max F0) * albedo for GGX) and
+//   indirect / albedo is the indirect irradiance / pi for every material.
+// * cones (kNumCones per pixel): the radiance that the diffuse rays brought back (light that
+//   bounced at least once: the `indirect` path before the reflectance), recorded with
+//   screen::AddConeSample in the cone of each ray's direction and averaged over the spp, so that
+//   indirect = albedo * ShadeCones(cones) and each cone's expectation is the cosine-weighted mean
+//   radiance of its cell; a cone no ray fell in is 0. All six are NaN where there is no diffuse
+//   ray (background, lights, a shading normal facing away); with cached indirect all six are
+//   the cache's irradiance / pi (see below). A ray below the tessellated surface brings back 0
+//   and still counts. Sampling density is cos/pi about the normal.
+// * guides: position = primary hit (tessellated surface), normal = limit shading normal facing
+//   the camera, depth = ray distance, roughness = the GGX alpha used (max(r^2, 1e-3); 0 for
+//   diffuse), specular = F0 (0 for diffuse), objectId = scene object. prevPosition / prevNormal:
+//   moved by the object's keyframes from the frame time to `prevTime`.
+// * A quad light seen directly: `emitted` only, with position / normal / depth / prevPosition /
+//   prevNormal of the light's surface (moved by its keyframes) and objectId -1 (not an object).
+//   The environment seen directly: `emitted` only, every guide NaN / INF / -1.
+// * Texture-space shading (options.texture.enabled): diffuse materials take `indirect` from the
+//   cache, as the path integrator does (albedo * cached indirect irradiance / pi; no diffuse ray;
+//   the six cones all hold the cached irradiance / pi, so indirect = albedo * ShadeCones(cones)
+//   still holds and the stage's cone history keeps the cached light: NaN cones sent Reliable's
+//   indirect to 0 there, issue 21); direct light always stays per hit here (the split needs its
+//   visibility), so options.texture.cacheDirect is ignored. GGX materials are shaded per hit as
+//   above.
+// * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty
+//   otherwise): for diffuse materials facing the camera, the texel-cache lookup of the pixel's
+//   texel in the object's visibility grids (TextureSpaceCache::VisibilityTexelOf; a cache
+//   sample is ShadeVisibilitySample: the shadowed / unshadowed irradiance ratio of
+//   options.texture.shadowSamples stratified light samples of all lights, one shadow ray each),
+//   filtered by the object's filter kind over a footprint of options.texture.visibilityRadius
+//   (5x5 by default: shadows have edges) and blended over frames with temporalAlpha; NaN
+//   elsewhere (background, lights, GGX materials, whose visibility is weighted by a
+//   view-dependent lobe). It is the diffuse lobe's cosine-weighted ratio where `visibility` is
+//   weighted by the BSDF, and the filter blurs shadow edges over its footprint (measured:
+//   results/disocclusion.md). The stage uses it only where its visibility has no history.
+#pragma once
+#include <string>
+
+#include "renderer/render.h"
+#include "renderer/scene/scene.h"
+#include "screen_space/frame_buffers.h"
+
+namespace texcache {
+
+class AtomicFiles;
+
+/// Renders the frame at options.frameTime (the time `scene` was built for) into `out` (every
+/// buffer filled, sizes options.width x options.height, options.spp samples per pixel); "prev"
+/// buffers are moved to `prevTime` (usually frameTime - 1/fps). options.integrator, seconds,
+/// aovs and the camera's lens and shutter are ignored. With options.texture.enabled the cache
+/// is `cache`, or one made for this frame when null. Throws InputError on bad options.
+RenderStats RenderFrameBuffers(const RenderScene& scene, const RenderOptions& options,
+                               float prevTime, screen::FrameBuffers* out,
+                               TextureSpaceCache* cache = nullptr);
+
+/// Why frame buffers cannot honour `cam` (they trace every pixel through the lens centre at
+/// shutter open: exact guides for the screen-space stage), e.g. "its camera has a lens
+/// (lens_radius 0.05): ..."; empty when they can (pinhole, closed shutter).
+std::string FrameBufferCameraProblem(const Camera& cam);
+
+/// The screen-space camera of `cam` at scene time `time` for a width x height raster: the pinhole
+/// projection CameraModel traces (lens and shutter ignored).
+screen::FrameCamera MakeFrameCamera(const Camera& cam, float time, int width, int height);
+
+/// A frame's colours (FrameBuffers::Compose(), a denoised image) as a width x height RGB image.
+Image ToImage(const std::vector<glm::vec3>& colours, int width, int height);
+
+/// Writes a frame's buffers as one multi-layer EXR (32-bit float, lossless): R,G,B = Compose(),
+/// then a layer per buffer ("shading.R", "visibility.Y", "position.X", "objectId.Y", "cone3.G",
+/// ...; empty buffers are left out) and the camera and time as header attributes
+/// ("texcache:worldToClip", "texcache:cameraPosition", "texcache:time"). Writes a temporary file
+/// and renames it over `path` (with a `group`: the group's Commit() does). Throws InputError
+/// naming the path.
+void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fb,
+                       AtomicFiles* group = nullptr);
+
+/// Reads a file WriteFrameBuffers wrote (missing layers stay empty); throws InputError naming the
+/// path when it cannot be read, claims a size it cannot hold (CheckImageSizeClaim) or lacks the
+/// camera attributes.
+screen::FrameBuffers ReadFrameBuffers(const std::string& path);
+
+}  // namespace texcache

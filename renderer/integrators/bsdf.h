@@ -1,0 +1,184 @@
+// SPDX-License-Identifier: Apache-2.0
+// The two materials the scenes need: Lambertian diffuse, and a GGX specular layer over a
+// diffuse base. Evaluated in the shading frame (z = shading normal); header-only for inlining.
+#pragma once
+#include <algorithm>
+#include <cmath>
+
+#include <glm/glm.hpp>
+
+#include "renderer/integrators/sampling.h"
+
+namespace texcache {
+
+inline float Luminance(glm::vec3 c) {
+    return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+}
+
+class Bsdf {
+public:
+    /// Diffuse when `ggx` is false; otherwise specular GGX + (1 - F0) diffuse, alpha =
+    /// roughness^2 per axis: roughness.x along `tangent` (projected onto the normal's plane),
+    /// roughness.y across it. Isotropic roughness ignores the tangent; so does a tangent
+    /// parallel to n (then the frame's own tangent is used).
+    Bsdf(glm::vec3 n, glm::vec3 ng, glm::vec3 albedo, bool ggx, glm::vec2 roughness, glm::vec3 f0,
+         glm::vec3 tangent = glm::vec3(0.0f))
+        : frame_(Frame::FromZ(n)), ng_(ng), albedo_(albedo), ggx_(ggx), f0_(f0) {
+        alpha_ = glm::max(roughness * roughness, glm::vec2(1e-3f));
+        kd_ = ggx ? 1.0f - std::max({f0.x, f0.y, f0.z}) : 1.0f;
+        if (ggx && alpha_.x != alpha_.y) {
+            const glm::vec3 t = tangent - n * glm::dot(n, tangent);
+            const float len2 = glm::dot(t, t);
+            if (len2 > 1e-12f && std::isfinite(len2)) {
+                frame_.s = t / std::sqrt(len2);
+                frame_.t = glm::cross(n, frame_.s);
+            }
+        }
+    }
+
+    /// BSDF value f(wo, wi) for world directions (both pointing away from the surface).
+    ///
+    /// wo may lie below the shading normal's plane while above the geometric one: a curved
+    /// surface seen at a grazing angle, where the interpolated normal leans away from the eye.
+    /// The diffuse lobe does not depend on wo and shades such a view as any other; the specular
+    /// lobe needs wo above the shading plane and is 0 there. (Both were 0, which left dark
+    /// fringes where a curved diffuse surface turns away: the clay car under a white sky, along
+    /// the lower edge of its body, lit 0.23 per hit against 0.8 x its ambient occlusion, 0.60.)
+    glm::vec3 Eval(glm::vec3 woW, glm::vec3 wiW) const {
+        if (glm::dot(wiW, ng_) <= 0.0f) return glm::vec3(0.0f);
+        const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
+        if (wi.z <= 0.0f) return glm::vec3(0.0f);
+        glm::vec3 f = kd_ * albedo_ * kInvPi;
+        if (ggx_ && wo.z > 0.0f) {
+            const glm::vec3 wm = glm::normalize(wo + wi);
+            const glm::vec3 F = FresnelSchlick(f0_, glm::dot(wo, wm));
+            f += F * (GgxD(wm, alpha_) * GgxG(wo, wi, alpha_) / (4.0f * wo.z * wi.z));
+        }
+        return f;
+    }
+
+    /// Solid-angle pdf of Sample() producing wiW.
+    float Pdf(glm::vec3 woW, glm::vec3 wiW) const {
+        const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
+        if (wi.z <= 0.0f) return 0.0f;
+        const float pDiffuse = CosineHemispherePdf(wi.z);
+        if (!ggx_ || wo.z <= 0.0f) return pDiffuse;  // Sample() then draws the diffuse lobe
+        const float ps = SpecularProbability(wo);
+        return ps * GgxPdfReflect(wo, wi, alpha_) + (1.0f - ps) * pDiffuse;
+    }
+
+    /// Samples wi; returns false when no direction was produced. `weight` = f * cos / pdf.
+    bool Sample(glm::vec3 woW, float uChoice, glm::vec2 u, glm::vec3* wiW, glm::vec3* weight,
+                float* pdf) const {
+        const glm::vec3 wo = frame_.ToLocal(woW);
+        glm::vec3 wi;
+        if (ggx_ && wo.z > 0.0f && uChoice < SpecularProbability(wo)) {
+            const glm::vec3 wm = GgxSampleVisibleNormal(wo, alpha_, u);
+            wi = glm::reflect(-wo, wm);
+        } else {
+            wi = SampleCosineHemisphere(u);
+        }
+        if (wi.z <= 0.0f) return false;
+        *wiW = frame_.FromLocal(wi);
+        *pdf = Pdf(woW, *wiW);
+        if (!(*pdf > 0.0f)) return false;
+        *weight = Eval(woW, *wiW) * (std::abs(wi.z) / *pdf);
+        return true;
+    }
+
+    // ---- The lobes separately (the screen-space frame buffers keep them apart) ----
+
+    /// Whether there is a specular (GGX) lobe.
+    bool HasSpecular() const { return ggx_; }
+    /// GGX alpha of the specular lobe (0 without one); the geometric mean of the two axes'
+    /// alphas when anisotropic.
+    float Alpha() const { return ggx_ ? std::sqrt(alpha_.x * alpha_.y) : 0.0f; }
+    /// GGX alphas along the frame's s and t axes.
+    glm::vec2 AlphaXY() const { return alpha_; }
+    /// Schlick F0 of the specular lobe.
+    glm::vec3 F0() const { return f0_; }
+    /// Reflectance of the diffuse lobe: albedo, times (1 - max F0) under a specular layer.
+    glm::vec3 DiffuseReflectance() const { return kd_ * albedo_; }
+
+    /// Eval() split into the diffuse and the specular lobe (their sum is Eval()).
+    void EvalLobes(glm::vec3 woW, glm::vec3 wiW, glm::vec3* diffuse, glm::vec3* specular) const {
+        *diffuse = *specular = glm::vec3(0.0f);
+        if (glm::dot(wiW, ng_) <= 0.0f) return;
+        const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
+        if (wi.z <= 0.0f) return;
+        *diffuse = kd_ * albedo_ * kInvPi;
+        if (ggx_ && wo.z > 0.0f) {
+            const glm::vec3 wm = glm::normalize(wo + wi);
+            *specular = FresnelSchlick(f0_, glm::dot(wo, wm)) *
+                        (GgxD(wm, alpha_) * GgxG(wo, wi, alpha_) / (4.0f * wo.z * wi.z));
+        }
+    }
+
+    /// The diffuse lobe for a white albedo: 1/pi where Eval() shades wiW at all, else 0
+    /// (DiffuseReflectance() x this is the diffuse lobe). It does not depend on the view.
+    float DiffuseWhite(glm::vec3 wiW) const {
+        return glm::dot(wiW, ng_) > 0.0f && glm::dot(wiW, frame_.n) > 0.0f ? kInvPi : 0.0f;
+    }
+    /// The specular lobe alone (Eval() = DiffuseReflectance() x DiffuseWhite() + this).
+    glm::vec3 EvalSpecular(glm::vec3 woW, glm::vec3 wiW) const {
+        glm::vec3 d, s;
+        EvalLobes(woW, wiW, &d, &s);
+        return s;
+    }
+
+    /// Solid-angle pdf of SampleSpecular() producing wiW.
+    float PdfSpecular(glm::vec3 woW, glm::vec3 wiW) const {
+        if (!ggx_) return 0.0f;
+        return GgxPdfReflect(frame_.ToLocal(woW), frame_.ToLocal(wiW), alpha_);
+    }
+
+    /// Samples the specular lobe alone (visible normals); `weight` = f_spec * cos / pdf.
+    bool SampleSpecular(glm::vec3 woW, glm::vec2 u, glm::vec3* wiW, glm::vec3* weight,
+                        float* pdf) const {
+        const glm::vec3 wo = frame_.ToLocal(woW);
+        if (!ggx_ || wo.z <= 0.0f) return false;
+        const glm::vec3 wm = GgxSampleVisibleNormal(wo, alpha_, u);
+        const glm::vec3 wi = glm::reflect(-wo, wm);
+        if (wi.z <= 0.0f) return false;
+        *wiW = frame_.FromLocal(wi);
+        if (glm::dot(*wiW, ng_) <= 0.0f) return false;
+        *pdf = GgxPdfReflect(wo, wi, alpha_);
+        if (!(*pdf > 0.0f)) return false;
+        // f cos / pdf of visible-normal sampling: F G2 / G1(wo).
+        *weight =
+            FresnelSchlick(f0_, glm::dot(wo, wm)) * (GgxG(wo, wi, alpha_) / GgxG1(wo, alpha_));
+        return true;
+    }
+
+    /// Samples the diffuse lobe alone (cosine); `weight` = DiffuseReflectance(). False when the
+    /// direction lies below the geometric surface, where Eval() is 0 (wiW is set in either case).
+    bool SampleDiffuse(glm::vec2 u, glm::vec3* wiW) const {
+        *wiW = frame_.FromLocal(SampleCosineHemisphere(u));
+        return glm::dot(*wiW, ng_) > 0.0f;
+    }
+
+    const Frame& frame() const { return frame_; }
+
+    /// Sample() picks the specular lobe at least this often (in [0.1, 0.9]; 0.1 by default).
+    /// A caller that averages the diffuse lobe's light over many hits (binning at camera hits)
+    /// but not the specular lobe's spends more of its samples on the latter.
+    void SetMinSpecularProbability(float p) { minSpecular_ = std::clamp(p, 0.1f, 0.9f); }
+
+private:
+    float SpecularProbability(glm::vec3 wo) const {
+        const float s = Luminance(FresnelSchlick(f0_, wo.z));
+        const float d = kd_ * Luminance(albedo_);
+        return std::clamp(s / std::max(s + d, 1e-6f), minSpecular_, 0.9f);
+    }
+    static constexpr float kInvPi = 0.31830988618379067f;
+
+    Frame frame_;
+    glm::vec3 ng_, albedo_;
+    bool ggx_;
+    glm::vec3 f0_;
+    glm::vec2 alpha_;
+    float kd_;
+    float minSpecular_ = 0.1f;
+};
+
+}  // namespace texcache

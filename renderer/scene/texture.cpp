@@ -1,0 +1,58 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/scene/texture.h"
+
+#include <cmath>
+
+#include "renderer/image/image.h"
+
+namespace texcache {
+
+namespace {
+float SrgbToLinear(float c) {
+    return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+bool IsFloatFormat(const std::string& path) {
+    auto dot = path.rfind('.');
+    std::string ext = dot == std::string::npos ? "" : path.substr(dot + 1);
+    for (auto& ch : ext) ch = char(std::tolower(ch));
+    return ext == "exr" || ext == "hdr" || ext == "pfm";
+}
+}  // namespace
+
+TextureImage::TextureImage(const Texture& desc) : desc_(desc) {
+    if (desc.kind != Texture::Kind::Image) return;
+    Image img = ReadImageRGB(desc.path);
+    width_ = img.width;
+    height_ = img.height;
+    texels_.resize(size_t(width_) * height_);
+    const bool decode = !IsFloatFormat(desc.path);  // 8-bit images store sRGB-encoded colour
+    for (int y = 0; y < height_; ++y)
+        for (int x = 0; x < width_; ++x) {
+            const float* p = img.At(x, y);
+            glm::vec3 c(p[0], p[1], p[2]);
+            if (decode) c = {SrgbToLinear(c.x), SrgbToLinear(c.y), SrgbToLinear(c.z)};
+            texels_[size_t(y) * width_ + x] = glm::max(c, glm::vec3(0.0f));
+        }
+}
+
+glm::vec3 TextureImage::Eval(glm::vec2 uv) const {
+    if (desc_.kind == Texture::Kind::Checker) {
+        const int cx = int(std::floor(uv.x * desc_.scale)),
+                  cy = int(std::floor(uv.y * desc_.scale));
+        return ((cx + cy) & 1) ? desc_.colorB : desc_.colorA;
+    }
+    // Bilinear with wrapping; v = 0 is the bottom row of the image (OBJ convention).
+    const float x = (uv.x - std::floor(uv.x)) * width_ - 0.5f;
+    const float y = (1.0f - (uv.y - std::floor(uv.y))) * height_ - 0.5f;
+    const int x0 = int(std::floor(x)), y0 = int(std::floor(y));
+    const float fx = x - x0, fy = y - y0;
+    auto at = [&](int xi, int yi) {
+        xi = ((xi % width_) + width_) % width_;
+        yi = ((yi % height_) + height_) % height_;
+        return texels_[size_t(yi) * width_ + xi];
+    };
+    return glm::mix(glm::mix(at(x0, y0), at(x0 + 1, y0), fx),
+                    glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx), fy);
+}
+
+}  // namespace texcache

@@ -1,0 +1,485 @@
+// SPDX-License-Identifier: Apache-2.0
+// The renderer's use of libtexcache: one cache mesh per scene object (shading depends on where
+// the object is), samples of ShadedSample, texels of filtered RGB.
+//
+// Progressive texture space (why the cache keeps converging). The paper shades each cached
+// sample once, so a larger budget only buys camera rays: the shading noise the filter leaves
+// and the filter's bias stay. The catmark car in diffuse clay (albedo 0.8) under a constant
+// white sky, path tracing with max_depth 2, 256x256, `--shading texture --cached-light all`
+// against a 512-spp per-hit render (`texcache compare`): with `--pass-spp 0` relMSE 0.0134 at
+// 16 spp and 0.0125 at 64 spp; progressive 0.0059 and 0.0028.
+// Here a render of more than options.passSpp camera samples
+// runs passes of passSpp samples (render.cpp, RunPasses) and every pass k > 0 begins with
+// BeginPass(k):
+//   * every sample and texel is evicted and shaded again from random streams of (key, k), so
+//     the passes are independent estimates and the image, their mean, loses variance as 1/K;
+//   * a sample of pass k > 0 sits at a uniform point of its texel instead of the centre, so the
+//     mean over passes is the texel's mean shading (the centre's value is biased by the shading's
+//     curvature over the texel);
+//   * footprints shrink as r_k = round(r_0 (k + 1)^(-1/6)). A filter of radius r averages a
+//     smooth signal with a bias of O(r^2) and divides the noise variance by O(r^2) taps, so over
+//     K passes bias^2 ~ r^4 ~ K^(-2/3) and variance ~ 1 / (K r^2) ~ K^(-2/3): both vanish, at
+//     the rate that balances them (progressive photon mapping's radius reduction, alpha = 2/3).
+//
+// Hit binning (TextureSamples::Hits) takes the same route with bins for footprints: a pass
+// shades every camera hit as per-hit shading would (AO rays; or, for the path integrator, the
+// light a diffuse hit receives, its albedo applied after) and adds the result to the bins of
+// its point at two levels above its texel's (HitBinLevels); each camera sample then reads the
+// 2x2 bins around it at each level, bilinearly, and combines the two (below). Bins of side h
+// average a smooth signal with a bias of O(h^2) and hold O(h^2 n) rays for n rays per pixel, so
+// with h ~ n^(-k): bias^2 ~ n^(-4k) and variance ~ n^(2k-1), and both vanish for any 0 < k < 1/2 (k
+// = 1/6 balances them asymptotically). We take k = 1/3 from 2.5 levels at 4 rays per pixel: at the
+// budgets speed-vs-error measures the bias of the coarser bins dominates sooner than the
+// asymptotic rate assumes (car AO 480x270, 4 spp, 16 rays per hit: relMSE 0.0044 with bins 2
+// levels up, 0.0028 with 1; at 1 ray per hit 2 levels up 0.032, 1 level 0.071). AO's noise is
+// about the same on any scene (a ray escapes or not); a path's estimate of diffuse light is not:
+// its variance for its mean ranges over 100x from a clay object under a white sky to a glossy
+// car under a courtyard map, and the best level with it. A fixed 3.5 levels (tuned on the
+// scenes/ cases) left OpenSubdiv's bishop under a white sky at relMSE 0.0085 against per hit's
+// 0.0090 at one path per hit, where 2 levels give 0.0011. So a pass of diffuse light first shades
+// every hit, measures V, the variance of the binned light among each pixel's camera samples over
+// their mean squared (summed over the pixels), and bins at 3.6 + log2(V) / 4 - log2(n / 4) / 3
+// levels (HitLightLevels; n = camera samples per pixel so far; V already falls with the paths per
+// hit). 480x270 (bishop 640x360), 4 spp, 1 path per hit, relMSE with the fixed 3.5 levels ->
+// these: car (all diffuse light binned, V 1.3) 0.0613 -> 0.0598, chess (V 0.81) 0.0373 -> 0.0376,
+// sunlit (indirect binned, V 2.1) 0.0061 -> 0.0056, bishop (V 0.014) 0.0085 -> 0.0011; with a
+// slope of 1/5 or 1/3 instead of 1/4 the bishop's 0.0013 / 0.0014, the others within 1%. The
+// direct integrator's light keeps AO's levels: its best level did not follow V (chess soft
+// shadows, V 0.76, and the bishop, V 0.028, both best near 2.5-3).
+//
+// Combining the two levels. The schedule's level b is fractional; the bins lie floor(b) and
+// floor(b) + 1 levels up. A sample had read one of the two at random (the coarser with
+// probability frac(b)), which blends them whatever the data say. Instead it reads both and
+// moves from the finer estimate f towards the coarser c by alpha (render.cpp, Reconstruct):
+// f + alpha (c - f). A fine bin holds about a quarter of its coarse bin's samples, so with s^2
+// f's variance, Var(c) ~ cov(f, c) ~ s^2 / 4, and for a coarse bias B = E[c - f] the MSE of
+// f + alpha (c - f) is s^2 - 1.5 alpha s^2 + alpha^2 (0.75 s^2 + B^2), least at
+// alpha = 0.75 s^2 / E[(c - f)^2]. With the observed (c - f)^2 for its expectation, alpha =
+// min(1, k s^2 / (c - f)^2) (CoarseWeight): the coarse bins where the levels agree within the
+// noise (a flat region), the fine ones where they do not (a crease, a contact shadow's edge).
+// AO's s^2 is binomial from the bins' counts, k = 3/4. The light's comes from the pass's V (one
+// relative variance for the whole image, which underestimates it where the light changes
+// fastest): k = 4, measured best among 0.3-8 (all of 2-8 beat the random pick). The bins'
+// level is then floor(b) (half a level finer on average than the random pick; floor(b) + 1/2
+// lost on every case). 480x270 (chess 480x360, bishop 640x360), 4 spp, one ray or path per hit,
+// relMSE random pick -> combined: AO car 0.0237 -> 0.0176, chess 0.0079 -> 0.0069, car through
+// a thin lens 0.0173 -> 0.0139, the bishop 0.0042 -> 0.0037; light car 0.0598 -> 0.0550, chess
+// 0.0376 -> 0.0290, sunlit 0.0056 -> 0.0053, chess soft shadows (direct) 0.0329 -> 0.0271, the
+// bishop 0.0011 -> 0.00081; 16 paths: chess 0.0068 -> 0.0050, sunlit 0.0012 -> 0.0011, soft
+// shadows 0.0080 -> 0.0051. alpha stays in [0, 1], so the estimate lies between two consistent
+// ones and stays consistent. An earlier try picked one level per sample from six (the
+// intersection of confidence intervals, variances from the bins' second moments) and lost to
+// the schedule on the torus tests (AO at 1 ray per hit relMSE 0.020-0.042 against 0.016): a
+// hard choice among many noisy levels, where this one shrinks between two neighbours. The bias
+// vanishes until the bins reach level 0 (texels of texelFraction of the object's size), below
+// which it stays that of level 0's bins. The bins hold integer counts, whose sums do not depend
+// on the order of the adds (see texcache/hit_bins.h), so the image is the same for any thread
+// count.
+// The passes are deterministic (streams of key and pass, whatever thread shades a sample), so
+// the same seed still gives the same image for any thread count. Temporal accumulation
+// (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
+#pragma once
+#include <algorithm>
+#include <climits>
+#include <memory>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "filters/regression_filter.h"
+#include "filters/soft_shadow_filter.h"
+#include "filters/texture_filters.h"
+#include "renderer/render_options.h"
+#include "renderer/scene/render_scene.h"
+#include "texcache/hit_bins.h"
+#include "texcache/huge_pages.h"
+#include "texcache/shading_cache.h"
+#include "texcache/temporal_history.h"
+#include "texcache/visible_texels.h"
+
+namespace texcache {
+
+using RenderShadingCache = ShadingCache<ShadedSample, glm::vec3>;
+
+/// Bounding box of a cage's control points (object space).
+void CageBounds(const ControlCage& cage, glm::vec3* lo, glm::vec3* hi);
+/// Mip-0 texel size of the shading grids of a cage of bounds [lo, hi]: `texelFraction` of the
+/// box's diagonal (TextureSpaceOptions::texelFraction; eq. 1 then picks the level whose texels
+/// are about a pixel).
+float MipZeroTexelSize(glm::vec3 lo, glm::vec3 hi, float texelFraction = 1.0f / 4096.0f);
+
+/// A shading cache for a scene: lives as long as its owner wants (e.g. across frames). The one
+/// door between the renderer and libtexcache: it picks each hit's texel and each object's
+/// filter, and blends texels over frames; nothing else touches the ShadingCache inside.
+namespace internal {
+/// A camera sample of a pass as the visibility prepass saw it (see render.cpp's PassTexels).
+struct PassTexel {
+    uint64_t key;     ///< TexelKey::Pack()
+    int32_t mesh;     ///< the texel's cache mesh, or a PassTexels marker (< 0)
+    glm::vec3 found;  ///< the texel's value, when the prepass found it cached
+};
+/// A camera sample of a pass of hit-binned AO (render.cpp, AoHitsBin): where it hit, for the
+/// reconstruction that reads the bins around it. 12 bytes: a pass's records are written once and
+/// read once, and 1920x1080 at 4 spp holds 8.3M of them.
+struct HitRecord {
+    static constexpr float kUvScale = 65536.0f;
+    uint16_t u, v;       ///< the hit's face (u,v) in 1/65536 (the finest bins are 1/16384)
+    int32_t mesh;        ///< its cache mesh, or a PassTexels marker (< 0)
+    uint32_t faceLevel;  ///< the mesh's local Ptex face << 4 | the level its reconstruction reads
+    int Face() const { return int(faceLevel >> 4); }
+    int Level() const { return int(faceLevel & 15u); }
+    float U() const { return (float(u) + 0.5f) / kUvScale; }
+    float V() const { return (float(v) + 0.5f) / kUvScale; }
+    static uint16_t Quantize(float x) {
+        if (!(x > 0.0f)) return 0;  // NaN too
+        return uint16_t(std::min(x * kUvScale, kUvScale - 1.0f));
+    }
+};
+/// A binned diffuse hit of a pass of hit-binned light (render.cpp, PathHitsTrace): the light it
+/// bins, the albedo its reconstruction is multiplied by, and the level of its texel (its bins lie
+/// levels above it, chosen once the pass's noise is known).
+struct BinnedHit {
+    glm::vec3 light, albedo;
+    int32_t texelLevel;
+};
+/// Hit binning's reconstruction (the note at the top): how far a sample's estimate moves from
+/// its bins' level towards the level above, given the two estimates' (luminance) difference `d`
+/// and the finer one's variance `fineVariance`: alpha = min(1, k fineVariance / d^2), 1 when
+/// they agree exactly or the variance is not a number. Always in [0, 1], so the estimate stays
+/// between the two levels'.
+inline double CoarseWeight(double d, double fineVariance, double k) {
+    const double d2 = d * d;
+    const double v = k * fineVariance;
+    if (!(v >= 0.0)) return 1.0;  // NaN or negative: no evidence either way
+    return d2 > v ? v / d2 : 1.0;
+}
+/// k of CoarseWeight for AO, whose fine variance is binomial from the bins' counts: 3/4, the
+/// MSE-optimal weight for a finer bin holding a quarter of the coarser one's samples (note at
+/// the top).
+constexpr double kAoCoarseWeightK = 0.75;
+/// k for binned light (the path and direct integrators), whose fine variance comes from the
+/// pass's mean relative variance V:
+/// measured best near 4 (2-8 all beat the fixed blend; note at the top).
+constexpr double kLightCoarseWeightK = 4.0;
+
+/// What the visibility prepass keeps of a pass for its shading pass (render.cpp's PassTexels).
+struct PassScratch {
+    std::vector<PassTexel> texels;  ///< per camera sample of the pass
+    std::vector<uint32_t> added;    ///< per pixel: its first samples the prepass added itself
+    size_t Bytes() const {
+        return texels.capacity() * sizeof(PassTexel) + added.capacity() * sizeof(uint32_t);
+    }
+};
+}  // namespace internal
+
+class TextureSpaceCache {
+public:
+    /// Registers every object of the scene; throws InputError on impossible settings.
+    TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options);
+
+    const TextureSpaceOptions& options() const { return options_; }
+
+    /// The texel a shading point maps to (eq. 1 and 2) in its object's front or back grids.
+    SampleRequest TexelOf(const SurfaceInteraction& si) const {
+        return cache_.TexelAt({MeshOf(si.object, si.backFacing), si.ptex.face, si.ptex.u, si.ptex.v,
+                               si.dudx, si.dvdx, si.dudy, si.dvdy});
+    }
+    /// The texel of a shading point in its object's visibility grids (options.cachedVisibility:
+    /// a second set of grids per object, so that the cached visibility and the cached light of
+    /// one texel are different keys of the one cache).
+    SampleRequest VisibilityTexelOf(const SurfaceInteraction& si) const {
+        const size_t o = size_t(si.object);
+        const int mesh =
+            si.backFacing && visBackMeshOf_[o] >= 0 ? visBackMeshOf_[o] : visMeshOf_[o];
+        return cache_.TexelAt(
+            {mesh, si.ptex.face, si.ptex.u, si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy});
+    }
+    /// TexelOf's result for a texel key of cache mesh `mesh` (see ShadingCache::RequestOf).
+    SampleRequest RequestOf(int mesh, const TexelKey& key) const {
+        return cache_.RequestOf(mesh, key);
+    }
+    /// Starts fetching a texel's slot into the CPU cache (see ShadingCache::Prefetch): for a
+    /// batch of texels before their lookups.
+    void Prefetch(const SampleRequest& texel) const { cache_.Prefetch(texel); }
+    /// The texel's value when the texel cache holds it right now: read-only (never shades,
+    /// claims or counts), and the value a Lookup hit would return.
+    bool FindTexel(const SampleRequest& texel, glm::vec3* value) const {
+        return cache_.FindTexel(texel, value);
+    }
+
+    /// The cached term of scene object `object` at `texel` (from TexelOf): a texel-cache hit,
+    /// or on a miss the object's filter over its footprint, with the missing samples shaded by
+    /// `shade(const SampleRequest&) -> ShadedSample` and the result blended into the texel's
+    /// temporal history. `raysPerSample` is the number of rays behind each sample (the
+    /// regression's n). Inlined: no virtual call or allocation per lookup.
+    template <typename ShadeFn>
+    glm::vec3 Lookup(const SampleRequest& texel, int object, ShadeFn&& shade, int raysPerSample,
+                     CacheStats& stats);
+
+    /// Texels a side of a sample's face grid at its level.
+    int Resolution(const SampleRequest& r) const { return cache_.Mesh(r.mesh).Res(r.face, r.mip); }
+    /// Footprints keep only the texels of `visible` until the next call (null: every texel);
+    /// see ShadingCache::RestrictFootprints. Never while lookups run.
+    void RestrictFootprints(const VisibleTexels* visible) { cache_.RestrictFootprints(visible); }
+    /// Stereo's second eye (renderer/texture_space/stereo.h): while on, a lookup whose texel is not
+    /// cached takes the mean of the cached texels among its 8 neighbours (same face and level)
+    /// before filtering anew; such a lookup counts as a texel hit. Never while lookups run.
+    void ReuseNeighbourTexels(bool on) { neighbourReuse_ = on; }
+    /// Evicts every sample and texel (not the temporal history): the next lookups shade anew.
+    /// Every way of emptying the caches (BeginFrame, a new pass, Reconfigure) comes here.
+    void Invalidate() {
+        cache_.InvalidateAll();
+        mayHoldTexels_ = false;
+    }
+    /// False when no lookups ran since the caches were last emptied: a renderer may then skip
+    /// asking for texels it knows cannot be there (the visibility prepass of a first pass would
+    /// otherwise probe the empty texel table once per camera sample). Renderers call
+    /// NoteLookups() after lookups; forgetting it only costs those probes.
+    bool MayHoldTexels() const { return mayHoldTexels_; }
+    void NoteLookups() { mayHoldTexels_ = true; }
+
+    /// Starts pass `pass` of a progressive render (see the note at the top): evicts every
+    /// sample and texel unless `pass` is the current one, and sets the filter radii of the pass.
+    void BeginPass(uint32_t pass);
+    /// Back to pass 0 (its footprints, its random streams) for a new accumulation, keeping
+    /// what is cached: each sample and texel is an estimate of its own, whichever pass shaded
+    /// it. The preview calls it when the view moves after a still view re-shaded the cache for
+    /// many passes: the moving view would otherwise keep the last pass's shrunken footprints.
+    void RestartPasses() { BeginPassRadii(0); }
+    /// The current pass: 0 for a new cache, after Reconfigure and after BeginFrame.
+    uint32_t Pass() const { return pass_; }
+    /// Whether renders through this cache run progressive passes (options.passSpp > 0, no
+    /// temporal accumulation).
+    bool Progressive() const { return options_.passSpp > 0 && !history_; }
+    /// The footprint radius of pass `pass` for a material radius `radius`:
+    /// round(radius (pass + 1)^(-1/6)), the schedule the note at the top argues for.
+    static int PassRadius(int radius, uint32_t pass);
+    /// What hit binning bins: AO rays or direct light (one visibility ray per sample: the
+    /// direct integrator's light takes AO's levels), or a path tracer's diffuse light.
+    enum class HitTerm { Ao, Light };
+    /// Hit binning (TextureSamples::Hits): how many levels above a hit's texel its bins lie,
+    /// for `raysPerHit` AO rays or light paths per hit, `passSpp` camera samples a pass and pass
+    /// `pass`: c - log2(n / 4) / 3 for n = raysPerHit * passSpp * (pass + 1) rays per pixel (see
+    /// the note at the top), c = 2.5 for AO (and the direct integrator's light) and 3.5 for
+    /// diffuse light whose noise was not measured (HitLightLevels). For an offset b the bins
+    /// lie floor(b) and floor(b) + 1 levels above the texel's, and a sample combines the two by
+    /// their noise (the note at the top); light whose noise was not measured reads one of them,
+    /// the coarser with probability frac(b).
+    static float HitBinLevels(int raysPerHit, int passSpp, uint32_t pass,
+                              HitTerm term = HitTerm::Ao);
+    /// The same for a path tracer's diffuse light, from the pass's noise: `noiseVar` / `noiseMean2`
+    /// is the relative variance of one camera sample's binned light (the variance among each
+    /// pixel's samples over their mean squared, summed over the pixels); see the note at the top.
+    /// Without a measure (fewer than two binned samples a pixel) HitBinLevels(HitTerm::Light).
+    static float HitLightLevels(double noiseVar, double noiseMean2, int pathsPerHit, int passSpp,
+                                uint32_t pass);
+    /// Cache mesh id of a scene object's front side, or of its back side (open surfaces are
+    /// seen from both sides and shade differently on each; closed ones have no back mesh).
+    int MeshOf(int object, bool backFacing = false) const {
+        return backFacing && backMeshOf_[object] >= 0 ? backMeshOf_[object] : meshOf_[object];
+    }
+    /// The object a cache mesh belongs to, and whether it is that object's back side.
+    int ObjectOfMesh(int mesh) const { return meshObject_[mesh]; }
+    bool IsBackMesh(int mesh) const { return meshIsBack_[mesh]; }
+    /// Whether a cache mesh's samples lie on the side opposite to the limit normal
+    /// cross(dPdu, dPdv): the back side of an open surface, or the outside of a closed one whose
+    /// limit normals point inward in world space (a cage wound inward, or a mirroring transform).
+    bool SamplesAgainstNormal(int mesh) const { return meshAgainstNormal_[mesh]; }
+    /// The filter of an object's material (its override, else the render's default).
+    TextureFilterKind FilterOf(int object) const { return filterOf_[object]; }
+    /// Footprint radius of an object's material (its override, else the render's default), as
+    /// of pass 0.
+    int RadiusOf(int object) const { return radiusOf_[object]; }
+    /// Whether any object uses a filter (e.g. to skip what only that filter needs).
+    bool Uses(TextureFilterKind kind) const;
+    /// Whether any object's filter reads more than its centre texel.
+    bool AnyFootprint() const;
+    /// The visibility set for a render of width x height pixels, empty: about two words per
+    /// pixel (see visible_texels.h), between 32 KB and 16 MB; kept from render to
+    /// render and only reallocated when the size changes. With `clear` false, the marks of the
+    /// previous render of this size are kept (stereo: both eyes mark one set).
+    VisibleTexels& Visibility(int width, int height, bool clear = true);
+    /// What the visibility prepass found for each camera sample of a pass (render.cpp), kept
+    /// here from render to render like the visibility set: a warm frame then reuses its pages
+    /// instead of faulting in 24 bytes per camera sample again. Empty until a render uses it.
+    internal::PassScratch& PassTexelScratch() { return passTexels_; }
+    /// Hit-binned AO's bins: a table of at least `minBlocks` blocks, kept from pass to pass and
+    /// render to render (it only grows), and the records of a pass's camera samples (render.cpp).
+    HitBins& Bins(size_t minBlocks) {
+        if (!bins_ || bins_->NumBlocks() < minBlocks) bins_ = std::make_unique<HitBins>(minBlocks);
+        return *bins_;
+    }
+    /// Hit-binned diffuse light's bins (the path integrator), kept as Bins() keeps its own.
+    RadianceBins& LightBins(size_t minBlocks) {
+        if (!lightBins_ || lightBins_->NumBlocks() < minBlocks)
+            lightBins_ = std::make_unique<RadianceBins>(minBlocks);
+        return *lightBins_;
+    }
+    /// At least `n` records on huge pages (uninitialised; kept from render to render).
+    internal::HitRecord* HitRecords(size_t n) {
+        if (n > hitRecordCount_) {
+            hitRecords_.reset(static_cast<internal::HitRecord*>(
+                AllocateHugePages(n * sizeof(internal::HitRecord))));
+            hitRecordCount_ = n;
+        }
+        return hitRecords_.get();
+    }
+    /// At least `n` binned diffuse hits' light and albedo, beside their records (as HitRecords).
+    internal::BinnedHit* BinnedHits(size_t n) {
+        if (n > hitAlbedoCount_) {
+            hitAlbedos_.reset(AllocateHugePages(n * sizeof(internal::BinnedHit)));
+            hitAlbedoCount_ = n;
+        }
+        return static_cast<internal::BinnedHit*>(hitAlbedos_.get());
+    }
+    /// The grids of a cache mesh (resolutions, Ptex adjacency).
+    const MeshGrids& Grids(int mesh) const { return cache_.Mesh(mesh); }
+    /// Ptex faces of all cache meshes.
+    size_t NumFaces() const {
+        size_t n = 0;
+        for (int m = 0; m < cache_.NumMeshes(); ++m) n += size_t(cache_.Mesh(m).NumFaces());
+        return n;
+    }
+
+    /// Takes new options and starts empty, keeping the cache storage when its layout is the same
+    /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
+    /// clears 2 x 64 MB instead of having the kernel map and zero them again for every render
+    /// (measured: 0.3 s of CPU on a 480x270 render, more than its shading; figure from e62355c,
+    /// closest command `texcache experiment speed-vs-error --only car-ao --out DIR`, whose
+    /// renders are 480x270). Returns false, and changes nothing, when the storage does not
+    /// match: build a new cache then.
+    bool Reconfigure(const RenderScene& rs, const TextureSpaceOptions& options);
+
+    /// Starts a frame of an animation: shading changes when objects move, so samples and texels
+    /// are re-shaded, while the temporal history (if any) carries over.
+    void BeginFrame(uint32_t frame);
+    uint32_t Frame() const { return frame_; }
+    /// This frame's filtered value of a texel blended into its history (eq. 6); `value` as is
+    /// when temporal accumulation is off.
+    glm::vec3 Accumulate(const TexelKey& key, glm::vec3 value) {
+        return history_ ? history_->Blend(key, frame_, value) : value;
+    }
+    /// Bytes of all cache storage (sample and texel caches, temporal history, visibility set).
+    size_t BytesUsed() const {
+        return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0) +
+               (visible_ ? visible_->Bytes() : 0) + passTexels_.Bytes() +
+               (bins_ ? bins_->BytesUsed() : 0) + (lightBins_ ? lightBins_->BytesUsed() : 0) +
+               hitRecordCount_ * sizeof(internal::HitRecord) +
+               hitAlbedoCount_ * sizeof(internal::BinnedHit);
+    }
+    size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
+    size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
+    size_t SampleSlots() const { return cache_.SampleSlots(); }
+
+private:
+    void AssignFilters(const Scene& scene);
+    /// Sets the pass and its filter radii (BeginPass without the eviction).
+    void BeginPassRadii(uint32_t pass);
+    /// The mean of the cached texels among the 8 around `texel` on its face and level; false
+    /// when none is cached (see ReuseNeighbourTexels).
+    bool FindNeighbourTexel(const SampleRequest& texel, glm::vec3* value) const;
+
+    TextureSpaceOptions options_;
+    RenderShadingCache cache_;
+    std::vector<int> meshOf_, backMeshOf_;
+    std::vector<int> visMeshOf_, visBackMeshOf_;  ///< visibility grids (empty unless cached)
+    int firstVisMesh_ = INT_MAX;                  ///< cache meshes from here on are those
+    std::vector<int> meshObject_;
+    std::vector<char> meshIsBack_, meshAgainstNormal_;
+    std::vector<TextureFilterKind> filterOf_;
+    std::vector<int> radiusOf_;
+    std::vector<int> passRadiusOf_;  ///< radiusOf_ shrunk for the current pass
+    std::unique_ptr<TemporalHistory<glm::vec3>> history_;
+    std::unique_ptr<VisibleTexels> visible_;
+    internal::PassScratch passTexels_;
+    std::unique_ptr<HitBins> bins_;
+    struct Free {
+        void operator()(void* p) const { std::free(p); }
+    };
+    std::unique_ptr<internal::HitRecord[], Free> hitRecords_;
+    size_t hitRecordCount_ = 0;
+    std::unique_ptr<RadianceBins> lightBins_;
+    std::unique_ptr<void, Free> hitAlbedos_;
+    size_t hitAlbedoCount_ = 0;
+    uint32_t frame_ = 0;
+    uint32_t pass_ = 0;
+    bool mayHoldTexels_ = false;  ///< see MayHoldTexels
+    bool neighbourReuse_ = false;
+};
+
+namespace internal {
+/// A texture filter whose results pass through the temporal blend; it offers the block (tile)
+/// form of ShadingCache::LookupTexel exactly when the filter does and `Blocks` is true (false:
+/// a miss filters its own texel alone).
+template <typename Filter, bool Blocks = true>
+struct Accumulating {
+    TextureSpaceCache* cache;
+    const Filter& filter;
+
+    glm::vec3 operator()(const FilterInput<ShadedSample>& in) const {
+        return cache->Accumulate(in.request.key, filter(in));
+    }
+    glm::vec3 operator()(const SampleTile<ShadedSample>& t, int cx, int cy, int radius,
+                         const SampleRequest& texel) const
+        requires(Blocks&& requires { filter(t, cx, cy, radius, texel); }) {
+        return cache->Accumulate(texel.key, filter(t, cx, cy, radius, texel));
+    }
+    auto Prepare(const SampleTile<ShadedSample>& t, int radius) const
+        requires(Blocks&& requires { filter.Prepare(t, radius); }) {
+        return
+            [c = cache, p = filter.Prepare(t, radius)](int cx, int cy, const SampleRequest& texel) {
+                return c->Accumulate(texel.key, p(cx, cy, texel));
+            };
+    }
+};
+
+}  // namespace internal
+
+template <typename ShadeFn>
+glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, ShadeFn&& shade,
+                                    int raysPerSample, CacheStats& stats) {
+    // One branch per lookup picks the material's filter; the filters themselves are inlined. The
+    // temporal blend runs once per reconstructed texel, not per lookup.
+    auto lookup = [&]<typename Filter>(int radius, const Filter& filter,
+                                       FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
+        // Stereo's second eye (ReuseNeighbourTexels) filters a missed texel alone: its misses are
+        // mostly served by neighbours, and reconstructing the blocks around its few true misses
+        // shaded their samples too (car AO, 320x180: its new samples rose from 21% to 31% of the
+        // first eye's).
+        if (neighbourReuse_)
+            return cache_.LookupTexel(texel, radius, shade,
+                                      internal::Accumulating<Filter, false>{this, filter}, stats,
+                                      taps);
+        return cache_.LookupTexel(texel, radius, shade,
+                                  internal::Accumulating<Filter>{this, filter}, stats, taps);
+    };
+    if (neighbourReuse_) {
+        // A cached texel is read as is (a hit); a missing one tries its neighbours first.
+        glm::vec3 v;
+        if (cache_.FindTexel(texel, &v) || FindNeighbourTexel(texel, &v)) {
+            ++stats.lookups, ++stats.texelHits;
+            return v;
+        }
+    }
+    const float cosThreshold = options_.cosThreshold;
+    const int radius = texel.mesh >= firstVisMesh_ && options_.visibilityRadius >= 0
+                           ? options_.visibilityRadius
+                           : passRadiusOf_[object];
+    switch (filterOf_[object]) {
+        case TextureFilterKind::None:
+            return lookup(0, CentreFilter{});
+        case TextureFilterKind::Gaussian:
+            // The paper's 20x20 Gaussian: sigma half the radius, same normal test.
+            return lookup(radius, NormalWeightedFilter{cosThreshold, 0.5f * float(radius)});
+        case TextureFilterKind::Regression:
+            // A linear model fits the gradient a one-sided window sees: no symmetry needed.
+            return lookup(radius, RegressionFilter{raysPerSample, false}, FootprintTaps::Visible);
+        case TextureFilterKind::SoftShadow:
+            return lookup(radius, SoftShadowFilter{cosThreshold});
+        case TextureFilterKind::Normal:
+            break;
+    }
+    return lookup(radius, NormalWeightedFilter{cosThreshold, 0.0f});
+}
+
+}  // namespace texcache

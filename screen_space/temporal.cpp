@@ -1,0 +1,673 @@
+// SPDX-License-Identifier: Apache-2.0
+// The temporal passes of the screen-space stage (see denoiser_state.h).
+//
+// Design note. Each pass is one loop over a row that does everything a pixel needs at once (3x3
+// neighbourhood statistics of the current frame, the bilinear history gathered over the taps the
+// motion field allows, clamping, the blend, moments), written without branches (selects and
+// zero weights instead) so that GCC vectorizes it, with AVX2 gathers for the history; whether a
+// history exists at all is a template parameter, not a per-pixel test. The cone pass is the
+// exception: 18 floats per pixel and a 6x6 transfer whose weights depend on the two normals are
+// done per pixel, vectorized across the cones' channels.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "screen_space/denoiser_state.h"
+#include "screen_space/internal.h"
+
+namespace texcache::screen::internal {
+namespace {
+
+constexpr float kMaxLen = 255.0f;           // history lengths only select alpha and the variance
+constexpr int kConeFloats = 3 * kNumCones;  // a pixel's cones in FrameBuffers
+
+// Rows y-1, y, y+1 of a plane, with factor 0 for a row outside the image (then the centre row
+// is read in its place).
+struct Rows3 {
+    int r[3];
+    float f[3];
+    Rows3(int y, int h) {
+        r[0] = y > 0 ? y - 1 : y, r[1] = y, r[2] = y + 1 < h ? y + 1 : y;
+        f[0] = y > 0 ? 1.0f : 0.0f, f[1] = 1.0f, f[2] = y + 1 < h ? 1.0f : 0.0f;
+    }
+};
+
+// Sums over the usable samples of a 3x3 neighbourhood: count, per channel and of the
+// luminance (the channel itself for NC = 1), and of their squares.
+struct Stats3x3 {
+    float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0}, sl = 0.0f, sl2 = 0.0f;
+};
+template <int NC>
+inline __attribute__((always_inline)) Stats3x3 Neighbourhood(const float* const (&cur)[3][3],
+                                                             const float* const (&valid)[3],
+                                                             const float (&rowF)[3], int x) {
+    Stats3x3 st;
+#pragma GCC unroll 3
+    for (int r = 0; r < 3; ++r)
+#pragma GCC unroll 3
+        for (int dx = -1; dx <= 1; ++dx) {
+            const float ok = valid[r][x + dx] * rowF[r];
+            float v[3] = {0, 0, 0};
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) v[c] = cur[c][r][x + dx];
+            st.cnt += ok;
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) st.s1[c] += ok * v[c], st.s2[c] += ok * v[c] * v[c];
+            if constexpr (NC == 3) {
+                const float l = Luma(v[0], v[1], v[2]);
+                st.sl += ok * l, st.sl2 += ok * l * l;
+            }
+        }
+    if constexpr (NC == 1) st.sl = st.s1[0], st.sl2 = st.s2[0];
+    return st;
+}
+
+// A chunk's pixels [x0, x0 + n) through pixels(uniform, i0, i1, run): in runs of one history
+// tap offset (ForTapRuns) when there is a history, else in one go.
+template <bool Hist, class Args, class Pixels>
+inline __attribute__((always_inline)) void RunPixels(const Args& a, int x0, int n,
+                                                     Pixels&& pixels) {
+    if constexpr (Hist)
+        ForTapRuns(a.mx, a.my, a.mt, x0, n, a.w, a.h, a.stride, size_t(a.stride) * size_t(a.h),
+                   pixels);
+    else
+        pixels(std::false_type{}, 0, n, TapRun{});
+}
+
+struct SvgfArgs {
+    int w, h, stride;
+    const float* cur[3][3];  // [channel][row] at x = 0
+    const float* valid[3];   // [row]
+    float rowF[3];
+    const float* mx;
+    const float* my;
+    const uint8_t* mt;
+    const float* hc[3];  // history bases
+    const float* hm1;
+    const float* hm2;
+    const float* hlen;
+    float alpha, clampK;
+    const float* clampKRow;  // per-pixel k of the row (Clamp == kClampPerPixel)
+    float* out[3];
+    float* outVar;
+    float* m1;
+    float* m2;
+    float* len;
+};
+
+// How SvgfRowImpl clamps the history: not at all, with one k, or with a k per pixel.
+constexpr int kClampNone = 0, kClampUniform = 1, kClampPerPixel = 2;
+
+template <int NC, bool Hist, int Clamp>
+inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
+    // Everything the loop reads is copied to locals and its results go to local arrays: then the
+    // compiler sees no possible aliasing and needs no run-time checks to vectorize.
+    const SvgfArgs a = args;
+    constexpr int kC = 256;
+    alignas(64) float o[3][kC], ovar[kC], om1[kC], om2[kC], olen[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
+            __attribute__((always_inline)) {
+            constexpr bool kUniform = decltype(uniform)::value;
+            for (int i = i0; i < i1; ++i) {
+                const int x = x0 + i;
+                // 3x3 statistics of the current frame (valid samples only).
+                const Stats3x3 st = Neighbourhood<NC>(a.cur, a.valid, a.rowF, x);
+                const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
+                const float* s1 = st.s1;
+                const float* s2 = st.s2;
+                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+                const float lm = sl * in;
+                const float spVar = std::max(0.0f, sl2 * in - lm * lm);
+
+                // Validity as 0/1 floats and arithmetic blends rather than bools: GCC 12 gives up
+                // on loops mixing boolean widths.
+                const float cv = a.valid[1][x];
+                float v[3] = {0, 0, 0};
+#pragma GCC unroll 3
+                for (int c = 0; c < NC; ++c) v[c] = a.cur[c][1][x];
+                const float l = NC == 3 ? Luma(v[0], v[1], v[2]) : v[0];
+
+                float hv[3] = {0, 0, 0}, hm1 = 0.0f, hm2 = 0.0f, hl = 0.0f, hf = 0.0f;
+                if constexpr (Hist) {
+                    const Bilinear b =
+                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+#pragma GCC unroll 3
+                    for (int c = 0; c < NC; ++c) hv[c] = RunGather<kUniform>(a.hc[c], b, run, x);
+                    hm1 = RunGather<kUniform>(a.hm1, b, run, x);
+                    hm2 = RunGather<kUniform>(a.hm2, b, run, x);
+                    hl = RunGather<kUniform>(a.hlen, b, run, x);
+                    hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
+                    if constexpr (Clamp != kClampNone) {
+                        const float k = Clamp == kClampPerPixel ? a.clampKRow[x] : a.clampK;
+#pragma GCC unroll 3
+                        for (int c = 0; c < NC; ++c) {
+                            const float mu = s1[c] * in;
+                            const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                            const float cl = std::min(std::max(hv[c], mu - k * sg), mu + k * sg);
+                            hv[c] = k > 0.0f ? cl : hv[c];  // per pixel, k = 0: not clamped
+                        }
+                    }
+#pragma GCC unroll 3
+                    for (int c = 0; c < NC; ++c) hv[c] *= hf;
+                    hm1 *= hf, hm2 *= hf, hl *= hf;
+                }
+                // len: +1 with a new sample; al: max(alpha, 1/len) with history, 1 without, 0
+                // without a new sample.
+                const float len =
+                    cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+                const float al =
+                    cv * (hf * std::max(a.alpha, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+#pragma GCC unroll 3
+                for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (v[c] - hv[c]);
+                const float m1 = hm1 + al * (l - hm1), m2 = hm2 + al * (l * l - hm2);
+                om1[i] = m1, om2[i] = m2, olen[i] = len;
+                const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
+                ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
+            }
+        };
+        RunPixels<Hist>(a, x0, n, pixels);
+        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
+        std::copy_n(ovar, n, a.outVar + x0);
+        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
+        std::copy_n(olen, n, a.len + x0);
+    }
+}
+
+#define TEXCACHE_SVGF(name, NC, H, C)                     \
+    TEXCACHE_SCREEN_CLONES void name(const SvgfArgs& a) { \
+        SvgfRowImpl<NC, H, C>(a);                         \
+    }
+TEXCACHE_SVGF(Svgf1, 1, false, kClampNone)
+TEXCACHE_SVGF(Svgf1H, 1, true, kClampNone)
+TEXCACHE_SVGF(Svgf1HC, 1, true, kClampUniform)
+TEXCACHE_SVGF(Svgf1HP, 1, true, kClampPerPixel)
+TEXCACHE_SVGF(Svgf3, 3, false, kClampNone)
+TEXCACHE_SVGF(Svgf3H, 3, true, kClampNone)
+TEXCACHE_SVGF(Svgf3HC, 3, true, kClampUniform)
+#undef TEXCACHE_SVGF
+
+struct ReliableArgs {
+    int w, h, stride;
+    const float* sp[3][3];  // [channel][row]
+    const float* spVar[3];  // [row]
+    float rowF[3];
+    const float* mx;
+    const float* my;
+    const uint8_t* mt;
+    const float* alphaV;  // null: alpha
+    const float* hc[3];
+    const float* hlen;
+    float alpha, clampK;
+    float* out[3];
+    float* outValid;
+    float* sigma;
+    float* len;
+};
+
+template <int NC, bool Hist, bool AlphaV>
+inline __attribute__((always_inline)) void ReliableRowImpl(const ReliableArgs& args) {
+    const ReliableArgs a = args;  // locals + local results: see SvgfRowImpl
+    constexpr int kC = 256;
+    alignas(64) float o[3][kC], ovalid[kC], osigma[kC], olen[kC];
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
+            __attribute__((always_inline)) {
+            constexpr bool kUniform = decltype(uniform)::value;
+            for (int i = i0; i < i1; ++i) {
+                const int x = x0 + i;
+                float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0};
+#pragma GCC unroll 3
+                for (int r = 0; r < 3; ++r)
+#pragma GCC unroll 3
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const float ok = a.spVar[r][x + dx] >= 0.0f ? a.rowF[r] : 0.0f;
+                        cnt += ok;
+#pragma GCC unroll 3
+                        for (int c = 0; c < NC; ++c) {
+                            const float v = a.sp[c][r][x + dx];
+                            s1[c] += ok * v, s2[c] += ok * v * v;
+                        }
+                    }
+                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+                const float cv = a.spVar[1][x] >= 0.0f ? 1.0f : 0.0f;  // 0/1: see SvgfRowImpl
+                const float av = AlphaV ? a.alphaV[x] : a.alpha;
+                float hv[3] = {0, 0, 0}, hl = 0.0f, hf = 0.0f, sigma = 0.0f;
+                if constexpr (Hist) {
+                    const Bilinear b =
+                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+                    hl = RunGather<kUniform>(a.hlen, b, run, x);
+                    hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
+                    float before = 0.0f, after = 0.0f;
+#pragma GCC unroll 3
+                    for (int c = 0; c < NC; ++c) {
+                        const float h = RunGather<kUniform>(a.hc[c], b, run, x);
+                        const float mu = s1[c] * in;
+                        const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                        hv[c] = std::min(std::max(h, mu - a.clampK * sg), mu + a.clampK * sg);
+                        before += h, after += hv[c];
+                        hv[c] *= hf;
+                    }
+                    hl *= hf;
+                    // eq. 8 on the channel sum, eq. 7, and the clean-up std.
+                    const float wc = std::fabs(after - before) / (std::fabs(before) + 1e-3f);
+                    const float wa = (av - a.alpha) * (av - a.alpha);
+                    sigma = hf * std::min(wa + wc, 5.0f);
+                }
+                const float len =
+                    cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+                const float al = cv * (hf * std::max(av, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+#pragma GCC unroll 3
+                for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (a.sp[c][1][x] - hv[c]);
+                ovalid[i] = std::max(cv, hf);
+                osigma[i] = sigma;
+                olen[i] = len;
+            }
+        };
+        RunPixels<Hist>(a, x0, n, pixels);
+        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
+        std::copy_n(ovalid, n, a.outValid + x0);
+        std::copy_n(osigma, n, a.sigma + x0), std::copy_n(olen, n, a.len + x0);
+    }
+}
+
+#define TEXCACHE_RELIABLE(name, NC, H, AV)                    \
+    TEXCACHE_SCREEN_CLONES void name(const ReliableArgs& a) { \
+        ReliableRowImpl<NC, H, AV>(a);                        \
+    }
+TEXCACHE_RELIABLE(Reliable1, 1, false, false)
+TEXCACHE_RELIABLE(Reliable1H, 1, true, false)
+TEXCACHE_RELIABLE(Reliable1HA, 1, true, true)
+TEXCACHE_RELIABLE(Reliable3, 3, false, false)
+TEXCACHE_RELIABLE(Reliable3H, 3, true, false)
+#undef TEXCACHE_RELIABLE
+
+}  // namespace
+
+void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, float clampK,
+                  const Plane* clampKPerPixel) {
+    ComponentPlanes& cp = s.comp[ci];
+    ComponentScratch& sc = s.scratch[ci];
+    History& hc = s.hist[ci][s.cur];
+    const History* hp = mf && s.hist[ci][s.cur ^ 1].valid ? &s.hist[ci][s.cur ^ 1] : nullptr;
+    const int nc = cp.nc;
+    ForRowBlocks(s.h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            const Rows3 r3(y, s.h);
+            SvgfArgs a;
+            a.w = s.w, a.h = s.h, a.stride = int(cp.valid.Stride());
+            for (int r = 0; r < 3; ++r) {
+                for (int c = 0; c < nc; ++c) a.cur[c][r] = cp.v[c].Row(r3.r[r]);
+                a.valid[r] = cp.valid.Row(r3.r[r]);
+                a.rowF[r] = r3.f[r];
+            }
+            if (hp) {
+                a.mx = mf->x.Row(y), a.my = mf->y.Row(y), a.mt = mf->taps.Row(y);
+                for (int c = 0; c < nc; ++c) a.hc[c] = hp->c[c].Base();
+                a.hm1 = hp->m1.Base(), a.hm2 = hp->m2.Base(), a.hlen = hp->len.Base();
+            }
+            a.alpha = s.set.alpha, a.clampK = clampK;
+            a.clampKRow = clampKPerPixel ? clampKPerPixel->Row(y) : nullptr;
+            for (int c = 0; c < nc; ++c) a.out[c] = sc.t[c].Row(y);
+            a.outVar = sc.tVar.Row(y);
+            a.m1 = hc.m1.Row(y), a.m2 = hc.m2.Row(y), a.len = hc.len.Row(y);
+            if (nc == 3)
+                !hp ? Svgf3(a) : clampK > 0.0f ? Svgf3HC(a) : Svgf3H(a);
+            else if (hp && clampKPerPixel)
+                Svgf1HP(a);
+            else
+                !hp ? Svgf1(a) : clampK > 0.0f ? Svgf1HC(a) : Svgf1H(a);
+        }
+    });
+}
+
+void ReliableTemporal(ScreenSpaceDenoiser::State& s, int ci, Plane* const* sp, const Plane& spVar,
+                      const MotionField* mf, const Plane* alphaV) {
+    ComponentPlanes& cp = s.comp[ci];
+    ComponentScratch& sc = s.scratch[ci];
+    History& hc = s.hist[ci][s.cur];
+    const History* hp = mf && s.hist[ci][s.cur ^ 1].valid ? &s.hist[ci][s.cur ^ 1] : nullptr;
+    const int nc = cp.nc;
+    ForRowBlocks(s.h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            const Rows3 r3(y, s.h);
+            ReliableArgs a;
+            a.w = s.w, a.h = s.h, a.stride = int(spVar.Stride());
+            for (int r = 0; r < 3; ++r) {
+                for (int c = 0; c < nc; ++c) a.sp[c][r] = sp[c]->Row(r3.r[r]);
+                a.spVar[r] = spVar.Row(r3.r[r]);
+                a.rowF[r] = r3.f[r];
+            }
+            a.alphaV = hp && alphaV ? alphaV->Row(y) : nullptr;
+            if (hp) {
+                a.mx = mf->x.Row(y), a.my = mf->y.Row(y), a.mt = mf->taps.Row(y);
+                for (int c = 0; c < nc; ++c) a.hc[c] = hp->c[c].Base();
+                a.hlen = hp->len.Base();
+            }
+            a.alpha = s.set.alpha, a.clampK = s.set.reliableClampK;
+            for (int c = 0; c < nc; ++c) a.out[c] = sc.t[c].Row(y);
+            a.outValid = sc.tVar.Row(y);
+            a.sigma = s.sigma.Row(y);
+            a.len = hc.len.Row(y);
+            if (nc == 3)
+                hp ? Reliable3H(a) : Reliable3(a);
+            else
+                !hp ? Reliable1(a) : a.alphaV ? Reliable1HA(a) : Reliable1H(a);
+        }
+    });
+}
+
+void CachedWhereNoHistory(ScreenSpaceDenoiser::State& s, bool svgf) {
+    ComponentPlanes& cp = s.comp[kVis];
+    ComponentScratch& sc = s.scratch[kVis];
+    History& hc = s.hist[kVis][s.cur];
+    ForRows(s.h, [&](int y) {
+        const float* cached = s.cachedVis.Row(y);
+        const float* valid = cp.valid.Row(y);
+        const float* len = hc.len.Row(y);
+        float* t = sc.t[0].Row(y);
+        float* var = sc.tVar.Row(y);
+        float* m1 = hc.m1.Row(y);
+        float* m2 = hc.m2.Row(y);
+        for (int x = 0; x < s.w; ++x) {
+            // len 1 with a usable sample: blended with weight 1, i.e. no history was found.
+            const bool use = cached[x] >= 0.0f && valid[x] > 0.0f && len[x] == 1.0f;
+            if (!use) continue;
+            t[x] = cached[x];
+            if (svgf) var[x] = 0.0f, m1[x] = cached[x], m2[x] = cached[x] * cached[x];
+        }
+    });
+}
+
+// ---- Cones ---------------------------------------------------------------------------------
+//
+// History layout: per pixel 3 vectors of 8 floats, one per colour channel, lanes 0..5 the 6 cones
+// (lanes 6, 7 zero), so the bilinear fetch, the overlap transfer and the blend are 8-wide vector
+// operations (GCC vector extensions: AVX2/AVX-512 clones, split in two on the baseline).
+
+namespace {
+
+typedef float V8 __attribute__((vector_size(32)));
+// V8 values are passed between internal functions that are inlined into each ISA clone, so the
+// baseline clone's different vector ABI (-Wpsabi) never matters.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+constexpr int kConeStride = 24;  // floats per pixel in the history
+
+inline V8 Load8(const float* p) {
+    V8 v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+}
+inline void Store8(float* p, V8 v) {
+    std::memcpy(p, &v, sizeof v);
+}
+inline float Sum6(V8 v, V8 w) {
+    const V8 m = v * w;
+    return m[0] + m[1] + m[2] + m[3] + m[4] + m[5];
+}
+
+// Cone axes with the azimuths' sines and cosines as constants (ConeAxes() evaluates them).
+inline void FastConeAxes(glm::vec3 n, glm::vec3* axes) {
+    static constexpr float kC[5] = {1.0f, 0.30901699f, -0.80901699f, -0.80901699f, 0.30901699f};
+    static constexpr float kS[5] = {0.0f, 0.95105652f, 0.58778525f, -0.58778525f, -0.95105652f};
+    glm::vec3 t1, t2;
+    ConeFrame(n, &t1, &t2);
+    axes[0] = n;
+    for (int k = 1; k < kNumCones; ++k)
+        axes[k] = 0.86602540f * (kC[k - 1] * t1 + kS[k - 1] * t2) + 0.5f * n;
+}
+
+// The overlap transfer (eqs. 9-10) of history cones recorded in the cone frame of normal np into
+// the cone frame of n: cone k takes the overlap-weighted mean of the history cones. Returned as
+// 6 columns: out = sum_j col[j] * raw[j] (per channel), and `cover`, how much of its usual
+// overlap cone k found (1 for the same frame; less where the hemispheres only partly overlap,
+// so the blend leans on the current frame there).
+struct ConeTransfer {
+    V8 col[kNumCones];
+    V8 cover;
+};
+inline void SameFrameTransfer(const ConeOverlapTable& t, ConeTransfer* tr) {
+    for (int j = 0; j < kNumCones; ++j) {
+        V8 c = {};
+        for (int k = 0; k < kNumCones; ++k) c[k] = t.SameFrame(k, j) / t.SameFrameRowSum(k);
+        tr->col[j] = c;
+    }
+    tr->cover = V8{1, 1, 1, 1, 1, 1, 0, 0};
+}
+inline void GeneralTransfer(const ConeOverlapTable& t, glm::vec3 n, glm::vec3 np,
+                            ConeTransfer* tr) {
+    glm::vec3 a[kNumCones], ap[kNumCones];
+    FastConeAxes(n, a);
+    FastConeAxes(np, ap);
+    float w[kNumCones][kNumCones], sum[kNumCones];
+    for (int k = 0; k < kNumCones; ++k) {
+        sum[k] = 0.0f;
+        for (int j = 0; j < kNumCones; ++j) {
+            w[k][j] = t.Overlap(glm::dot(a[k], ap[j]));
+            sum[k] += w[k][j];
+        }
+    }
+    for (int j = 0; j < kNumCones; ++j) {
+        V8 c = {};
+        for (int k = 0; k < kNumCones; ++k) c[k] = sum[k] > 0.0f ? w[k][j] / sum[k] : 0.0f;
+        tr->col[j] = c;
+    }
+    V8 cv = {};
+    for (int k = 0; k < kNumCones; ++k) cv[k] = std::min(1.0f, sum[k] / t.SameFrameRowSum(k));
+    tr->cover = cv;
+}
+
+struct ConeArgs {
+    int w, h, stride;
+    const float* ec[3][3];  // current shading [channel][row]
+    const float* valid[3];  // [row]
+    float rowF[3];
+    const uint8_t* guideValid;
+    const float* mx;
+    const float* my;
+    const uint8_t* mt;
+    const float* hm1;
+    const float* hm2;
+    const float* hlen;
+    const float* curCones;   // this frame's cones of the row: [cone][rgb], 18 floats per pixel
+    const float* histCones;  // previous history, padded pixel index x kConeStride
+    float* outCones;         // this frame's history of the row
+    const float* nx;         // this frame's normals of the row
+    const float* ny;
+    const float* nz;
+    const float* pnx;  // previous normals, bases
+    const float* pny;
+    const float* pnz;
+    const ConeOverlapTable* table;
+    const ConeTransfer* same;
+    float alpha, clampK;
+    const float* clampKRow;  // per-pixel k of the row (Clamp == kClampPerPixel)
+    float* out[3];
+    float* outVar;
+    float* m1;
+    float* m2;
+    float* len;
+};
+
+template <bool Hist>
+inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
+    constexpr int kC = 128;
+    alignas(64) float mu[3][kC], sg[3][kC], spv[kC], wt[4][kC], hf[kC], hm1[kC], hm2[kC], hl[kC];
+    alignas(64) int idx[4][kC];
+    alignas(64) float oe[3][kC], om1[kC], om2[kC], olen[kC], ovar[kC];
+    const V8 shade = {kConeShadeWeight[0],
+                      kConeShadeWeight[1],
+                      kConeShadeWeight[2],
+                      kConeShadeWeight[3],
+                      kConeShadeWeight[4],
+                      kConeShadeWeight[5],
+                      0,
+                      0};
+    for (int x0 = 0; x0 < a.w; x0 += kC) {
+        const int n = std::min(kC, a.w - x0);
+        // Pass 1 (vectorized across pixels): 3x3 statistics of the current shading, the history
+        // footprints and moments.
+        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
+            __attribute__((always_inline)) {
+            constexpr bool kUniform = decltype(uniform)::value;
+            for (int i = i0; i < i1; ++i) {
+                const int x = x0 + i;
+                const Stats3x3 st = Neighbourhood<3>(a.ec, a.valid, a.rowF, x);
+                const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
+                const float* s1 = st.s1;
+                const float* s2 = st.s2;
+                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+#pragma GCC unroll 3
+                for (int c = 0; c < 3; ++c) {
+                    mu[c][i] = s1[c] * in;
+                    sg[c][i] = std::sqrt(std::max(0.0f, s2[c] * in - mu[c][i] * mu[c][i]));
+                }
+                spv[i] = std::max(0.0f, sl2 * in - sl * in * sl * in);
+                if constexpr (Hist) {
+                    const Bilinear b =
+                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+                    idx[0][i] = b.i00, idx[1][i] = b.i10, idx[2][i] = b.i01, idx[3][i] = b.i11;
+                    wt[0][i] = b.w00, wt[1][i] = b.w10, wt[2][i] = b.w01, wt[3][i] = b.w11;
+                    const float l = RunGather<kUniform>(a.hlen, b, run, x);
+                    hf[i] = b.ok * (l >= 0.5f ? 1.0f : 0.0f);
+                    hm1[i] = hf[i] * RunGather<kUniform>(a.hm1, b, run, x);
+                    hm2[i] = hf[i] * RunGather<kUniform>(a.hm2, b, run, x);
+                    hl[i] = hf[i] * l;
+                } else {
+                    hf[i] = hm1[i] = hm2[i] = hl[i] = 0.0f;
+                }
+            }
+        };
+        RunPixels<Hist>(a, x0, n, pixels);
+        // Pass 2: the cones, pixel by pixel, 8-wide across the cones of a channel.
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            float* lo = a.outCones + size_t(x) * kConeStride;
+            const float cv = a.valid[1][x];
+            const bool hist = Hist && hf[i] > 0.0f;
+            if (!a.guideValid[x]) {
+                std::fill_n(lo, kConeStride, 0.0f);
+                oe[0][i] = oe[1][i] = oe[2][i] = 0.0f;
+                om1[i] = om2[i] = olen[i] = 0.0f, ovar[i] = -1.0f;
+                continue;
+            }
+            V8 hc[3] = {V8{}, V8{}, V8{}};
+            V8 cover = {1, 1, 1, 1, 1, 1, 0, 0};
+            if (hist) {
+                V8 raw[3] = {V8{}, V8{}, V8{}};
+                int dom = 0;
+                for (int k = 0; k < 4; ++k) {
+                    const float wk = wt[k][i];
+                    const float* src = a.histCones + size_t(idx[k][i]) * kConeStride;
+                    for (int c = 0; c < 3; ++c) raw[c] += wk * Load8(src + 8 * c);
+                    dom = wk > wt[dom][i] ? k : dom;
+                }
+                const glm::vec3 nc(a.nx[x], a.ny[x], a.nz[x]);
+                const int id = idx[dom][i];
+                const glm::vec3 np(a.pnx[id], a.pny[id], a.pnz[id]);
+                ConeTransfer general;
+                const ConeTransfer* tr = a.same;
+                if (!(glm::dot(nc, np) > 0.9999f && (nc.z >= 0.0f) == (np.z >= 0.0f))) {
+                    GeneralTransfer(*a.table, nc, np, &general);
+                    tr = &general;
+                }
+                cover = tr->cover;
+                for (int c = 0; c < 3; ++c)
+                    for (int j = 0; j < kNumCones; ++j) hc[c] += tr->col[j] * raw[c][j];
+                // Clamp the history's shading to mu +- k sigma of the current shading; the
+                // cones are scaled alike (k = 0: no clamping).
+                for (int c = 0; c < 3 && a.clampK > 0.0f; ++c) {
+                    const float sh = Sum6(hc[c], shade);
+                    const float cl = std::clamp(sh, mu[c][i] - a.clampK * sg[c][i],
+                                                mu[c][i] + a.clampK * sg[c][i]);
+                    hc[c] *= sh > 1e-12f ? cl / sh : 1.0f;
+                }
+            }
+            const float len =
+                cv * (hist ? std::min(hl[i] + 1.0f, kMaxLen) : 1.0f) + (1.0f - cv) * hl[i];
+            const float al = cv * (hist ? std::max(a.alpha, 1.0f / std::max(len, 1.0f)) : 1.0f);
+            // A cone only partly covered by the history's cones leans on the current frame.
+            const V8 ak = 1.0f - (1.0f - al) * cover;
+            const float* cur = a.curCones + size_t(x) * kConeFloats;
+            for (int c = 0; c < 3; ++c) {
+                V8 cu = {};
+                if (cv > 0.0f)
+                    for (int k = 0; k < kNumCones; ++k) cu[k] = cur[3 * k + c];
+                const V8 r = cv > 0.0f ? hc[c] + ak * (cu - hc[c]) : hc[c];
+                Store8(lo + 8 * c, r);
+                oe[c][i] = Sum6(r, shade);
+            }
+            const float l = Luma(a.ec[0][1][x], a.ec[1][1][x], a.ec[2][1][x]);
+            const float m1 = hm1[i] + al * (l - hm1[i]), m2 = hm2[i] + al * (l * l - hm2[i]);
+            om1[i] = m1, om2[i] = m2, olen[i] = len;
+            const bool any = cv > 0.0f || hist;
+            ovar[i] = any ? (len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spv[i]) : -1.0f;
+        }
+        for (int c = 0; c < 3; ++c) std::copy_n(oe[c], n, a.out[c] + x0);
+        std::copy_n(ovar, n, a.outVar + x0);
+        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
+        std::copy_n(olen, n, a.len + x0);
+    }
+}
+
+TEXCACHE_SCREEN_CLONES void ConeRow(const ConeArgs& a) {
+    ConeRowImpl<false>(a);
+}
+TEXCACHE_SCREEN_CLONES void ConeRowH(const ConeArgs& a) {
+    ConeRowImpl<true>(a);
+}
+#pragma GCC diagnostic pop
+
+}  // namespace
+
+void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const MotionField* mf) {
+    ComponentPlanes& cp = s.comp[kIndirect];
+    ComponentScratch& sc = s.scratch[kIndirect];
+    History& hc = s.hist[kIndirect][s.cur];
+    const History& prev = s.hist[kIndirect][s.cur ^ 1];
+    const int stride = int(cp.valid.Stride());
+    const size_t nCones = size_t(stride) * size_t(s.h) * kConeStride;
+    const History* hp = mf && prev.valid && prev.cones.size() == nCones ? &prev : nullptr;
+    if (hc.cones.size() != nCones) hc.cones.Assign(nCones, 0.0f);
+    ConeTransfer same;
+    SameFrameTransfer(s.coneTable, &same);
+    const Guides& g = s.G();
+    const Guides& pg = s.PrevG();
+    ForRowBlocks(s.h, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            const Rows3 r3(y, s.h);
+            ConeArgs a;
+            a.w = s.w, a.h = s.h, a.stride = stride;
+            for (int r = 0; r < 3; ++r) {
+                for (int c = 0; c < 3; ++c) a.ec[c][r] = cp.v[c].Row(r3.r[r]);
+                a.valid[r] = cp.valid.Row(r3.r[r]);
+                a.rowF[r] = r3.f[r];
+            }
+            a.guideValid = g.valid.Row(y);
+            if (hp) {
+                a.mx = mf->x.Row(y), a.my = mf->y.Row(y), a.mt = mf->taps.Row(y);
+                a.hm1 = hp->m1.Base(), a.hm2 = hp->m2.Base(), a.hlen = hp->len.Base();
+                a.histCones = hp->cones.data();
+                a.pnx = pg.nx.Base(), a.pny = pg.ny.Base(), a.pnz = pg.nz.Base();
+            }
+            a.curCones = &f.cones[size_t(y) * size_t(s.w) * kNumCones].x;
+            a.outCones = hc.cones.data() + (size_t(y) * size_t(stride) + kPad) * kConeStride;
+            a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+            a.table = &s.coneTable;
+            a.same = &same;
+            a.alpha = s.set.alpha, a.clampK = s.set.reliableIndirectClampK;
+            for (int c = 0; c < 3; ++c) a.out[c] = sc.t[c].Row(y);
+            a.outVar = sc.tVar.Row(y);
+            a.m1 = hc.m1.Row(y), a.m2 = hc.m2.Row(y), a.len = hc.len.Row(y);
+            hp ? ConeRowH(a) : ConeRow(a);
+        }
+    });
+}
+
+}  // namespace texcache::screen::internal
