@@ -30,17 +30,16 @@ endif()
 add_library(texcache_options INTERFACE)
 target_link_libraries(texcache_options INTERFACE texcache_warnings texcache_sanitizers)
 # No code here reads errno after a math call; without this flag every std::sqrt carries a
-# branch to the library's sqrtf for negative input, which also keeps loops of it scalar (the
-# camera ray's normalize was a sixth of a sky-only frame's CPU time: `perf annotate`).
+# branch to the library's sqrtf for negative input, which also keeps loops of it scalar (with it
+# the camera ray's normalize is a sixth of a sky-only frame's CPU time: `perf annotate`).
 target_compile_options(texcache_options INTERFACE -fno-math-errno)
 
 # Sanitizer builds compile code that only drives the libraries at -O0: the render tests, the CLI
 # and the experiments' orchestration. Under ASan + UBSan that is a third of the compile time of
-# -O1 (tests/frame_buffers_test.cpp: 8.8 s against 27 s of CPU; `time` on its compile command
-# from build-asan/'s compile_commands.json with -O1 -g1 replaced), and their run time stays with
-# the libraries they call, which keep -O1 (screen_space_test with its own file at -O0: 8.5 s
-# against 8.2 s of CPU, Release libraries). The cache library's tests keep -O1: they instantiate
-# its templates themselves.
+# -O1 (`time` on a test file's compile command from build-asan/'s compile_commands.json), and
+# their run time stays with the libraries they call, which keep -O1 (a test file at -O0 runs
+# about as fast as at -O1). The cache library's tests keep -O1: they instantiate its templates
+# themselves.
 function(texcache_driver_code target)
   if(NOT TEXCACHE_SANITIZE STREQUAL "")
     target_compile_options(${target} PRIVATE -O0)

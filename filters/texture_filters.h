@@ -34,9 +34,8 @@ struct ShadedSample {
 };
 
 /// A ShadedSample as the sample cache keeps it, in 16 bytes instead of 36, so a sample-cache slot
-/// takes 32 bytes instead of 56 (1.75x the samples per MB; overshading at 4K with 16 MB fell
-/// from 14.2% to 9.4%: `texcache experiment cache-size --out DIR`, its 4096x2304 / 16 MB cell,
-/// before and after ab2e9ac): the normal octahedron-encoded in 2 x 16 bits (error below 1e-4
+/// takes 32 bytes instead of 56 (1.75x the samples per MB, so less overshading in a small cache:
+/// results/cache_size.md): the normal octahedron-encoded in 2 x 16 bits (error below 1e-4
 /// radians; filters compare normals at cos 0.9), value, variance and extra as half floats
 /// (relative precision 5e-4, far below the Monte Carlo noise of a sample; magnitudes past 65504,
 /// extreme fireflies, are clamped there; inf and NaN are kept).
@@ -120,7 +119,7 @@ struct NormalWeightedFilter {
 
     /// Gaussian weights exp(-d2 / (2 sigma^2)) for squared offsets d2 = 0..reach: the thread's
     /// table, valid until its next call with another sigma or a larger reach. Why: one exp per
-    /// tap was a third of a Gaussian-filtered AO render's filtering (perf, car 480x270, 21x21),
+    /// tap is a third of a Gaussian-filtered AO render's filtering (perf, car 480x270, 21x21),
     /// and a window has only 2r^2 + 1 distinct offsets. Entries are the expression Sum used per
     /// tap, so results are unchanged.
     const float* GaussianWeights(int reach) const;

@@ -29,8 +29,8 @@ struct Kernel {
 /// pixel at scale 0.6: a circle of confusion under 1.7 pixels) are treated as sharp: the pixel is
 /// copied. Their neighbours would weigh exp(-2) or less, and a pixel blurred this little is
 /// sampled well by its own 8-16 camera samples; averaging it only risks blurring what is in
-/// focus (on the car's in-focus crop, a threshold of a quarter pixel changed 41% of its pixels
-/// and raised its relMSE 2% at 16 spp).
+/// focus (on the car's in-focus crop, a threshold of a quarter pixel changes 41% of its pixels
+/// and raises its relMSE: results/blur.md, "Alternatives").
 constexpr float kSharpVariance = 1.0f / 4.0f;
 /// Added to the covariance before inverting it: a motion blur is a segment (rank 1), whose
 /// Gaussian still needs a width across it (1/8 pixel std: neighbours across get exp(-32)).

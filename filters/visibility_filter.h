@@ -23,8 +23,8 @@
 // depth and motion buffers; no per-sample storage. The full layered reconstruction filters the
 // samples themselves in the light field (lens position and time per sample), which the renderer
 // does not keep; once texture space has removed the shading noise, pixel buffers suffice here:
-// on the bundled blur scenes this filter lowers texture-space relMSE 1.2-1.8x and puts texture
-// space 4.1-6.3x below per hit at equal time (results/blur.md).
+// on the bundled blur scenes this filter lowers texture-space relMSE, most where the blur is
+// motion (results/blur.md, docs/stereo-and-blur.md).
 //
 // Cost: windows reach a neighbourhood's largest kernel (McGuire's tile-max / neighbour-max with
 // tiles of the largest radius), capped at `maxRadius`; pixels no kernel reaches are copied. CPU,

@@ -78,8 +78,9 @@ bool VisibleOnly(FootprintMode mode, IntegratorKind integrator) {
 void SizeCachesToFrame(CacheSettings* cache, int width, int height, int views,
                        IntegratorKind integrator, FootprintMode footprint) {
     // Bytes per pixel: 4 slots of 32 bytes per texel or sample a pixel needs (two choices per
-    // key keep evictions rare at a quarter full: car AO 480x270, 7% of the texels evicted
-    // once at 16 MiB, 0.5% more samples shaded); four times that for whole-window footprints.
+    // key keep evictions rare at a quarter full: on car AO a few percent of the texels are
+    // evicted once, and the samples shaded barely change); four times that for whole-window
+    // footprints.
     constexpr double kTexelBytes = 128.0, kVisibleSampleBytes = 128.0, kAllSampleBytes = 512.0;
     constexpr size_t kMin = size_t(4) << 20, kMax = size_t(64) << 20;
     const bool visibleOnly = VisibleOnly(footprint, integrator);

@@ -18,22 +18,17 @@ namespace texcache {
 /// Which texels of a filter footprint a render shades and averages.
 ///   Visible  only those the render's camera rays reach (a prepass traces the camera rays and
 ///            marks them: texcache/visible_texels.h), point-symmetric for the averaging filters.
-///            A 21x21 window then shades 1.3x the samples of no filter instead of 5.2x (car AO,
-///            640x360, 4 spp; `texcache experiment filter-size --out DIR`) at lower error: AO
+///            A 21x21 window then shades little more than no filter, where the full window
+///            shades five times as many samples (results/filter_size.md), at lower error: AO
 ///            has sharp detail (contact shadows), and the hidden texels a full window averages
 ///            in are biased, not just costly.
 ///   All      every texel of the window (the paper's footprint). Smooth, noisy signals gain from
 ///            the unseen texels: they are still samples of nearly the same shading (path-traced
-///            indirect light on sunlit.json, 480x270, 4 spp, one path per sample: relMSE 0.0068
-///            in 0.74 s with full windows, 0.0212 in 0.56 s visible; `texcache experiment
-///            speed-vs-error --only sunlit-indirect --out DIR`, ts-normal at budget 1, visible
-///            footprints set in the experiment's code for the second: figures from 9824931).
+///            indirect light on sunlit.json: docs/texture-space.md, "Visible footprints").
 ///   Auto     Visible for ambient occlusion, All for the direct and path integrators: the
-///            paper's footprint where the evidence is mixed (speed-vs-error's best equal-time
-///            ratios, visible / all: sunlit-indirect 2.69x / 4.00x, but car-diffuse 2.54x /
-///            2.07x and chess-diffuse 1.58x / 1.34x; `texcache experiment speed-vs-error --only
-///            sunlit-indirect,car-diffuse,chess-diffuse --out DIR`: the "all" run is
-///            results/speed_vs_error.md, the visible run's figures are from c6c07c5).
+///            paper's footprint where the evidence is mixed (visible footprints win on
+///            sunlit-indirect's grid filters and lose on car-diffuse and chess-diffuse in
+///            `texcache experiment speed-vs-error`; docs/texture-space.md has the figures).
 enum class FootprintMode { Auto, Visible, All };
 /// Whether footprints of `mode` keep only the texels the camera sees: Visible, and Auto for AO.
 bool VisibleOnly(FootprintMode mode, IntegratorKind integrator);
@@ -47,7 +42,7 @@ std::string FootprintModeNames();
 ///         with a snap ray), shaded on demand and reconstructed by the material's filter.
 ///   Hits  at the camera's own hits, as per-hit shading shades them (same rays, same random
 ///         numbers), added up per bin of a coarser level of the same grids and read back by a
-///         bilinear reconstruction over the 2x2 bins around each hit (render.cpp, AoHitsBin,
+///         bilinear reconstruction over the 2x2 bins around each hit (the renderer's AoHitsBin,
 ///         PathHitsTrace): no limit evaluation, snap ray or footprint gather, and every ray traced
 ///         lands in some bin. The path integrator bins the light its diffuse hits receive (all
 ///         of it, or its indirect part: TextureSpaceOptions::cacheDirect) and applies each hit's
@@ -58,10 +53,9 @@ std::string FootprintModeNames();
 ///         why the result converges).
 /// The command line's `--ts-samples auto` (its default) takes Hits for AO, path and cached direct
 /// light unless a filter, a filter radius or temporal accumulation is asked for (those belong to
-/// the grid); the API's default is the paper's Grid.
-/// `texcache experiment speed-vs-error --only car-ao --out DIR`, budget 1 (480x270, 4 spp,
-/// 1 ray per hit or per sample): hits relMSE 0.032 at 0.124 s CPU, grid ts-normal 0.052 at
-/// 0.40 s, per hit 0.254 at 0.080 s (figures from the commit that added hits).
+/// the grid); the API's default is the paper's Grid. At one ray per hit or sample the grid
+/// costs several times per-hit AO's CPU time, which no filter's gain makes up, while hits cost
+/// little more than per hit (results/speed_vs_error.md, methods ts-hits and ts-normal).
 enum class TextureSamples { Grid, Hits };
 /// "grid" or "hits"; throws InputError naming `where` and the valid names otherwise.
 TextureSamples ParseTextureSamples(const std::string& name, const std::string& where);
@@ -90,11 +84,9 @@ struct TextureSpaceOptions {
     int indirectSamples = 1;    ///< paths per cached indirect sample
     /// Path integrator: diffuse materials cache their direct light too (one NEE sample per
     /// cached path), not just indirect. Both are view-independent for a diffuse surface, but
-    /// direct light has the sharp shadows: filtering them blurs hard shadow edges (measured on
-    /// sunlit.json: relMSE 0.40 with the 13x13 normal filter against 0.16 unfiltered; closest
-    /// command `texcache render scenes/sunlit.json --integrator path --shading texture
-    /// --cached-light all --filter normal` and `--filter none`, each put through `texcache
-    /// compare` against a per-hit reference: figure from 8db43ea), so this is for soft lighting
+    /// direct light has the sharp shadows: filtering them blurs hard shadow edges (on
+    /// sunlit.json the 13x13 normal filter more than doubles the relMSE of the unfiltered cache:
+    /// docs/texture-space.md, "Which light is cached"), so this is for soft lighting
     /// (environment, large area lights) and off by default.
     bool cacheDirect = false;
     int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
@@ -106,9 +98,8 @@ struct TextureSpaceOptions {
     bool cachedVisibility = false;
     /// Footprint radius of the cached visibility's filter (the object's filter kind), -1 for
     /// the object's own radius as the other cached terms. Shadows have edges the other terms
-    /// lack: on anim_disocclusion (160x90, 4 rays per sample) a 5x5 footprint gave the lowest
-    /// direct-light RMSE over frame 0 (0.0116, radius 1: 0.0119, 3: 0.0120, the normal filter's
-    /// 13x13: 0.0142, 1x1: 0.0183, the stage's own spatial filter: 0.0163) at 80% of the 13x13's
+    /// lack: on anim_disocclusion a 5x5 footprint gives the lowest direct-light RMSE over
+    /// frame 0, below 1x1, 13x13 and the stage's own spatial filter, at less than the 13x13's
     /// cost (`texcache experiment disocclusion --out DIR`; results/disocclusion.md).
     int visibilityRadius = 2;
     /// Where AO shades: see TextureSamples. --ts-samples auto|grid|hits.
@@ -145,10 +136,8 @@ int DefaultFilterRadius(TextureFilterKind kind);
 /// of about a pixel, so a frame looks up about as many texels as it has pixels (car AO,
 /// 480x270, 4 spp: 1.8 per pixel) and shades as many samples with footprints of visible texels
 /// (AO: 1.8), several times more with footprints of every texel of the window (direct and path
-/// light; car path 640x360: 5.6 per pixel). The tables are zeroed when made, which took longer
-/// than the render itself at the fixed 64 MiB: car AO, 480x270, 4 spp, 1 ray, `texcache render
-/// --shading texture`: 0.21 s wall at 16 MiB against 0.27-0.37 s at 64 MiB, with the same
-/// render CPU time (0.311 and 0.309 s) and 0.5% more samples shaded.
+/// light; car path 640x360: 5.6 per pixel). The tables are zeroed when made, which at the fixed
+/// 64 MiB takes longer than a small render itself (docs/cache.md, "Memory budget").
 void SizeCachesToFrame(CacheSettings* cache, int width, int height, int views,
                        IntegratorKind integrator, FootprintMode footprint);
 

@@ -38,9 +38,8 @@ inline float InRange(int v, int n) {
 // base[idx] and base[idx + 1] with one 8-byte load (x86 is little-endian: the left entry is
 // the low half). A footprint's taps come in two such pairs, and in a vectorized loop each load
 // from a per-pixel address is a scalar load and a lane insert (GCC's generic tuning does not use
-// AVX-512 gathers, rightly: they measured 1.6x slower on the Zen 4 machines; figure from ecef9bd,
-// a build that used gathers against one that did not, closest command
-// build/bin/screen_space_benchmark, tradMV_ms and newMV_ms), so pairing halves them.
+// AVX-512 gathers, rightly: on the Zen 4 machines they are slower than the scalar loads, as
+// build/bin/screen_space_benchmark's tradMV_ms and newMV_ms show), so pairing halves them.
 template <class T>
 struct Adjacent {
     T l, r;
@@ -258,8 +257,8 @@ struct ShadowRowArgs {
 // Where a pixel's history would be if only the camera and the receiver moved: its traditional
 // vector, or the pixel itself where it has none. Shadow vectors are splatted as offsets from it
 // (the shadow's motion over the receiver), so that a splatted pixel keeps its own camera motion:
-// splatting absolute offsets gave it its neighbours' parallax instead, which differs wherever the
-// camera moves (a fly-through over a static scene, issue 21).
+// splatting absolute offsets would give it its neighbours' parallax instead, which differs
+// wherever the camera moves (a fly-through over a static scene).
 inline float SplatBase(float t, int x) {
     return std::isfinite(t) ? t : float(x) + 0.5f;
 }
@@ -530,7 +529,7 @@ TEXCACHE_SCREEN_CLONES void GlossyRow(const GlossyRowArgs& args) {
     // Two loops per chunk (eq. 5's vectors, then the lobe's jitter and the taps): one loop holds
     // more live values than there are vector registers, and its spills cost more than these
     // arrays' round trip through L1 (build/bin/screen_space_benchmark
-    // --benchmark_filter=reliable, cpu_newMV_ms: 51.3 -> 48.1 ms in 0ed668a).
+    // --benchmark_filter=reliable, cpu_newMV_ms).
     alignas(64) float oks[kC], vxs[kC], vys[kC], vzs[kC], nxs[kC], nys[kC], nzs[kC], pxs[kC],
         pys[kC], pzs[kC], muxs[kC], muys[kC];
     alignas(64) float ox[kC], oy[kC];
@@ -763,7 +762,7 @@ void OcclusionMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& 
     // taken relative to the camera so the sums stay well conditioned far from the origin.
     // An affine motion is fixed by a handful of points, so the fit samples every kFitStep-th
     // pixel of every kFitStep-th row (an occluder often covers half the image, and the full sum
-    // in double precision was a fifth of the new motion vectors' time); objects that sampling
+    // in double precision would be a fifth of the new motion vectors' time); objects that sampling
     // leaves with fewer than kMinFit points are summed again over all their pixels.
     constexpr int kFitStep = 4;
     constexpr double kMinFit = 64.0;

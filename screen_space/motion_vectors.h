@@ -123,9 +123,9 @@ inline float Gather(const float* base, const Bilinear& b) {
 // Motion is smooth, so along a run of consecutive pixels the history taps' column offset (tap
 // index - x) is usually a single value. Such a run reads every plane with contiguous vector loads
 // at x + d00 (+1) and x + d01 (+1) instead of 4 gathers: on the AMD Zen 4 machines a 16-lane
-// gather costs about as much as the rest of a temporal kernel's arithmetic (the temporal pass
-// spent more than half its time in them; build/bin/screen_space_benchmark
-// --benchmark_filter=clamp, cpu_temporal_ms, before e374146). The sums are the same expression
+// gather costs about as much as the rest of a temporal kernel's arithmetic (gathering every tap,
+// the temporal pass spends more than half its time in them: build/bin/screen_space_benchmark
+// --benchmark_filter=clamp, cpu_temporal_ms). The sums are the same expression
 // in the same order as Gather(), so a run's results do not depend on which path it took.
 
 /// Pixels per run: long enough to amortize the test, short enough that most runs of a row are

@@ -29,9 +29,8 @@ inline constexpr int kPad = 32;
 
 /// Heap array for large per-frame buffers: 2 MB aligned and advised onto transparent huge pages
 /// when it spans at least one, because first-touch page faults are what a fresh 8 MB plane costs
-/// most (measured ~25 us per 4 KB fault on the shared VM: 130 ms for a 24 MB buffer; figure from
-/// b0d92c3, closest command build/bin/screen_space_benchmark). Allocated once per size; never
-/// per frame.
+/// most (tens of microseconds per 4 KB fault on a virtual machine, over 100 ms for a 24 MB
+/// buffer: build/bin/screen_space_benchmark). Allocated once per size; never per frame.
 template <class T>
 class HugeArray {
 public:
@@ -46,9 +45,9 @@ public:
             data_ = nullptr, size_ = 0;
             if (n) {
                 // Only a buffer of at least one huge page is rounded up to whole huge pages:
-                // rounding every plane up made a 96x54 denoiser touch 2 MB per plane, 300 MB
-                // per denoiser (`texcache experiment temporal --quick`: 2.6 GB peak RSS, half
-                // its time in the kernel's clear_page).
+                // rounding every plane up would make a 96x54 denoiser touch 2 MB per plane,
+                // 300 MB per denoiser, and `texcache experiment temporal --quick` (dozens of
+                // denoisers) spend half its time in the kernel's clear_page.
                 constexpr size_t kHuge = size_t(2) << 20;
                 const size_t raw = n * sizeof(T);
                 const size_t align = raw >= kHuge ? kHuge : 64;

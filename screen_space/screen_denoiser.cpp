@@ -18,35 +18,31 @@
 //     a-trous with a spatial variance, as SpatialOnly), the history fetched with the shadow
 //     vector is clamped to mu +- 3 sigma of c~_i and blended (eq. 2 with alpha^V), then the
 //     clean-up runs with std min(w_A + w_C, 5) (eqs. 7-8); its output is the next history.
-//     It was the default until issue 21: on a camera flying over a static scene (shadow vectors
-//     = traditional ones) it kept Reliable 5% above the plain baseline (anim_flythrough, mean
-//     RMSE 0.0465 against 0.0443; SVGF order 0.0446), because a spatial filter that only ever
-//     sees 1 spp keeps its blur however many frames are averaged (see glossy below). Elsewhere
-//     the two orders are within 3.5% (figures at reliableVisibilityOrder in screen_denoiser.h).
+//     It is not the default: on a camera flying over a static scene (shadow vectors =
+//     traditional ones) it keeps Reliable above the plain baseline, because a spatial filter
+//     that only ever sees 1 spp keeps its blur however many frames are averaged (see glossy
+//     below). Elsewhere the two orders are within a few percent (docs/screen-space.md and
+//     results/temporal.md have the figures).
 //     Zeng et al. use a 31x31 joint bilateral sized by the penumbra (after Liu et al.) for
-//     c~_i; ours (geometry guides only, std w/4 from the blocker-light spread) was worse than the
-//     variance-guided a-trous with no history at all (direct-light RMSE on frame 0, 96x54:
-//     anim_light 0.0116 vs 0.0072, anim_disocclusion 0.0240 vs 0.0172, where an environment
-//     light's visibility is noisy everywhere, not only in penumbrae; `texcache experiment
-//     temporal --quick --only anim_light,anim_disocclusion --out DIR`, frame 0's rmse_direct of
-//     reliable against spatial, before 42eb8e3 removed that filter), so Reliable was worse than
-//     the baseline before any history existed. The paper's point is the motion vectors, and its
-//     Sec. 7 names the spatial filter as orthogonal.
+//     c~_i; ours is the variance-guided a-trous of SpatialOnly, because a penumbra-sized filter
+//     on geometry guides alone does worse than the a-trous with no history at all where an
+//     environment light's visibility is noisy everywhere, not only in penumbrae, which leaves
+//     Reliable worse than the baseline before any history exists (docs/screen-space.md). The
+//     paper's point is the motion vectors, and its Sec. 7 names the spatial filter as orthogonal.
 // Why not Zeng's order for glossy too: a spatial filter that only ever sees 1 spp keeps its bias
-// however many frames are averaged (on a static glossy sphere the glossy RMSE after 16 frames
-// was 0.026, against 0.017 accumulating first, which lets the a-trous sharpen as the temporal
-// variance drops; the scene of ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges, glossy
-// RMSE: figure from 6a7cb45); Zeng et al. use a BRDF-lobe-sized glossy filter we do not have.
+// however many frames are averaged, while accumulating first lets the a-trous sharpen as the
+// temporal variance drops (ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges; figures in
+// docs/screen-space.md); Zeng et al. use a BRDF-lobe-sized glossy filter we do not have.
 // The glossy component keeps the stochastic glossy vectors; its a-trous, which runs after the
 // blend, takes the clean-up's place. Glossy and indirect histories are not clamped by default:
 // in this order the clamp is against 1-spp samples, not against Zeng's filtered c~_i, and it
-// made Reliable worse than the unclamped baseline where the vectors are right (issue 21,
-// results/temporal.md; reliableGlossyClampK / reliableIndirectClampK turn it back on).
+// makes Reliable worse than the unclamped baseline where the vectors are right
+// (results/temporal_ablation.md; reliableGlossyClampK / reliableIndirectClampK turn it on).
 // All a-trous work of a frame runs as one pass per level over every component that needs it, so
 // the depth/normal weights are computed once per tap. With indirectCones (off by default: its
-// raw cone history was noisier than SVGF's filtered colour history on every scene of the
-// temporal experiment, issue 21) the Reliable indirect keeps incident radiance in 6 cones per
-// pixel as its history (Sec. 4.3): history cones are moved into the
+// raw cone history is noisier than SVGF's filtered colour history on every scene of the
+// temporal experiment, results/temporal_ablation.md) the Reliable indirect keeps incident
+// radiance in 6 cones per pixel as its history (Sec. 4.3): history cones are moved into the
 // current pixel's cone frame with Mazonka overlap weights and blended per cone; the a-trous then
 // runs on their diffuse shading (ShadeCones), 3 channels instead of 18 (filtering every cone
 // spatially would cost about as much as the whole stage's filtering at 1080p).
@@ -411,9 +407,9 @@ enum class IndMode { Colour, ColourDemod, Cones };
 
 // The shading of one pixel's cones (kConeShadeWeight per cone, per channel) and whether all 18
 // floats are finite (1 / 0). Plain scalar multiply-adds: GCC vectorizes them across pixels
-// (strided loads); the former 8-wide-per-pixel form spent most of its time in horizontal sums
-// (a profile, figure from 2838e24; closest command build/bin/screen_space_benchmark
-// --benchmark_filter=reliable, prepare_ms, where the cones are shaded).
+// (strided loads), where an 8-wide-per-pixel form spends most of its time in horizontal sums
+// (a profile of build/bin/screen_space_benchmark --benchmark_filter=reliable, prepare_ms, where
+// the cones are shaded).
 inline __attribute__((always_inline)) void ConeShade(const float* q, float* c0, float* c1,
                                                      float* c2, float* finite) {
     float o[3] = {0.0f, 0.0f, 0.0f}, sum = 0.0f;
@@ -632,7 +628,7 @@ void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) 
 // reprojection computed two ways), the traditional vector and its taps replace it and the
 // history is not clamped (k 0 in `clampK`); elsewhere the history is clamped with `k`. The taps
 // matter as much as the position: the shadow vectors' plane test and the disocclusion test keep
-// different taps at edges, and a history averaged over other taps than the baseline's made a
+// different taps at edges, and a history averaged over other taps than the baseline's makes a
 // static scene's visibility drift from the baseline's.
 void TrustAgreeingShadowVectors(const MotionField& trad, float k, MotionField* shadow,
                                 Plane* clampK) {
@@ -676,10 +672,9 @@ void Cleanup(ScreenSpaceDenoiser::State& s, int ci) {
 }
 
 // The final sum of one row, written like the preparation kernels (plain pointers, local result
-// arrays, 0/1 floats) so that it vectorizes: the per-pixel glm version with its Finite() tests
-// and plane accessors cost ~12 ms a frame at 1080p, several times this
-// (build/bin/screen_space_benchmark --benchmark_filter=reliable, compose_ms; the glm version's
-// figure from 2838e24).
+// arrays, 0/1 floats) so that it vectorizes: a per-pixel glm version with Finite() tests and
+// plane accessors costs several times this at 1080p (build/bin/screen_space_benchmark
+// --benchmark_filter=reliable, compose_ms).
 struct ComposeRowArgs {
     int w;
     const float* emitted;   // xyz interleaved, or null

@@ -93,25 +93,23 @@ struct DenoiserSettings {
     float alpha = 0.2f;           ///< weight of the current frame in the temporal blend (eq. 2)
     float baselineClampK = 1.0f;  ///< BaselineClamp: history in mu +- k sigma (3x3)
     float reliableClampK = 3.0f;  ///< Reliable visibility: history in mu +- k sigma (Sec. 5)
-    /// Svgf by default: Zeng's order kept Reliable above the plain baseline on a camera flying
-    /// over a static scene (where the shadow vectors are the traditional ones). Mean RMSE,
-    /// demodulation on, Svgf / Zeng / baseline: anim_flythrough 0.0446 / 0.0465 / 0.0443,
-    /// anim_shadow 0.0069 / 0.0069 / 0.0160, anim_light 0.0059 / 0.0057 / 0.0067, anim_glossy
-    /// 0.0663 / 0.0665 / 0.0667, anim_disocclusion 0.0136 / 0.0133 / 0.0164 (`texcache
-    /// experiment temporal --ablation --out DIR`, results/temporal.md).
+    /// Svgf by default: Zeng's order keeps Reliable above the plain baseline on a camera flying
+    /// over a static scene (where the shadow vectors are the traditional ones), and elsewhere the
+    /// two are within a few percent (`texcache experiment temporal --ablation --out DIR`,
+    /// results/temporal_ablation.md).
     VisibilityOrder reliableVisibilityOrder = VisibilityOrder::Svgf;
     /// Reliable glossy and diffuse indirect: history in mu +- k sigma of the current 3x3, 0 for
     /// none. Zeng et al. clamp every component at 3 sigma, but their clamp is against a spatially
     /// filtered frame; ours (accumulate first, see screen_denoiser.cpp) is against 1-spp samples,
     /// whose 3x3 sigma is often 0 where the light is sparse, so the clamp throws valid history
-    /// away where the vectors are right and made Reliable worse than the unclamped baseline
-    /// (issue 21; `texcache experiment temporal --ablation --out DIR`, results/temporal.md).
+    /// away where the vectors are right and makes Reliable worse than the unclamped baseline
+    /// (`texcache experiment temporal --ablation --out DIR`, results/temporal_ablation.md).
     float reliableGlossyClampK = 0.0f;
     float reliableIndirectClampK = 0.0f;  ///< (see reliableGlossyClampK)
     /// Reliable: keep diffuse indirect as incident radiance in 6 cones (Sec. 4.3) when the frame
     /// has cones. Off by default: the cone history is the blend of raw 1-spp cones, where SVGF's
-    /// colour history is the first a-trous level's output, and it was the noisier of the two on
-    /// every scene of the temporal experiment (issue 21, results/temporal.md).
+    /// colour history is the first a-trous level's output, and it is the noisier of the two on
+    /// every scene of the temporal experiment (results/temporal_ablation.md).
     bool indirectCones = false;
     int atrousLevels = 4;         ///< a-trous iterations, steps 1, 2, 4, 8 (1..5)
     float sigmaLuminance = 4.0f;  ///< SVGF's sigma_l
@@ -120,27 +118,20 @@ struct DenoiserSettings {
     int shadowSplatRadius = 8;    ///< Reliable: window shadow vectors and sizes splat through
     /// Reliable with VisibilityOrder::Zeng (InputError otherwise): eq. 4's non-planarity
     /// falloff (alpha^V) on the visibility blend. Off by default:
-    /// it raised the direct-light RMSE on every ghosting scene (temporal experiment, 96x54, 8
-    /// frames, mean direct RMSE with / without: anim_glossy 0.0382 / 0.0334, anim_light 0.0053 /
-    /// 0.0052, anim_shadow 0.0098 / 0.0096, anim_disocclusion 0.0185 / 0.0180; `texcache
-    /// experiment temporal --quick --out DIR`, reliable's rmse_direct, "with" by setting this in
-    /// code: figure from 77a9f14), i.e. it sends pixels back to the spatial filter where the
-    /// shadow vectors were usable.
+    /// it raises the direct-light RMSE on every ghosting scene of the temporal experiment
+    /// (results/ablations.md, section 14), i.e. it sends pixels back to the spatial filter where
+    /// the shadow vectors are usable.
     bool shadowFalloff = false;
     float shadowFalloffSigma = 0.1f;  ///< Reliable: eq. 4's sigma (radians)
     float glossyLobeScale = 1.0f;     ///< Reliable: glossy lobe's angular std = scale * GGX alpha
     /// Reliable: cap (pixels) on the glossy vector's Gaussian axes. Zeng's Sigma spans the
     /// lobe's footprint, tens of pixels at 1080p for alpha > 0.2; history that far away is
     /// another part of the reflection, and in a static scene the jitter is a blur that never
-    /// converges (glossy RMSE after 16 static frames, 96x64 test: 0.025 at 8 px, 0.023 at 4,
-    /// 0.017 without jitter; the scene of ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges,
-    /// glossy RMSE of Reliable: figure from 6a7cb45). 0 by default (the glossy vector is then
-    /// eq. 5's virtual-image reprojection alone): with the jitter capped at 4 px Reliable was
-    /// above the plain baseline on a camera flying over a static scene, and no scene gained
-    /// from it (mean RMSE demod on, 4 px / 0 / baseline: anim_flythrough 0.0446 / 0.0444 /
-    /// 0.0443, anim_glossy 0.0663 / 0.0662 / 0.0667, anim_light 0.0059 / 0.0058 / 0.0067,
-    /// anim_shadow and anim_disocclusion equal; `texcache experiment temporal --ablation --out
-    /// DIR` at 7f132b3, "glossy jitter 0" against the default).
+    /// converges (the scene of ctest -R ScreenSpaceTemporal.StaticNoisySceneConverges; figures
+    /// in results/ablations.md, section 13). 0 by default (the glossy vector is then eq. 5's
+    /// virtual-image reprojection alone): with the jitter capped at 4 px Reliable is above the
+    /// plain baseline on a camera flying over a static scene, and no scene gains from it (`texcache
+    /// experiment temporal --ablation --out DIR`, results/temporal_ablation.md, "glossy jitter 4").
     float maxGlossyJitter = 0.0f;
     int brdfSamples = 1024;  ///< samples per BRDF-table entry (Zhuang et al.'s count)
     unsigned seed = 1;       ///< glossy motion-vector sampling
@@ -176,8 +167,8 @@ public:
     std::vector<glm::vec3> Denoise(const FrameBuffers& frame, Method method,
                                    Demodulation demodulation = Demodulation::On);
     /// The same into `image` (resized), whose allocation is reused from frame to frame: on
-    /// machines where first-touch page faults are slow, a fresh 1080p image costs more than the
-    /// whole stage (figure from b0d92c3; closest command build/bin/screen_space_benchmark).
+    /// machines where first-touch page faults are slow, a fresh 1080p image can cost more than
+    /// the whole stage (build/bin/screen_space_benchmark shows it).
     void Denoise(const FrameBuffers& frame, Method method, Demodulation demodulation,
                  std::vector<glm::vec3>* image);
     /// Forgets the history: the next frame is treated as the first.

@@ -40,7 +40,7 @@ fi
 
 # Texture space: diffuse light of the ground (indirect and direct: the courtyard's light is soft)
 # shaded at the camera hits and binned per texel of a coarser level (the default for path
-# tracing); the glossy paint stays per hit. Settings: README.md (demo).
+# tracing); the glossy paint stays per hit. Why these settings: docs/texture-space.md.
 # It renders first: its passes are 4 camera samples, so it may overrun the budget; per hit (passes
 # of one sample) then gets the time texture space took.
 texture=(--shading texture --cached-light all)

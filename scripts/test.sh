@@ -60,7 +60,7 @@ sanitizer_build "$root/build-asan" address --target texcache_test_programs
 took "ASan build"
 t0=$SECONDS
 # The experiments' end-to-end runs are left to the Release suite: they render dozens of images
-# (half the ASan suite's time: 660 of 1424 test-seconds in b7fd49d's fresh-clone run), their
+# (under ASan, about half the suite's test-seconds), their
 # rendering code is what the other tests run under ASan, and what is theirs alone is writing
 # CSV, plots and markdown.
 (cd "$root/build-asan" && ctest --output-on-failure -j"$jobs" -E "$asan_skip" "$@") ||

@@ -43,8 +43,8 @@ const std::array<Method, 4> kMethods = {Method::SpatialOnly, Method::Baseline,
 constexpr float kFps = 24.0f;
 // Demodulation may not raise a scene's mean RMSE by more than this (goal 2): the frame-to-frame
 // spread of the per-frame RMSE ratio at this sample count is of this order (the per-frame rmse
-// of demodulation on / off in temporal.csv of `texcache experiment temporal --out DIR`; figure
-// from 2392c67), so a smaller change is not distinguishable from the noise of one 1-spp sequence.
+// of demodulation on / off in results/temporal.csv), so a smaller change is not distinguishable
+// from the noise of one 1-spp sequence.
 constexpr double kNoise = 0.02;
 
 const char* DemodName(Demodulation d) {
@@ -210,8 +210,7 @@ int Index(Method m, Demodulation d) {
 
 int Temporal(const Setup& s) {
     const std::vector<std::string> scenes = SelectedScenes(s);
-    // Full size: what renders in a few minutes on 2 cores (the references are most of it; `time
-    // texcache experiment temporal --out DIR`: 4m53s in 192af5c).
+    // Full size: what renders in a few minutes on 2 cores (the references are most of it).
     // Quick: the test's size (its ASan run is the longest of the suite's at 96x54 and 32 spp).
     const int W = s.quick ? 64 : 320, H = s.quick ? 36 : 180;
     const int frames = s.quick ? 8 : 24;
@@ -220,8 +219,8 @@ int Temporal(const Setup& s) {
     const std::string csv = (fs::path(s.outDir) / "temporal.csv").string();
     Table table({"scene", "method", "demodulation", "frame", "rmse", "ssim", "temporal_change",
                  "ms", "cpu_ms", "rmse_direct", "rmse_glossy", "rmse_indirect"});
-    // One BRDF table for all 8 denoisers (it is a few hundred ms to build: figure from 2392c67,
-    // nothing times it alone; closest command ctest -R ScreenSpaceTables.BrdfTable).
+    // One BRDF table for all 8 denoisers (it takes a few hundred ms to build; ctest -R
+    // ScreenSpaceTables.BrdfTable builds one).
     const auto brdf = std::make_shared<const screen::BrdfPreintegration>();
     std::vector<SceneResult> results;
     std::string ablationRows;  // --ablation: markdown rows, per scene

@@ -108,9 +108,8 @@ TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s);
 /// The screen-space stage's settings for preview frames `height` rows tall: the library's
 /// defaults, with one a-trous level fewer below 720 rows (steps 1, 2, 4 of the 3x3 kernel: a
 /// 15-pixel footprint instead of 31), a quarter of the stage's filtering for little error at
-/// that size. Measured at 640x360 (`preview scenes/anim_shadow.json --bench --denoise
-/// reliable`): a-trous 19.3 -> 13.9 ms cpu a frame, relMSE 0.01394 -> 0.01410 (2 levels: 9.2 ms,
-/// 0.01472).
+/// that size (`preview scenes/anim_shadow.json --bench --denoise reliable` at 640x360; the
+/// figures are in results/preview.md). Two levels fewer lose visibly more.
 screen::DenoiserSettings StageSettingsFor(int height);
 
 /// Whether the screen-space stage's history survives going from settings `a` to `b`: only what

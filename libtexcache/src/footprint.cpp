@@ -106,8 +106,8 @@ bool Closer(const FootprintSample& a, const FootprintSample& b) {
 
 // Drops all but the closest walk to each texel, in O(n) with a small open-addressing table of
 // sample indices (thread-local; emptied by bumping a generation stamp rather than clearing).
-// Sorting by key did the same in O(n log n) and was 9% of a 21x21 AO render (a profile of the
-// 21x21 render of `texcache experiment filter-size --out DIR`; figure from 7aea17b).
+// Sorting by key would do the same in O(n log n), a visible share of a 21x21 AO render (a
+// profile of the 21x21 render of `texcache experiment filter-size --out DIR`).
 void RemoveDuplicateTexels(std::vector<FootprintSample>* out) {
     const size_t n = out->size();
     thread_local std::vector<uint32_t> index, stamp;
@@ -159,10 +159,9 @@ void RemoveDuplicateTexels(std::vector<FootprintSample>* out) {
 // Keeps the taps whose mirror offset (-dx, -dy) is also in the footprint; returns how many it
 // dropped. Why: the taps a camera sees are one-sided where a surface disappears behind another
 // (the ground under a car body) or where eq. 1 switches mip level, and a one-sided average of a
-// shading gradient is biased by the gradient times the taps' mean offset (car AO, 13x13:
-// relMSE 0.024 one-sided against 0.014 for the full window; `texcache experiment filter-size
-// --out DIR`, the one-sided figure from f721c1e, before this function). A point-symmetric set
-// has its mean offset at the centre, so linear gradients average out as in the full window.
+// shading gradient is biased by the gradient times the taps' mean offset (on car AO it costs a
+// 13x13 window most of its gain: docs/texture-space.md, "Visible footprints"). A point-symmetric
+// set has its mean offset at the centre, so linear gradients average out as in the full window.
 int KeepSymmetric(std::vector<FootprintSample>* out, int radius) {
     const int side = 2 * radius + 1;
     thread_local std::vector<uint8_t> present;
@@ -188,14 +187,14 @@ int KeepSymmetric(std::vector<FootprintSample>* out, int radius) {
 
 // ---- Footprint pads ---------------------------------------------------------------------------
 //
-// Why. A window that crosses a face edge was gathered by walking from its centre, one Step per
-// tap (a Ptex edge crossing at each face boundary), then tested tap by tap against the visible
-// set (a hash each): on the car, whose small faces send most 21x21 windows across edges, that
-// walk was a third of the filtered render (perf, 1 thread, 21x21 render of `texcache experiment
-// filter-size`). But the texels a window reaches outside its face depend only on where they
-// sit relative to that face, not on the centre: a pad, the ring of r texels around a (face,
-// mip), walked once, serves every window of the face. A window then reads its taps from the pad
-// row by row (and the in-face ones as the interior path does).
+// Why. A window that crosses a face edge can be gathered by walking from its centre, one Step
+// per tap (a Ptex edge crossing at each face boundary), then testing tap by tap against the
+// visible set (a hash each): on the car, whose small faces send most 21x21 windows across edges,
+// that walk is a third of the filtered render (perf, 1 thread, 21x21 render of `texcache
+// experiment filter-size`). But the texels a window reaches outside its face depend only on
+// where they sit relative to that face, not on the centre: a pad, the ring of r texels around a
+// (face, mip), walked once, serves every window of the face. A window then reads its taps from the
+// pad row by row (and the in-face ones as the interior path does).
 //
 // Policy (GatherFootprint's, footprint.h). Pad position (x, y) outside the face is reached from
 // the nearest face texel: along u first (a row walk from (clamp x, y) when y is inside), then v.
@@ -206,24 +205,23 @@ int KeepSymmetric(std::vector<FootprintSample>* out, int radius) {
 // it crossed, so its taps would depend on the centre; the pad's do not: a window keeps its taps at
 // their distance from the face along each axis. That makes every window of a face a read of one
 // pad, and every 8x8 block of windows one tile (ShadingCache::FilterBlock). Walking those faces
-// per window instead (commit 0074c73) kept the centre-dependent taps for an image difference of
-// relMSE 0.00004 on the car's 21x21 AO, but sent 65k of its 110k texel misses down the per-texel
-// path (FilterBlock refused their tiles): 1.18 s render against 0.89-1.06 s with the pads (car AO,
-// 640x360, 4 spp, 4 rays per sample, r = 10).
+// per window instead would keep the centre-dependent taps for an image difference too small to
+// see (relMSE 4e-5 on the car's 21x21 AO), but would send most of its texel misses down the
+// slower per-texel path, because FilterBlock cannot take their tiles.
 //
 // Duplicates (two pad positions on one texel: around extraordinary vertices, faces smaller
 // than the window that the ring wraps around) are flagged when the
 // pad is built; only a window holding a flagged tap pays for removing them (the closest walk
-// wins, as before).
+// wins, as in GatherFootprint).
 //
 // Memory and threading. Each thread keeps kPadSlots pads, direct-mapped by (grids, face, mip,
 // radius), each at most kMaxPadTaps entries of 24 bytes (a grid of 2048 texels at r = 10; a pad
 // of a 16x16 grid at r = 10 takes 25 KiB), allocated as pads are first built; a (face, mip)
 // whose ring would be larger is walked per window. All of a thread's pads together hold at most
 // kMaxHeldTaps entries (24 MiB): a build that would pass it frees every pad first. The cap per
-// pad was 4096 first, then 16384: windows of the car's 512 and 1024-texel grids (its ground) at
-// r = 8..10 were then walked, and their blocks filtered texel by texel (25k of the 21x21
-// render's 110k misses). Pads depend only on the (immutable)
+// pad is that large so that the car's 512- and 1024-texel grids (its ground) get pads at
+// r = 8..10: with a smaller cap their windows are walked, and their blocks filtered texel by
+// texel, a large share of the 21x21 render's misses. Pads depend only on the (immutable)
 // grids, tagged by MeshGrids::Id(), so they never go stale and need no locking; the visible set
 // is tested per tap through the texel's stored Probe (marks may be added between passes).
 namespace {
@@ -348,8 +346,7 @@ const Pad* PadOf(const MeshGrids& g, int face, int mip, int radius) {
 // A window's taps as bits: row j (dy = j - r) holds bit p for dx = p - r, in `words` 64-bit
 // words per row. Deciding which taps a window keeps on bits (visible, not a duplicate, mirror
 // kept) and writing only the kept ones costs a few operations per tap: writing every visible
-// tap and then compacting it (KeepSymmetric) was most of GatherFootprint's time once pads had
-// removed the walk.
+// tap and then compacting it (KeepSymmetric) would be most of GatherFootprint's time.
 struct WindowBits {
     std::vector<uint64_t> bits;
     int words = 1;
@@ -454,8 +451,8 @@ int internal::GatherFootprint(const MeshGrids& g, int face, int mip, int iu, int
         iu - radius >= 0 && iu + radius < res && iv - radius >= 0 && iv + radius < res;
     if (inside && !visible) {
         // Every tap of a window inside the face: written directly, in place (the paper's
-        // footprint; writing bits first cost it 5-28% of the render, `texcache experiment
-        // filter-size`, its "all" curve, before this branch).
+        // footprint; writing bits first would cost it a noticeable share of the render, the
+        // "all" curve of `texcache experiment filter-size`).
         out->resize(size_t(side) * size_t(side));
         FootprintSample* o = out->data();
         for (int dy = -radius; dy <= radius; ++dy) {

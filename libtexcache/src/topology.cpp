@@ -519,9 +519,9 @@ LimitSurface::LimitSurface(const ControlCage& cage, int maxIsolationLevel,
     // LimitPositionsAgreeWithOpenSubdiv).
     // A regular face with one creased edge is not isolated but becomes one single-crease patch
     // (evaluated by SingleCreaseWeights; an infinitely sharp crease gets the isolation level as
-    // its sharpness, which is what isolating it gave): isolating the car's 314 sharpness-6
-    // creases to level 6 made 18 MiB of patches in 0.05 s of a 0.1 s load (3.7 MiB and 0.015 s
-    // this way), and deep patches are slower to find. ctest -R SingleCreasePatches.
+    // its sharpness, the same surface as isolating it): isolating the car's 314 sharpness-6
+    // creases to level 6 would take several times the patch memory and OpenSubdiv time
+    // (docs/surfaces.md), and deep patches are slower to find. ctest -R SingleCreasePatches.
     Far::PatchTableFactory::Options options(maxIsolationLevel);
     options.endCapType = Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS;
     options.useSingleCreasePatch = true;

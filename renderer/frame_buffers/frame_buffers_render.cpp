@@ -58,11 +58,10 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr int kShadingCandidates = 32;
 // Light samples per frame-buffer sample when `shading` has a closed form (ClosedFormShading):
 // they only pick the shadow ray and estimate the visibility ratio, whose noise the stage filters.
-// Picked in proportion to the lights' closed-form terms, 6 gave the error of 8 picked uniformly
-// (which spent half of them on anim_shadow's dim sky) with two candidates fewer: relMSE
-// undenoised 0.0966 vs 0.0973, denoised 0.01422 vs 0.01421 (`texcache preview
-// scenes/anim_shadow.json --bench --denoise reliable --resolution 640x360`; 4: 0.0987 / 0.01423,
-// 8: 0.0947 / 0.01424).
+// Picked in proportion to the lights' closed-form terms, 6 give the error of 8 picked uniformly
+// (which spend half of them on anim_shadow's dim sky), and 4 or 8 change the denoised error by
+// less than its noise (`texcache preview scenes/anim_shadow.json --bench --denoise reliable
+// --resolution 640x360`; results/preview.md).
 constexpr int kRatioCandidates = 6;
 const glm::vec3 kNaN3(kNaN);
 
@@ -255,15 +254,15 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
             uPick = (float(light) + 0.5f) / float(c.numLights);
             pickScale = wSum / (weights.w[light] * float(c.numLights));
         }
-        // x - floor(x) is fmod(x, 1) for x >= 0, exactly, without libm's fmodf (11% of the bench
-        // profile with 32 candidates).
+        // x - floor(x) is fmod(x, 1) for x >= 0, exactly, without libm's fmodf (a tenth of the
+        // bench profile with 32 candidates).
         const float rx = shift.x + kG1 * float(k), ry = shift.y + kG2 * float(k);
         const glm::vec2 u(rx - std::floor(rx), ry - std::floor(ry));
         LightSample& ls = cand[k];
         if (diffuseQuads && light < int(c.quads.size())) {
             // SampleLight's quad sample and the diffuse BSDF folded together (pdf and cosines
             // from the unnormalized direction): one square root and one division instead of
-            // their six (a third of the frame buffers' render time went to these candidates).
+            // their six (these candidates are a large share of the frame buffers' render time).
             const Context::Quad& q = c.quads[size_t(light)];
             const glm::vec2 v = glm::min(u, glm::vec2(kOneMinusEpsilon));
             const glm::vec3 d = q.corner + v.x * q.e1 + v.y * q.e2 - si.P;
@@ -275,7 +274,7 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
                 !(q.twoSided ? cosLight != 0.0f : cosLight > 0.0f))
                 continue;
             // 1 / sqrt by the estimate and one Newton step (relative error ~1e-7): the square
-            // root and the division in a row were the loop's longest latency.
+            // root and the division in a row would be the loop's longest latency.
             const float e = _mm_cvtss_f32(_mm_rsqrt_ss(_mm_set_ss(dist2)));
             const float invDist = e * (1.5f - 0.5f * dist2 * e * e);
             ls.wi = d * invDist;
@@ -568,8 +567,8 @@ void RenderTile(const Context& c, const FrameMotion& motion, int x0, int y0,
             // Pixel centre, lens centre, shutter open: exact guides (see the header).
             const Ray r = c.camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f),
                                             c.tsc ? &ts.diff[n] : nullptr);
-            // Field by field: copying the whole temporary stalled on store forwarding (8% of
-            // this function in the profile).
+            // Field by field: copying the whole temporary stalls on store forwarding (visible in
+            // this function's profile).
             Ray& ray = ts.ray[n];
             ray.org = r.org, ray.dir = r.dir;
             ray.tnear = r.tnear, ray.tfar = r.tfar;

@@ -44,7 +44,7 @@
 //   uniform), and visibility is the ratio lum(their mean) * V / lum(shading), V the
 //   0/1 of the shadow ray resampled as above: its expectation is the shadowed over the
 //   unshadowed light (the luminance of shading * visibility is unbiased; measured, the
-//   ComposeIsUnbiased test; taking V alone was visibly biased in penumbrae, z^2 1.54 there), so
+//   ComposeIsUnbiased test; taking V alone is visibly biased in penumbrae, z^2 1.54 there), so
 //   it is 0 where the ray was blocked and near 1, above or below, where not; it is 0 without a
 //   shadow ray when all 6 samples fell where the BSDF is 0. With spp > 1 it is the mean of the
 //   samples weighted by the luminance of their shading (the ratio estimator), so shading *
@@ -83,8 +83,8 @@
 // * Texture-space shading (options.texture.enabled): diffuse materials take `indirect` from the
 //   cache, as the path integrator does (albedo * cached indirect irradiance / pi; no diffuse ray;
 //   the six cones all hold the cached irradiance / pi, so indirect = albedo * ShadeCones(cones)
-//   still holds and the stage's cone history keeps the cached light: NaN cones sent Reliable's
-//   indirect to 0 there, issue 21); direct light always stays per hit here (the split needs its
+//   still holds and the stage's cone history keeps the cached light: NaN cones would send
+//   Reliable's indirect to 0 there); direct light always stays per hit here (the split needs its
 //   visibility), so options.texture.cacheDirect is ignored. GGX materials are shaded per hit as
 //   above.
 // * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty

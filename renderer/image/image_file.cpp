@@ -126,8 +126,8 @@ void WriteExr(const std::string& path, const ImageFile& f) {
 }
 
 /// 8-bit grey or RGB(A) PNG with libpng. Every render writes one beside its EXR by default:
-/// through OpenImageIO that cost each process ~0.3 s of CPU loading its libraries (a 64x36
-/// render: 0.33 s of CPU with its PNG, 0.04 s without), libpng costs nothing measurable.
+/// through OpenImageIO that costs each process ~0.3 s of CPU loading its libraries (more than a
+/// small render itself), libpng costs nothing measurable.
 void WritePng(const std::string& path, const ImageFile& f) {
     const int colorType = f.channels == 1   ? PNG_COLOR_TYPE_GRAY
                           : f.channels == 2 ? PNG_COLOR_TYPE_GRAY_ALPHA

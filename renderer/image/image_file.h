@@ -2,10 +2,10 @@
 // Image files as image.cpp and frame_buffers_exr.cpp read and write them. Internal to renderer/.
 //
 // Why OpenImageIO is not linked: Debian's build of it needs ~260 shared libraries (OpenCV,
-// FFmpeg, GDAL, Poppler, ...), and binding them made every process that links the renderer
-// spend ~0.3-0.4 s of CPU in the dynamic loader before main(): each `texcache` command, and
-// each of the ~400 test processes CTest starts (`render_test --gtest_list_tests`: 0.26 s CPU,
-// against 0.00 s for the cache library's tests, which link no OpenImageIO). So:
+// FFmpeg, GDAL, Poppler, ...), and binding them makes every process that links the renderer
+// spend ~0.3 s of CPU in the dynamic loader before main(): each `texcache` command, and each of
+// the hundreds of test processes CTest starts (`render_test --gtest_list_tests` shows it against
+// the cache library's tests, which link no OpenImageIO). So:
 //   - EXR, the renderer's own format (every render's output, the environment maps, the frame
 //     buffers), is read and written with OpenEXR directly (a handful of libraries);
 //   - 8-bit PNG, the picture beside every render's EXR, is written with libpng;

@@ -41,9 +41,9 @@ public:
     /// wo may lie below the shading normal's plane while above the geometric one: a curved
     /// surface seen at a grazing angle, where the interpolated normal leans away from the eye.
     /// The diffuse lobe does not depend on wo and shades such a view as any other; the specular
-    /// lobe needs wo above the shading plane and is 0 there. (Both were 0, which left dark
-    /// fringes where a curved diffuse surface turns away: the clay car under a white sky, along
-    /// the lower edge of its body, lit 0.23 per hit against 0.8 x its ambient occlusion, 0.60.)
+    /// lobe needs wo above the shading plane and is 0 there. (Both 0 would leave dark fringes
+    /// where a curved diffuse surface turns away: the clay car under a white sky, along the lower
+    /// edge of its body, would be lit far below 0.8 x its ambient occlusion.)
     glm::vec3 Eval(glm::vec3 woW, glm::vec3 wiW) const {
         if (glm::dot(wiW, ng_) <= 0.0f) return glm::vec3(0.0f);
         const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);

@@ -24,9 +24,9 @@ Distribution1D::Distribution1D(const std::vector<float>& weights)
 namespace {
 
 // std::upper_bound's index (the first element > u) without a branch per step: the halving
-// compiles to a conditional move, where std::upper_bound's branches were mispredicted about
-// every other step (environment-map light samples: Distribution1D::Sample was 41% of the car's
-// frame-buffer render in `perf`, 32 unshadowed samples a pixel).
+// compiles to a conditional move, where std::upper_bound's branches are mispredicted about
+// every other step (environment-map light samples: with 32 unshadowed samples a pixel,
+// Distribution1D::Sample is a large share of the car's frame-buffer render in `perf`).
 size_t UpperBound(const float* a, size_t count, float u) {
     const float* base = a;
     size_t n = count;

@@ -213,13 +213,11 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
 /// pixels, then sample by sample, then ray (or path) by ray. Every aligned 2^k x 2^k block of
 /// pixels so gets the consecutive points of a (0,m,2)-net: a pixel's samples of the pass
 /// stratify its hemisphere together, and so do a block's, which is what a bin of hit-binned
-/// shading averages (a bin spans 4x4 pixels or more). With a random shift per hit, as before,
-/// only one hit's own rays were stratified: car AO, 480x270, 4 spp, relMSE against the shading
-/// reference, 1 ray per hit: per hit 0.254 -> 0.177, at the hits 0.0340 -> 0.0237; 4 rays:
-/// 0.0441 -> 0.0309, 0.0092 -> 0.0067; car path traced (car-diffuse of `texcache experiment
-/// speed-vs-error`), 1 path: per hit 1.037 -> 0.447, at the hits 0.316 -> 0.214; `texcache bench
-/// rays` 87.5-89.1% against 88.6-91.5% before (the grid's cache samples keep their own nets:
-/// CosineRays; later bounces draw
+/// shading averages (a bin spans 4x4 pixels or more). A random shift per hit would stratify
+/// only one hit's own rays; the shared sequence lowers the error of per-hit and binned shading
+/// alike, by up to half on path-traced light, at no measurable cost in `texcache bench rays`
+/// (docs/texture-space.md, "Stratification"). The grid's cache samples keep their own
+/// nets (CosineRays); later bounces draw
 /// from the sample's random stream). Each pass has its own scramble, so passes are independent and
 /// a pixel's result depends on its samples and the pass split (a render with --spp is one pass
 /// unless shaded in texture space); never on the threads or tiles.
@@ -270,10 +268,10 @@ struct PixelSequence {
 /// The first BSDF ray then picks the specular lobe at least `minSpecularProbability` of the
 /// time (Bsdf::SetMinSpecularProbability; per hit's mixture gives it 10-20% on the scenes'
 /// paints): the bins average the diffuse lobe's noise over many hits (and NEE estimates most of
-/// its light), the specular lobe's noise stays in the pixel. Budget 1, relMSE at 0.1 / 0.5 /
-/// 0.7 / 0.9: car-diffuse 0.0652 / 0.0643 / 0.0619 / 0.0618, chess-diffuse 0.0382 / 0.0372 /
-/// 0.0373 / 0.0383, the GGX plane under a white sky of the tests 0.070 / 0.046 / 0.033 / 0.027.
-/// With 0.1 the two lobes sum to per hit's estimate exactly (the same mixture).
+/// its light), the specular lobe's noise stays in the pixel. Raising it from per hit's 0.1 to
+/// 0.7-0.9 lowers the error on the glossy car and on the tests' GGX plane, and changes little on
+/// chess (docs/texture-space.md, "Glossy hits"). With 0.1 the two lobes sum to per hit's
+/// estimate exactly (the same mixture).
 struct FirstHitLight {
     const SurfaceInteraction* si;
     glm::vec3* direct;
@@ -455,9 +453,9 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
 /// The AO rays of a camera hit, in order: opt.aoSamples directions from `first` on in the
 /// pass's PixelSequence, cosine-distributed about the shading normal, those below the tessellated
 /// surface left out (they count as blocked). Each is written field by field into the Ray& that
-/// slot() returns: building a Ray on the stack and copying it out made the copy's 16-byte loads
-/// wait on its 4-byte stores (failed store forwarding: 21% of a per-hit AO render's samples on
-/// those two instructions, perf annotate). LiAO and per-hit AO tiles trace them; `texcache
+/// slot() returns: building a Ray on the stack and copying it out makes the copy's 16-byte loads
+/// wait on its 4-byte stores (failed store forwarding: a fifth of a per-hit AO render's samples
+/// on those two instructions, perf annotate). LiAO and per-hit AO tiles trace them; `texcache
 /// bench rays` records them for its raw Embree loop.
 template <typename Slot>
 void ForEachAoRay(const Context& c, const Ray& ray, const SurfaceInteraction& si,

@@ -17,10 +17,10 @@
 // as the map's own sampling would find it), and across cells it follows lobe x light. A record is
 // 568 bytes.
 //
-// (The first design warped a 16x16 grid through the GGX visible-normal sampler, so that every
-// bin lies in the lobe. Its bins in the lobe's tail span tens of degrees, where a soft box is a
-// small part of one bin: variance 1-100x MIS's at single shading points of brushed.json; see
-// results/cpis.md.)
+// (Why not a 16x16 grid warped through the GGX visible-normal sampler, so that every bin lies
+// in the lobe: its bins in the lobe's tail span tens of degrees, where a soft box is a small
+// part of one bin, and the variance at single shading points of brushed.json reaches 100x
+// MIS's; see docs/cpis.md.)
 //
 // Unbiasedness. A record's density at any direction (Pdf) is exact for the distribution it draws
 // from (the same walk down the pyramid), whichever hit built it: the estimator MIS-combines it
@@ -142,11 +142,10 @@ struct ProductRecord {
 /// defensive mixture, Hesterberg 1995): light from outside a record's window, e.g. a bright
 /// source in the far tail of a rough lobe, would otherwise be found by BSDF sampling alone.
 /// Measured at single shading points of brushed.json's lobe (tests/product_sampling_test.cpp,
-/// EstimatorAgreesWithMis prints them): without it, one point of six whose light came from
-/// outside the window had 180x MIS's variance; with it, that set gave 0.16-0.53x at four points
-/// and 1.5x and 2.2x at two lit from the far tail of the lobe's broad axis, and the test's
-/// current six points give 0.14-0.35x. Shares of 0.05 and 0.3 gave no better image (commit
-/// a8848ca).
+/// EstimatorAgreesWithMis prints them): without it, a point whose light comes from outside the
+/// window has two orders of magnitude more variance than MIS; with it, the test's six points
+/// have a third of MIS's variance or less. Shares of 0.05 and 0.3 give no better image
+/// (results/cpis.md, "Alternatives").
 constexpr float kEnvShare = 0.15f;
 
 /// A light sample of product sampling: from `record` with probability 1 - kEnvShare, else from

@@ -68,7 +68,7 @@ struct Frame {
 };
 
 /// sin and cos of a in [-pi/4, pi/4] by Taylor polynomials (|error| < 4e-8 there): the
-/// concentric map only needs this range, and libm's sincosf was a visible cost per AO ray.
+/// concentric map only needs this range, and libm's sincosf is a visible cost per AO ray.
 inline void SinCosQuarterPi(float a, float* s, float* c) {
     const float a2 = a * a;
     *s = a * (1.0f + a2 * (-1.0f / 6.0f + a2 * (1.0f / 120.0f +

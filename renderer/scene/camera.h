@@ -26,10 +26,10 @@ public:
     }
     /// The same, written into `*ray` field by field: the renderer's camera rays (see below).
     ///
-    /// Why in place and inline: returned by value from an out-of-line call, the Ray was built on
+    /// Why in place and inline: returned by value from an out-of-line call, the Ray is built on
     /// the stack with 4- and 8-byte stores and copied out with 16-byte loads, which the CPU
-    /// cannot forward from the pending stores; perf put 28% of the CPU time of a frame whose
-    /// camera rays all miss (512x512, 64 spp) on those loads.
+    /// cannot forward from the pending stores; in a frame whose camera rays all miss, perf puts
+    /// over a quarter of the CPU time on those loads.
     void Generate(float px, float py, glm::vec2 lens, Ray* ray, RayDifferentials* diff) const {
         if (!(lensRadius_ <= 0.0f)) {
             *ray = GenerateThinLens(px, py, lens, diff);
@@ -48,7 +48,7 @@ public:
     /// Generate for n pinhole rays at film positions (px[i], py[i]) (IsPinhole(); no
     /// differentials), written field by field into rayAt(i): the same rays bit for bit, with
     /// the normalizes in one loop the compiler vectorizes. One ray at a time, the sqrt and the
-    /// division behind it were a quarter of a sky-only frame's CPU time (`perf annotate`).
+    /// division behind it are a quarter of a sky-only frame's CPU time (`perf annotate`).
     template <typename RayAt>
     void GeneratePinhole(const float* px, const float* py, size_t n, RayAt&& rayAt) const {
         constexpr size_t kChunk = 64;
@@ -101,8 +101,8 @@ private:
 
     glm::mat4 camToWorld_, worldToCam_;
     // Pinhole: the unnormalized world-space direction through film position (px, py) is
-    // dirBase_ + px * dirX_ + py * dirY_ (one normalize per ray, no matrix: the camera's ray
-    // generation was 10% of a path-traced frame's profile; `perf record` on `texcache bench peer`).
+    // dirBase_ + px * dirX_ + py * dirY_ (one normalize per ray, no matrix: with a matrix per
+    // ray, ray generation is a tenth of a path-traced frame's profile in `texcache bench peer`).
     glm::vec3 eye_, dirBase_, dirX_, dirY_;
     float tanHalfY_, aspect_;
     int width_, height_;

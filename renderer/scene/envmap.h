@@ -24,7 +24,7 @@ public:
     static EnvironmentMap Load(const std::string& path, float intensity, float rotationDegrees);
     /// Load(), once while any caller holds the result, and the last map loaded stays loaded: a
     /// RenderScene is rebuilt for every frame of an animation, and reading a 4k map and building
-    /// its distribution each time was most of `texcache experiment temporal --quick`
+    /// its distribution each time would be most of `texcache experiment temporal --quick`
     /// (clear_page + Distribution in `perf`). The key includes the file's size and modification
     /// time, so an edited file is read again.
     static std::shared_ptr<const EnvironmentMap> Shared(const std::string& path, float intensity,
@@ -37,8 +37,8 @@ public:
     /// Samples a direction for a surface of shading normal `n` (unit); returns Eval(dir). A map:
     /// proportionally to max(0, luminance) * sin(theta), whatever n. A constant environment:
     /// cosine-weighted about n, since light that arrives alike from everywhere matters in
-    /// proportion to the cosine alone (uniform sphere sampling wasted half its samples below the
-    /// horizon: car under a white sky, path length 2, relMSE see `texcache bench peer`).
+    /// proportion to the cosine alone (uniform sphere sampling wastes half its samples below the
+    /// horizon: car under a white sky, path length 2, `texcache bench peer`).
     glm::vec3 Sample(glm::vec3 n, glm::vec2 u, glm::vec3* dir, float* pdfSolidAngle) const;
     /// Solid-angle density of Sample(n, ...) at `dir`.
     float Pdf(glm::vec3 n, glm::vec3 dir) const;

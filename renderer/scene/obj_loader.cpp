@@ -302,8 +302,8 @@ private:
     /// are skipped with a warning (Embree fails on creases of non-edges); malformed tags throw.
     void ResolveTags() {
         // The sorted edge list only for crease tags to check against: on a 1,000,000-quad cage
-        // without creases it took 32 MB and ~0.35 s of sorting (5.6% of a 1-thread `texcache
-        // render` of it, perf).
+        // without creases it would take 32 MB and ~0.35 s of sorting (a twentieth of a 1-thread
+        // `texcache render` of it, perf).
         std::vector<uint64_t> edges;
         const bool creased = std::any_of(tags_.begin(), tags_.end(),
                                          [](const PendingTag& t) { return t.name == "crease"; });

@@ -431,7 +431,7 @@ void ParseRender(const Node& n, RenderSettings* s) {
 /// Builds the JSON document from nlohmann's SAX events, rejecting duplicate keys (nlohmann keeps
 /// the last silently, which would hide a typo'd override) and nesting beyond kMaxJsonDepth. Not
 /// nlohmann's parser callback: its DOM builder scans the parent object for a discarded value at
-/// every object end, quadratic in the number of sibling objects (100,000 materials took 257 s).
+/// every object end, quadratic in the number of sibling objects (100,000 materials take minutes).
 /// Here time and memory stay proportional to the text: each open container keeps its own
 /// current key (the key path is built only for a message) and its keys in a hash set.
 class JsonBuilder {

@@ -119,7 +119,7 @@ bool SamplePoint(const Context& c, const SampleRequest& r, SurfaceSample* ss, gl
 /// time of the shutter share its texels; its rays start from the sample's point carried rigidly
 /// from shutter open (where SamplePoint finds it) to the ray's time. The cached shading is
 /// therefore the paper's "shading reused over the shutter", averaged like the reference's
-/// rather than frozen at shutter open, which had left moving shadows sharp. Without a shutter
+/// rather than frozen at shutter open, which would leave moving shadows sharp. Without a shutter
 /// no extra random number is drawn: static renders keep their streams.
 class ShutterMotion {
 public:
@@ -157,11 +157,9 @@ private:
 /// The directions are the Sobol' (0,2)-sequence (Sobol02), digitally shifted by a random pair of
 /// the sample's own: each ray alone is cosine-distributed (the shift is uniform), so the sample is
 /// an unbiased estimate, and its n rays form a (0,log2 n,2)-net when n is a power of two, whose
-/// error falls faster than independent rays' (car AO, `texcache experiment speed-vs-error --only
-/// car-ao`, 16 rays per sample: unfiltered relMSE 0.0276 -> 0.0129, 13x13 normal filter 0.0048
-/// -> 0.0035; one ray per sample unchanged). Tried and not kept: one net over the 16 samples of a
-/// 4x4 texel block (the filter averages them), shifted per block: no gain at one ray per sample,
-/// where the filter's footprint sees parts of several blocks.
+/// error falls faster than independent rays' (docs/texture-space.md, "Stratification"). One net
+/// over the 16 samples of a 4x4 texel block (the filter averages them), shifted per block, gains
+/// nothing at one ray per sample, where the filter's footprint sees parts of several blocks.
 class CosineRays {
 public:
     CosineRays(const Context& c, const SampleRequest& r, const SurfaceSample& ss, glm::vec3 origin,
@@ -202,8 +200,8 @@ private:
 /// stratification (at 16 rays per sample the unfiltered car AO has half the error of
 /// independent rays). For such n the two halves, nets of n/2 points each, estimate it instead:
 /// (mean_1 - mean_2)^2 / 4, which the regression filter's bias-variance choice needs (with the
-/// old formula it smoothed too much once samples had many rays: car AO, 16 rays, relMSE
-/// 0.0037 with independent rays, 0.0050 with the net and the old variance).
+/// independent-ray formula it smooths too much once samples have many rays, and loses the
+/// net's gain and more).
 struct RayMean {
     explicit RayMean(int n) : n(n), half(n >= 2 && std::has_single_bit(unsigned(n)) ? n / 2 : 0) {}
     int n, half, added = 0;

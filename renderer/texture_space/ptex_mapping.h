@@ -22,8 +22,8 @@ struct PtexCoord {
     float u = 0.0f, v = 0.0f;
 };
 
-/// Embree (primID, U, V) -> Ptex face and (u,v), clamped to [0,1] (Embree returns ~-4e-10;
-/// figure from 9bb82c3, closest command: ctest -R RayHitsDecodeToTheirPtexLocation).
+/// Embree (primID, U, V) -> Ptex face and (u,v), clamped to [0,1] (Embree can return values
+/// like -4e-10 at edges; ctest -R RayHitsDecodeToTheirPtexLocation).
 inline PtexCoord EmbreeToPtex(const PtexTopology& topo, unsigned primID, float U, float V) {
     PtexCoord c;
     if (topo.IsQuad(int(primID))) {

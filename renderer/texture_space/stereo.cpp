@@ -119,9 +119,9 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
     // Texels: the right eye's visible texels are marked before the left eye renders, so that
     // the left eye's footprints also shade the samples the right eye will look up. Neighbour
     // does without: the neighbours serve most of those texels, and the shared set would move
-    // shading from the right eye into the left one rather than save it (car AO, 320x180,
-    // 4 spp, 512 MiB: with it the right eye took 22-24% of a left eye of 0.90-1.38 s CPU;
-    // without, 23% of 0.70-0.89 s, the left eye then being exactly the mono render).
+    // shading from the right eye into the left one rather than save it (on car AO the right
+    // eye's share stays the same while the left eye's time grows; without it the left eye is
+    // exactly the mono render).
     // A single pass under a time budget does not know its sample count before the left eye
     // renders: the right eye cannot mark its texels first, and the eyes keep their own sets.
     const bool shareVisibility = cache && reuse == StereoReuse::Texels &&

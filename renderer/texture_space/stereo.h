@@ -17,14 +17,14 @@
 //     render (RenderOptions::firstSample); with zero separation the right eye equals the left
 //     and shades nothing.
 //   * Bands. The second eye reuses the first eye's samples only while they are still in the
-//     sample cache; when the left eye rendered its whole frame first, its later tiles evicted
-//     much of what the right eye then looked up (sunlit, path traced, 320x180: 24% of the left
-//     eye's samples shaded again by the right eye with the default 64 MiB, 8.6% with 512 MiB,
-//     and more at 640x360: its working set is four times larger). So the eyes take turns band
+//     sample cache; when the left eye renders its whole frame first, its later tiles evict
+//     much of what the right eye then looks up (on sunlit, path traced, the right eye re-shades
+//     about a quarter of the left eye's samples with the default 64 MiB: results/stereo.md,
+//     "neighbour-frames"; more at larger sizes). So the eyes take turns band
 //     of rows by band of rows (RenderOptions::rowBegin/rowEnd): the left eye's band, then the
 //     same rows of the right eye (the rig has no vertical parallax, so they see the same
 //     surfaces). A band holds about an eighth of the sample cache's slots worth of shading,
-//     sized from the left eye's rate over the bands so far: the reuse no longer depends on the
+//     sized from the left eye's rate over the bands so far: the reuse does not depend on the
 //     cache size or the resolution, and a cache that holds the whole frame gets one band (the
 //     whole-frame order). Visible footprints (texture-space AO by default) keep the whole-frame
 //     order: each eye's footprints need its whole frame's visible texels marked first.
@@ -32,19 +32,20 @@
 //     misses are texels of surfaces both eyes see. eq. 1 makes a texel at most a pixel across
 //     the footprint's narrow axis (less along the long one at grazing angles), so a few jittered
 //     camera samples per pixel reach a random subset of a surface's texels, and a shifted eye a
-//     different one: on the car (320x180, 4 spp) half the second eye's texels were not the first
-//     eye's at any separation above 0.01 (results/stereo.md). Two remedies (StereoReuse):
+//     different one: on the car (320x180, 4 spp) a quarter to a third of the second eye's texels
+//     are not the first eye's at any separation above 0.01 (results/stereo.md). Two remedies
+//     (StereoReuse):
 //     - Texels: the right eye's visible texels are marked before the left eye renders
 //       (VisibilityPrepass), so that the left eye's visible footprints shade their samples too,
-//       and the right eye only filters them (a bigger sample cache then keeps them: its
-//       collisions evicted half of them at 64 MiB);
+//       and the right eye only filters them (a bigger sample cache then keeps them: at 64 MiB
+//       its collisions evict about half of them);
 //     - Neighbour (the default): a texel the first eye did not fill takes the mean of the
 //       filtered texels among the 8 around it (its face and level) before filtering anew: new
 //       texels fall from 50% to 7% and the second eye costs about a quarter of the first, at a
 //       relMSE within a few percent of the eye rendered alone (results/stereo.md). The mean of
 //       the neighbours found is a one-texel-wide blur of values already filtered over a wider
-//       footprint; taking the first neighbour found instead (a shift of up to a texel) gave car
-//       AO relMSE 0.01898 against 0.01856 with the mean and 0.01813 alone (320x180, 4 spp).
+//       footprint; taking the first neighbour found instead (a shift of up to a texel) costs
+//       more error (results/ablations.md, section 11).
 //     Each eye's visible footprints are its own in Neighbour mode, so the left eye is exactly
 //     the mono render of its camera.
 //   * Cost: per eye, its own RenderStats: wall and CPU seconds, rays, and the cache's counters

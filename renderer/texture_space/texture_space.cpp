@@ -14,7 +14,7 @@ namespace {
 // Whether the limit normals cross(dPdu, dPdv) of a closed cage point into the solid it bounds,
 // in world space. The cage sample shader shades each texel on the side its normal points to, and
 // per-hit shading faces the ray, so a closed cage wound inward (clockwise seen from outside, as
-// some exporters write) was cached from inside: dark, where per-hit shading was right. The
+// some exporters write) would be cached from inside: dark, where per-hit shading is right. The
 // faces' signed volume (fans about each face's first vertex, relative to `centre`; the cage's
 // sign is its limit surface's) is negative for an inward-wound cage, and a mirroring transform
 // (negative determinant) turns the normals around again. The whole mesh decides: the inner wall
@@ -70,8 +70,8 @@ bool TextureSpaceCache::AnyFootprint() const {
 VisibleTexels& TextureSpaceCache::Visibility(int width, int height, bool clear) {
     // Two words per pixel: the 8x8 blocks a frame marks are sparse (a line of 8 words serves a
     // 64-texel run of one face, mostly partly seen), and with a quarter of a word per pixel
-    // blocks shared words so often that the phantom marks made footprints shade 1.35x the
-    // samples of the unfiltered render (car AO 640x360, 4 spp, 21x21; 1.05x with two words).
+    // blocks share words so often that the phantom marks make 21x21 footprints shade about a
+    // third more samples than the unfiltered render, against a few percent with two words.
     const size_t words = std::clamp<size_t>(std::bit_ceil(size_t(width) * size_t(height) * 2),
                                             size_t(1) << 12, size_t(1) << 21);
     if (!visible_ || visible_->Bytes() != words * sizeof(uint64_t))
@@ -154,7 +154,7 @@ TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOp
             CageBounds(cage, &lo, &hi);
             const float texel = MipZeroTexelSize(lo, hi, options.texelFraction);
             // The scene's Ptex topology, shared: not built again (on a 1,000,000-quad cage it
-            // is 44 MB, and building it took an OpenSubdiv refinement of ~0.5 s and ~250 MB).
+            // is 44 MB, and building it takes an OpenSubdiv refinement of ~0.5 s and ~250 MB).
             front->push_back(cache_.AddMesh(cage, texel, rs.SharedTopology(int(o))));
             meshObject_.push_back(int(o));
             meshIsBack_.push_back(0);

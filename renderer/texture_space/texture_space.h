@@ -4,12 +4,9 @@
 //
 // Progressive texture space (why the cache keeps converging). The paper shades each cached
 // sample once, so a larger budget only buys camera rays: the shading noise the filter leaves
-// and the filter's bias stay. The catmark car in diffuse clay (albedo 0.8) under a constant
-// white sky, path tracing with max_depth 2, 256x256, `--shading texture --cached-light all`
-// against a 512-spp per-hit render (`texcache compare`): with `--pass-spp 0` relMSE 0.0134 at
-// 16 spp and 0.0125 at 64 spp; progressive 0.0059 and 0.0028.
+// and the filter's bias stay, and the error stalls (docs/texture-space.md, "Progressive passes").
 // Here a render of more than options.passSpp camera samples
-// runs passes of passSpp samples (render.cpp, RunPasses) and every pass k > 0 begins with
+// runs passes of passSpp samples (the renderer's RunPasses) and every pass k > 0 begins with
 // BeginPass(k):
 //   * every sample and texel is evicted and shaded again from random streams of (key, k), so
 //     the passes are independent estimates and the image, their mean, loses variance as 1/K;
@@ -30,27 +27,23 @@
 // with h ~ n^(-k): bias^2 ~ n^(-4k) and variance ~ n^(2k-1), and both vanish for any 0 < k < 1/2 (k
 // = 1/6 balances them asymptotically). We take k = 1/3 from 2.5 levels at 4 rays per pixel: at the
 // budgets speed-vs-error measures the bias of the coarser bins dominates sooner than the
-// asymptotic rate assumes (car AO 480x270, 4 spp, 16 rays per hit: relMSE 0.0044 with bins 2
-// levels up, 0.0028 with 1; at 1 ray per hit 2 levels up 0.032, 1 level 0.071). AO's noise is
+// asymptotic rate assumes (docs/texture-space.md, "Hit bins", has the figures). AO's noise is
 // about the same on any scene (a ray escapes or not); a path's estimate of diffuse light is not:
 // its variance for its mean ranges over 100x from a clay object under a white sky to a glossy
-// car under a courtyard map, and the best level with it. A fixed 3.5 levels (tuned on the
-// scenes/ cases) left OpenSubdiv's bishop under a white sky at relMSE 0.0085 against per hit's
-// 0.0090 at one path per hit, where 2 levels give 0.0011. So a pass of diffuse light first shades
+// car under a courtyard map, and the best level with it. A fixed level tuned on the scenes/
+// cases leaves a clay object under a white sky (OpenSubdiv's bishop) near per hit's error,
+// where two levels finer give several times less. So a pass of diffuse light first shades
 // every hit, measures V, the variance of the binned light among each pixel's camera samples over
 // their mean squared (summed over the pixels), and bins at 3.6 + log2(V) / 4 - log2(n / 4) / 3
 // levels (HitLightLevels; n = camera samples per pixel so far; V already falls with the paths per
-// hit). 480x270 (bishop 640x360), 4 spp, 1 path per hit, relMSE with the fixed 3.5 levels ->
-// these: car (all diffuse light binned, V 1.3) 0.0613 -> 0.0598, chess (V 0.81) 0.0373 -> 0.0376,
-// sunlit (indirect binned, V 2.1) 0.0061 -> 0.0056, bishop (V 0.014) 0.0085 -> 0.0011; with a
-// slope of 1/5 or 1/3 instead of 1/4 the bishop's 0.0013 / 0.0014, the others within 1%. The
-// direct integrator's light keeps AO's levels: its best level did not follow V (chess soft
-// shadows, V 0.76, and the bishop, V 0.028, both best near 2.5-3).
+// hit). A slope of 1/5 or 1/3 instead of 1/4 changes little. The direct integrator's light keeps
+// AO's levels: its best level does not follow V (chess soft shadows and the bishop are both best
+// near 2.5-3 levels up).
 //
 // Combining the two levels. The schedule's level b is fractional; the bins lie floor(b) and
-// floor(b) + 1 levels up. A sample had read one of the two at random (the coarser with
-// probability frac(b)), which blends them whatever the data say. Instead it reads both and
-// moves from the finer estimate f towards the coarser c by alpha (render.cpp, Reconstruct):
+// floor(b) + 1 levels up. Reading one of the two at random (the coarser with probability
+// frac(b)) would blend them whatever the data say. Instead a sample reads both and moves from
+// the finer estimate f towards the coarser c by alpha (the renderer's Reconstruct):
 // f + alpha (c - f). A fine bin holds about a quarter of its coarse bin's samples, so with s^2
 // f's variance, Var(c) ~ cov(f, c) ~ s^2 / 4, and for a coarse bias B = E[c - f] the MSE of
 // f + alpha (c - f) is s^2 - 1.5 alpha s^2 + alpha^2 (0.75 s^2 + B^2), least at
@@ -59,18 +52,14 @@
 // noise (a flat region), the fine ones where they do not (a crease, a contact shadow's edge).
 // AO's s^2 is binomial from the bins' counts, k = 3/4. The light's comes from the pass's V (one
 // relative variance for the whole image, which underestimates it where the light changes
-// fastest): k = 4, measured best among 0.3-8 (all of 2-8 beat the random pick). The bins'
-// level is then floor(b) (half a level finer on average than the random pick; floor(b) + 1/2
-// lost on every case). 480x270 (chess 480x360, bishop 640x360), 4 spp, one ray or path per hit,
-// relMSE random pick -> combined: AO car 0.0237 -> 0.0176, chess 0.0079 -> 0.0069, car through
-// a thin lens 0.0173 -> 0.0139, the bishop 0.0042 -> 0.0037; light car 0.0598 -> 0.0550, chess
-// 0.0376 -> 0.0290, sunlit 0.0056 -> 0.0053, chess soft shadows (direct) 0.0329 -> 0.0271, the
-// bishop 0.0011 -> 0.00081; 16 paths: chess 0.0068 -> 0.0050, sunlit 0.0012 -> 0.0011, soft
-// shadows 0.0080 -> 0.0051. alpha stays in [0, 1], so the estimate lies between two consistent
-// ones and stays consistent. An earlier try picked one level per sample from six (the
-// intersection of confidence intervals, variances from the bins' second moments) and lost to
-// the schedule on the torus tests (AO at 1 ray per hit relMSE 0.020-0.042 against 0.016): a
-// hard choice among many noisy levels, where this one shrinks between two neighbours. The bias
+// fastest): k = 4, best among 0.3-8 (all of 2-8 beat the random pick). The bins' level is then
+// floor(b) (half a level finer on average than the random pick; floor(b) + 1/2 loses on every
+// case). The combination beats the random pick on every case of speed-vs-error and the bishop
+// (docs/texture-space.md, "Combining the two levels"). alpha stays in [0, 1], so the estimate
+// lies between two consistent ones and stays consistent. Picking one level per sample from six
+// (the intersection of confidence intervals, variances from the bins' second moments) loses to
+// the schedule on the torus tests: a hard choice among many noisy levels, where this one
+// shrinks between two neighbours. The bias
 // vanishes until the bins reach level 0 (texels of texelFraction of the object's size), below
 // which it stays that of level 0's bins. The bins hold integer counts, whose sums do not depend
 // on the order of the adds (see texcache/hit_bins.h), so the image is the same for any thread
@@ -159,10 +148,10 @@ inline double CoarseWeight(double d, double fineVariance, double k) {
 constexpr double kAoCoarseWeightK = 0.75;
 /// k for binned light (the path and direct integrators), whose fine variance comes from the
 /// pass's mean relative variance V:
-/// measured best near 4 (2-8 all beat the fixed blend; note at the top).
+/// best near 4 (2-8 all beat the fixed blend; note at the top).
 constexpr double kLightCoarseWeightK = 4.0;
 
-/// What the visibility prepass keeps of a pass for its shading pass (render.cpp's PassTexels).
+/// What the visibility prepass keeps of a pass for its shading pass (the renderer's PassTexels).
 struct PassScratch {
     std::vector<PassTexel> texels;  ///< per camera sample of the pass
     std::vector<uint32_t> added;    ///< per pixel: its first samples the prepass added itself
@@ -344,10 +333,9 @@ public:
     /// Takes new options and starts empty, keeping the cache storage when its layout is the same
     /// (sizes, LOD bias, texel size; no temporal history): a renderer comparing settings then
     /// clears 2 x 64 MB instead of having the kernel map and zero them again for every render
-    /// (measured: 0.3 s of CPU on a 480x270 render, more than its shading; figure from e62355c,
-    /// closest command `texcache experiment speed-vs-error --only car-ao --out DIR`, whose
-    /// renders are 480x270). Returns false, and changes nothing, when the storage does not
-    /// match: build a new cache then.
+    /// (mapping and zeroing costs more CPU than the shading of a 480x270 render, such as those
+    /// of `texcache experiment speed-vs-error`). Returns false, and changes nothing, when the
+    /// storage does not match: build a new cache then.
     bool Reconfigure(const RenderScene& rs, const TextureSpaceOptions& options);
 
     /// Starts a frame of an animation: shading changes when objects move, so samples and texels
@@ -444,8 +432,7 @@ glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, Shad
                                        FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
         // Stereo's second eye (ReuseNeighbourTexels) filters a missed texel alone: its misses are
         // mostly served by neighbours, and reconstructing the blocks around its few true misses
-        // shaded their samples too (car AO, 320x180: its new samples rose from 21% to 31% of the
-        // first eye's).
+        // would shade their samples too (on car AO about half as many new samples again).
         if (neighbourReuse_)
             return cache_.LookupTexel(texel, radius, shade,
                                       internal::Accumulating<Filter, false>{this, filter}, stats,

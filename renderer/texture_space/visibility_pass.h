@@ -3,10 +3,10 @@
 // and a blur covariance per pixel) come from 4 rays per pixel through the pixel centre, 4 points
 // of the lens and 4 times of the shutter (what the GPU filter the paper uses takes as its depth
 // and motion buffers), at the cost of 4 camera rays per pixel (0.1-0.2 CPU s at 480x270), and
-// without asking the render for AOV layers: those take texture-space AO off its prepass path (a
-// frame cost 1.4x as much with them: blur_motion.json, 16 spp, one pass, 4.2 -> 5.8 s). With one
-// ray through the lens centre at mid-shutter, the ground seen through a moving torus's hole read
-// as sharp and kept its noise (results/blur.md, attempts 2 and 3).
+// without asking the render for AOV layers: those take texture-space AO off its prepass path,
+// which makes the frame cost about 1.4x as much. With one ray through the lens centre at
+// mid-shutter, the ground seen through a moving torus's hole reads as sharp and keeps its noise
+// (docs/stereo-and-blur.md; results/blur.md, alternatives 2 and 3).
 #pragma once
 #include <vector>
 

@@ -39,9 +39,9 @@
 // slot stores its key with the cache's current tag in the top 4 bits. InvalidateAll moves to the
 // next tag, and an entry of an older tag reads as empty (a miss, then a claim that evicts
 // nothing). Only every 15th InvalidateAll, when the tags would come round again, sweeps the
-// slots. Progressive passes and the preview's refinement invalidate both caches every pass: the
-// sweep of 2 x 64 MB had been 8% of a small progressive render (car AO 160x90, 32 passes of
-// 1 spp, 1 thread: `perf record`), and its page faults on untouched slots another 8%.
+// slots. Progressive passes and the preview's refinement invalidate both caches every pass, and
+// a sweep of 2 x 64 MB each time (with page faults on slots never touched) would be a large
+// share of a small progressive render.
 #pragma once
 #include <algorithm>
 #include <atomic>
@@ -150,7 +150,7 @@ public:
                 if (k1 == key && TryRead(*s1, q1, out) == kHit) return AcquireResult::Hit;
                 // An idle first slot that holds nothing live: claim it without loading the
                 // second slot (the claim below would pick it too). Filling a cold cache, that
-                // load was a miss to memory per entry: ~70% of Acquire's time in a cold frame.
+                // load is a miss to memory per entry and would be most of Acquire's time.
                 // The key may sit in the second slot only if this one was emptied after it got
                 // there (Abandon, InvalidateIf): then it gets a second copy, see the note.
                 uint64_t expected = q1;
@@ -231,9 +231,9 @@ public:
 
     /// Starts loading the first slot of `hash` into the CPU cache, ahead of an Acquire or Find.
     /// Not the second: most lookups end in the first (a warm frame of `texcache bench cache`
-    /// found 86% of its texels there, and a cold claim of an empty first slot never reads the
-    /// second), and fetching both lines for every texel cost more than it hid: warm / constant
-    /// CPU 1.51-1.53x with both, 1.42-1.44x with the first (three alternating runs each).
+    /// finds most of its texels there, and a cold claim of an empty first slot never reads the
+    /// second), and fetching both lines for every texel costs more than it hides
+    /// (docs/cache.md, "Prefetching").
     void Prefetch(uint64_t hash) const { PrefetchLine(&slots_[SlotOf(hash)]); }
 
     /// Stores the payload of a claimed slot and makes it visible.
@@ -268,10 +268,9 @@ public:
 
 private:
     // The slot array is 2 MB-aligned and asks for transparent huge pages: lookups land at random
-    // in a table of tens of MB, and with 4 KB pages nearly every one missed the TLB (measured:
-    // software prefetches did not help until the table was on huge pages; figure from 0b4f00b,
-    // closest command `texcache bench cache`). The slots take numSlots * kSlotBytes (rounded
-    // to a cache line), so the budget holds.
+    // in a table of tens of MB, and with 4 KB pages nearly every one misses the TLB, which
+    // software prefetches cannot hide (`texcache bench cache` shows it). The slots take
+    // numSlots * kSlotBytes (rounded to a cache line), so the budget holds.
     struct SlotDeleter {
         size_t n;
         void operator()(Slot* p) const {
@@ -293,10 +292,10 @@ private:
         // Acquire loads (rather than relaxed loads + an acquire fence) keep the re-read of seq
         // after the payload, and ThreadSanitizer models them (it ignores fences). Plain moves on
         // x86. Each word goes straight to `out` (which holds garbage if we then return kRetry):
-        // staging the words in a local buffer and copying it out made the compiler reload them
-        // with 16-byte loads from 8-byte stores, a store-forwarding stall measured at 60% of
-        // this function (a profile; figure from 7aea17b, closest command `perf record
-        // build/bin/cache_benchmark --benchmark_filter=BM_TexelCacheHit`).
+        // staging the words in a local buffer and copying it out lets the compiler reload them
+        // with 16-byte loads from 8-byte stores, a store-forwarding stall that dominates this
+        // function in a profile (`perf record build/bin/cache_benchmark
+        // --benchmark_filter=BM_TexelCacheHit`).
         char* dst = reinterpret_cast<char*>(out);
         for (size_t i = 0; i < kWords; ++i) {
             const uint64_t w = s.words[i].load(std::memory_order_acquire);

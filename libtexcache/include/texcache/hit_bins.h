@@ -192,7 +192,7 @@ public:
     }
 
     /// A thread's adds, gathered in a small local table and added to the shared bins once per
-    /// bin: a tile's hits fall into a few dozen bins, and one atomic add per hit had been most of
+    /// bin: a tile's hits fall into a few dozen bins, and one atomic add per hit would be most of
     /// the cost of binning (`perf` on hit-binned AO). Flush (or destroy) before the bins are
     /// read. The sums are the same as adding one by one (integer sums, any order).
     class Batch {
@@ -224,7 +224,7 @@ public:
     private:
         static constexpr int kLog2Local = 8;
         // The value is left uninitialised until its key is set (a union member): zeroing all of
-        // them for every batch, one per tile, had cost as much as binning a 4-spp tile's hits.
+        // them for every batch, one per tile, would cost as much as binning a 4-spp tile's hits.
         struct Entry {
             Entry() {}
             uint64_t key;
@@ -252,7 +252,7 @@ public:
 
 private:
     // The key beside its bins: a lookup touches the block's first line for the key and, for
-    // most lanes, the next one or two (a separate key array had cost a second miss per lookup).
+    // most lanes, the next one or two (a separate key array would cost a second miss per lookup).
     struct Block {
         std::atomic<uint64_t> key;
         std::atomic<uint64_t> w[16 * Bin::kWords];

@@ -36,18 +36,17 @@ struct CacheSettings {
     float lodBias = 0.0f;  ///< added to eq. 1's level (Sec. 6.2 shader LOD)
     bool referenceMode =
         false;  ///< unbounded caches: every sample and texel kept (overshading baseline)
-    /// Let a texel live in one of two slots (see direct_mapped_cache.h): a warm frame then hits
-    /// ~99.9% instead of ~91% of its texels (measured on the car at 640x360, 4 spp: the warm
-    /// frame of `texcache bench cache`; ~91% with this false, which has no flag there: figure
-    /// from 5a67a7b); false is the paper's strictly direct-mapped texel cache.
+    /// Let a texel live in one of two slots (see direct_mapped_cache.h): a warm frame then finds
+    /// nearly all of its texels, where one slot per key loses about one in ten to conflicts
+    /// (docs/cache.md, "Two choices"); false is the paper's strictly direct-mapped texel cache.
     bool texelTwoChoices = true;
     /// The same for samples. On by default: in the steady state of a still or slowly moving
     /// view (the preview, an animation, the warm frame of `texcache bench cache`), the texels
-    /// that miss need samples shaded frames ago, and direct mapping had evicted many of them:
-    /// car AO 640x360 with the default 64 MB, a warm frame shaded 39781 samples direct-mapped
-    /// and 1760 with two choices. In an overfull cache it is slightly worse: at 4096x2304 with
-    /// 16 MB, two choices re-shaded 15.8% against 14.4% (`texcache experiment cache-size`,
-    /// figure from 4728839, before packed samples). The paper's cache is direct-mapped.
+    /// that miss need samples shaded frames ago, and direct mapping evicts many of them (a warm
+    /// frame of car AO re-shades about twenty times fewer samples with two choices:
+    /// docs/cache.md, "Two choices"). In an overfull cache it is slightly worse (a little more
+    /// overshading at 4096x2304 with 16 MB in `texcache experiment cache-size`). The paper's
+    /// cache is direct-mapped.
     bool sampleTwoChoices = true;
 
     /// Throws InputError naming the setting when a value is out of range.
@@ -549,17 +548,16 @@ private:
     // and puts those nobody holds into the texel cache. Why: neighbouring
     // windows share all but 2r+1 of their taps, and the visible texels of a block are looked up
     // soon (the prepass marked them from this frame's camera rays), so gathering, fetching and
-    // testing each window's taps again per texel was most of a 21x21 render (perf, car AO,
+    // testing each window's taps again per texel would be most of a 21x21 render (perf, car AO,
     // `texcache experiment filter-size`). The tile is at most (16 + 2r)^2 samples per thread
     // (r = 10: 1296, 47 KiB with ShadedSample): per texel of the block, 5 tile positions to
-    // build, fetch and test instead of 12 with 8x8 blocks (21x21 car AO, 640x360: 8% less render
-    // CPU, median of 7 alternating runs). Past the face's edges the tile reads the face's
-    // pad, which gives every window there the taps GatherFootprint gives it; a window holding a
-    // texel twice (around extraordinary vertices, beside coarser grids) drops the positions
-    // GatherFootprint drops from its own copy of the tile's bit rows. (It took the per-texel
-    // path before, after its tile was built: 18k of the 40k misses of the car's 21x21 AO once
-    // pads covered grids of every size.) Texels are reconstructed from the samples they would
-    // have been filtered with, so their values are the per-texel path's.
+    // build, fetch and test, where 8x8 blocks need 12. Past the face's edges the tile reads the
+    // face's pad, which gives every window there the taps GatherFootprint gives it; a window
+    // holding a texel twice (around extraordinary vertices, beside coarser grids) drops the
+    // positions GatherFootprint drops from its own copy of the tile's bit rows, so such windows
+    // stay on the block path too (on the car's 21x21 AO they are a large share of the misses).
+    // Texels are reconstructed from the samples they would have been filtered with, so their
+    // values are the per-texel path's.
     // False when the block path does not apply to the centre: no tile overload, no visible set,
     // reference mode, an unseen centre, or a tile past the face's edges that is wider than 64
     // texels or whose face is too large for a pad.
@@ -749,9 +747,9 @@ private:
     // A block reconstruction (FilterBlock) pays off when the block's other texels are missing
     // too, as in a frame that fills the cache; a miss in a filled block (the few texels a warm
     // frame lost to conflicts) costs its whole tile's gather there, ~5x the per-texel window
-    // (car AO 640x360, warm frame of `texcache bench cache`: ~580 such misses, 7% of the frame's
-    // CPU). Both paths give the same value (BlockReconstructionGivesThePerTexelValues), so
-    // the choice changes the time, never the image.
+    // (hundreds of such misses in a warm frame of `texcache bench cache`). Both paths give the
+    // same value (BlockReconstructionGivesThePerTexelValues), so the choice changes the time,
+    // never the image.
     bool IsolatedMiss(const TexelKey& k, int res) const {
         for (int q = 1; q < 4; ++q) {
             const int u = int(k.iu) ^ (q & 1), v = int(k.iv) ^ (q >> 1);

@@ -96,8 +96,8 @@ private:
         *length = subFace && (edge == 0 || edge == 3) ? 0.5f : 1.0f;
     }
 
-    // Adjacency, packed (a 1,000,000-quad cage holds 32 MB here, where whole EdgeLinks took
-    // 144 MB): two words per Ptex edge, one per neighbour segment, kNoLink when absent. A word
+    // Adjacency, packed (a 1,000,000-quad cage holds 32 MB here, where whole EdgeLinks would
+    // take 144 MB): two words per Ptex edge, one per neighbour segment, kNoLink when absent. A word
     // is the neighbour's Ptex id << kFaceShift | kIsSubFace (this face is an n-gon sub-face)
     // | kNeighbourIsSubFace | the neighbour's edge (2 bits).
     static constexpr uint32_t kNoLink = ~uint32_t(0);
@@ -149,9 +149,9 @@ inline void UvToEdge(int edge, float u, float v, float* along, float* inward) {
 }
 
 /// Fast limit evaluation for the Ptex faces whose limit surface is one regular bicubic B-spline
-/// patch with no crease (interior or boundary; most faces of a typical cage): ~20 ns instead of a
-/// general patch evaluation (figure from 2ad54fc; nothing times it alone, the closest command is
-/// `texcache bench rays`). Other faces report Has() == false and need a general evaluator.
+/// patch with no crease (interior or boundary; most faces of a typical cage): tens of
+/// nanoseconds, a fraction of a general patch evaluation (`texcache bench rays` shows it in the
+/// whole frame). Other faces report Has() == false and need a general evaluator.
 /// Immutable.
 class RegularPatches {
 public:

@@ -9,9 +9,7 @@
 // keep only visible taps: a footprint then shades little more than the unfiltered render. The
 // kept taps are made point-symmetric about the centre (GatherFootprint): the visible part of a
 // window is one-sided where a surface disappears behind another, and a one-sided average of a
-// shading gradient is biased (car AO 640x360, 4 spp, relMSE 13x13 / 21x21: full window 0.0141 /
-// 0.0233, visible 0.0240 / 0.0517, visible and symmetric 0.0156 / 0.0176; `texcache experiment
-// filter-size --out DIR`, the one-sided "visible" figures from f721c1e, before symmetry).
+// shading gradient is biased (docs/texture-space.md, "Visible footprints", has the figures).
 //
 // Design note (concurrency and memory). A fixed table of 64-bit words; a word holds the 8x8
 // block of texels (face, mip, iu/8, iv/8) hashes to, one bit per texel. Marking is an atomic
