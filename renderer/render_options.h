@@ -47,15 +47,15 @@ std::string FootprintModeNames();
 ///         with a snap ray), shaded on demand and reconstructed by the material's filter.
 ///   Hits  at the camera's own hits, as per-hit shading shades them (same rays, same random
 ///         numbers), added up per bin of a coarser level of the same grids and read back by a
-///         bilinear reconstruction over the 2x2 bins around each hit (render.cpp, AoHitsBin,
-///         PathHitsTrace): no limit evaluation, snap ray or footprint gather, and every ray traced
-///         lands in some bin. The path integrator bins the light its diffuse hits receive (all
-///         of it, or its indirect part: TextureSpaceOptions::cacheDirect) and applies each hit's
-///         albedo when it reads the bins; a glossy hit bins its diffuse base's light and keeps
-///         its specular lobe per hit; the direct integrator bins its light when cacheDirect.
-///         The bins lie HitBinLevels above the hit's texel (HitLightLevels for diffuse light:
-///         from the pass's measured noise; fewer as rays per pixel grow; texture_space.h argues
-///         why the result converges).
+///         bilinear reconstruction over the 2x2 bins around each hit
+///         (texture_space/hit_binning.cpp, AoHitsBin, PathHitsTrace): no limit evaluation, snap ray
+///         or footprint gather, and every ray traced lands in some bin. The path integrator bins
+///         the light its diffuse hits receive (all of it, or its indirect part:
+///         TextureSpaceOptions::cacheDirect) and applies each hit's albedo when it reads the bins;
+///         a glossy hit bins its diffuse base's light and keeps its specular lobe per hit; the
+///         direct integrator bins its light when cacheDirect. The bins lie HitBinLevels above the
+///         hit's texel (HitLightLevels for diffuse light: from the pass's measured noise; fewer as
+///         rays per pixel grow; texture_space.h argues why the result converges).
 /// The command line's `--ts-samples auto` (its default) takes Hits for AO, path and cached direct
 /// light unless a filter, a filter radius or temporal accumulation is asked for (those belong to
 /// the grid); the API's default is the paper's Grid.

@@ -50,33 +50,32 @@
 // Combining the two levels. The schedule's level b is fractional; the bins lie floor(b) and
 // floor(b) + 1 levels up. A sample had read one of the two at random (the coarser with
 // probability frac(b)), which blends them whatever the data say. Instead it reads both and
-// moves from the finer estimate f towards the coarser c by alpha (render.cpp, Reconstruct):
-// f + alpha (c - f). A fine bin holds about a quarter of its coarse bin's samples, so with s^2
-// f's variance, Var(c) ~ cov(f, c) ~ s^2 / 4, and for a coarse bias B = E[c - f] the MSE of
-// f + alpha (c - f) is s^2 - 1.5 alpha s^2 + alpha^2 (0.75 s^2 + B^2), least at
-// alpha = 0.75 s^2 / E[(c - f)^2]. With the observed (c - f)^2 for its expectation, alpha =
-// min(1, k s^2 / (c - f)^2) (CoarseWeight): the coarse bins where the levels agree within the
-// noise (a flat region), the fine ones where they do not (a crease, a contact shadow's edge).
-// AO's s^2 is binomial from the bins' counts, k = 3/4. The light's comes from the pass's V (one
-// relative variance for the whole image, which underestimates it where the light changes
-// fastest): k = 4, measured best among 0.3-8 (all of 2-8 beat the random pick). The bins'
-// level is then floor(b) (half a level finer on average than the random pick; floor(b) + 1/2
-// lost on every case). 480x270 (chess 480x360, bishop 640x360), 4 spp, one ray or path per hit,
-// relMSE random pick -> combined: AO car 0.0237 -> 0.0176, chess 0.0079 -> 0.0069, car through
-// a thin lens 0.0173 -> 0.0139, the bishop 0.0042 -> 0.0037; light car 0.0598 -> 0.0550, chess
-// 0.0376 -> 0.0290, sunlit 0.0056 -> 0.0053, chess soft shadows (direct) 0.0329 -> 0.0271, the
-// bishop 0.0011 -> 0.00081; 16 paths: chess 0.0068 -> 0.0050, sunlit 0.0012 -> 0.0011, soft
-// shadows 0.0080 -> 0.0051. alpha stays in [0, 1], so the estimate lies between two consistent
-// ones and stays consistent. An earlier try picked one level per sample from six (the
-// intersection of confidence intervals, variances from the bins' second moments) and lost to
-// the schedule on the torus tests (AO at 1 ray per hit relMSE 0.020-0.042 against 0.016): a
-// hard choice among many noisy levels, where this one shrinks between two neighbours. The bias
-// vanishes until the bins reach level 0 (texels of texelFraction of the object's size), below
-// which it stays that of level 0's bins. The bins hold integer counts, whose sums do not depend
-// on the order of the adds (see texcache/hit_bins.h), so the image is the same for any thread
-// count.
-// The passes are deterministic (streams of key and pass, whatever thread shades a sample), so
-// the same seed still gives the same image for any thread count. Temporal accumulation
+// moves from the finer estimate f towards the coarser c by alpha (bin_reconstruction.cpp,
+// Reconstruct): f + alpha (c - f). A fine bin holds about a quarter of its coarse bin's samples, so
+// with s^2 f's variance, Var(c) ~ cov(f, c) ~ s^2 / 4, and for a coarse bias B = E[c - f] the MSE
+// of f + alpha (c - f) is s^2 - 1.5 alpha s^2 + alpha^2 (0.75 s^2 + B^2), least at alpha = 0.75 s^2
+// / E[(c - f)^2]. With the observed (c - f)^2 for its expectation, alpha = min(1, k s^2 / (c -
+// f)^2) (CoarseWeight): the coarse bins where the levels agree within the noise (a flat region),
+// the fine ones where they do not (a crease, a contact shadow's edge). AO's s^2 is binomial from
+// the bins' counts, k = 3/4. The light's comes from the pass's V (one relative variance for the
+// whole image, which underestimates it where the light changes fastest): k = 4, measured best among
+// 0.3-8 (all of 2-8 beat the random pick). The bins' level is then floor(b) (half a level finer on
+// average than the random pick; floor(b) + 1/2 lost on every case). 480x270 (chess 480x360, bishop
+// 640x360), 4 spp, one ray or path per hit, relMSE random pick -> combined: AO car 0.0237 ->
+// 0.0176, chess 0.0079 -> 0.0069, car through a thin lens 0.0173 -> 0.0139, the bishop 0.0042 ->
+// 0.0037; light car 0.0598 -> 0.0550, chess 0.0376 -> 0.0290, sunlit 0.0056 -> 0.0053, chess soft
+// shadows (direct) 0.0329 -> 0.0271, the bishop 0.0011 -> 0.00081; 16 paths: chess 0.0068 ->
+// 0.0050, sunlit 0.0012 -> 0.0011, soft shadows 0.0080 -> 0.0051. alpha stays in [0, 1], so the
+// estimate lies between two consistent ones and stays consistent. An earlier try picked one level
+// per sample from six (the intersection of confidence intervals, variances from the bins' second
+// moments) and lost to the schedule on the torus tests (AO at 1 ray per hit relMSE 0.020-0.042
+// against 0.016): a hard choice among many noisy levels, where this one shrinks between two
+// neighbours. The bias vanishes until the bins reach level 0 (texels of texelFraction of the
+// object's size), below which it stays that of level 0's bins. The bins hold integer counts, whose
+// sums do not depend on the order of the adds (see texcache/hit_bins.h), so the image is the same
+// for any thread count. The passes are deterministic (streams of key and pass, whatever thread
+// shades a sample), so the same seed still gives the same image for any thread count. Temporal
+// accumulation
 // (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
 #pragma once
 #include <algorithm>
@@ -112,13 +111,13 @@ float MipZeroTexelSize(glm::vec3 lo, glm::vec3 hi, float texelFraction = 1.0f / 
 /// door between the renderer and libtexcache: it picks each hit's texel and each object's
 /// filter, and blends texels over frames; nothing else touches the ShadingCache inside.
 namespace internal {
-/// A camera sample of a pass as the visibility prepass saw it (see render.cpp's PassTexels).
+/// A camera sample of a pass as the visibility prepass saw it (see render_internal.h's PassTexels).
 struct PassTexel {
     uint64_t key;     ///< TexelKey::Pack()
     int32_t mesh;     ///< the texel's cache mesh, or a PassTexels marker (< 0)
     glm::vec3 found;  ///< the texel's value, when the prepass found it cached
 };
-/// A camera sample of a pass of hit-binned AO (render.cpp, AoHitsBin): where it hit, for the
+/// A camera sample of a pass of hit-binned AO (hit_binning.cpp, AoHitsBin): where it hit, for the
 /// reconstruction that reads the bins around it. 12 bytes: a pass's records are written once and
 /// read once, and 1920x1080 at 4 spp holds 8.3M of them.
 struct HitRecord {
@@ -135,9 +134,9 @@ struct HitRecord {
         return uint16_t(std::min(x * kUvScale, kUvScale - 1.0f));
     }
 };
-/// A binned diffuse hit of a pass of hit-binned light (render.cpp, PathHitsTrace): the light it
-/// bins, the albedo its reconstruction is multiplied by, and the level of its texel (its bins lie
-/// levels above it, chosen once the pass's noise is known).
+/// A binned diffuse hit of a pass of hit-binned light (hit_binning.cpp, PathHitsTrace): the light
+/// it bins, the albedo its reconstruction is multiplied by, and the level of its texel (its bins
+/// lie levels above it, chosen once the pass's noise is known).
 struct BinnedHit {
     glm::vec3 light, albedo;
     int32_t texelLevel;
@@ -162,7 +161,8 @@ constexpr double kAoCoarseWeightK = 0.75;
 /// measured best near 4 (2-8 all beat the fixed blend; note at the top).
 constexpr double kLightCoarseWeightK = 4.0;
 
-/// What the visibility prepass keeps of a pass for its shading pass (render.cpp's PassTexels).
+/// What the visibility prepass keeps of a pass for its shading pass (render_internal.h's
+/// PassTexels).
 struct PassScratch {
     std::vector<PassTexel> texels;  ///< per camera sample of the pass
     std::vector<uint32_t> added;    ///< per pixel: its first samples the prepass added itself
