@@ -206,7 +206,7 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     add("hit_bin_bytes", double(s.hitBinBytes));  // shading at the hits (--ts-samples hits)
     add("hit_bins_dropped", double(s.hitBinsDropped));
     add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes));
-    // The scene: its size and the meshes Embree could not take (render_scene.cpp's design note).
+    // The scene: its size and the meshes Embree could not take (embree_mesh.cpp's design note).
     const RenderScene::TessellationStats t = rs.LimitTessellated();
     add("ptex_faces", double(rs.NumPtexFaces()));
     add("cage_faces_beyond_embree", double(t.beyondEmbree));
@@ -216,7 +216,7 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     return json;
 }
 
-/// The scene's size, and the meshes Embree could not take (render_scene.cpp's design note).
+/// The scene's size, and the meshes Embree could not take (embree_mesh.cpp's design note).
 void PrintSceneStats(const RenderScene& rs) {
     const size_t objects = rs.scene().objects.size();
     std::printf("scene: %zu object%s, %zu Ptex faces; %s\n", objects, objects == 1 ? "" : "s",
