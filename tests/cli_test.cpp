@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -20,6 +21,7 @@
 
 #include "cli_run.h"
 #include "renderer/image/image.h"
+#include "renderer/library_versions.h"
 #include "support/cages.h"
 #include "test_util.h"
 
@@ -121,6 +123,74 @@ TEST(Cli, HelpOnEverySubcommand) {
         const CliRun r = Texcache(c);
         EXPECT_EQ(r.code, 0) << c << ": " << r.out;
         EXPECT_NE(r.out.find("Usage"), std::string::npos) << c;
+    }
+}
+
+// `texcache --version`: texcache's version on the first line, then each library's, as the
+// renderer reports them (no subcommand needed, exit 0).
+TEST(Cli, VersionNamesTexcacheAndItsLibraries) {
+    const CliRun r = Texcache("--version");
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(r.out.rfind(std::string("texcache ") + TexcacheVersion() + "\n", 0), 0u) << r.out;
+    const std::vector<LibraryVersion> libs = LibraryVersions();
+    ASSERT_EQ(libs.size(), 4u);
+    for (const char* name : {"Embree", "OpenSubdiv", "OpenEXR", "OpenImageIO"}) {
+        const auto it = std::find_if(libs.begin(), libs.end(),
+                                     [&](const LibraryVersion& v) { return v.name == name; });
+        ASSERT_NE(it, libs.end()) << name;
+        EXPECT_FALSE(it->version.empty()) << name;
+        EXPECT_TRUE(std::isdigit(static_cast<unsigned char>(it->version[0]))) << it->version;
+        EXPECT_NE(r.out.find(it->name + " " + it->version + "\n"), std::string::npos) << r.out;
+    }
+}
+
+// The help of the commands with many options lists them under headings, in this order, each
+// option under its own (a sample of each group).
+TEST(Cli, HelpGroupsTheOptions) {
+    struct Group {
+        std::string heading;
+        std::vector<std::string> options;
+    };
+    struct Case {
+        std::string command;
+        std::vector<Group> groups;
+    };
+    const Case cases[] = {
+        {"render --help",
+         {{"Output:", {"--output", "--aov", "--frames"}},
+          {"Sampling:", {"--spp", "--integrator", "--light-sampling"}},
+          {"Texture space:", {"--shading", "--ts-samples", "--texel-cache-mb"}},
+          {"Screen-space stage:", {"--frame-buffers", "--denoise"}},
+          {"Stereo and blur:", {"--stereo", "--visibility-filter"}},
+          {"Diagnostics:", {"--stats", "--overshading"}}}},
+        {"preview --help",
+         {{"View:", {"--resolution", "--view"}},
+          {"Texture space:", {"--shading", "--no-reshade"}},
+          {"Screen-space stage:", {"--denoise", "--motion"}},
+          {"Stereo:", {"--eye-separation"}},
+          {"Headless test mode:", {"--screenshot", "--play"}},
+          {"Benchmark:", {"--bench-frames"}}}},
+    };
+    for (const Case& c : cases) {
+        const CliRun r = Texcache(c.command);
+        ASSERT_EQ(r.code, 0) << c.command << ": " << r.out;
+        size_t last = 0;
+        for (size_t g = 0; g < c.groups.size(); ++g) {
+            const size_t at = r.out.find("\n" + c.groups[g].heading + "\n");
+            ASSERT_NE(at, std::string::npos) << c.command << ": " << c.groups[g].heading;
+            EXPECT_GT(at, last) << c.command << ": " << c.groups[g].heading << " out of order";
+            const size_t end = g + 1 < c.groups.size()
+                                   ? r.out.find("\n" + c.groups[g + 1].heading + "\n")
+                                   : r.out.size();
+            for (const std::string& o : c.groups[g].options) {
+                // The option's own line: "  --spp INT ..." or "  -o,--output TEXT ...".
+                size_t opt = r.out.find("\n  " + o + " ", at);
+                opt = std::min(opt, r.out.find("," + o + " ", at));
+                EXPECT_TRUE(opt != std::string::npos && opt < end)
+                    << c.command << ": " << o << " not under " << c.groups[g].heading;
+            }
+            last = at;
+        }
     }
 }
 

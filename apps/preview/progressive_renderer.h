@@ -93,8 +93,8 @@ struct PreviewSettings {
     screen::MotionKind motionKind = screen::MotionKind::Traditional;
     /// Stereo (renderer/texture_space/stereo.h): the beauty and debug-integrator views show both
     /// eyes side by side, the right eye from the left eye's cache, converging at the orbit's pivot;
-    /// the eyes `eyeSeparation` apart (< 0: 1/30 of the distance to the pivot). Cache and heat
-    /// views and the screen-space stage stay mono.
+    /// the eyes `eyeSeparation` apart (< 0: DefaultEyeSeparation of the distance to the pivot).
+    /// Cache and heat views and the screen-space stage stay mono.
     bool stereo = false;
     float eyeSeparation = -1.0f;
 

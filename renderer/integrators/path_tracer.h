@@ -251,11 +251,12 @@ struct PixelSequence {
         return OwenSobol02(uint32_t(j), ScrambleOf(j, pair));
     }
 };
-/// What a caller that bins diffuse light at camera hits (render.cpp, PathHitsTrace) asks LiPath
-/// for: the first hit's light for a white diffuse surface (the caller applies the hit's albedo,
-/// so a textured surface keeps its detail), with its interaction computed already, and the
-/// direct part of that light (NEE at the first hit, and emission the first BSDF ray finds, MIS-
-/// weighted) added to `direct` so that it can stay per hit while the indirect rest is binned.
+/// What a caller that bins diffuse light at camera hits (texture_space/hit_binning.cpp,
+/// PathHitsTrace) asks LiPath for: the first hit's light for a white diffuse surface (the caller
+/// applies the hit's albedo, so a textured surface keeps its detail), with its interaction computed
+/// already, and the direct part of that light (NEE at the first hit, and emission the first BSDF
+/// ray finds, MIS- weighted) added to `direct` so that it can stay per hit while the indirect rest
+/// is binned.
 ///
 /// With `specular` set, the first hit keeps its own BSDF (a GGX layer over a diffuse base) and
 /// one path estimates both lobes: the diffuse lobe's light is returned for a white lobe (the
