@@ -20,8 +20,8 @@
 
 #include "cli_run.h"
 #include "renderer/image/image.h"
-#include "support/cages.h"
 #include "test_util.h"
+#include "testing/cages.h"
 
 namespace texcache {
 namespace {

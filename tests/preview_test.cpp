@@ -24,8 +24,8 @@
 #include "renderer/scene/render_scene.h"
 #include "renderer/scene/scene_loader.h"
 #include "renderer/texture_space/texture_space.h"
-#include "support/cages.h"
 #include "test_util.h"
+#include "testing/cages.h"
 
 namespace {
 

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The screen-space stage on synthetic frames (tests/support/screen_space_scene.h): reprojection,
+// The screen-space stage on synthetic frames (testing/screen_space_scene.h): reprojection,
 // temporal convergence, disocclusion, moving shadows, NaN/Inf containment, input errors, the cone
 // and BRDF tables, demodulation. Every tolerance is stated where it is checked.
 #include <gtest/gtest.h>
@@ -14,7 +14,7 @@
 #include "screen_space/cone_overlap.h"
 #include "screen_space/planes.h"
 #include "screen_space/screen_denoiser.h"
-#include "tests/support/screen_space_scene.h"
+#include "testing/screen_space_scene.h"
 #include "texcache/error.h"
 
 namespace texcache::screen {

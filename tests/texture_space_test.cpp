@@ -14,8 +14,8 @@
 #include "renderer/integrators/path_tracer.h"
 #include "renderer/render.h"
 #include "renderer/scene/scene_loader.h"
-#include "support/cages.h"
 #include "test_util.h"
+#include "testing/cages.h"
 
 namespace texcache {
 namespace {

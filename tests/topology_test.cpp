@@ -15,7 +15,7 @@
 #include "../libtexcache/src/osd_refiner.h"  // the reference's refiner
 #include "libtexcache/topology_checks.h"
 #include "test_util.h"
-#include "tests/support/cages.h"
+#include "testing/cages.h"
 #include "texcache/footprint.h"
 #include "texcache/topology.h"
 
@@ -24,7 +24,7 @@ namespace {
 
 class TopologyTest : public ::testing::TestWithParam<std::string> {};
 
-// A bundled mesh, or one of the cages past Embree's limits (support/cages.h).
+// A bundled mesh, or one of the cages past Embree's limits (testing/cages.h).
 ControlCage Cage(const std::string& name) {
     const auto& beyond = test::BeyondEmbreeCages();
     if (std::find(beyond.begin(), beyond.end(), name) != beyond.end())

@@ -17,7 +17,7 @@
 
 #include "screen_space/brdf_table.h"
 #include "screen_space/screen_denoiser.h"
-#include "tests/support/screen_space_scene.h"
+#include "testing/screen_space_scene.h"
 
 namespace {
 

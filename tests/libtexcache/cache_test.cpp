@@ -20,7 +20,7 @@
 #include <unistd.h>
 
 #include "libtexcache/topology_checks.h"
-#include "tests/support/cages.h"
+#include "testing/cages.h"
 #include "texcache/direct_mapped_cache.h"
 #include "texcache/footprint.h"
 #include "texcache/shading_cache.h"
