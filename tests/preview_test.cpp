@@ -17,9 +17,9 @@
 
 #include <gtest/gtest.h>
 
-#include "progressive_renderer.h"
 #include "renderer/image/image.h"
 #include "renderer/image/metrics.h"
+#include "renderer/preview/progressive_renderer.h"
 #include "renderer/render.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/scene/scene_loader.h"

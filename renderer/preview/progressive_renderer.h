@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
-// Progressive rendering for the preview on a worker thread.
+// Progressive rendering for the preview on a worker thread: the preview's rendering engine, without
+// a window (apps/preview draws what it publishes; the tests drive it directly).
 //
 // Threading: the UI thread only posts settings and camera (Post, RequestPick)
 // and reads results (WithDisplay, Stats, CopyImage); it never waits for a frame (except the
@@ -32,8 +33,8 @@
 #include <thread>
 #include <vector>
 
-#include "orbit_camera.h"
 #include "renderer/image/image.h"
+#include "renderer/preview/orbit_camera.h"
 #include "renderer/render.h"
 #include "renderer/scene/scene.h"
 #include "screen_space/screen_denoiser.h"
@@ -107,10 +108,9 @@ TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s);
 
 /// The screen-space stage's settings for preview frames `height` rows tall: the library's
 /// defaults, with one a-trous level fewer below 720 rows (steps 1, 2, 4 of the 3x3 kernel: a
-/// 15-pixel footprint instead of 31), a quarter of the stage's filtering for little error at
-/// that size. Measured at 640x360 (`preview scenes/anim_shadow.json --bench --denoise
-/// reliable`): a-trous 19.3 -> 13.9 ms cpu a frame, relMSE 0.01394 -> 0.01410 (2 levels: 9.2 ms,
-/// 0.01472).
+/// 15-pixel footprint instead of 31), a quarter of the stage's filtering for little added error
+/// at that size (`texcache preview scenes/anim_shadow.json --bench --denoise reliable` measures
+/// both).
 screen::DenoiserSettings StageSettingsFor(int height);
 
 /// Whether the screen-space stage's history survives going from settings `a` to `b`: only what
