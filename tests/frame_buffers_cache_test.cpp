@@ -80,14 +80,14 @@ TEST(FrameBuffers, TextureSpaceCacheComposes) {
     EXPECT_NEAR(cached / perHit, 1.0, 0.01);
 }
 
-// Every screen-space method keeps the cached diffuse light (issue 21: with texture shading the
-// cones were NaN and Reliable's cone path set indirect to 0, darkening frame 0 by the mean
-// indirect buffer). Three frames of the test scene, each denoised by every method: the denoised
-// indirect light on the diffuse objects keeps 60-110% of the buffer's (measured 70-84%: the
-// a-trous's edge stopping loses some of the bright texels' light on this small scene, and more
-// since grazing views shade their diffuse lobe (bsdf.h), which put light in silhouette pixels:
-// 80-87% before; the broken path gave 0%), Reliable's frame 0 (no history: the a-trous alone) is
-// within 5% of the spatial filter's (measured 0-2.5%), and the image is finite.
+// Every screen-space method keeps the cached diffuse light: with texture shading the cones are NaN
+// (no diffuse ray), and a cone path that took them would set indirect to 0, darkening frame 0 by
+// the mean indirect buffer. Three frames of the test scene, each denoised by every method: the
+// denoised indirect light on the diffuse objects keeps 60-110% of the buffer's (measured 70-84%:
+// the a-trous's edge stopping loses some of the bright texels' light on this small scene, the
+// more as grazing views shade their diffuse lobe (bsdf.h), which puts light in silhouette
+// pixels), Reliable's frame 0 (no history: the a-trous alone) is within 5% of the spatial
+// filter's (measured 0-2.5%), and the image is finite.
 TEST(FrameBuffers, EveryDenoiserKeepsTheCachedIndirectLight) {
     Scene s = TestScene();
     RenderScene rs(s, {});

@@ -322,8 +322,8 @@ TEST(FrameBuffers, ComposeIsUnbiased) {
 // torus (a GGX lobe under a quad light has no closed form here). At 1 spp, per pixel, the
 // luminance's relative error against a 64-spp estimate of the TestScene (quad light + sky).
 // Measured RMS 0.010 and 99th percentile 0.054 over the pixels with shading above 1% of the
-// brightest (all of it the torus; with light samples everywhere, before the closed form: 0.055
-// and 0.23). Tolerances: RMS < 0.08, 99th percentile < 0.35 (what the light samples alone met).
+// brightest (all of it the torus; light samples everywhere give 0.055 and 0.23). Tolerances:
+// RMS < 0.08, 99th percentile < 0.35 (what light samples alone meet).
 TEST(FrameBuffers, ShadingIsLowNoise) {
     const Scene s = TestScene();
     RenderScene rs(s, {});

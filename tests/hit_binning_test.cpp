@@ -177,7 +177,7 @@ TEST(HitBins, DeterministicAcrossThreadCounts) {
     EXPECT_EQ(RenderOnThreads(rs, o, 1).data, RenderOnThreads(rs, o, 2).data);
 }
 
-// No lasting error (the dark texels of issue 16): at many rays the bins are fine and the image
+// No lasting error (no texel stays dark): at many rays the bins are fine and the image
 // approaches the per-hit reference of the same camera rays everywhere, not just on average:
 // every pixel within 0.06 of it (measured max 0.021).
 TEST(HitBins, NoPixelKeepsAnError) {

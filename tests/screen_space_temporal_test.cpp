@@ -120,8 +120,8 @@ TEST(ScreenSpaceTemporal, StaticNoisySceneConverges) {
     // most 1/4 of the noisy input's and at most 0.8x the first frame's (which is already
     // spatially filtered) for every temporal method; 0.6x with the default settings, which
     // converge alike (measured 0.55x for each). Reliable with its glossy vectors jittered over
-    // the lobe's footprint (maxGlossyJitter 4 px, issue 21's default) converged less, ~0.73x:
-    // the jitter reuses a random pixel of the lobe's footprint, a blur that never converges.
+    // the lobe's footprint (maxGlossyJitter 4 px, off by default) converges less, ~0.73x: the
+    // jitter reuses a random pixel of the lobe's footprint, a blur that never converges.
     SynthScene sc = FullScene(96, 64);
     sc.eyeVelocity = sc.lightVelocity = glm::vec3(0.0f);
     for (SynthObject& o : sc.objects) o.velocity = glm::vec3(0.0f);
@@ -147,12 +147,12 @@ TEST(ScreenSpaceTemporal, StaticNoisySceneConverges) {
 }
 
 // Where the history is valid (a static scene, 1 spp per frame), Reliable's diffuse indirect
-// must converge as well as the baseline's. Issue 21: clamping to 1-spp 3x3 neighbourhoods (whose
-// sigma is often 0 where the light is sparse) and the raw cone history (SVGF keeps the first
-// a-trous level instead) kept Reliable above the plain baseline. Indirect RMSE against a
-// 128-spp reference after 10 frames: Reliable at most 1.05x the baseline's (measured 1.00x),
-// and with issue 5's settings (clamped cones) at least 1.05x (measured 1.14x), so that the
-// scene tells the two apart.
+// must converge as well as the baseline's. Clamping to 1-spp 3x3 neighbourhoods (whose sigma is
+// often 0 where the light is sparse) and the raw cone history (SVGF keeps the first a-trous
+// level instead) keep Reliable above the plain baseline, which is why the defaults do neither.
+// Indirect RMSE against a 128-spp reference after 10 frames: Reliable at most 1.05x the
+// baseline's (measured 1.00x), and with clamped history and cones at least 1.05x (measured
+// 1.14x), so that the scene tells the two apart.
 TEST(ScreenSpaceTemporal, ReliableIndirectConvergesLikeTheBaselineWhereHistoryIsValid) {
     SynthScene sc = FullScene(96, 64);
     sc.eyeVelocity = sc.lightVelocity = glm::vec3(0.0f);
@@ -161,9 +161,9 @@ TEST(ScreenSpaceTemporal, ReliableIndirectConvergesLikeTheBaselineWhereHistoryIs
     const auto mask = GeometryMask(ref);
     std::vector<FrameBuffers> frames;
     for (int fr = 0; fr < 10; ++fr) frames.push_back(SynthRender(sc, fr, 3));
-    DenoiserSettings issue5;
-    issue5.reliableGlossyClampK = issue5.reliableIndirectClampK = 3.0f;
-    issue5.indirectCones = true;
+    DenoiserSettings clamped;
+    clamped.reliableGlossyClampK = clamped.reliableIndirectClampK = 3.0f;
+    clamped.indirectCones = true;
     auto indirectRmse = [&](Method m, const DenoiserSettings& set) {
         ScreenSpaceDenoiser dn(set, SharedBrdf());
         for (const FrameBuffers& f : frames) dn.Denoise(f, m, Demodulation::Off);
@@ -171,11 +171,11 @@ TEST(ScreenSpaceTemporal, ReliableIndirectConvergesLikeTheBaselineWhereHistoryIs
     };
     const double base = indirectRmse(Method::Baseline, {});
     const double rel = indirectRmse(Method::Reliable, {});
-    const double old = indirectRmse(Method::Reliable, issue5);
-    std::printf("indirect RMSE: baseline %.4f, reliable %.4f (%.2fx), issue 5's %.4f (%.2fx)\n",
-                base, rel, rel / base, old, old / base);
+    const double clampedRmse = indirectRmse(Method::Reliable, clamped);
+    std::printf("indirect RMSE: baseline %.4f, reliable %.4f (%.2fx), clamped cones %.4f (%.2fx)\n",
+                base, rel, rel / base, clampedRmse, clampedRmse / base);
     EXPECT_LE(rel, 1.05 * base);
-    EXPECT_GE(old, 1.05 * base);
+    EXPECT_GE(clampedRmse, 1.05 * base);
 }
 
 // A wall (grey) with a red box in front of it that stands still for 6 frames, then jumps 0.4
@@ -352,8 +352,8 @@ INSTANTIATE_TEST_SUITE_P(ScreenSpaceTemporal, MovingHardShadow,
 TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesWhereNoShadowMoves) {
     // A camera flying over a static scene (objects and light still, soft shadows, 1 spp): every
     // shadow vector is the traditional one, splatted ones included, so Reliable's visibility in
-    // SVGF order must be the baseline's (issue 21: on anim_flythrough Reliable trailed the
-    // plain baseline): the shadow vectors land within 0.08 px of the traditional ones here, so
+    // SVGF order must be the baseline's (on anim_flythrough it must not trail the plain
+    // baseline): the shadow vectors land within 0.08 px of the traditional ones here, so
     // the traditional vectors and taps replace them and the passes are the baseline's. Tolerance
     // 1e-6 on the largest difference over 8 frames (measured 0: the same arithmetic). Zeng's
     // order differs by more than 0.02 (measured 0.72 at a shadow edge: the test tells the two
@@ -393,8 +393,8 @@ TEST(ScreenSpaceTemporal, MovingReflectionFollowsGlossyVectors) {
     // each frame must be lower with the glossy vectors than with the baseline's:
     // by 1.15x with the default unclamped glossy history (measured 1.30x; 1.26x with the 4 px
     // jitter) and 1.5x with it clamped at 3 sigma (measured 1.80x). The clamp's cost: it trims the
-    // ghost at the reflection's edges here, and on the temporal experiment's 1-spp scenes it threw
-    // valid history away (issue 21, results/temporal.md), hence off by default.
+    // ghost at the reflection's edges here, and on the temporal experiment's 1-spp scenes it
+    // throws valid history away (results/temporal.md), hence off by default.
     SynthScene sc;
     sc.width = 96, sc.height = 64;
     sc.eye = glm::vec3(0.0f, 1.0f, 5.0f), sc.target = glm::vec3(0.0f, 0.3f, 0.0f);

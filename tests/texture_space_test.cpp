@@ -31,10 +31,10 @@ using test::TorusOnPlane;
 // with the 1x1 filter and the same camera samples (same seed: the same camera rays, so coverage
 // noise at silhouettes cancels) and 64 rays per cached sample converges to it up to the
 // quantization of shading to texel centres: relMSE below 0.006 (measured 0.0029).
-// The cache's grids hold the scene's Ptex topology rather than building their own (issue 18
-// item 6: on a 1,000,000-quad cage that copy and the OpenSubdiv refiner behind it took ~330 MB
-// more in texture space). The torus is closed (front grids only); the plane is open (front and
-// back grids share one topology too).
+// The cache's grids hold the scene's Ptex topology rather than building their own (on a
+// 1,000,000-quad cage a copy and the OpenSubdiv refiner behind it would take ~330 MB more in
+// texture space). The torus is closed (front grids only); the plane is open (front and back
+// grids share one topology too).
 TEST(TextureSpace, CacheSharesTheScenesTopology) {
     const RenderScene& rs = TorusAo();
     const long torusBefore = rs.SharedTopology(0).use_count() - 1,
@@ -53,7 +53,7 @@ TEST(TextureSpace, OneByOneFilterConvergesToPerHitShading) {
     const RenderResult cached = Render(rs, o);
     const double e = RelMSE(cached.beauty, ref);
     RecordProperty("relMSE", std::to_string(e));
-    EXPECT_LT(e, 0.006);  // measured 0.0029 (0.0093 before samples ignored other objects)
+    EXPECT_LT(e, 0.006);  // measured 0.0029
     // More rays per cached sample: closer still (convergence, not just a bound).
     o.aoSamples = 8;
     EXPECT_LT(e, RelMSE(Render(rs, o).beauty, ref));
@@ -61,14 +61,13 @@ TEST(TextureSpace, OneByOneFilterConvergesToPerHitShading) {
     EXPECT_GT(cached.stats.cache.samplesShaded, 0u);
 }
 
-// Issue 18: a closed cage wound inward (clockwise seen from outside) has limit normals pointing
-// into the solid. Per-hit shading faces the ray and was right; the cache shaded each texel on the
-// side its normal points to, inside the torus: AO near 0, relMSE 0.49 against per-hit AO (96x96,
-// 16 spp, `scripts/make_torus.py 48 24 t.obj --inward`). Now its samples face outward, and
+// A closed cage wound inward (clockwise seen from outside) has limit normals pointing into the
+// solid. Per-hit shading faces the ray; a cache that shaded each texel on the side its normal
+// points to would shade inside the torus (AO near 0). The cache's samples face outward, and
 // texture-space AO is as close to per-hit AO as on the same torus wound outward: the 1x1
 // filter, 8 camera samples, 32 rays per cached sample against 8 x 16 rays per pixel with the
 // same camera rays; bound 1.5x the outward torus's error + 0.001 (measured 0.0081 inward, 0.0080
-// outward; 0.58 inward before the fix).
+// outward).
 TEST(TextureSpace, InwardWoundClosedCagesAreShadedOutside) {
     double error[2];
     for (const bool inward : {false, true}) {
@@ -90,16 +89,16 @@ TEST(TextureSpace, InwardWoundClosedCagesAreShadedOutside) {
     EXPECT_LT(error[1], 1.5 * error[0] + 0.001);
 }
 
-// Issue 16: texels whose rays start inside the object stay dark at any ray count. On the car's
-// door (a close-up of the bundled scene) the tessellation lies above the limit point of some
-// texels by more than the 3% of a face that SamplePoint's snap ray used to start from, so it
-// started inside the car (and missed, or found the inner wall of a folded seam). Texture-space AO
+// Texels whose rays start inside the object stay dark at any ray count. On the car's door (a
+// close-up of the bundled scene) the tessellation lies above the limit point of some texels by
+// more than 3% of a face, so a snap ray starting within 3% of a face of the limit point would
+// start inside the car (and miss, or find the inner wall of a folded seam). Texture-space AO
 // with the 1x1 filter at 256 rays per sample against per-hit AO with the same camera rays (same
 // spp and seed: coverage cancels) at 256 rays per camera sample: a pixel is off by more than 0.2
 // only where bias stays. The two estimates have standard deviations of at most 0.031 (one
 // texel's 256 rays) and 0.016 (4 x 256 rays), so 0.2 is over 5 combined standard deviations;
 // texel quantization moves AO by far less than 0.2 across a texel on this smooth door. Bound: at
-// most 3 of the 3072 pixels (0.1%); measured 46 before the fix (relMSE 0.040), 0 after (0.009).
+// most 3 of the 3072 pixels (0.1%); measured 0 (relMSE 0.009).
 TEST(TextureSpace, NoTexelStartsItsRaysInsideTheCar) {
     std::vector<std::string> warnings;
     Scene s = LoadScene(test::SceneDir() + "/car.json", &warnings);
@@ -162,7 +161,7 @@ TEST(TextureSpace, VisibleFootprintsShadeWhatTheCameraSees) {
     EXPECT_EQ(all.stats.cache.tapsUnseen, 0u);
     EXPECT_GT(visible.stats.cache.tapsUnseen, 0u);
     // Measured: samples 6416 / 21126 / 6786 (1x1 / all / visible), relMSE 0.059 / 0.0340 /
-    // 0.0352 (the 1x1 render was at 0.079 before each sample's 4 rays became a (0,2,2)-net).
+    // 0.0352 (each sample's 4 rays a (0,2,2)-net).
     EXPECT_LT(nVisible, 0.5 * nAll) << nNone << " " << nAll << " " << nVisible;
     EXPECT_LT(nVisible, 1.25 * nNone) << nNone << " " << nAll << " " << nVisible;
     EXPECT_LT(eVisible, 0.7 * eNone) << eNone << " " << eAll << " " << eVisible;
@@ -221,9 +220,8 @@ TEST(TextureSpace, ProgressivePassesKeepConverging) {
 }
 
 // Each progressive pass filters with the texels its own camera samples see. Through a thin lens
-// the passes see different texels around each one, and a visible set kept over the passes had
-// grown with every pass, and every sample of it was shaded again each pass (car AO through a
-// lens, 640x360: 452k samples a pass over 2 passes, 782k over 8). Here a pass shades about as
+// the passes see different texels around each one, and a visible set kept over the passes would
+// grow with every pass, every sample of it shaded again each pass. Here a pass shades about as
 // many samples at pass 8 as at pass 2 (within 10%; measured 1.00).
 TEST(TextureSpace, PassesThroughALensShadeWhatTheyOwnSee) {
     Scene scene = TorusOnPlane();
@@ -568,8 +566,8 @@ TEST(TextureSpace, SoftShadowFilterLowersDirectLightingError) {
     const Image soft = Render(rs, o).beauty;
     ASSERT_TRUE(AllFiniteIn(soft, 0.0f, 1e4f));
     const double eHit = RelMSE(hit, ref), eSoft = RelMSE(soft, ref);
-    // Measured: per hit 0.0299 (its light samples a net per pixel since PixelSequence; with a
-    // shift per sample it had been higher), the filter 0.0154.
+    // Measured: per hit 0.0299 (its light samples a net per pixel: PixelSequence), the filter
+    // 0.0154.
     EXPECT_LT(eSoft, 0.6 * eHit) << "per hit " << eHit << " soft-shadow filter " << eSoft;
     double mr = 0, ms = 0;
     for (size_t i = 0; i < ref.data.size(); ++i) mr += ref.data[i], ms += soft.data[i];

@@ -162,9 +162,9 @@ TEST(DirectMappedCache, StaysWithinItsByteBudget) {
 #if defined(__x86_64__) && defined(__linux__)
 // A function whose only effect is a cache's Prefetch, out of line, and a caller. GCC's IPA
 // pure-const pass finds such a function "const" when its prefetch is __builtin_prefetch, and
-// deletes the calls to it: that had left the renderer without a single prefetch instruction
-// (see PrefetchLine). The test reads the caller's machine code back: the call (or the prefetch,
-// if the compiler inlines it after all) must still be there.
+// deletes the calls to it, which leaves the renderer without a single prefetch instruction
+// (PrefetchLine says how the cache avoids it). The test reads the caller's machine code back: the
+// call (or the prefetch, if the compiler inlines it after all) must still be there.
 extern "C" __attribute__((noinline)) void TexcachePrefetchProbe(
     const DirectMappedCache<Payload>* cache, uint64_t hash) {
     cache->Prefetch(hash);
