@@ -5,7 +5,7 @@
 #  3. tsan: the cache library's tests (label `cache`) under ThreadSanitizer in build-tsan/, since
 #     the caches are shared by all render threads;
 #  4. asan: the suite under AddressSanitizer + UndefinedBehaviorSanitizer in build-asan/, all but
-#     the experiments' end-to-end runs and the benchmarks' smoke runs (below);
+#     the experiments' end-to-end runs, the examples and the benchmarks' smoke runs (below);
 #  5. the whole suite in the Release build, last, so that its CTest summary closes the output.
 # Every build treats warnings in project code as errors (TEXCACHE_WERROR), here as in CI, so that
 # a run that passes here passes there; the setting stays in build/'s CMake cache. Extra arguments
@@ -57,7 +57,7 @@ phase "AddressSanitizer + UBSan: whole suite (build-asan/)"
 # UBSan findings abort in this build (-fno-sanitize-recover, cmake/Warnings.cmake); the options
 # add stack traces. Leaks are checked (the preview tests excepted: tests/CMakeLists.txt says why).
 asan_skip='Experiment\.|SpeedVsError\.'
-asan_skip_labels='bench'
+asan_skip_labels='example|bench'
 export ASAN_OPTIONS="detect_leaks=1:check_initialization_order=1:strict_init_order=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 sanitizer_build "$root/build-asan" address --target texcache_test_programs
@@ -66,8 +66,8 @@ t0=$SECONDS
 # The experiments' end-to-end runs are left to the Release suite: they render dozens of images
 # (about half the ASan suite's time on a fresh clone), their rendering code is what the other
 # tests run under ASan, and what is theirs alone is writing CSV, plots and markdown. So are the
-# benchmarks' smoke runs (label bench, not built here): they check that the programs still run,
-# on library code that the tests run under ASan.
+# examples and the benchmarks' smoke runs (labels example, bench; not built here): they check
+# that the programs still run and give their answers, on library code the tests run under ASan.
 (cd "$root/build-asan" && ctest --output-on-failure -j"$jobs" -E "$asan_skip" \
     -LE "$asan_skip_labels" "$@") ||
     failed+=("ASan + UBSan tests")
