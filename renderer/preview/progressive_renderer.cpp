@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "progressive_renderer.h"
+#include "renderer/preview/progressive_renderer.h"
 
 #include <algorithm>
 #include <chrono>
