@@ -17,6 +17,7 @@
 #include "cli_util.h"
 #include "renderer/render.h"
 #include "renderer/render_options.h"
+#include "renderer/render_policy.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/texture_space/texture_space.h"
 #include "renderer/texture_space/visibility_pass.h"
@@ -91,9 +92,9 @@ inline constexpr const char* kCacheSizeOptions = "--sample-cache-mb/--texel-cach
 /// The scene's render settings with the command line's values on top, each checked.
 void ApplySettings(const RenderArgs& a, RenderSettings* settings);
 
-/// The texture-space options of the command line. `softLight`: the scene's direct light has no
-/// delta light (distant lights), so `--cached-light auto` may cache it (CachesDirectLight).
-TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, bool softLight);
+/// The texture-space options of the command line; `lights`: the kinds of light the scene has,
+/// which `--cached-light auto` decides by (CachedDirectLight).
+TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights);
 /// The cache sizes of a render of `opt` (`views` images): those given, else sized to the frame
 /// (SizeTextureCaches), checked against this machine's memory.
 void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views);

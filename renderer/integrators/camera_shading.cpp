@@ -57,10 +57,11 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
 
     const IntegratorKind k = c.opt.integrator;
     if (k == IntegratorKind::Direct || k == IntegratorKind::Path) {
-        // A camera ray that hits nothing sees the environment, whatever the integrator does at
+        // A camera ray that hits nothing sees the environment (and the suns' discs), whatever the
+        // integrator does at
         // hits (LiPath's first miss: no MIS weight): most samples of an object under a sky. Not
         // through LiPath, whose call and 1 KB stack frame would weigh on a sky-only frame.
-        if (!found) return c.env ? c.env->Eval(ray.dir) : glm::vec3(0.0f);
+        if (!found) return c.Background(ray.dir);
         // Differentials tell LiPath that its first hit is a camera hit, which product sampling
         // needs; otherwise none, so that MIS does not compute a footprint it never uses.
         const RayDifferentials* productDiff =

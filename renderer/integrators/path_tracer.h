@@ -19,6 +19,7 @@
 #include "renderer/render_options.h"
 #include "renderer/scene/camera.h"
 #include "renderer/scene/envmap.h"
+#include "renderer/scene/lights.h"
 #include "renderer/scene/render_scene.h"
 
 namespace texcache {
@@ -48,6 +49,8 @@ struct LightSample {
     bool delta;
     int quad = -1;     // the quad light sampled, -1 for other lights
     int distant = -1;  // the distant light sampled, -1 for other lights
+    int sphere = -1;   // the point or spot light sampled (Scene::pointLights), -1 for others
+    int emitter = -1;  // the emissive object sampled (Context::emitters), -1 for others
 };
 
 /// Everything the per-sample code reads, resolved once per frame.
@@ -65,6 +68,13 @@ struct Context {
         bool twoSided;
     };
     std::vector<Quad> quads;
+    std::vector<SunDisc> suns;         // per distant light (delta: an angular size of 0)
+    bool sunDiscs = false;             // some distant light has an angular size
+    std::vector<SphereLight> spheres;  // per Scene::pointLights
+    std::vector<MeshEmitter> emitters;
+    std::vector<int> emitterOf;  // per object: its index in `emitters`, -1 if it emits nothing
+    // The lights SampleLight picks from, in its order: quads, distant lights, spheres, emitters,
+    // the environment; each with probability 1 / numLights (uniform light selection).
     int numLights = 0;
     float shutterLength;
     TextureSpaceCache* tsc = nullptr;
@@ -103,6 +113,56 @@ struct Context {
         const float c = std::abs(glm::dot(q.n, dir));
         return c > 0.0f ? dist * dist / (q.area * c) * PickPdf() : 0.0f;
     }
+    int FirstSphere() const { return int(quads.size() + distantDir.size()); }
+    int FirstEmitter() const { return FirstSphere() + int(spheres.size()); }
+
+    /// Radiance a ray receives from what it hit: a light's (quad, sphere) or an emissive
+    /// object's; 0 from any other surface.
+    glm::vec3 HitEmission(const Ray& ray, const Hit& hit) const {
+        if (hit.light >= 0)
+            return hit.light < int(quads.size())
+                       ? QuadEmission(hit.light, ray.dir)
+                       : spheres[size_t(hit.light) - quads.size()].Emission(ray.org, ray.dir);
+        const int e = emitters.empty() ? -1 : emitterOf[size_t(hit.object)];
+        if (e < 0) return glm::vec3(0.0f);
+        return emitters[size_t(e)].Emission(MeshEmitter::Triangle(hit.primID, hit.U, hit.V),
+                                            ray.dir);
+    }
+    /// The solid-angle density with which SampleLight, from the ray's origin, samples the point
+    /// the ray hit (the light's pick included): the MIS partner of a BSDF sample that found it.
+    float HitLightPdf(const Ray& ray, const Hit& hit) const {
+        if (hit.light >= 0)
+            return hit.light < int(quads.size())
+                       ? QuadPdf(hit.light, ray.dir, hit.t)
+                       : spheres[size_t(hit.light) - quads.size()].Pdf(ray.org) * PickPdf();
+        const int e = emitters.empty() ? -1 : emitterOf[size_t(hit.object)];
+        if (e < 0) return 0.0f;
+        return emitters[size_t(e)].Pdf(MeshEmitter::Triangle(hit.primID, hit.U, hit.V), ray.dir,
+                                       hit.t) *
+               PickPdf();
+    }
+    /// HitEmission weighted against the BSDF sample of density `bsdfPdf` that found it (power
+    /// heuristic); unweighted for a ray that was not a BSDF sample (bsdfPdf 0: a camera ray).
+    glm::vec3 EmittedMis(const Ray& ray, const Hit& hit, float bsdfPdf) const {
+        const glm::vec3 Le = HitEmission(ray, hit);
+        if (!(bsdfPdf > 0.0f) || Le == glm::vec3(0.0f)) return Le;
+        return Le * PowerHeuristic(1, bsdfPdf, 1, HitLightPdf(ray, hit));
+    }
+    /// Radiance of the suns' discs along `dir` (a ray that left the scene), weighted against
+    /// the BSDF sample of density `bsdfPdf` (0: unweighted).
+    glm::vec3 SunRadiance(glm::vec3 dir, float bsdfPdf) const {
+        glm::vec3 L(0.0f);
+        if (!sunDiscs) return L;
+        for (const SunDisc& sun : suns)
+            if (!sun.IsDelta() && sun.Contains(dir))
+                L += sun.radiance *
+                     (bsdfPdf > 0.0f ? PowerHeuristic(1, bsdfPdf, 1, sun.Pdf() * PickPdf()) : 1.0f);
+        return L;
+    }
+    /// What a camera ray that hits nothing sees: the environment and the suns' discs.
+    glm::vec3 Background(glm::vec3 dir) const {
+        return (env ? env->Eval(dir) : glm::vec3(0.0f)) + SunRadiance(dir, 0.0f);
+    }
 
     /// One light sample for the surface point `p` of shading normal `n` (facing the viewer); the
     /// environment is sampled from `psr` when given (a valid record).
@@ -112,12 +172,7 @@ struct Context {
         int i = std::min(int(uPick * float(numLights)), numLights - 1);
         if (i < int(quads.size())) {
             const Quad& q = quads[i];
-            const glm::vec3 x = q.corner + u.x * q.e1 + u.y * q.e2;
-            glm::vec3 d = x - p;
-            const float dist2 = glm::dot(d, d);
-            if (!(dist2 > 0.0f)) return false;
-            s->dist = std::sqrt(dist2);
-            s->wi = d / s->dist;
+            if (!Towards(p, q.corner + u.x * q.e1 + u.y * q.e2, &s->wi, &s->dist)) return false;
             s->Li = QuadEmission(i, s->wi);
             s->pdf = QuadPdf(i, s->wi, s->dist);
             s->delta = false;
@@ -126,12 +181,36 @@ struct Context {
         }
         i -= int(quads.size());
         if (i < int(distantDir.size())) {
-            s->wi = distantDir[i];
+            const SunDisc& sun = suns[size_t(i)];
             s->dist = INFINITY;
+            s->distant = i;
+            if (!sun.IsDelta()) {
+                s->wi = sun.Sample(u);
+                s->Li = sun.radiance;
+                s->pdf = sun.Pdf() * PickPdf();
+                s->delta = false;
+                return true;
+            }
+            s->wi = distantDir[i];
             s->Li = distantE[i] * float(numLights);  // divided by the pick probability
             s->pdf = 0.0f;
             s->delta = true;
-            s->distant = i;
+            return true;
+        }
+        i -= int(distantDir.size());
+        if (i < int(spheres.size() + emitters.size())) {
+            LightPoint lp;
+            const bool sphere = i < int(spheres.size());
+            if (sphere ? !spheres[size_t(i)].Sample(p, u, &lp)
+                       : !emitters[size_t(i) - spheres.size()].Sample(p, u, &lp))
+                return false;
+            s->wi = lp.wi;
+            s->dist = lp.dist;
+            s->delta = !(lp.pdf > 0.0f);
+            // A delta light's irradiance, divided by the pick probability.
+            s->Li = s->delta ? lp.Li * float(numLights) : lp.Li;
+            s->pdf = lp.pdf * PickPdf();
+            (sphere ? s->sphere : s->emitter) = sphere ? i : i - int(spheres.size());
             return true;
         }
         float pdf;
@@ -278,6 +357,10 @@ struct FirstHitLight {
     glm::vec3* direct;
     glm::vec3* specular = nullptr;
     float minSpecularProbability = 0.75f;
+    /// When given, the part of `direct` that delta lights (points, spots, distant lights
+    /// without an angular size) give is added here too: their sharp shadows can stay per hit
+    /// while soft lights' direct light is binned (TextureSpaceOptions::deltaDirectPerHit).
+    glm::vec3* deltaDirect = nullptr;
 };
 
 /// A camera hit's light sample and BSDF sample, from the pass's PixelSequence (dimension pairs
@@ -326,7 +409,13 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         *split->specular += lobeS + lobeBetaS * l;
         return lobeL + lobeBetaD * l;
     };
-    for (int depth = 0;; ++depth) {
+    int depth = 0;
+    // Light the ray being traced found (MIS-weighted already).
+    auto emitted = [&](glm::vec3 Le) {
+        L += beta * Le;
+        if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le;
+    };
+    for (;; ++depth) {
         if (depth > 0) {
             ++rays.bounce;
             found = c.rs.Intersect(ray, &hit);
@@ -344,17 +433,17 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                 L += beta * Le * w;
                 if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le * w;
             }
+            if (c.sunDiscs) emitted(c.SunRadiance(ray.dir, prevPdf));
             break;
         }
         if (hit.light >= 0) {
-            const glm::vec3 Le = c.QuadEmission(hit.light, ray.dir);
-            float w = 1.0f;
-            if (prevPdf > 0.0f)
-                w = PowerHeuristic(1, prevPdf, 1, c.QuadPdf(hit.light, ray.dir, hit.t));
-            L += beta * Le * w;
-            if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le * w;
+            emitted(c.EmittedMis(ray, hit, prevPdf));
             break;
         }
+        // An emissive object's light; a split first hit's goes to the caller (not to be
+        // multiplied by the albedo applied to what this returns).
+        if (!c.emitters.empty() && (depth > 0 || (emitFirst && !split)))
+            emitted(c.EmittedMis(ray, hit, prevPdf));
         if (depth >= maxDepth) break;
         if (depth == 1 && baseIndirect) {
             // The first BSDF ray found its direct light for both lobes; the diffuse base's
@@ -404,15 +493,18 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                     const float w =
                         ls.delta ? 1.0f : PowerHeuristic(1, ls.pdf, 1, bsdf.Pdf(wo, ls.wi));
                     const glm::vec3 Li = ls.Li * (ls.delta ? cosi : cosi * w / ls.pdf);
+                    glm::vec3 Ld;
                     if (lobes && depth == 0) {
-                        const glm::vec3 Ld = bsdf.DiffuseWhite(ls.wi) * Li;
+                        Ld = bsdf.DiffuseWhite(ls.wi) * Li;
                         lobeL += Ld;
                         lobeS += bsdf.EvalSpecular(wo, ls.wi) * Li;
-                        *split->direct += Ld;
                     } else {
-                        const glm::vec3 Ld = beta * f * Li;
+                        Ld = beta * f * Li;
                         L += Ld;
-                        if (split && depth == 0) *split->direct += Ld;
+                    }
+                    if (split && depth == 0) {
+                        *split->direct += Ld;
+                        if (ls.delta && split->deltaDirect) *split->deltaDirect += Ld;
                     }
                 }
             }

@@ -16,6 +16,7 @@
 #include <embree3/rtcore.h>
 #include <glm/glm.hpp>
 
+#include "renderer/scene/plain_mesh.h"
 #include "renderer/scene/scene.h"
 #include "renderer/texture_space/ptex_mapping.h"
 #include "texcache/limit_tessellation.h"
@@ -39,10 +40,15 @@ struct EmbreeMesh {
     // Limit tessellation only: the general evaluator, and per quad its Ptex square and uvs.
     std::unique_ptr<LimitSurface> limit;
     std::vector<LimitTessellation::Square> squares;
-    std::vector<std::array<float, 2>> cornerUvs;
+    std::vector<std::array<float, 2>> cornerUvs;  // also a plain mesh's, per quad
+    // Plain meshes (plain_mesh.h): one Embree quad per Ptex face, whose (u,v) is the face's;
+    // its 4 corners in Embree's vertex buffer (16-byte stride), which this points into.
+    bool plain = false;
+    const float* plainCorners = nullptr;
 
     /// Ptex location of a hit (Embree's primitive and hit parameters).
     PtexCoord ToPtex(unsigned prim, float U, float V) const {
+        if (plain) return {int(prim), std::clamp(U, 0.0f, 1.0f), std::clamp(V, 0.0f, 1.0f)};
         if (!limit) return EmbreeToPtex(*topo, prim, U, V);
         const LimitTessellation::Square& s = squares[prim];
         return {s.face, std::clamp(s.u0 + s.size * U, 0.0f, 1.0f),
@@ -53,6 +59,7 @@ struct EmbreeMesh {
     /// Embree's (prim, U, V) on a subdivision mesh (16-byte aligned outputs); false on a hole.
     bool Eval(const PtexCoord& c, unsigned prim, float U, float V, float* P, float* du,
               float* dv) const {
+        if (plain) return PlainQuadEval(plainCorners + 16 * size_t(c.face), c.u, c.v, P, du, dv);
         if (regular->Has(c.face)) {
             // Regular patches: our bicubic evaluation, several times cheaper than rtcInterpolate
             // (the same surface).
@@ -79,7 +86,7 @@ struct EmbreeMesh {
 
     /// Texture coordinates at a hit (only when hasUv).
     glm::vec2 Uv(unsigned prim, float U, float V) const {
-        if (limit) {
+        if (limit || plain) {
             // Bilinear in the quad, whose corners carry OpenSubdiv's limit uvs.
             const auto* c = &cornerUvs[size_t(prim) * 4];
             auto at = [&](int k) { return glm::vec2(c[k][0], c[k][1]); };
@@ -109,6 +116,11 @@ void BuildIrregularPatches(const ControlCage& cage, const std::vector<int>& face
 /// `withUv`); sets mesh's hole flags and hasUv.
 RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, float rate,
                                    bool withUv, EmbreeMesh* mesh);
+
+/// The cage as a plain mesh (plain_mesh.h): one quad per Ptex face (mesh->topo must be set);
+/// sets mesh's plain corners and uvs.
+RTCGeometry NewPlainQuadGeometry(RTCDevice device, const ControlCage& cage, bool withUv,
+                                 EmbreeMesh* mesh);
 
 /// The cage as quads on its limit surface, as many per cage quad edge as Embree's grids at
 /// `rate`; sets mesh's limit surface, Ptex squares and uvs.

@@ -72,6 +72,10 @@ struct RenderScene::Impl {
     std::vector<Instance> objects;  // by Scene::objects index
     // Top-level geomID -> object or quad light (-1: not that kind); geomIDs are small and dense.
     std::vector<int> geomToObject, geomToLight;
+    // The point and spot lights with a radius, as one geometry of spheres: its geomID, and per
+    // sphere its Hit::light (after the quad lights).
+    unsigned sphereGeom = RTC_INVALID_GEOMETRY_ID;
+    std::vector<int> sphereToLight;
     static void Map(std::vector<int>& v, unsigned id, int value) {
         if (v.size() <= id) v.resize(id + 1, -1);
         v[id] = value;
@@ -107,9 +111,31 @@ struct RenderScene::Impl {
             hit->Ng = WorldNormal(hit->object, time, Ng);
         } else {
             hit->object = -1;
-            hit->light = geomToLight[geomID];
+            hit->light = geomID == sphereGeom ? sphereToLight[primID] : geomToLight[geomID];
             hit->Ng = Ng;
         }
+    }
+
+    /// The point and spot lights with a radius, posed at `time`, as spheres that camera and BSDF
+    /// rays see (lights without one are points: nothing to hit).
+    void AddSphereLights(const Scene& scene, float time) {
+        std::vector<glm::vec4> spheres;
+        for (size_t l = 0; l < scene.pointLights.size(); ++l) {
+            const PointLight& p = scene.pointLights[l];
+            if (!(p.radius > 0.0f)) continue;
+            const glm::vec3 c(p.transform.Eval(time) * glm::vec4(p.position, 1.0f));
+            spheres.emplace_back(c, p.radius);
+            sphereToLight.push_back(int(scene.quadLights.size() + l));
+        }
+        if (spheres.empty()) return;
+        RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SPHERE_POINT);
+        auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+            g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 4 * sizeof(float), spheres.size()));
+        for (size_t i = 0; i < spheres.size(); ++i)
+            for (int k = 0; k < 4; ++k) v[4 * i + k] = spheres[i][k];
+        rtcCommitGeometry(g);
+        sphereGeom = rtcAttachGeometry(top, g);
+        rtcReleaseGeometry(g);
     }
 
     glm::mat4 Transform(int object, float time) const {
@@ -151,11 +177,19 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     rtcSetDeviceMemoryMonitorFunction(I.device, EmbreeMemory::Count, &I.embreeMemory);
     I.top = rtcNewScene(I.device);
 
-    // Which meshes are used, and which of them need face-varying uvs (textured materials only).
+    // Which meshes are used, and which of them need face-varying uvs (textured materials only),
+    // are plain meshes or emit light.
     const size_t numMeshes = scene.meshes.size();
-    std::vector<char> used(numMeshes, 0), needUv(numMeshes, 0);
+    std::vector<char> used(numMeshes, 0), needUv(numMeshes, 0), plain(numMeshes, 0),
+        emissive(numMeshes, 0);
     for (const Object& o : scene.objects) {
+        if (used[o.mesh] && plain[o.mesh] != !o.subdivide)
+            throw InputError(scene.path, "object '" + o.name +
+                                             "' shares its mesh with an object of the other "
+                                             "subdivision (give each form its own mesh)");
         used[o.mesh] = 1;
+        plain[o.mesh] = !o.subdivide;
+        emissive[o.mesh] |= o.Emissive();
         if (options.needTextures && MaterialUsesTextures(scene.materials[o.material]))
             needUv[o.mesh] = 1;
     }
@@ -169,9 +203,11 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         CageTopology t = BuildCageTopology(cage);
         mesh.topo = std::make_shared<const PtexTopology>(std::move(t.ptex));
         mesh.regular = std::make_unique<RegularPatches>(std::move(t.regular));
-        const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
-        const bool tessellate = beyond > 0 || options.tessellateAll;
-        if (!tessellate && options.irregularPatches) {
+        const size_t beyond = plain[m] ? 0 : FacesBeyondEmbree(cage, *mesh.topo);
+        // An emissive subdivision surface is rendered as its limit tessellation, the surface its
+        // light samples are taken on (lights.h, MeshEmitter).
+        const bool tessellate = !plain[m] && (beyond > 0 || options.tessellateAll || emissive[m]);
+        if (!tessellate && !plain[m] && options.irregularPatches) {
             // rtcInterpolate re-derives a face's patch on every call (about a microsecond): a
             // large share of a path-traced frame's CPU time when many faces are off the fast
             // path, as most of the car's are. OpenSubdiv's patches at isolation level 6 evaluate
@@ -185,7 +221,11 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         mesh.scene = rtcNewScene(I.device);
         const bool wantUv = needUv[m] && !cage.uvs.empty();
         RTCGeometry g;
-        if (tessellate) {
+        if (plain[m]) {
+            g = NewPlainQuadGeometry(I.device, cage, wantUv, &mesh);
+            // Watertight: neighbouring quads share corners (see the limit quads below).
+            rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
+        } else if (tessellate) {
             g = NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
                                      &mesh);
             clock.Charge(&I.build.opensubdiv);
@@ -193,9 +233,11 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             // may slip between its quads (ctest -R EmbreeLimits.ClosedCagesHaveNoHoles aims
             // rays at the limit points on the n-gons' edges).
             rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
-            ++I.tessellation.meshes;
-            I.tessellation.cageFaces += size_t(cage.numFaces());
-            I.tessellation.beyondEmbree += beyond;
+            if (beyond > 0 || options.tessellateAll) {  // not counted: emitters' (by choice)
+                ++I.tessellation.meshes;
+                I.tessellation.cageFaces += size_t(cage.numFaces());
+                I.tessellation.beyondEmbree += beyond;
+            }
         } else {
             g = NewSubdivisionGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
                                        &mesh);
@@ -259,6 +301,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             Impl::Map(I.geomToLight, rtcAttachGeometry(I.top, g), int(l));
             rtcReleaseGeometry(g);
         }
+        I.AddSphereLights(scene, options.frameTime);
         if (options.needEnvironment && !scene.environments.empty()) {
             const EnvironmentLight& e = scene.environments.front();
             env_ = e.path.empty() ? std::make_shared<const EnvironmentMap>(
@@ -564,6 +607,25 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     return si;
 }
 
+std::vector<glm::vec3> RenderScene::QuadCorners(int object) const {
+    const Impl& I = *impl_;
+    const Impl::Mesh& mesh = I.meshes[size_t(I.objects[size_t(object)].mesh)];
+    std::vector<glm::vec3> corners;
+    if (!mesh.plain && !mesh.limit) return corners;
+    const auto* v =
+        static_cast<const float*>(rtcGetGeometryBufferData(mesh.geom, RTC_BUFFER_TYPE_VERTEX, 0));
+    const auto* idx =
+        static_cast<const unsigned*>(rtcGetGeometryBufferData(mesh.geom, RTC_BUFFER_TYPE_INDEX, 0));
+    const size_t quads = mesh.plain ? size_t(mesh.topo->NumPtexFaces()) : mesh.squares.size();
+    const glm::mat4 M = I.Transform(object, 0.0f);
+    corners.reserve(4 * quads);
+    for (size_t i = 0; i < 4 * quads; ++i) {
+        const float* p = v + 4 * size_t(idx[i]);
+        corners.emplace_back(M * glm::vec4(p[0], p[1], p[2], 1.0f));
+    }
+    return corners;
+}
+
 PtexCoord RenderScene::HitPtex(const Hit& hit) const {
     return impl_->meshes[impl_->objects[hit.object].mesh].ToPtex(hit.primID, hit.U, hit.V);
 }
@@ -575,7 +637,7 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
     unsigned prim = 0;
     float U = c.u, V = c.v;
-    if (!mesh.limit) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
+    if (!mesh.limit && !mesh.plain) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
     alignas(16) float P[4], du[4], dv[4];
     if (!mesh.Eval(c, prim, U, V, P, du, dv)) return false;
     const glm::mat4 M = I.Transform(object, time);
