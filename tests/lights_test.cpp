@@ -241,6 +241,41 @@ TEST(Lights, SunDiscFoundByBsdfRaysIsCounted) {
     EXPECT_NEAR(mean, Lsun, 0.1 * Lsun);
 }
 
+// A BSDF ray that hits an emissive object gets the density of the triangle it hit: the
+// emitter's triangle of a hit (MeshEmitter::Triangle, from Embree's quad (u,v)) is the one
+// Embree hit, whose geometric normal Embree reports. On the limit tessellation of the cube
+// (non-planar quads: the two triangles of a quad differ), for rays from all around, the
+// emitter's density t^2 / (area |cos|) equals the one from Embree's normal within 1e-3.
+TEST(Lights, EmitterDensityAtAHitIsTheSampledOne) {
+    Scene s = test::OneObjectScene(test::CubeCage());
+    s.objects[0].emission = glm::vec3(1.0f);
+    const RenderScene rs(s, {});
+    const internal::MeshEmitter e(0, rs.QuadCorners(0), glm::vec3(1.0f), false);
+    ASSERT_GT(e.Area(), 0.0f);
+    Rng rng(7, 0);
+    int hits = 0, distinct = 0;
+    for (int i = 0; i < 2000; ++i) {
+        Ray r;
+        r.org = 4.0f * SampleUniformSphere(rng.Next2D());
+        r.dir = glm::normalize(0.6f * SampleUniformSphere(rng.Next2D()) - r.org);
+        Hit h;
+        if (!rs.Intersect(r, &h)) continue;
+        ++hits;
+        const float fromEmbree =
+            h.t * h.t / (e.Area() * std::abs(glm::dot(glm::normalize(h.Ng), r.dir)));
+        const float pdf = e.Pdf(internal::MeshEmitter::Triangle(h.primID, h.U, h.V), r.dir, h.t);
+        ASSERT_NEAR(pdf / fromEmbree, 1.0f, 1e-3f) << i;
+        // The quad's other triangle would not do.
+        const int other = internal::MeshEmitter::Triangle(h.primID, h.U, h.V) ^ 1;
+        distinct += std::abs(e.Pdf(other, r.dir, h.t) / fromEmbree - 1.0f) > 1e-3f;
+        // Seen from outside: the front, where a one-sided emitter emits.
+        EXPECT_EQ(e.Emission(internal::MeshEmitter::Triangle(h.primID, h.U, h.V), r.dir),
+                  glm::vec3(1.0f));
+    }
+    EXPECT_GT(hits, 1500);
+    EXPECT_GT(distinct, hits / 2);
+}
+
 /// A closed box, 10 units across around the origin (two-sided emission of radiance 2, black), a
 /// plain mesh or a subdivision surface, and inside it the subdivided unit cube (albedo 0.5), seen
 /// from inside the box.
