@@ -66,6 +66,11 @@ struct Context {
     };
     std::vector<Quad> quads;
     int numLights = 0;
+    /// Some material emits (RenderScene::Emission): rays that find a surface add its emission.
+    bool emissive = false;
+    /// Some material reads a Ptex texture: camera hits compute their footprint (ray
+    /// differentials), which picks the texture's filter width.
+    bool textureFootprints = false;
     float shutterLength;
     TextureSpaceCache* tsc = nullptr;
     tbb::enumerable_thread_specific<CacheStats>* cacheStats = nullptr;
@@ -158,7 +163,8 @@ inline Bsdf MakeBsdf(const Context& c, const SurfaceInteraction& si, bool diffus
     const glm::vec2 roughness(r, m.anisotropic ? m.roughnessV : r);
     // Without its diffuse lobe (a black base): a glossy hit whose base light is cached.
     const glm::vec3 albedo = diffuseLobe ? c.rs.Albedo(si) : glm::vec3(0.0f);
-    return Bsdf(si.N, si.Ng, albedo, ggx, roughness, m.specular, si.dPdu);
+    return Bsdf(si.N, si.Ng, albedo, ggx, roughness, ggx ? c.rs.Specular(si) : glm::vec3(0.04f),
+                si.dPdu);
 }
 
 /// A ray leaving the surface at `si` in direction `wi` (offset off the surface, unbounded).
@@ -354,6 +360,16 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
             L += beta * Le * w;
             if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le * w;
             break;
+        }
+        // Emitting materials are found by rays only, never sampled as lights: no MIS weight.
+        // A split first hit's own emission is the caller's (it is not light the hit receives),
+        // as is the first surface's of a path that does not count emission first.
+        if (c.emissive && depth > 0) {
+            const glm::vec3 Le = c.rs.Emission(hit);
+            L += beta * Le;
+            if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le;
+        } else if (c.emissive && emitFirst && !split) {
+            L += c.rs.Emission(hit);
         }
         if (depth >= maxDepth) break;
         if (depth == 1 && baseIndirect) {

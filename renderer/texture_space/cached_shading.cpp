@@ -300,6 +300,10 @@ ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool d
             ++rays.bounce;
             Hit hit;
             const bool found = c.rs.Intersect(ray, &hit);
+            // Emitting surfaces are not sampled as lights: with the direct part cached, the
+            // first ray is what finds them (a cosine-weighted estimate of their light, 1/pi
+            // integral of Le cos).
+            if (direct && found && c.emissive) Ld += c.rs.Emission(hit);
             const glm::vec3 L =
                 Ld + LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
             return std::isfinite(L.x + L.y + L.z) ? L : glm::vec3(0.0f);
@@ -414,7 +418,7 @@ glm::vec3 LiDirectCachedShadows(const Context& c, const Ray& ray, const Hit& hit
     const SurfaceInteraction si = c.rs.Interact(ray, hit, &diff);
     const Bsdf bsdf = MakeBsdf(c, si);
     const glm::vec3 wo = -ray.dir;
-    glm::vec3 L(0.0f);
+    glm::vec3 L = c.emissive ? c.rs.Emission(hit) : glm::vec3(0.0f);
     // Area lights: unshadowed estimate times cached visibility.
     const int m = c.opt.texture.shadowSamples;
     glm::vec3 unshadowed(0.0f);

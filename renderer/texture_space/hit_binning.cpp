@@ -142,7 +142,8 @@ void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     thread_local std::vector<CameraSample> cs;
     if (cs.size() < total) cs.resize(total);
-    const bool productDiff = c.lightSampling != LightSampling::Mis;
+    // Differentials for product sampling's records and for Ptex textures' filter widths.
+    const bool productDiff = c.lightSampling != LightSampling::Mis || c.textureFootprints;
     HitsCameraRays(c, r, s0, s1, cs.data(), total, productDiff, rays);
     const bool all = c.opt.texture.cacheDirect;
     const int spp = s1 - s0, paths = std::max(c.opt.hitSamples, 1);
@@ -185,6 +186,7 @@ void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
                 glossy ? MakeBsdf(c, si).DiffuseReflectance() : c.rs.Albedo(si);
             L = specular / float(paths);
             if (!all) L += albedo * direct;
+            if (c.emissive) L += c.rs.Emission(p.hit);  // the hit's own light stays per hit
             const glm::vec3 binned = all ? E : glm::max(E - direct, glm::vec3(0.0f));
             RadianceBin::Value v;
             // A NaN or infinite estimate is dropped, as per-hit drops such a sample.
