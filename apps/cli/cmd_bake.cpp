@@ -46,6 +46,7 @@ std::string FileName(const std::string& object, std::map<std::string, int>* used
 int RunBake(BakeArgs a) {
     CheckRange("--threads", a.threads, 0, 4096);
     a.bake.integrator = ParseIntegrator(a.integrator, "--integrator");
+    CheckBakeOptions(a.bake);  // before the scene loads: a bad option is the one message
     std::vector<std::string> warnings;
     const Scene scene = LoadSceneOrObj(a.scene, &warnings);
     for (const std::string& w : warnings)

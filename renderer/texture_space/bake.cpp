@@ -22,7 +22,7 @@ std::vector<ptex::FaceTexels> BakedTexture::Faces() const {
     return out;
 }
 
-std::vector<BakedTexture> Bake(const RenderScene& rs, RenderOptions opt, const BakeOptions& bake) {
+void CheckBakeOptions(const BakeOptions& bake) {
     if (bake.resolution < 1 || bake.resolution > 4096 ||
         !std::has_single_bit(unsigned(bake.resolution)))
         throw InputError("--resolution",
@@ -31,10 +31,15 @@ std::vector<BakedTexture> Bake(const RenderScene& rs, RenderOptions opt, const B
     if (bake.samples < 1 || bake.samples > (1 << 20))
         throw InputError("--samples",
                          "must be in [1, 1048576], got " + std::to_string(bake.samples));
+    const IntegratorKind k = bake.integrator;
+    if (k != IntegratorKind::AO && k != IntegratorKind::Direct && k != IntegratorKind::Path)
+        throw InputError("--integrator",
+                         std::string("bakes ao, direct or path, not ") + IntegratorName(k));
+}
+
+std::vector<BakedTexture> Bake(const RenderScene& rs, RenderOptions opt, const BakeOptions& bake) {
+    CheckBakeOptions(bake);
     const bool ao = bake.integrator == IntegratorKind::AO;
-    if (!ao && bake.integrator != IntegratorKind::Direct && bake.integrator != IntegratorKind::Path)
-        throw InputError("--integrator", std::string("bakes ao, direct or path, not ") +
-                                             IntegratorName(bake.integrator));
     opt.integrator = bake.integrator;
     opt.aoSamples = bake.samples;
     opt.texture.enabled = true;

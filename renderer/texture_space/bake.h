@@ -34,11 +34,14 @@ struct BakedTexture {
     std::vector<ptex::FaceTexels> Faces() const;
 };
 
+/// Throws InputError naming the option for a resolution that is not a power of two in
+/// [1, 4096], a sample count out of [1, 2^20] or an integrator other than ao, direct and path.
+void CheckBakeOptions(const BakeOptions& bake);
+
 /// Bakes every object of `rs` (front side: the side of its limit normals, or the outside of a
 /// closed cage). `render` gives the scene's render settings (max depth, AO distance, seed, light
-/// sampling); the integrator, sample counts and the texture-space settings are the bake's. Throws
-/// InputError for a resolution that is not a power of two in [1, 4096] or a sample count out of
-/// [1, 2^20].
+/// sampling); the integrator, sample counts and the texture-space settings are the bake's.
+/// Throws as CheckBakeOptions.
 std::vector<BakedTexture> Bake(const RenderScene& rs, RenderOptions render,
                                const BakeOptions& bake);
 
