@@ -215,23 +215,39 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
 
 /// Where a pass's first-bounce directions come from (AO rays, and the light and BSDF samples at
 /// the camera hits of the direct and path integrators): one Owen-scrambled Sobol' (0,2)-sequence
-/// per dimension pair over the image (OwenSobol02), its points dealt out in Morton order of the
-/// pixels, then sample by sample, then ray (or path) by ray. Every aligned 2^k x 2^k block of
-/// pixels so gets the consecutive points of a (0,m,2)-net: a pixel's samples of the pass
-/// stratify its hemisphere together, and so do a block's, which is what a bin of hit-binned
-/// shading averages (a bin spans 4x4 pixels or more). A random shift per hit would stratify
-/// only one hit's own rays; the shared sequence lowers the error of per-hit and binned shading
-/// alike, by up to half on path-traced light, at no measurable cost in `texcache bench rays`
-/// (docs/texture-space.md, "Stratification"). The grid's cache samples keep their own
-/// nets (CosineRays); later bounces draw
-/// from the sample's random stream). Each pass has its own scramble, so passes are independent and
-/// a pixel's result depends on its samples and the pass split (a render with --spp is one pass
-/// unless shaded in texture space); never on the threads or tiles.
+/// per dimension pair over the image (OwenSobol02), its points dealt out pixel by pixel in a
+/// shuffled Morton order, then sample by sample, then ray (or path) by ray.
+///
+/// The order: a camera sample's number is its pixel's Morton index with the sample's slot in the
+/// pass below it, and the base-4 digits of that number are permuted level by level from the top,
+/// each by a permutation picked by a hash of the digits above it (ShuffledMorton; Ahmed and
+/// Wonka 2020, as pbrt-v4's ZSobolSampler). A permutation of the digits keeps every aligned
+/// block together, so every aligned 2^k x 2^k block of pixels gets consecutive points of the
+/// sequence, a (0,m,2)-net: a pixel's samples of the pass stratify its hemisphere together, and so
+/// do a block's, which is what a bin of hit-binned shading averages (a bin spans 4x4 pixels or
+/// more). The shuffle is what keeps that stratification free of a pattern: in plain Morton order
+/// the strata a pixel gets depend only on its place within its 2x2, 4x4, ... blocks (the scramble
+/// of a point's leading digits depends on the index's low bits alone), so all pixels of one class
+/// (x mod 2, y mod 2) sample the same strata and the noise shows a grid of period 2 to 4 pixels;
+/// shuffled, each block deals its points in an order of its own, and a pixel's strata are random
+/// whatever its class (tests/pixel_sequence_test.cpp). The sample slots are shuffled too, so a
+/// pass of fewer samples than its power of two leaves a random slot of each pixel unused, not the
+/// same slot everywhere. The shuffle is two hashes per camera sample for all levels at once, not
+/// a hash per level, and nothing per ray.
+///
+/// A random shift per hit would stratify only one hit's own rays; the shared sequence lowers the
+/// error of per-hit and binned shading alike, by up to half on path-traced light
+/// (docs/texture-space.md, "Stratification"). The grid's cache samples keep their own nets
+/// (CosineRays); later bounces draw from the sample's random stream. Each pass has its own
+/// scramble and shuffle, so passes are independent and a pixel's result depends on its samples
+/// and the pass split (a render with --spp is one pass unless shaded in texture space); never on
+/// the threads or tiles.
 struct PixelSequence {
-    uint32_t seed;     ///< the pass's scramble
-    int s0;            ///< the pass's first sample index
-    uint32_t samples;  ///< points per pixel sample slot: the pass's samples, a power of two
-    uint32_t perHit;   ///< points per camera sample, rounded up to a power of two
+    uint32_t seed;        ///< the pass's scramble
+    int s0;               ///< the pass's first sample index
+    uint32_t samples;     ///< points per pixel sample slot: the pass's samples, a power of two
+    uint32_t perHit;      ///< points per camera sample, rounded up to a power of two
+    MortonShuffle order;  ///< the pass's order of the pixels and of their slots
 
     /// Samples [passS0, passS1) of a pass: opt.aoSamples points (rays) per camera sample for AO,
     /// opt.hitSamples (paths) for the others.
@@ -239,11 +255,14 @@ struct PixelSequence {
         : seed(uint32_t(MixBits(opt.seed * 0xA24BAED4963EE407ull + uint64_t(passS0) + 1u))),
           s0(passS0),
           samples(std::bit_ceil(uint32_t(std::max(passS1 - passS0, 1)))),
-          perHit(std::bit_ceil(uint32_t(std::max(
-              opt.integrator == IntegratorKind::AO ? opt.aoSamples : opt.hitSamples, 1)))) {}
+          perHit(std::bit_ceil(uint32_t(
+              std::max(opt.integrator == IntegratorKind::AO ? opt.aoSamples : opt.hitSamples, 1)))),
+          // The image's Morton levels (pixels past them, if any, keep their blocks' order).
+          order(seed, int(std::bit_width(uint32_t(std::max({opt.width, opt.height, 1}) - 1))),
+                std::countr_zero(samples)) {}
     /// Index of the first point of camera sample (x, y, s).
     uint64_t First(int x, int y, int s) const {
-        return (uint64_t(Morton2(uint32_t(x), uint32_t(y))) * samples + uint64_t(s - s0)) * perHit;
+        return ShuffledMorton(uint32_t(x), uint32_t(y), uint32_t(s - s0), order) * perHit;
     }
     /// The scramble of point j of dimension pair `pair`: past 2^32 points (e.g. 4096x4096
     /// pixels x 64 samples x 4 rays) the sequence restarts with another scramble, so no two
