@@ -57,7 +57,7 @@ inline Scene TestScene() {
     glossy.type = Material::Type::GGX;
     glossy.albedo.value = glm::vec3(0.3f, 0.4f, 0.6f);
     glossy.roughness.value = 0.4f;
-    glossy.specular = glm::vec3(0.3f);
+    glossy.specular.value = glm::vec3(0.3f);
     Material occluder;
     occluder.albedo.value = glm::vec3(0.7f, 0.3f, 0.2f);
     s.materials = {ground, glossy, occluder};

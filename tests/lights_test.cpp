@@ -226,7 +226,7 @@ TEST(Lights, SunDiscFoundByBsdfRaysIsCounted) {
     s.distantLights.push_back(d);
     s.materials[0].type = Material::Type::GGX;
     s.materials[0].albedo.value = glm::vec3(0.0f);
-    s.materials[0].specular = glm::vec3(1.0f);
+    s.materials[0].specular.value = glm::vec3(1.0f);
     s.materials[0].roughness.value = 0.05f;
     s.camera.pose.keys = {test::LookAt({0.0f, 3.0f, 0.01f}, {0, 0, 0})};
     s.camera.fovYDegrees = 5.0f;

@@ -79,7 +79,7 @@ TEST(SceneLoader, ValidSceneRoundTrips) {
     EXPECT_EQ(red.type, Material::Type::GGX);
     EXPECT_FLOAT_EQ(red.albedo.value.g, 0.1f);
     EXPECT_FLOAT_EQ(red.roughness.value, 0.3f);
-    EXPECT_FLOAT_EQ(red.specular.r, 0.05f);
+    EXPECT_FLOAT_EQ(red.specular.value.r, 0.05f);
     EXPECT_EQ(red.cacheFilter, "gaussian");
     EXPECT_EQ(red.cacheRadius, 3);
     const Material& chk = s.materials[size_t(s.objects[1].material)];

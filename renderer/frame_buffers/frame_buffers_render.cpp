@@ -510,7 +510,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
     fb.depth[p] = hit.t;
     fb.roughness[p] = bsdf.Alpha();
     fb.albedo[p] = bsdf.DiffuseReflectance();
-    fb.specular[p] = bsdf.HasSpecular() ? m.specular : glm::vec3(0.0f);
+    fb.specular[p] = bsdf.HasSpecular() ? c.rs.Specular(si) : glm::vec3(0.0f);
     fb.objectId[p] = si.object;
     fb.prevPosition[p] = motion.Point(hit, si.P);
     fb.prevNormal[p] = motion.Normal(hit, si.N);
@@ -695,7 +695,8 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     const Scene& scene = rs.scene();
     bool anyGlossy = false;
     for (const Object& o : scene.objects)
-        anyGlossy |= scene.materials[size_t(o.material)].type == Material::Type::GGX;
+        for (const int m : o.Materials())
+            anyGlossy |= scene.materials[size_t(m)].type == Material::Type::GGX;
     for (auto* v : {&fb.glossy, &fb.glossyHit, &fb.prevGlossyHit}) v->resize(anyGlossy ? n : 0);
     fb.cones.resize(n * screen::kNumCones);
     // Only when asked for and there is a cache to look it up in (ctx.tsc: texture shading).

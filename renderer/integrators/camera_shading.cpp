@@ -40,7 +40,7 @@ void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInt
 
 /// Differentials feed the cache's mip selection and the debug views; they are skipped otherwise.
 bool NeedsDifferentials(const Context& c) {
-    return c.tsc != nullptr || c.psrCache != nullptr ||
+    return c.tsc != nullptr || c.psrCache != nullptr || c.textureFootprints ||
            c.opt.integrator == IntegratorKind::Normal || c.opt.integrator == IntegratorKind::Ptex ||
            c.opt.integrator == IntegratorKind::Uv;
 }
@@ -63,9 +63,10 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
         // through LiPath, whose call and 1 KB stack frame would weigh on a sky-only frame.
         if (!found) return c.Background(ray.dir);
         // Differentials tell LiPath that its first hit is a camera hit, which product sampling
-        // needs; otherwise none, so that MIS does not compute a footprint it never uses.
+        // needs, and give Ptex textures their filter width; otherwise none, so that MIS does not
+        // compute a footprint it never uses.
         const RayDifferentials* productDiff =
-            c.lightSampling != LightSampling::Mis ? &diff : nullptr;
+            c.lightSampling != LightSampling::Mis || c.textureFootprints ? &diff : nullptr;
         if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
         if (c.tsc && k == IntegratorKind::Path) {
             // Diffuse light is view-independent: diffuse materials and the diffuse base of

@@ -22,6 +22,7 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
         for (CameraModel* m :
              {&camera, cameraOpen ? &*cameraOpen : nullptr, cameraClose ? &*cameraClose : nullptr})
             if (m) m->SetEye(o.eyeOffset, o.eyeConvergence);
+    textureFootprints = r.PtexTextured();
     hitRect = {0, 0, o.width, o.height};
     glm::vec3 lo, hi;
     if (o.cullMissingPixels && camera.IsPinhole() && !cameraMoves && r.StaticBounds(&lo, &hi)) {
@@ -45,6 +46,7 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
                        std::clamp(px(std::ceil(fmax.y), o.height) + 2, 0, o.height)};
     }
     if (!IntegratorUsesLights(o.integrator)) return;
+    emissive = r.Emissive();
     for (const DistantLight& d : scene.distantLights) {
         const glm::mat3 M(d.transform.Eval(o.frameTime));
         distantDir.push_back(-glm::normalize(M * d.direction));

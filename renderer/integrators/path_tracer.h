@@ -76,6 +76,11 @@ struct Context {
     // The lights SampleLight picks from, in its order: quads, distant lights, spheres, emitters,
     // the environment; each with probability 1 / numLights (uniform light selection).
     int numLights = 0;
+    /// Some material emits (RenderScene::Emission): rays that find a surface add its emission.
+    bool emissive = false;
+    /// Some material reads a Ptex texture: camera hits compute their footprint (ray
+    /// differentials), which picks the texture's filter width.
+    bool textureFootprints = false;
     float shutterLength;
     TextureSpaceCache* tsc = nullptr;
     tbb::enumerable_thread_specific<CacheStats>* cacheStats = nullptr;
@@ -116,9 +121,9 @@ struct Context {
     int FirstSphere() const { return int(quads.size() + distantDir.size()); }
     int FirstEmitter() const { return FirstSphere() + int(spheres.size()); }
 
-    /// Radiance a ray receives from what it hit: a light's (quad, sphere) or an emissive
-    /// object's; 0 from any other surface.
-    glm::vec3 HitEmission(const Ray& ray, const Hit& hit) const {
+    /// Radiance a ray receives from the sampled lights it hit: a light's (quad, sphere) or an
+    /// emissive object's; 0 from any other surface.
+    glm::vec3 SampledEmission(const Ray& ray, const Hit& hit) const {
         if (hit.light >= 0)
             return hit.light < int(quads.size())
                        ? QuadEmission(hit.light, ray.dir)
@@ -127,6 +132,15 @@ struct Context {
         if (e < 0) return glm::vec3(0.0f);
         return emitters[size_t(e)].Emission(MeshEmitter::Triangle(hit.primID, hit.U, hit.V),
                                             ray.dir);
+    }
+    /// What an emitting material (RenderScene::Emission) sends from the hit: found by rays only,
+    /// never sampled as a light, so it takes no MIS weight.
+    glm::vec3 SurfaceEmission(const Hit& hit) const {
+        return emissive && hit.light < 0 ? rs.Emission(hit) : glm::vec3(0.0f);
+    }
+    /// Everything a ray receives from what it hit.
+    glm::vec3 HitEmission(const Ray& ray, const Hit& hit) const {
+        return SampledEmission(ray, hit) + SurfaceEmission(hit);
     }
     /// The solid-angle density with which SampleLight, from the ray's origin, samples the point
     /// the ray hit (the light's pick included): the MIS partner of a BSDF sample that found it.
@@ -144,9 +158,9 @@ struct Context {
     /// HitEmission weighted against the BSDF sample of density `bsdfPdf` that found it (power
     /// heuristic); unweighted for a ray that was not a BSDF sample (bsdfPdf 0: a camera ray).
     glm::vec3 EmittedMis(const Ray& ray, const Hit& hit, float bsdfPdf) const {
-        const glm::vec3 Le = HitEmission(ray, hit);
-        if (!(bsdfPdf > 0.0f) || Le == glm::vec3(0.0f)) return Le;
-        return Le * PowerHeuristic(1, bsdfPdf, 1, HitLightPdf(ray, hit));
+        const glm::vec3 Le = SampledEmission(ray, hit), own = SurfaceEmission(hit);
+        if (!(bsdfPdf > 0.0f) || Le == glm::vec3(0.0f)) return Le + own;
+        return Le * PowerHeuristic(1, bsdfPdf, 1, HitLightPdf(ray, hit)) + own;
     }
     /// Radiance of the suns' discs along `dir` (a ray that left the scene), weighted against
     /// the BSDF sample of density `bsdfPdf` (0: unweighted).
@@ -237,7 +251,8 @@ inline Bsdf MakeBsdf(const Context& c, const SurfaceInteraction& si, bool diffus
     const glm::vec2 roughness(r, m.anisotropic ? m.roughnessV : r);
     // Without its diffuse lobe (a black base): a glossy hit whose base light is cached.
     const glm::vec3 albedo = diffuseLobe ? c.rs.Albedo(si) : glm::vec3(0.0f);
-    return Bsdf(si.N, si.Ng, albedo, ggx, roughness, m.specular, si.dPdu);
+    return Bsdf(si.N, si.Ng, albedo, ggx, roughness, ggx ? c.rs.Specular(si) : glm::vec3(0.04f),
+                si.dPdu);
 }
 
 /// A ray leaving the surface at `si` in direction `wi` (offset off the surface, unbounded).
@@ -461,7 +476,7 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         }
         // An emissive object's light; a split first hit's goes to the caller (not to be
         // multiplied by the albedo applied to what this returns).
-        if (!c.emitters.empty() && (depth > 0 || (emitFirst && !split)))
+        if ((!c.emitters.empty() || c.emissive) && (depth > 0 || (emitFirst && !split)))
             emitted(c.EmittedMis(ray, hit, prevPdf));
         if (depth >= maxDepth) break;
         if (depth == 1 && baseIndirect) {

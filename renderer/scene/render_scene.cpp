@@ -7,6 +7,7 @@
 #include "renderer/scene/render_scene.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -162,8 +163,16 @@ private:
     std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 
-static bool MaterialUsesTextures(const Material& m) {
-    return m.albedo.texture >= 0 || m.roughness.texture >= 0;
+/// The texture indices a material's parameters look up (-1: a constant).
+static std::array<int, 4> MaterialTextures(const Material& m) {
+    return {m.albedo.texture, m.roughness.texture, m.specular.texture, m.emission.texture};
+}
+
+static bool ObjectUsesTextures(const Scene& scene, const Object& o) {
+    for (const int m : o.Materials())
+        for (const int t : MaterialTextures(scene.materials[size_t(m)]))
+            if (t >= 0) return true;
+    return false;
 }
 
 RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
@@ -190,8 +199,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         used[o.mesh] = 1;
         plain[o.mesh] = !o.subdivide;
         emissive[o.mesh] |= o.Emissive();
-        if (options.needTextures && MaterialUsesTextures(scene.materials[o.material]))
-            needUv[o.mesh] = 1;
+        if (options.needTextures && ObjectUsesTextures(scene, o)) needUv[o.mesh] = 1;
     }
 
     I.meshes.resize(numMeshes);
@@ -316,11 +324,10 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     if (options.needTextures) {
         // Only textures some object's material references are loaded.
         std::vector<char> texUsed(scene.textures.size(), 0);
-        for (const Object& o : scene.objects) {
-            const Material& m = scene.materials[o.material];
-            if (m.albedo.texture >= 0) texUsed[m.albedo.texture] = 1;
-            if (m.roughness.texture >= 0) texUsed[m.roughness.texture] = 1;
-        }
+        for (const Object& o : scene.objects)
+            for (const int m : o.Materials())
+                for (const int t : MaterialTextures(scene.materials[size_t(m)]))
+                    if (t >= 0) texUsed[size_t(t)] = 1;
         I.textures.resize(scene.textures.size());
         for (size_t t = 0; t < scene.textures.size(); ++t) {
             if (!texUsed[t]) continue;
@@ -332,8 +339,27 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
                 throw InputError(scene.textures[t].where, e.what());
             }
         }
+        CheckPtexFaceCounts(scene, I);
     }
     clock.Charge(&I.build.other);
+}
+
+void RenderScene::CheckPtexFaceCounts(const Scene& scene, const Impl& I) {
+    // A Ptex file holds one texel grid per Ptex face of the mesh it was painted on: another
+    // count means another mesh, whose faces would get unrelated texels (or none).
+    for (const Object& o : scene.objects)
+        for (const int m : o.Materials())
+            for (const int t : MaterialTextures(scene.materials[size_t(m)])) {
+                if (t < 0 || !I.textures[size_t(t)]) continue;
+                const int faces = I.textures[size_t(t)]->PtexFaces();
+                const int meshFaces = I.meshes[size_t(o.mesh)].topo->NumPtexFaces();
+                if (faces >= 0 && faces != meshFaces)
+                    throw InputError(
+                        scene.textures[size_t(t)].where,
+                        "'" + scene.textures[size_t(t)].path + "' has " + std::to_string(faces) +
+                            " faces, but object '" + o.name + "' (mesh '" + o.objPath + "') has " +
+                            std::to_string(meshFaces) + " Ptex faces (a quad is one, an n-gon n)");
+            }
 }
 
 RenderScene::~RenderScene() = default;
@@ -551,10 +577,10 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     const Impl::Mesh& mesh = I.meshes[I.objects[hit.object].mesh];
     SurfaceInteraction si;
     si.object = hit.object;
-    si.material = scene_.objects[hit.object].material;
     si.P = ray.org + hit.t * ray.dir;
 
     si.ptex = mesh.ToPtex(hit.primID, hit.U, hit.V);
+    si.material = scene_.objects[hit.object].MaterialOfFace(mesh.topo->CoarseFace(si.ptex.face));
     // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
     alignas(16) float du[4] = {0, 0, 0, 0}, dv[4] = {0, 0, 0, 0};
     mesh.Eval(si.ptex, hit.primID, hit.U, hit.V, nullptr, du, dv);
@@ -651,20 +677,73 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
     return true;
 }
 
+namespace {
+/// A shading point's texture lookup: Ptex filter width from its footprint (the larger extent
+/// of a pixel in u or v; 0 without differentials).
+TextureQuery QueryOf(const SurfaceInteraction& si) {
+    const float w =
+        std::max({std::abs(si.dudx), std::abs(si.dudy), std::abs(si.dvdx), std::abs(si.dvdy)});
+    return {si.uv, si.ptex.face, si.ptex.u, si.ptex.v, std::isfinite(w) ? w : 0.0f};
+}
+}  // namespace
+
+glm::vec3 RenderScene::ColorAt(const ColorParam& p, const TextureQuery& q) const {
+    if (p.texture >= 0 && impl_->textures[size_t(p.texture)])
+        return impl_->textures[size_t(p.texture)]->Color(q);
+    return p.value;
+}
+
 glm::vec3 RenderScene::Albedo(const SurfaceInteraction& si) const {
-    const ColorParam& a = scene_.materials[si.material].albedo;
-    if (a.texture >= 0 && impl_->textures[a.texture])
-        return impl_->textures[a.texture]->Eval(si.uv);
-    return a.value;
+    // Clamped: a float texture above 1 would create energy.
+    return glm::clamp(ColorAt(scene_.materials[si.material].albedo, QueryOf(si)), 0.0f, 1.0f);
+}
+
+glm::vec3 RenderScene::Specular(const SurfaceInteraction& si) const {
+    return glm::clamp(ColorAt(scene_.materials[si.material].specular, QueryOf(si)), 0.0f, 1.0f);
 }
 
 float RenderScene::Roughness(const SurfaceInteraction& si) const {
     const FloatParam& r = scene_.materials[si.material].roughness;
-    if (r.texture >= 0 && impl_->textures[r.texture]) {
-        const glm::vec3 c = impl_->textures[r.texture]->Eval(si.uv);
-        return glm::clamp(0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z, 0.0f, 1.0f);
-    }
+    if (r.texture >= 0 && impl_->textures[size_t(r.texture)])
+        return glm::clamp(impl_->textures[size_t(r.texture)]->Scalar(QueryOf(si)), 0.0f, 1.0f);
     return r.value;
+}
+
+glm::vec3 RenderScene::Emission(const Hit& hit) const {
+    if (hit.object < 0) return glm::vec3(0.0f);
+    const Impl::Mesh& mesh = impl_->meshes[size_t(impl_->objects[size_t(hit.object)].mesh)];
+    const PtexCoord c = mesh.ToPtex(hit.primID, hit.U, hit.V);
+    const Object& o = scene_.objects[size_t(hit.object)];
+    const ColorParam& e =
+        scene_.materials[size_t(o.MaterialOfFace(mesh.topo->CoarseFace(c.face)))].emission;
+    if (e.texture < 0) return e.value;
+    const glm::vec2 uv = mesh.hasUv ? mesh.Uv(hit.primID, hit.U, hit.V) : glm::vec2(c.u, c.v);
+    return glm::max(ColorAt(e, {uv, c.face, c.u, c.v, 0.0f}), glm::vec3(0.0f));
+}
+
+glm::vec3 RenderScene::AlbedoAt(int object, const PtexCoord& c, float width) const {
+    const Object& o = scene_.objects[size_t(object)];
+    const Impl::Mesh& mesh = impl_->meshes[size_t(impl_->objects[size_t(object)].mesh)];
+    const Material& m = scene_.materials[size_t(o.MaterialOfFace(mesh.topo->CoarseFace(c.face)))];
+    // A Ptex location carries no cage uv: image textures read at the Ptex (u,v) here, as on
+    // cages without uvs.
+    return glm::clamp(ColorAt(m.albedo, {glm::vec2(c.u, c.v), c.face, c.u, c.v, width}), 0.0f,
+                      1.0f);
+}
+
+bool RenderScene::PtexTextured() const {
+    for (const auto& t : impl_->textures)
+        if (t && t->PtexFaces() >= 0) return true;
+    return false;
+}
+
+bool RenderScene::Emissive() const {
+    for (const Object& o : scene_.objects)
+        for (const int m : o.Materials()) {
+            const ColorParam& e = scene_.materials[size_t(m)].emission;
+            if (e.texture >= 0 || e.value != glm::vec3(0.0f)) return true;
+        }
+    return false;
 }
 
 }  // namespace texcache

@@ -17,6 +17,7 @@ namespace texcache {
 
 class EnvironmentMap;
 class TextureImage;
+struct TextureQuery;
 
 struct Ray {
     glm::vec3 org, dir;
@@ -129,10 +130,22 @@ public:
     size_t EmbreeBytes() const;
     size_t EmbreePeakBytes() const;
     const EnvironmentMap* environment() const { return env_.get(); }
-    /// Albedo at a shading point (constant or texture).
+    /// Albedo at a shading point (constant or texture), in [0,1]. Ptex textures are filtered
+    /// over the point's footprint (its ray differentials; the finest level without them).
     glm::vec3 Albedo(const SurfaceInteraction& si) const;
-    /// Roughness at a shading point (constant or texture luminance), in [0,1].
+    /// Roughness at a shading point (constant, texture luminance or a Ptex channel), in [0,1].
     float Roughness(const SurfaceInteraction& si) const;
+    /// GGX F0 at a shading point (constant or texture), in [0,1].
+    glm::vec3 Specular(const SurfaceInteraction& si) const;
+    /// Radiance a hit surface emits (its material's emission, both sides; 0 for lights).
+    glm::vec3 Emission(const Hit& hit) const;
+    /// Whether any object's material emits (Emission is then worth asking).
+    bool Emissive() const;
+    /// Whether any object's material reads a Ptex texture (filtered by the hits' footprints).
+    bool PtexTextured() const;
+    /// Albedo of an object at a Ptex location, Ptex textures filtered over `width` (in the
+    /// face's parameter units): a texel's albedo in texture space.
+    glm::vec3 AlbedoAt(int object, const PtexCoord& c, float width) const;
     /// Object-to-world transform at normalized shutter time.
     glm::mat4 ObjectToWorld(int object, float time) const;
     /// Embree scene handle (for raw-throughput benchmarks).
@@ -167,6 +180,10 @@ public:
 
 private:
     struct Impl;
+    /// Throws InputError when a Ptex texture's face count differs from its object's mesh's.
+    static void CheckPtexFaceCounts(const Scene& scene, const Impl& I);
+    glm::vec3 ColorAt(const ColorParam& p, const TextureQuery& q) const;
+
     const Scene& scene_;
     std::unique_ptr<Impl> impl_;
     std::shared_ptr<const EnvironmentMap> env_;  // shared by the scenes of an animation's frames

@@ -18,6 +18,7 @@
 
 #include "filters/texture_filters.h"
 #include "renderer/scene/obj_loader.h"
+#include "renderer/scene/obj_materials.h"
 #include "texcache/error.h"
 
 namespace texcache {
@@ -269,9 +270,23 @@ void ParseCamera(const Node& n, Camera* cam) {
     if (n.Has("stereo")) ParseStereo(n["stereo"], cam);
 }
 
-/// TEXTURE: {"texture": "checker", "colors": [[..],[..]], "scale": s} or {"texture": "file"}.
+/// TEXTURE: {"texture": "checker", "colors": [[..],[..]], "scale": s}, {"texture": "file"} or
+/// {"ptex": "file.ptx", "channel": c}.
 int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
     Texture t;
+    if (!n.Has("texture") && !n.Has("ptex"))
+        n.Fail("a texture needs 'texture' (checker, or an image file) or 'ptex' (a Ptex file)");
+    if (n.Has("ptex")) {
+        n.Keys({"ptex", "channel"});
+        t.kind = Texture::Kind::Ptex;
+        t.path = Resolve(base, n["ptex"].String());
+        RequireFile(n["ptex"], t.path, "Ptex file");
+        // Ptex files hold at most 255 channels (one byte in the header).
+        if (n.Has("channel")) t.channel = int(n["channel"].Int(0, 254));
+        t.where = n["ptex"].Where();
+        scene->textures.push_back(t);
+        return int(scene->textures.size()) - 1;
+    }
     const std::string name = n["texture"].String();
     if (name == "checker") {
         n.Keys({"texture", "colors", "scale"});
@@ -305,7 +320,7 @@ int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
 
 void ParseMaterial(const Node& n, const std::string& name, const fs::path& base, Scene* scene,
                    std::vector<std::string>* warnings) {
-    n.Keys({"type", "albedo", "roughness", "specular", "filter", "filter_radius"});
+    n.Keys({"type", "albedo", "roughness", "specular", "emission", "filter", "filter_radius"});
     Material m;
     m.name = name;
     const std::string type = n.Has("type") ? n["type"].String() : "diffuse";
@@ -315,13 +330,18 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
         m.type = Material::Type::GGX;
     else
         n["type"].Fail("unknown material type '" + Excerpt(type) + "' (valid: diffuse, ggx)");
-    if (n.Has("albedo")) {
-        const Node a = n["albedo"];
-        if (a.raw().is_object())
-            m.albedo.texture = ParseTexture(a, base, scene);
+    // A colour [r,g,b] within [lo, hi], or a TEXTURE.
+    auto color = [&](const char* key, double lo, double hi, ColorParam* p) {
+        if (!n.Has(key)) return;
+        const Node c = n[key];
+        if (c.raw().is_object())
+            p->texture = ParseTexture(c, base, scene);
         else
-            m.albedo.value = a.Vec3(0.0f, 1.0f);  // > 1 would create energy
-    }
+            p->value = c.Vec3(lo, hi);
+    };
+    color("albedo", 0.0, 1.0, &m.albedo);  // > 1 would create energy
+    color("specular", 0.0, 1.0, &m.specular);
+    color("emission", 0.0, kBig, &m.emission);
     if (n.Has("roughness")) {
         const Node r = n["roughness"];
         if (r.raw().is_object()) {
@@ -340,7 +360,6 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
             m.roughness.value = r.Number(0.0f, 1.0f);
         }
     }
-    if (n.Has("specular")) m.specular = n["specular"].Vec3(0.0f, 1.0f);
     if (m.type == Material::Type::Diffuse && warnings)
         for (const char* k : {"roughness", "specular"})
             if (n.Has(k))
@@ -689,7 +708,18 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
     const Node objs = root["objects"];
     if (objs.ArraySize() == 0) objs.Fail("needs at least one object");
     std::map<std::string, int> meshIds;
+    std::vector<ObjFaceTags> meshTags;  // by mesh id: the OBJ's usemtl faces and libraries
+    std::map<std::string, int> mtlIds;  // materials read from MTL files (AssignObjMaterials)
     int defaultMaterial = -1;
+    auto fallback = [&] {
+        if (defaultMaterial < 0) {
+            Material grey;
+            grey.name = "default";
+            scene.materials.push_back(grey);
+            defaultMaterial = int(scene.materials.size()) - 1;
+        }
+        return defaultMaterial;
+    };
     for (size_t i = 0; i < objs.ArraySize(); ++i) {
         const Node o = objs.At(i);
         o.Keys({"name", "mesh", "material", "transform", "keyframes", "subdivision", "emission"});
@@ -712,9 +742,12 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
             if (other != meshIds.end()) {
                 ControlCage copy = scene.meshes[size_t(other->second)];
                 scene.meshes.push_back(std::move(copy));
+                meshTags.push_back(meshTags[size_t(other->second)]);
             } else {
                 RequireFile(o["mesh"], obj.objPath, "mesh file");
-                scene.meshes.push_back(LoadObj(obj.objPath, warnings));  // errors name the line
+                meshTags.emplace_back();
+                // Errors name the OBJ's line.
+                scene.meshes.push_back(LoadObj(obj.objPath, warnings, &meshTags.back()));
             }
             it = meshIds.emplace(key(obj.subdivide), int(scene.meshes.size()) - 1).first;
         }
@@ -729,14 +762,12 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
                                    (known.empty() ? "none" : Excerpt(known, 200)) + ")");
             }
             obj.material = mit->second;
+        } else if (!meshTags[size_t(obj.mesh)].materials.empty()) {
+            // The OBJ's own materials, per face (a scene material of the same name overrides).
+            AssignObjMaterials(meshTags[size_t(obj.mesh)], obj.objPath, materialIds, fallback,
+                               &mtlIds, &scene, &obj, warnings);
         } else {
-            if (defaultMaterial < 0) {
-                Material grey;
-                grey.name = "default";
-                scene.materials.push_back(grey);
-                defaultMaterial = int(scene.materials.size()) - 1;
-            }
-            obj.material = defaultMaterial;
+            obj.material = fallback();
         }
         obj.transform = ParseTrack(o);
         scene.objects.push_back(obj);
@@ -748,6 +779,8 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
     bool lit = !scene.environments.empty() || !scene.quadLights.empty() ||
                !scene.distantLights.empty() || !scene.pointLights.empty();
     for (const Object& o : scene.objects) lit |= o.Emissive();
+    for (const Material& m : scene.materials)
+        lit |= m.emission.texture >= 0 || m.emission.value != glm::vec3(0.0f);
     if (!lit && warnings && IntegratorUsesLights(scene.settings.integrator))
         warnings->push_back(path + ": no lights: the '" +
                             std::string(IntegratorName(scene.settings.integrator)) +
@@ -777,16 +810,22 @@ Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath
                    std::vector<std::string>* warnings) {
     Scene scene;
     scene.path = objPath;
-    scene.meshes.push_back(LoadObj(objPath, warnings));
+    ObjFaceTags tags;
+    scene.meshes.push_back(LoadObj(objPath, warnings, &tags));
     Object o;
     o.name = fs::path(objPath).stem().string();
     o.objPath = fs::absolute(objPath).lexically_normal().string();
     o.mesh = 0;
-    scene.objects.push_back(o);
     Material m;
     m.name = "default";
     m.albedo.value = glm::vec3(0.6f);
     scene.materials.push_back(m);
+    // The OBJ's own materials when it names some; grey where it does not.
+    std::map<std::string, int> loaded;
+    if (!tags.materials.empty())
+        AssignObjMaterials(
+            tags, o.objPath, {}, [] { return 0; }, &loaded, &scene, &o, warnings);
+    scene.objects.push_back(o);
     EnvironmentLight env;
     std::error_code ec;
     if (fs::is_regular_file(defaultEnvPath, ec)) {

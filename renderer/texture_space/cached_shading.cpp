@@ -300,6 +300,10 @@ ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool d
             ++rays.bounce;
             Hit hit;
             const bool found = c.rs.Intersect(ray, &hit);
+            // Emitting surfaces are not sampled as lights: with the direct part cached, the
+            // first ray is what finds them (a cosine-weighted estimate of their light, 1/pi
+            // integral of Le cos).
+            if (direct && found) Ld += c.SurfaceEmission(hit);
             const glm::vec3 L =
                 Ld + LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
             return std::isfinite(L.x + L.y + L.z) ? L : glm::vec3(0.0f);

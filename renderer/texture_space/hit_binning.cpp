@@ -144,7 +144,8 @@ void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     thread_local std::vector<CameraSample> cs;
     if (cs.size() < total) cs.resize(total);
-    const bool productDiff = c.lightSampling != LightSampling::Mis;
+    // Differentials for product sampling's records and for Ptex textures' filter widths.
+    const bool productDiff = c.lightSampling != LightSampling::Mis || c.textureFootprints;
     HitsCameraRays(c, r, s0, s1, cs.data(), total, productDiff, rays);
     const bool all = c.opt.texture.cacheDirect;
     const bool keepDelta = all && c.opt.texture.deltaDirectPerHit;
