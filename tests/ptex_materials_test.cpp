@@ -10,6 +10,7 @@
 #include <fstream>
 
 #include "ptex_test_util.h"
+#include "renderer/image/image.h"
 #include "renderer/render.h"
 #include "renderer/scene/camera.h"
 #include "renderer/scene/scene_loader.h"
@@ -75,7 +76,8 @@ TEST(PtexMaterials, HitsSeeTheTexelsTheFileHolds) {
         {"ptex_nonquad.json", "nonquad/test/pPlane1Unsub.ptx"}};
     for (const auto& [file, ptx] : sets) {
         SCOPED_TRACE(file);
-        const Scene s = Load(file);
+        Scene s = Load(file);
+        for (Texture& tex : s.textures) tex.srgb = false;  // the texels as the file holds them
         RenderSceneOptions ro;
         ro.needLights = false;
         const RenderScene rs(s, ro);
@@ -134,11 +136,31 @@ TEST(PtexMaterials, FlatSphereShowsTheSameCellsAtBothResolutions) {
     EXPECT_GT(double(same) / double(hits), 0.85);
 }
 
+// "srgb": true decodes each filtered value as sRGB: the same hits see exactly the decoded
+// colours of the raw file (bound 1e-6, float rounding).
+TEST(PtexMaterials, SrgbKeyDecodesTheFilteredTexels) {
+    Scene a = Load("ptex_flatsphere.json");
+    ASSERT_TRUE(a.textures[0].srgb);
+    Scene b = a;
+    b.textures[0].srgb = false;
+    RenderSceneOptions ro;
+    ro.needLights = false;
+    const RenderScene ra(a, ro), rb(b, ro);
+    int hits = 0;
+    ForEachHit(ra, 3, [&](const Ray&, const SurfaceInteraction& si) {
+        const glm::vec3 dec = ra.Albedo(si), raw = rb.Albedo(si);
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(dec[c], SrgbToLinear(raw[c]), 1e-6f);
+        ++hits;
+    });
+    EXPECT_GT(hits, 2000);
+}
+
 // End to end through a render: the non-quad plane's file as emission (black albedo, no light),
 // one camera ray through each pixel's centre; each pixel is the file's lookup at the Ptex face
 // and (u,v) the render's own ptex layer reports for it.
 TEST(PtexMaterials, RenderedEmissionIsTheFilesLookupAtEachPixel) {
     Scene s = Load("ptex_nonquad.json");
+    for (Texture& tex : s.textures) tex.srgb = false;
     for (Material& m : s.materials) {
         m.emission.texture = m.albedo.texture;
         m.albedo = {glm::vec3(0.0f), -1};

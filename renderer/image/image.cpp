@@ -226,9 +226,12 @@ Image ReadImageRGB(const std::string& path, ColorEncoding* encoding) {
     return rgb;
 }
 
+float SrgbToLinear(float v) {
+    return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+}
+
 void SrgbToLinear(Image* img) {
-    for (float& v : img->data)
-        v = v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+    for (float& v : img->data) v = SrgbToLinear(v);
 }
 
 }  // namespace texcache

@@ -53,6 +53,8 @@ Image ReadImageRGB(const std::string& path, ColorEncoding* encoding = nullptr);
 Image ReadImage(const std::string& path);
 /// Decodes sRGB-encoded values in [0, 1] to linear light in place (exact inverse OETF).
 void SrgbToLinear(Image* img);
+/// The same for one value.
+float SrgbToLinear(float v);
 /// Throws InputError unless an image file's header claims a size worth allocating: at most
 /// kMaxImagePixels pixels and 2^30 values, and at most kMaxCompression raw pixel bytes per byte
 /// of the file beyond the first 256 MiB (no codec OpenImageIO reads packs pixels tighter than

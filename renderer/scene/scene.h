@@ -57,6 +57,9 @@ struct Texture {
     /// Ptex: the file's channel a scalar reads, or a colour's first (a colour reads three; from a
     /// file with one channel left from there, that one as grey).
     int channel = 0;
+    /// Ptex: the texels are sRGB-encoded (as 8-bit paint often is; Ptex records no colour
+    /// space): filtered values are decoded to linear light.
+    bool srgb = false;
     /// Where the scene file names it ("scene.json: key 'materials.m.albedo.texture'"), for
     /// errors found when the image is read; empty for textures made in code.
     std::string where;

@@ -277,12 +277,13 @@ int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
     if (!n.Has("texture") && !n.Has("ptex"))
         n.Fail("a texture needs 'texture' (checker, or an image file) or 'ptex' (a Ptex file)");
     if (n.Has("ptex")) {
-        n.Keys({"ptex", "channel"});
+        n.Keys({"ptex", "channel", "srgb"});
         t.kind = Texture::Kind::Ptex;
         t.path = Resolve(base, n["ptex"].String());
         RequireFile(n["ptex"], t.path, "Ptex file");
         // Ptex files hold at most 255 channels (one byte in the header).
         if (n.Has("channel")) t.channel = int(n["channel"].Int(0, 254));
+        if (n.Has("srgb")) t.srgb = n["srgb"].Bool();
         t.where = n["ptex"].Where();
         scene->textures.push_back(t);
         return int(scene->textures.size()) - 1;

@@ -10,9 +10,6 @@
 namespace texcache {
 
 namespace {
-float SrgbToLinear(float c) {
-    return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
-}
 bool IsFloatFormat(const std::string& path) {
     auto dot = path.rfind('.');
     std::string ext = dot == std::string::npos ? "" : path.substr(dot + 1);
@@ -70,6 +67,8 @@ glm::vec3 TextureImage::Color(const TextureQuery& q) const {
     float c[3] = {0.0f, 0.0f, 0.0f};
     const int n = std::min(3, ptex_->NumChannels() - desc_.channel);
     ptex_->Lookup(q.face, q.u, q.v, q.width, c, desc_.channel, n);
+    if (desc_.srgb)
+        for (float& v : c) v = SrgbToLinear(v);
     return n == 3 ? glm::vec3(c[0], c[1], c[2]) : glm::vec3(c[0]);
 }
 
@@ -80,7 +79,7 @@ float TextureImage::Scalar(const TextureQuery& q) const {
     }
     float x = 0.0f;
     ptex_->Lookup(q.face, q.u, q.v, q.width, &x, desc_.channel, 1);
-    return x;
+    return desc_.srgb ? SrgbToLinear(x) : x;
 }
 
 }  // namespace texcache
