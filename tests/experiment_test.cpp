@@ -105,7 +105,11 @@ INSTANTIATE_TEST_SUITE_P(
                  "blur",
                  2 * (3 + 2 * 2),
                  {"blur_blur_motion.png", "blur_blur_defocus_blurred.png",
-                  "blur_blur_motion_focus.png"}}),
+                  "blur_blur_motion_focus.png"}},
+        Expected{"equal-time",
+                 "equal_time",
+                 6 * 3 * 2,
+                 {"equal_time_pieces_forest.png", "equal_time_tent_lens_ao.png"}}),
     [](const ::testing::TestParamInfo<Expected>& i) {
         std::string n = i.param.name;
         for (char& c : n)

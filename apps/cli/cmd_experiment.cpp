@@ -23,6 +23,8 @@ struct ExperimentArgs {
     std::string methods;
     int cameraSpp = 0;
     bool ablation = false;
+    std::string set =
+        (std::filesystem::path(TEXCACHE_SCENES_DIR).parent_path() / "validation").string();
 };
 
 const std::map<std::string, std::function<int(const experiments::Setup&)>>& Experiments() {
@@ -37,6 +39,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
         {"cpis", experiments::Cpis},
         {"stereo", experiments::Stereo},
         {"blur", experiments::Blur},
+        {"equal-time", experiments::EqualTime},
     };
     return m;
 }
@@ -62,7 +65,8 @@ int RunExperiment(const ExperimentArgs& a) {
     if (a.cameraSpp < 0 || a.cameraSpp > 1024)
         throw InputError("--camera-spp",
                          "must be in 1..1024 (got " + std::to_string(a.cameraSpp) + ")");
-    experiments::Setup s{a.out, a.scenes, a.quick, a.only, a.methods, a.cameraSpp, a.ablation};
+    experiments::Setup s{a.out,     a.scenes,    a.quick,    a.only,
+                         a.methods, a.cameraSpp, a.ablation, a.set};
     const double t0 = NowSeconds();
     int code = 0;
     for (const auto& [name, fn] : all)
@@ -83,7 +87,7 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
                   "Test size: small images and budgets (under a minute); not for conclusions");
     cmd->add_option("--only", args->only,
                     "speed-vs-error: run only these cases (comma separated, e.g. car-ao,chess-ao); "
-                    "temporal: only these scenes (e.g. anim_shadow,anim_glossy)");
+                    "temporal, equal-time: only these scenes (e.g. anim_shadow,anim_glossy)");
     cmd->add_option("--methods", args->methods,
                     "speed-vs-error: run only these methods (comma separated, e.g. "
                     "per-hit,ts-hits); an earlier run's other rows in --out are kept");
@@ -96,6 +100,10 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
                   "jitter cap at 4 and 16 px, without clamping, and with its visibility in "
                   "SVGF's and in Zeng's order, summarised in temporal_ablation.md");
     cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
+        ->capture_default_str();
+    cmd->add_option("--set", args->set,
+                    "equal-time: the directory of scenes it compares per hit and texture space on "
+                    "(scenes no setting was chosen on)")
         ->capture_default_str();
     cmd->callback([args, &exitCode] { exitCode = RunExperiment(*args); });
 }

@@ -32,6 +32,8 @@ struct Setup {
     /// jitter cap at 0 and 16 pixels and without clamping (issue 21: why Reliable trails the
     /// baseline on some scenes).
     bool ablation = false;
+    /// equal-time: the directory of scenes it renders (validation/ beside scenes/ by default).
+    std::string sceneSet;
 };
 
 /// A scene file loaded and built once for a given integrator family. Not movable: the
@@ -145,5 +147,6 @@ int Disocclusion(const Setup& s);
 int Cpis(const Setup& s);
 int Stereo(const Setup& s);
 int Blur(const Setup& s);
+int EqualTime(const Setup& s);
 
 }  // namespace texcache::experiments
