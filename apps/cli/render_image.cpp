@@ -2,9 +2,13 @@
 // `texcache render` of one image or of an animation (--frames), and what it reports: the time
 // and memory of the render and of the scene build, the cache's traffic, the overshading against
 // unbounded caches (--overshading), and --stats as JSON.
+#include <algorithm>
+#include <csignal>
 #include <cstdio>
 
+#include "job.h"
 #include "render_command.h"
+#include "renderer/distributed/rank_group.h"
 #include "renderer/render_policy.h"
 #include "renderer/texture_space/visibility_pass.h"
 
@@ -52,6 +56,11 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
     add("hit_bin_bytes", double(s.hitBinBytes));  // shading at the hits (--ts-samples hits)
     add("hit_bins_dropped", double(s.hitBinsDropped));
+    // Over many ranks: rank 0's payload bytes exchanged with the others (rank_group.h).
+    add("ranks", double(opt.ranks ? opt.ranks->Size() : 1));
+    add("passes", double(s.passes));
+    add("bytes_sent", double(s.bytesSent));
+    add("bytes_received", double(s.bytesReceived));
     add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes));
     // The scene: its size and the meshes Embree could not take (embree_mesh.cpp's design note).
     const RenderScene::TessellationStats t = rs.LimitTessellated();
@@ -100,8 +109,12 @@ int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& o
     return 0;
 }
 
-int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
+int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& options,
              VisibilityFilterKind visibility, OutputPaths& out, double loadSeconds) {
+    // Over many ranks each renders its rows (RenderOptions::ranks); rank 0 writes and reports.
+    RenderOptions opt = options;
+    const bool root = Job().Rank() == 0;
+    if (Job().Size() > 1) opt.ranks = &Job(), opt.progress = opt.progress && root;
     const double t0 = NowSeconds();
     RenderScene rs(scene, SceneOptionsFor(a, opt, scene.settings.time));
     const double buildSeconds = NowSeconds() - t0;
@@ -120,7 +133,9 @@ int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
     const double tCache = NowSeconds();
     if (opt.texture.enabled) cache = MakeTextureSpaceCache(rs, opt.texture, kCacheSizeOptions);
     const double cacheSeconds = NowSeconds() - tCache;
+    if (InjectedFailure("die")) std::raise(SIGKILL);  // while the others render
     RenderResult r = Render(rs, opt, cache.get());
+    if (!root) return 0;
     const double visibilitySeconds = ApplyVisibilityFilter(visibility, rs, opt, &r.beauty);
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
@@ -179,6 +194,14 @@ int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
             (unsigned long long)p.built, (unsigned long long)p.evictions,
             double(r.stats.psrBytes) / (1 << 20));
     }
+    if (Job().Size() > 1)
+        std::printf(
+            "ranks: %d, rows in bands of %d; rank 0 exchanged %.1f KiB sent, %.1f KiB received "
+            "(%d passes: %.1f KiB a pass)\n",
+            Job().Size(), RowSplit::kRows, double(r.stats.bytesSent) / 1024.0,
+            double(r.stats.bytesReceived) / 1024.0, r.stats.passes,
+            double(r.stats.bytesSent + r.stats.bytesReceived) / 1024.0 /
+                std::max(r.stats.passes, 1));
     std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
     for (const std::string& f : out.written) std::printf("wrote %s\n", f.c_str());
     return 0;
