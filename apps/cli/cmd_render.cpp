@@ -145,6 +145,11 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Animation: render frames A:B (inclusive) or N (0..N-1) at --fps; outputs "
                     "are numbered (a run of # in -o, else name_NNNN.ext)");
     cmd->add_option("--fps", args->fps, "Frames per second of --frames")->capture_default_str();
+    cmd->add_option("--warmup-frames", args->warmupFrames,
+                    "Over many MPI ranks (each renders a contiguous chunk of --frames): frames "
+                    "rendered, not written, before a chunk to rebuild the temporal history (-1: "
+                    "enough for the history left out to weigh under 1% at --temporal-alpha)")
+        ->capture_default_str();
 
     group("Sampling");
     cmd->add_option("--spp", args->spp, "Samples per pixel (a cap when --seconds is given)");

@@ -3,6 +3,7 @@
 // and memory of the render and of the scene build, the cache's traffic, the overshading against
 // unbounded caches (--overshading), and --stats as JSON.
 #include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 
@@ -85,28 +86,49 @@ int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& o
     // persists, keyed by each object's own grids.
     AnimationFrames frames(scene, SceneOptionsFor(a, opt, scene.settings.time), opt, fps,
                            kCacheSizeOptions);
+    // Over many ranks each renders a contiguous chunk of the frames, alone, after warm-up
+    // frames that rebuild the temporal history the sequence would have (WarmUpFrames).
+    const int ranks = Job().Size(), rank = Job().Rank(), count = last - first + 1;
+    const int chunkFirst = first + int(int64_t(count) * rank / ranks);
+    const int chunkLast = first + int(int64_t(count) * (rank + 1) / ranks) - 1;
+    const int warm = a.warmupFrames >= 0 ? a.warmupFrames : WarmUpFrames(opt.texture.temporalAlpha);
+    const int from = ranks == 1               ? first
+                     : chunkLast < chunkFirst ? chunkFirst  // more ranks than frames: none
+                                              : std::max(first, chunkFirst - warm);
+    const char* who = ranks > 1 ? "rank " : "";
+    const std::string rankName = ranks > 1 ? std::to_string(rank) + ": " : "";
     double total = 0.0;
-    for (int f = first; f <= last; ++f) {
+    for (int f = from; f <= chunkLast; ++f) {
         const double tf = NowSeconds();
         frames.Pose(f);
         RenderOptions& fo = frames.Options();
         fo.progress = false;
         RenderResult r = Render(frames.PosedScene(), fo, frames.Cache());
+        if (f < chunkFirst) {
+            std::printf("%s%swarm-up frame %d: %.3f s\n", who, rankName.c_str(), f,
+                        r.stats.seconds);
+            continue;
+        }
         ApplyVisibilityFilter(visibility, frames.PosedScene(), fo, &r.beauty);
         OutputPaths& out = outs[size_t(f - first)];
         AtomicFiles group;
         WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
         group.Commit();
         total += NowSeconds() - tf;
-        std::printf("frame %d (%d of %d, t = %.3f): %.3f s, %.1f%% texel hits -> %s\n", f,
-                    f - first + 1, last - first + 1, fo.frameTime, r.stats.seconds,
+        std::printf("%s%sframe %d (%d of %d, t = %.3f): %.3f s, %.1f%% texel hits -> %s\n", who,
+                    rankName.c_str(), f, f - first + 1, count, fo.frameTime, r.stats.seconds,
                     100.0 * r.stats.cache.TexelHitRate(), out.written.front().c_str());
         std::fflush(stdout);
     }
-    std::printf("rendered %d frames of %s in %.2f s (%dx%d, %d spp, integrator %s)\n",
-                last - first + 1, scene.path.c_str(), total, opt.width, opt.height, opt.spp,
-                IntegratorName(opt.integrator));
+    std::printf("%s%srendered %d frames of %s in %.2f s (%dx%d, %d spp, integrator %s)\n", who,
+                rankName.c_str(), chunkLast - chunkFirst + 1, scene.path.c_str(), total, opt.width,
+                opt.height, opt.spp, IntegratorName(opt.integrator));
     return 0;
+}
+
+int WarmUpFrames(float temporalAlpha) {
+    if (!(temporalAlpha > 0.0f)) return 0;
+    return int(std::ceil(std::log(0.01) / std::log(double(temporalAlpha))));
 }
 
 int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& options,
