@@ -376,6 +376,8 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     const uint64_t sent0 = opt.ranks ? opt.ranks->BytesSent() : 0;
     const uint64_t received0 = opt.ranks ? opt.ranks->BytesReceived() : 0;
     const int done = RunPasses(ctx, frameCache, sums, counts, start) - opt.firstSample;
+    const uint64_t passBytes =
+        opt.ranks ? opt.ranks->BytesSent() + opt.ranks->BytesReceived() - sent0 - received0 : 0;
     if (opt.ranks && opt.ranks->Size() > 1) {
         // Every rank's rows to rank 0: each pixel's sums are one rank's, as one process adds
         // them (no reduction of the image).
@@ -415,6 +417,7 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     if (opt.ranks) {
         result.stats.bytesSent = opt.ranks->BytesSent() - sent0;
         result.stats.bytesReceived = opt.ranks->BytesReceived() - received0;
+        result.stats.passBytes = passBytes;
     }
     result.stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;

@@ -237,8 +237,9 @@ struct RenderStats {
     size_t hitBinBytes = 0;  ///< bytes of the hit bins (0 unless hits)
     int passes = 0;          ///< passes of camera samples run
     /// Over many ranks (RenderOptions::ranks): payload bytes this rank sent to and received
-    /// from the others during the render.
-    uint64_t bytesSent = 0, bytesReceived = 0;
+    /// from the others during the render, and of those the passes' (the texture-space
+    /// accumulators, the noise, the budget; the rest is the rows gathered at the end).
+    uint64_t bytesSent = 0, bytesReceived = 0, passBytes = 0;
 };
 
 /// A scene file's render settings as options: size, spp, time budget, integrator, seed, depth,

@@ -62,6 +62,7 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     add("passes", double(s.passes));
     add("bytes_sent", double(s.bytesSent));
     add("bytes_received", double(s.bytesReceived));
+    add("pass_bytes", double(s.passBytes));
     add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes));
     // The scene: its size and the meshes Embree could not take (embree_mesh.cpp's design note).
     const RenderScene::TessellationStats t = rs.LimitTessellated();
@@ -218,12 +219,12 @@ int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& optio
     }
     if (Job().Size() > 1)
         std::printf(
-            "ranks: %d, rows in bands of %d; rank 0 exchanged %.1f KiB sent, %.1f KiB received "
-            "(%d passes: %.1f KiB a pass)\n",
+            "ranks: %d, rows in bands of %d; rank 0 exchanged %.1f KiB sent, %.1f KiB received: "
+            "%.1f KiB a pass (%d passes), %.1f KiB of rows gathered\n",
             Job().Size(), RowSplit::kRows, double(r.stats.bytesSent) / 1024.0,
-            double(r.stats.bytesReceived) / 1024.0, r.stats.passes,
-            double(r.stats.bytesSent + r.stats.bytesReceived) / 1024.0 /
-                std::max(r.stats.passes, 1));
+            double(r.stats.bytesReceived) / 1024.0,
+            double(r.stats.passBytes) / 1024.0 / std::max(r.stats.passes, 1), r.stats.passes,
+            double(r.stats.bytesSent + r.stats.bytesReceived - r.stats.passBytes) / 1024.0);
     std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
     for (const std::string& f : out.written) std::printf("wrote %s\n", f.c_str());
     return 0;

@@ -5,11 +5,11 @@
 #   (same seed and samples): RMSE at most 1e-6 (the ranks split the rows, so every pixel is
 #   summed by one rank as one process sums it, and the texture-space bins are integer sums:
 #   the images are expected to be equal; the tolerance only absorbs the EXR's half floats).
-# CASE frames: --frames 0:7 with temporal accumulation (--temporal-alpha 0.7) in contiguous
-#   chunks over NP ranks, each after its warm-up frames, against one process's sequence: every
-#   frame's relMSE at most 1e-5. Two single-process runs of this sequence already differ by up
-#   to relMSE 8e-7 (RMSE 4e-5: the grid cache's evictions follow the threads' schedule); chunks
-#   without warm-up reach relMSE 7e-3, with 4 warm-up frames 3e-4 (results/mpi_scaling.md).
+# CASE frames: --frames 0:31 with temporal accumulation (--temporal-alpha 0.7) in contiguous
+#   chunks over NP ranks, each after its default warm-up (13 frames), against one process's
+#   sequence, one thread each (so that the grid cache's evictions do not follow a schedule):
+#   every frame's relMSE at most 2e-3. Measured worst on 3 ranks: 6.0e-4 (RMSE 6.1e-4), without
+#   warm-up 4.4e-3; a frame's own noise (another seed) is RMSE 0.13 (results/mpi_scaling.md).
 # CASE fail-read, fail-die: rank 1 cannot read the scene / is killed mid-render: the job exits
 #   non-zero, its first line names the rank (fail-read; mpirun's report names it for fail-die),
 #   and the earlier output is untouched.
@@ -36,16 +36,16 @@ equal_images() {  # options...
 
 chunked_frames() {
     local anim="$root/scenes/anim_shadow.json" f json relmse
-    local opts=(--frames 0:7 --resolution 48x30 --spp 2 --seed 3 -q --no-png --shading texture
-                --integrator path --temporal-alpha 0.7)
+    local opts=(--frames 0:31 --resolution 48x30 --spp 2 --seed 3 -q --no-png --shading texture
+                --integrator path --temporal-alpha 0.7 --threads 1)
     "$bin/texcache" render "$anim" "${opts[@]}" -o "$tmp/one_#.exr" >/dev/null
     run_mpi render "$anim" "${opts[@]}" -o "$tmp/many_#.exr" >"$tmp/log" 2>&1 ||
         { cat "$tmp/log"; fail "mpirun exited $?"; }
-    for f in 0 1 2 3 4 5 6 7; do
+    for f in $(seq 0 31); do
         json="$("$bin/texcache" compare --json "$tmp/many_$f.exr" "$tmp/one_$f.exr")"
         relmse="$(sed -n 's/.*"relmse": \([^,]*\),.*/\1/p' <<<"$json")"
         echo "frame $f np=$np: $json"
-        awk -v e="$relmse" 'BEGIN { exit !(e <= 1e-5) }' || fail "frame $f: relMSE $relmse > 1e-5"
+        awk -v e="$relmse" 'BEGIN { exit !(e <= 2e-3) }' || fail "frame $f: relMSE $relmse > 2e-3"
     done
 }
 
