@@ -42,9 +42,11 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
     CheckStereoOptions(a);
     const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
-        if (ranks)
+        if (ranks && (!a.frameBuffers.empty() || a.frames.empty()))
             throw InputError(a.frameBuffers.empty() ? "--denoise" : "--frame-buffers",
-                             "runs on one rank: launch it without mpirun");
+                             a.frameBuffers.empty()
+                                 ? "on many ranks splits --frames: give them, or run one rank"
+                                 : "runs on one rank: launch it without mpirun");
         if (const std::string why = FrameBufferCameraProblem(scene.camera); !why.empty())
             throw InputError(a.frameBuffers.empty() ? "--denoise" : "--frame-buffers",
                              scene.path + ": " + why);

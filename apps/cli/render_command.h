@@ -155,6 +155,14 @@ int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& o
 /// and W makes that at most 1% (13 frames at the paper's 0.7; none without temporal history).
 int WarmUpFrames(float temporalAlpha);
 
+/// This rank's part of frames first..last over the job's ranks: a contiguous chunk
+/// [first, last] (empty when there are more ranks than frames), rendered from `from` (the
+/// `warm` frames before the chunk rendered and not written). One rank: all of them.
+struct FrameChunk {
+    int from, first, last;
+};
+FrameChunk ChunkOfFrames(int first, int last, int warm);
+
 /// --stats: the render's figures as JSON (`overshading` < 0: not measured).
 std::string StatsJson(const RenderStats& s, const RenderScene& rs, const TextureSpaceCache* cache,
                       const RenderOptions& opt, double overshading);

@@ -90,12 +90,10 @@ int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& o
     // Over many ranks each renders a contiguous chunk of the frames, alone, after warm-up
     // frames that rebuild the temporal history the sequence would have (WarmUpFrames).
     const int ranks = Job().Size(), rank = Job().Rank(), count = last - first + 1;
-    const int chunkFirst = first + int(int64_t(count) * rank / ranks);
-    const int chunkLast = first + int(int64_t(count) * (rank + 1) / ranks) - 1;
-    const int warm = a.warmupFrames >= 0 ? a.warmupFrames : WarmUpFrames(opt.texture.temporalAlpha);
-    const int from = ranks == 1               ? first
-                     : chunkLast < chunkFirst ? chunkFirst  // more ranks than frames: none
-                                              : std::max(first, chunkFirst - warm);
+    const FrameChunk chunk = ChunkOfFrames(
+        first, last,
+        a.warmupFrames >= 0 ? a.warmupFrames : WarmUpFrames(opt.texture.temporalAlpha));
+    const int from = chunk.from, chunkFirst = chunk.first, chunkLast = chunk.last;
     const char* who = ranks > 1 ? "rank " : "";
     const std::string rankName = ranks > 1 ? std::to_string(rank) + ": " : "";
     double total = 0.0;
@@ -125,6 +123,16 @@ int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& o
                 rankName.c_str(), chunkLast - chunkFirst + 1, scene.path.c_str(), total, opt.width,
                 opt.height, opt.spp, IntegratorName(opt.integrator));
     return 0;
+}
+
+FrameChunk ChunkOfFrames(int first, int last, int warm) {
+    const int ranks = Job().Size(), rank = Job().Rank();
+    if (ranks == 1) return {first, first, last};
+    const int64_t count = last - first + 1;
+    const int chunkFirst = first + int(count * rank / ranks);
+    const int chunkLast = first + int(count * (rank + 1) / ranks) - 1;
+    if (chunkLast < chunkFirst) return {chunkFirst, chunkFirst, chunkLast};  // no frames
+    return {std::max(first, chunkFirst - warm), chunkFirst, chunkLast};
 }
 
 int WarmUpFrames(float temporalAlpha) {

@@ -28,9 +28,10 @@ public:
 };
 
 /// The number of ranks the launcher started, from the environment it gives each rank (Open
-/// MPI's mpirun, PMIx as under srun, MPICH's PMI); 1 when none is set.
+/// MPI's mpirun, PMIx as under srun, MPICH's PMI); 1 when none is set. Not Slurm's own
+/// variables: a batch script has them too, and a program it starts without srun is alone.
 int LaunchedRanks() {
-    for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMIX_SIZE", "PMI_SIZE", "SLURM_NTASKS"})
+    for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMIX_SIZE", "PMI_SIZE"})
         if (const char* v = std::getenv(name)) return std::max(1, std::atoi(v));
     return std::getenv("PMIX_RANK") ? 2 : 1;  // PMIx without its size: assume a job
 }
