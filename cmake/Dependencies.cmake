@@ -27,3 +27,18 @@ if(NOT TARGET CLI11::CLI11)
   add_library(CLI11::CLI11 INTERFACE IMPORTED)
   set_target_properties(CLI11::CLI11 PROPERTIES INTERFACE_INCLUDE_DIRECTORIES ${CLI11_INCLUDE_DIR})
 endif()
+
+# MPI (Debian's Open MPI: libopenmpi-dev, openmpi-bin): one render, animation or experiment over
+# many ranks (docs/cluster.md). Found, it is used; TEXCACHE_MPI=OFF builds without it, and the
+# program is then the same as one launched without mpirun.
+option(TEXCACHE_MPI "Use MPI when it is found (renders over many ranks)" ON)
+set(TEXCACHE_HAVE_MPI OFF)
+if(TEXCACHE_MPI)
+  enable_language(C)  # FindMPI's C component looks for the C compiler wrapper
+  find_package(MPI COMPONENTS C QUIET)
+  if(MPI_C_FOUND)
+    set(TEXCACHE_HAVE_MPI ON)
+    find_program(TEXCACHE_MPIEXEC NAMES mpirun mpiexec HINTS ${MPIEXEC_EXECUTABLE})
+  endif()
+endif()
+message(STATUS "texcache: MPI ${TEXCACHE_HAVE_MPI}")

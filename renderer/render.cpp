@@ -22,6 +22,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include "renderer/distributed/rank_group.h"
 #include "renderer/progress.h"
 #include "renderer/render_internal.h"
 #include "texcache/error.h"
@@ -32,11 +33,29 @@ using namespace internal;
 
 namespace {
 
+/// A table of hit bins as accumulators another rank's table adds to (the bins' sums are
+/// saturating integers: the same in any order).
+template <typename Table>
+class BinAccumulators final : public ReducibleAccumulators {
+public:
+    explicit BinAccumulators(Table& table) : table_(table) {}
+    size_t WordsPerKey() const override { return Table::kRecordWords - 1; }
+    void Export(std::vector<uint64_t>* out) const override { table_.ExportBlocks(out); }
+    uint64_t Import(const uint64_t* records, size_t n) override {
+        return table_.AddBlocks(records, n);
+    }
+
+private:
+    Table& table_;
+};
+
 /// Renders passes of whole sample indices from opt.firstSample until opt.spp samples are done
 /// or, with a time budget (counted from `start`), until the next pass would not fit in it;
 /// returns the sample index reached. A pixel's result depends only on its sample indices and the
 /// passes (first bounces are a net per pass: PixelSequence), so the image is the same for any
-/// thread count.
+/// thread count. Over many ranks (opt.ranks) each renders its bands of rows (RowSplit) and the
+/// ranks combine the pass's hit bins and noise before reading them back, so that every pixel
+/// gets the value one process gives it.
 int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
               tbb::enumerable_thread_specific<RayCounts>& counts,
               std::chrono::steady_clock::time_point start) {
@@ -44,25 +63,39 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const RenderOptions& opt = c.opt;
     const int W = opt.width, y0 = opt.rowBegin, y1 = opt.rowEnd > 0 ? opt.rowEnd : opt.height;
     auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
+    RankGroup* const group = opt.ranks && opt.ranks->Size() > 1 ? opt.ranks : nullptr;
+    const RowSplit split{y0, y1, group ? group->Rank() : 0, group ? group->Size() : 1};
+    int ownRows = 0;
+    for (int i = 0; i < split.OwnBands(); ++i) ownRows += split.Last(i) - split.First(i);
     // Per-hit AO traces a tile's camera rays first, then its AO rays (see AoTileTwoPhase).
     const bool twoPhaseAo = opt.integrator == IntegratorKind::AO && sums.aovs.empty();
     const int sppCap = std::max(opt.spp, 1);
     std::atomic<uint64_t> pixelSamplesDone{0};
-    const double totalWork = double(W) * double(y1 - y0) * (sppCap - opt.firstSample);
+    const double totalWork = double(W) * double(ownRows) * (sppCap - opt.firstSample);
     const Progress progress(opt.progress, [&] {
         if (opt.seconds > 0.0f)
             return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
         return double(pixelSamplesDone.load()) / totalWork;
     });
     auto forTiles = [&](auto&& tile) {
-        tbb::parallel_for(tbb::blocked_range2d<int>(y0, y1, 8, 0, W, 8),
-                          [&](const tbb::blocked_range2d<int>& r) {
-                              // Denormals off in every worker: Embree wants it and it saves
-                              // stalls in shading.
-                              _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-                              _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-                              tile(r, counts.local());
-                          });
+        auto run = [&](const tbb::blocked_range2d<int>& r) {
+            // Denormals off in every worker: Embree wants it and it saves stalls in shading.
+            _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+            _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+            tile(r, counts.local());
+        };
+        if (!group) {
+            tbb::parallel_for(tbb::blocked_range2d<int>(y0, y1, 8, 0, W, 8), run);
+            return;
+        }
+        // This rank's bands, each split into tiles of its rows.
+        tbb::parallel_for(
+            tbb::blocked_range2d<int>(0, split.OwnBands(), 1, 0, W, 8),
+            [&](const tbb::blocked_range2d<int>& b) {
+                for (int i = b.rows().begin(); i < b.rows().end(); ++i)
+                    run(tbb::blocked_range2d<int>(split.First(i), split.Last(i), 8,
+                                                  b.cols().begin(), b.cols().end(), 8));
+            });
     };
     // Progressive texture space: passes of opt.texture.passSpp camera samples, each after the
     // first starting a new pass of the cache (fresh shading, jittered sample positions, smaller
@@ -98,6 +131,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     // hits, unbinned direct light), written by the binning phase, added by the resolve.
     std::vector<glm::dvec3> perHit(pathHits ? framePixels : 0);
     std::vector<glm::dvec2> pixelNoise(pathHits ? framePixels : 0);  // see PathHitsTrace
+    std::vector<double> rowNoise(pathHits ? 2 * size_t(y1 - y0) : 0);
     while (done < sppCap) {
         const int s0 = done,
                   s1 = std::min(sppCap, done + (hits ? std::min(passSpp, hitSpp) : passSpp));
@@ -145,8 +179,18 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     PathHitsTrace(c, r, s0, s1, records, binnedHits, perHit.data(),
                                   pixelNoise.data(), rc);
                 });
-                for (size_t p = size_t(y0) * size_t(W); p < size_t(y1) * size_t(W); ++p)
-                    noiseVar += pixelNoise[p].x, noiseMean2 += pixelNoise[p].y;
+                // Summed row by row, then the rows in order: the same sum whichever rank
+                // rendered each row (a row's sums come from one rank; the others add zeros).
+                for (int y = y0; y < y1; ++y) {
+                    double v = 0.0, m = 0.0;
+                    if (split.Owns(y))
+                        for (size_t p = size_t(y) * W; p < size_t(y + 1) * W; ++p)
+                            v += pixelNoise[p].x, m += pixelNoise[p].y;
+                    rowNoise[2 * size_t(y - y0)] = v, rowNoise[2 * size_t(y - y0) + 1] = m;
+                }
+                if (group) group->SumDisjoint(rowNoise.data(), rowNoise.size());
+                for (size_t i = 0; i < rowNoise.size(); i += 2)
+                    noiseVar += rowNoise[i], noiseMean2 += rowNoise[i + 1];
             }
             // The direct integrator's light at AO's levels: its noise is AO's kind (a shadow
             // ray per sample), and bins one level finer than paths' keep its soft shadows'
@@ -182,12 +226,23 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                 size_t blocks =
                     std::clamp(2 * std::max(guess, binBlocksUsed), size_t(1024), maxBlocks);
                 for (;;) {
-                    Table& bins = table(blocks);
+                    // Over many ranks every rank's table holds every rank's hits: the ranks
+                    // agree on its size and on whether to bin again.
+                    uint64_t agreed[2] = {blocks, 0};
+                    if (group) group->MaxU64(agreed, 1);
+                    Table& bins = table(size_t(agreed[0]));
                     bins.Clear();
                     forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                         bin(r, bins, rc);
                     });
-                    if (bins.Dropped() == 0 || bins.NumBlocks() >= maxBlocks) break;
+                    agreed[0] = bins.Dropped(), agreed[1] = bins.NumBlocks() >= maxBlocks;
+                    if (group) {
+                        BinAccumulators<Table> acc(bins);
+                        AllReduce(*group, acc);
+                        agreed[0] = bins.Dropped();
+                        group->MaxU64(agreed, 2);
+                    }
+                    if (agreed[0] == 0 || agreed[1]) break;
                     blocks = 2 * bins.NumBlocks();
                 }
                 const Table& bins = table(blocks);
@@ -241,9 +296,13 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         if (c.tsc && opt.visibilityPrepass != VisibilityPrepass::Only) c.tsc->NoteLookups();
         done = s1;
         ++passesRun;
+        sums.passes = passesRun;
         if (opt.seconds > 0.0f) {
-            const double passTime = std::chrono::duration<double>(Clock::now() - passStart).count();
-            const double left = opt.seconds - elapsed();
+            // Over many ranks rank 0's clock decides for all: the budget is the job's.
+            double clock[2] = {std::chrono::duration<double>(Clock::now() - passStart).count(),
+                               opt.seconds - elapsed()};
+            if (group) group->Broadcast(clock, sizeof clock, 0);
+            const double passTime = clock[0], left = clock[1];
             if (left <= 0.0) break;
             if (progressive) {
                 const BudgetStep step =
@@ -314,7 +373,21 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     FrameSums sums{std::vector<double>(numPixels * 3, 0.0),
                    std::vector<PixelAovs>(opt.aovs.Any() ? numPixels : 0)};
     tbb::enumerable_thread_specific<RayCounts> counts;
+    const uint64_t sent0 = opt.ranks ? opt.ranks->BytesSent() : 0;
+    const uint64_t received0 = opt.ranks ? opt.ranks->BytesReceived() : 0;
     const int done = RunPasses(ctx, frameCache, sums, counts, start) - opt.firstSample;
+    const uint64_t passBytes =
+        opt.ranks ? opt.ranks->BytesSent() + opt.ranks->BytesReceived() - sent0 - received0 : 0;
+    if (opt.ranks && opt.ranks->Size() > 1) {
+        // Every rank's rows to rank 0: each pixel's sums are one rank's, as one process adds
+        // them (no reduction of the image).
+        RankGroup& g = *opt.ranks;
+        const RowSplit split{opt.rowBegin, rowEnd, g.Rank(), g.Size()};
+        GatherRows(g, split, sums.rgb.data(), size_t(W) * 3 * sizeof(double));
+        if (!sums.aovs.empty()) GatherRows(g, split, sums.aovs.data(), W * sizeof(PixelAovs));
+        if (opt.pixelCache)
+            GatherRows(g, split, opt.pixelCache->data(), W * sizeof(PixelCacheCounts));
+    }
 
     RenderResult result;
     result.beauty = Image(W, H, 3);
@@ -326,12 +399,26 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         result.stats.shadowRays += rc.shadow;
         result.stats.bounceRays += rc.bounce;
     }
+    if (opt.ranks && opt.ranks->Size() > 1) {
+        uint64_t rays[5] = {result.stats.cameraRays, result.stats.cameraRaysCulled,
+                            result.stats.shadowRays, result.stats.bounceRays, sums.hitBinsDropped};
+        opt.ranks->SumU64(rays, 5);
+        result.stats.cameraRays = rays[0], result.stats.cameraRaysCulled = rays[1];
+        result.stats.shadowRays = rays[2], result.stats.bounceRays = rays[3];
+        sums.hitBinsDropped = rays[4];
+    }
     for (const CacheStats& cs : frameCache.Stats()) result.stats.cache.Merge(cs);
     for (const RecordStats& ps : psrStats) result.stats.psr.Merge(ps);
     result.stats.psrBytes = psrCache ? psrCache->BytesUsed() : 0;
     result.stats.sppDone = done;
     result.stats.hitBinsDropped = sums.hitBinsDropped;
     result.stats.hitBinBytes = sums.hitBinBytes;
+    result.stats.passes = sums.passes;
+    if (opt.ranks) {
+        result.stats.bytesSent = opt.ranks->BytesSent() - sent0;
+        result.stats.bytesReceived = opt.ranks->BytesReceived() - received0;
+        result.stats.passBytes = passBytes;
+    }
     result.stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
     return result;

@@ -205,6 +205,7 @@ struct FrameSums {
     std::vector<PixelAovs> aovs;  // empty unless AOVs were asked for
     uint64_t hitBinsDropped = 0;  // see RenderStats
     size_t hitBinBytes = 0;
+    int passes = 0;
 };
 
 // The stages of a pass, each over one tile `r` (rows x columns of pixels) and samples [s0, s1)

@@ -15,6 +15,8 @@
 
 namespace texcache {
 
+class RankGroup;
+
 /// Which texels of a filter footprint a render shades and averages.
 ///   Visible  only those the render's camera rays reach (a prepass traces the camera rays and
 ///            marks them: texcache/visible_texels.h), point-symmetric for the averaging filters.
@@ -212,6 +214,11 @@ struct RenderOptions {
     /// without texture-space shading); null costs one predictable branch per lookup (the
     /// preview's cache heat maps).
     std::vector<PixelCacheCounts>* pixelCache = nullptr;
+    /// The ranks of a job that share this render (renderer/distributed/rank_group.h), null or
+    /// of one rank: this process renders it alone. Every rank renders its bands of rows and the
+    /// ranks combine the texture-space accumulators after each pass; rank 0's result holds the
+    /// whole image and statistics summed over the ranks, the others' only their own rows.
+    RankGroup* ranks = nullptr;
 };
 
 struct RenderStats {
@@ -228,6 +235,11 @@ struct RenderStats {
     /// allowed (256 MiB), left out of the reconstruction. 0 unless a frame is enormous.
     uint64_t hitBinsDropped = 0;
     size_t hitBinBytes = 0;  ///< bytes of the hit bins (0 unless hits)
+    int passes = 0;          ///< passes of camera samples run
+    /// Over many ranks (RenderOptions::ranks): payload bytes this rank sent to and received
+    /// from the others during the render, and of those the passes' (the texture-space
+    /// accumulators, the noise, the budget; the rest is the rows gathered at the end).
+    uint64_t bytesSent = 0, bytesReceived = 0, passBytes = 0;
 };
 
 /// A scene file's render settings as options: size, spp, time budget, integrator, seed, depth,

@@ -11,6 +11,7 @@ pkgs=(build-essential cmake pkg-config
       libeigen3-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev gnuplot-nox
       zlib1g-dev      # texcache_ptex (libpng-dev and libopenexr-dev pull it in too)
       libglfw3-dev libimgui-dev xvfb xauth libgl1-mesa-dri
+      libopenmpi-dev openmpi-bin   # renders over many ranks (docs/cluster.md); optional
       clang-format    # scripts/check_format.sh
       embree-tools)   # Embree's pathtracer, the peer of `texcache bench peer` (optional at run time)
 missing=()

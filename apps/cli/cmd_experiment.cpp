@@ -1,13 +1,18 @@
 // SPDX-License-Identifier: Apache-2.0
 // `texcache experiment <name> --out DIR [--quick]`: reproduce a claim of the paper on our scenes
 // and write CSV + PNG plots + a markdown summary into DIR.
+#include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <string>
+#include <vector>
 
 #include "cli_util.h"
 #include "commands.h"
 #include "experiment_util.h"
+#include "job.h"
 #include "texcache/error.h"
 
 namespace texcache::cli {
@@ -50,11 +55,29 @@ std::string ExperimentNames() {
     return s + ", all";
 }
 
-int RunExperiment(const ExperimentArgs& a) {
-    const auto& all = Experiments();
-    if (a.name != "all" && !all.count(a.name))
-        throw InputError("experiment",
-                         "unknown experiment '" + a.name + "' (valid: " + ExperimentNames() + ")");
+/// The experiments "a,b" or "all" names, in the order `all` runs them.
+std::vector<std::string> Names(const std::string& list) {
+    std::vector<std::string> names;
+    for (size_t at = 0; at <= list.size();) {
+        const size_t comma = std::min(list.find(',', at), list.size());
+        const std::string name = list.substr(at, comma - at);
+        if (name == "all")
+            for (const auto& [n, fn] : Experiments()) names.push_back(n);
+        else
+            names.push_back(name);
+        at = comma + 1;
+    }
+    std::sort(names.begin(), names.end());
+    names.erase(std::unique(names.begin(), names.end()), names.end());
+    return names;
+}
+
+/// The arguments checked, the output directory made.
+void CheckExperiment(const ExperimentArgs& a) {
+    for (const std::string& name : Names(a.name))
+        if (!Experiments().count(name))
+            throw InputError("experiment", "unknown experiment '" + name +
+                                               "' (valid: " + ExperimentNames() + ")");
     namespace fs = std::filesystem;
     std::error_code ec;
     fs::create_directories(a.out, ec);
@@ -65,12 +88,37 @@ int RunExperiment(const ExperimentArgs& a) {
     if (a.cameraSpp < 0 || a.cameraSpp > 1024)
         throw InputError("--camera-spp",
                          "must be in 1..1024 (got " + std::to_string(a.cameraSpp) + ")");
+}
+
+int RunExperiment(const ExperimentArgs& a) {
+    // Over many ranks every rank checks first (one line if one fails).
+    OnEveryRank([&] { CheckExperiment(a); });
     experiments::Setup s{a.out,     a.scenes,    a.quick,    a.only,
                          a.methods, a.cameraSpp, a.ablation, a.set};
     const double t0 = NowSeconds();
     int code = 0;
-    for (const auto& [name, fn] : all)
-        if (a.name == "all" || a.name == name) code = std::max(code, fn(s));
+    // Over many ranks the experiments are dealt round-robin: each writes its own files in
+    // --out, and each rank times its own renders, so an experiment's timings compare renders
+    // made under one rank's load (ranks sharing a machine's cores slow each other alike).
+    RankGroup& job = Job();
+    int index = 0;
+    std::string mine;
+    for (const std::string& name : Names(a.name)) {
+        if (index++ % job.Size() != job.Rank()) continue;
+        const double te = NowSeconds();
+        code = std::max(code, Experiments().at(name)(s));
+        mine += experiments::Format("experiment %s on rank %d of %d: %.1f s\n", name.c_str(),
+                                    job.Rank(), job.Size(), NowSeconds() - te);
+    }
+    if (job.Size() > 1) {
+        // Rank 0 reports every rank's experiments (their files are already in --out).
+        const std::vector<std::vector<char>> lines = job.Gather({mine.begin(), mine.end()});
+        std::vector<uint64_t> codes = job.AllGather({uint64_t(code)});
+        for (const uint64_t c : codes) code = std::max(code, int(c));
+        if (job.Rank() != 0) return code;
+        for (const std::vector<char>& l : lines) std::fwrite(l.data(), 1, l.size(), stdout);
+        std::printf("(each rank timed its own renders)\n");
+    }
     std::printf("experiment %s finished in %.1f s\n", a.name.c_str(), NowSeconds() - t0);
     return code;
 }
@@ -81,7 +129,10 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     auto args = std::make_shared<ExperimentArgs>();
     CLI::App* cmd = app.add_subcommand(
         "experiment", "Run one of the paper's experiments: CSV + PNG plots + markdown summary");
-    cmd->add_option("name", args->name, "One of: " + ExperimentNames())->required();
+    cmd->add_option("name", args->name,
+                    "One of: " + ExperimentNames() +
+                        "; or several, comma separated (over MPI ranks: dealt round-robin)")
+        ->required();
     cmd->add_option("--out", args->out, "Output directory (created if missing)")->required();
     cmd->add_flag("--quick", args->quick,
                   "Test size: small images and budgets (under a minute); not for conclusions");

@@ -3,11 +3,13 @@
 // This file declares the command's options, in the groups its --help shows, and sends a parsed
 // command to the kind of render it asks for (render_command.h lists the files of each kind).
 #include <cstdio>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "commands.h"
+#include "job.h"
 #include "render_command.h"
 #include "renderer/frame_buffers/frame_buffers_render.h"
 #include "renderer/integrators/product_sampling.h"
@@ -18,13 +20,19 @@ namespace texcache::cli {
 
 namespace {
 
-int RunRender(const RenderArgs& a) {
+/// Everything a render does before it renders (the scene read, the options checked, the outputs
+/// planned), and then the render to run.
+std::function<int()> PrepareRender(const RenderArgs& a) {
     std::vector<std::string> warnings;
     const double tLoad = NowSeconds();
-    Scene scene = LoadSceneOrObj(a.scene, &warnings);
+    if (InjectedFailure("read")) throw InputError(a.scene, "cannot read (TEXCACHE_FAIL_RANK)");
+    const auto owned = std::make_shared<Scene>(LoadSceneOrObj(a.scene, &warnings));
+    Scene& scene = *owned;
     const double loadSeconds = NowSeconds() - tLoad;
-    for (const std::string& w : warnings)
-        std::fprintf(stderr, "texcache: warning: %s\n", internal::OneLine(w).c_str());
+    if (Job().Rank() == 0)
+        for (const std::string& w : warnings)
+            std::fprintf(stderr, "texcache: warning: %s\n", internal::OneLine(w).c_str());
+    const bool ranks = Job().Size() > 1;
 
     // Command-line values override the scene's render settings.
     RenderSettings& s = scene.settings;
@@ -34,6 +42,11 @@ int RunRender(const RenderArgs& a) {
     CheckStereoOptions(a);
     const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
+        if (ranks && (!a.frameBuffers.empty() || a.frames.empty()))
+            throw InputError(a.frameBuffers.empty() ? "--denoise" : "--frame-buffers",
+                             a.frameBuffers.empty()
+                                 ? "on many ranks splits --frames: give them, or run one rank"
+                                 : "runs on one rank: launch it without mpirun");
         if (const std::string why = FrameBufferCameraProblem(scene.camera); !why.empty())
             throw InputError(a.frameBuffers.empty() ? "--denoise" : "--frame-buffers",
                              scene.path + ": " + why);
@@ -52,8 +65,10 @@ int RunRender(const RenderArgs& a) {
         if (!a.frames.empty()) ParseFrames(a.frames, &first, &last);
         const float fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
         if (!a.denoise.empty())
-            return RunDenoised(a, scene, fbo, !a.frames.empty(), first, last, fps);
-        return RunFrameBuffers(a, scene, fbo, first, last, fps);
+            return [=, &a] {
+                return RunDenoised(a, *owned, fbo, !a.frames.empty(), first, last, fps);
+            };
+        return [=, &a] { return RunFrameBuffers(a, *owned, fbo, first, last, fps); };
     }
     RenderOptions opt = common;
     opt.hitSamples = CheckRange("--hit-samples", a.hitSamples, 1, 1 << 16);
@@ -71,10 +86,13 @@ int RunRender(const RenderArgs& a) {
         fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
         if (a.overshading) throw InputError("--overshading", "renders one frame: drop --frames");
     }
+    if (ranks && (a.stereo || a.overshading))
+        throw InputError(a.stereo ? "--stereo" : "--overshading",
+                         "runs on one rank: launch it without mpirun");
     if (a.stereo) {
         if (visibility != VisibilityFilterKind::None)
             throw InputError("--visibility-filter", "not with --stereo (yet): drop one of them");
-        return RunStereo(a, scene, opt);
+        return [=, &a] { return RunStereo(a, *owned, opt); };
     }
     // Plan and check every output first: a bad or dangerous name fails before anything renders.
     std::vector<OutputPaths> outs;
@@ -87,9 +105,20 @@ int RunRender(const RenderArgs& a) {
     CheckCombinations(a, s, opt, outs.front());
     CheckFiles(scene, outs, a.statsFile);
 
-    const std::unique_ptr<tbb::global_control> limit = ThreadLimit(a.threads);
-    if (!a.frames.empty()) return RunAnimation(a, scene, opt, visibility, outs, first, last, fps);
-    return RunImage(a, scene, opt, visibility, outs.front(), loadSeconds);
+    return [=, &a]() mutable {
+        const std::unique_ptr<tbb::global_control> limit = ThreadLimit(a.threads);
+        if (!a.frames.empty())
+            return RunAnimation(a, *owned, opt, visibility, outs, first, last, fps);
+        return RunImage(a, *owned, opt, visibility, outs.front(), loadSeconds);
+    };
+}
+
+int RunRender(const RenderArgs& a) {
+    // Over many ranks every rank prepares, and a failure on any (a scene one cannot read) ends
+    // the job before anything renders, in one line naming the rank.
+    std::function<int()> render;
+    OnEveryRank([&] { render = PrepareRender(a); });
+    return render();
 }
 
 }  // namespace
@@ -118,6 +147,11 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Animation: render frames A:B (inclusive) or N (0..N-1) at --fps; outputs "
                     "are numbered (a run of # in -o, else name_NNNN.ext)");
     cmd->add_option("--fps", args->fps, "Frames per second of --frames")->capture_default_str();
+    cmd->add_option("--warmup-frames", args->warmupFrames,
+                    "Over many MPI ranks (each renders a contiguous chunk of --frames): frames "
+                    "rendered, not written, before a chunk to rebuild the temporal history (-1: "
+                    "enough for the history left out to weigh under 1% at --temporal-alpha)")
+        ->capture_default_str();
 
     group("Sampling");
     cmd->add_option("--spp", args->spp, "Samples per pixel (a cap when --seconds is given)");

@@ -2,9 +2,12 @@
 // `texcache`: render, compare and benchmark texture-space cached shading on subdivision surfaces.
 #include <cstdio>
 #include <exception>
+#include <memory>
 #include <new>
+#include <string>
 
 #include "commands.h"
+#include "job.h"
 #include "renderer/library_versions.h"
 #include "texcache/error.h"
 
@@ -45,6 +48,30 @@ std::string CommandPath(const CLI::App& app) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    // The job first: MPI may take its own arguments out of argv.
+    std::unique_ptr<texcache::RankGroup> job;
+    try {
+        job = texcache::JoinJob(&argc, &argv);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "texcache: error: %s\n",
+                     texcache::internal::OneLine(e.what()).c_str());
+        return 2;
+    }
+    texcache::cli::SetJob(job.get());
+    const int rank = job->Rank();
+    // Over many ranks, an error on the way (not agreed on by every rank: OnEveryRank) is this
+    // rank's alone: named with its rank, then the job stopped, as the others wait for it.
+    auto fail = [&](const char* kind, const std::string& what, int code) {
+        if (job->Size() == 1) {
+            std::fprintf(stderr, "texcache: %s: %s\n", kind, what.c_str());
+            return code;
+        }
+        std::fprintf(stderr, "texcache: %s: rank %d of %d: %s\n", kind, rank, job->Size(),
+                     what.c_str());
+        std::fflush(stderr);
+        job->Abort(code);
+        return code;  // not reached
+    };
     CLI::App app{"texcache: texture-space shading cache for ray-traced subdivision surfaces"};
     app.require_subcommand(1);
     app.set_version_flag("--version", VersionReport,
@@ -62,23 +89,22 @@ int main(int argc, char** argv) {
     RejectEmptyValues(&app);
     try {
         app.parse(argc, argv);
-    } catch (const CLI::Success& e) {  // --help, --version
-        return app.exit(e);
+    } catch (const CLI::Success& e) {  // --help, --version: every rank parses the same argv
+        return rank == 0 ? app.exit(e) : 0;
     } catch (const CLI::ParseError& e) {
-        // Malformed options exit 2 like any other bad input, in the same one-line form.
-        std::fprintf(stderr, "texcache: error: %s (see %s --help)\n",
-                     texcache::internal::OneLine(e.what()).c_str(), CommandPath(app).c_str());
+        // Malformed options exit 2 like any other bad input, in the same one-line form (once).
+        if (rank == 0)
+            std::fprintf(stderr, "texcache: error: %s (see %s --help)\n",
+                         texcache::internal::OneLine(e.what()).c_str(), CommandPath(app).c_str());
         return 2;
+    } catch (const texcache::cli::JobFailed& e) {  // reported by rank 0 (AgreeOrFail)
+        return e.code;
     } catch (const texcache::InputError& e) {
-        std::fprintf(stderr, "texcache: error: %s\n", e.what());
-        return 2;
+        return fail("error", e.what(), 2);
     } catch (const std::bad_alloc&) {
-        std::fprintf(stderr, "texcache: error: out of memory\n");
-        return 1;
+        return fail("error", "out of memory", 1);
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "texcache: internal error: %s\n",
-                     texcache::internal::OneLine(e.what()).c_str());
-        return 1;
+        return fail("internal error", texcache::internal::OneLine(e.what()), 1);
     }
     return exitCode;
 }

@@ -58,6 +58,9 @@ struct RenderArgs {
     // Animation: frames "A:B" (inclusive) or "N" (frames 0..N-1) at fps.
     std::string frames;
     float fps = 24.0f;
+    // Over many ranks: frames rendered before each rank's chunk to fill the temporal history
+    // (-1: enough for --temporal-alpha, WarmUpFrames).
+    int warmupFrames = -1;
     double sampleCacheMb = 64.0, texelCacheMb = 64.0;
     float lodBias = 0.0f;
     bool referenceCache = false;
@@ -146,6 +149,19 @@ int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
 int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
                  VisibilityFilterKind visibility, std::vector<OutputPaths>& outs, int first,
                  int last, float fps);
+
+/// Frames a rank renders (unwritten) before its chunk of an animation so that its temporal
+/// history matches the sequence's: the history that is missing weighs alpha^W after W frames,
+/// and W makes that at most 1% (13 frames at the paper's 0.7; none without temporal history).
+int WarmUpFrames(float temporalAlpha);
+
+/// This rank's part of frames first..last over the job's ranks: a contiguous chunk
+/// [first, last] (empty when there are more ranks than frames), rendered from `from` (the
+/// `warm` frames before the chunk rendered and not written). One rank: all of them.
+struct FrameChunk {
+    int from, first, last;
+};
+FrameChunk ChunkOfFrames(int first, int last, int warm);
 
 /// --stats: the render's figures as JSON (`overshading` < 0: not measured).
 std::string StatsJson(const RenderStats& s, const RenderScene& rs, const TextureSpaceCache* cache,

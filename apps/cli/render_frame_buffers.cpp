@@ -128,11 +128,20 @@ int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool
         a.demodulate ? screen::Demodulation::On : screen::Demodulation::Off;
     screen::ScreenSpaceDenoiser denoiser;
     std::vector<glm::vec3> denoised;
+    // Over many ranks each denoises a contiguous chunk of the frames after warm-up frames that
+    // rebuild both histories: the stage's (its temporal blend keeps 1 - alpha of the history)
+    // and the texture-space cache's (--temporal-alpha).
+    const int warm = a.warmupFrames >= 0
+                         ? a.warmupFrames
+                         : std::max(WarmUpFrames(1.0f - screen::DenoiserSettings{}.alpha),
+                                    WarmUpFrames(opt.texture.temporalAlpha));
+    const FrameChunk chunk = ChunkOfFrames(first, last, warm);
     const double total = ForEachFrameBuffers(
-        a, scene, opt, first, last, fps,
+        a, scene, opt, chunk.from, chunk.last, fps,
         [&](int f, const RenderOptions& fo, const RenderStats& st, const screen::FrameBuffers& fb,
             double) {
             denoiser.Denoise(fb, method, demod, &denoised);
+            if (f < chunk.first) return;  // a warm-up frame
             OutputPaths& out = outs[size_t(f - first)];
             AtomicFiles group;
             WriteOutputs(out, ToImage(denoised, fb.width, fb.height), {}, a.exposure, group);

@@ -2,9 +2,14 @@
 // `texcache render` of one image or of an animation (--frames), and what it reports: the time
 // and memory of the render and of the scene build, the cache's traffic, the overshading against
 // unbounded caches (--overshading), and --stats as JSON.
+#include <algorithm>
+#include <cmath>
+#include <csignal>
 #include <cstdio>
 
+#include "job.h"
 #include "render_command.h"
+#include "renderer/distributed/rank_group.h"
 #include "renderer/render_policy.h"
 #include "renderer/texture_space/visibility_pass.h"
 
@@ -52,6 +57,12 @@ std::string StatsJson(const RenderStats& s, const RenderScene& rs, const Texture
     add("texel_cache_bytes", cache ? double(cache->TexelCacheBytes()) : 0.0);
     add("hit_bin_bytes", double(s.hitBinBytes));  // shading at the hits (--ts-samples hits)
     add("hit_bins_dropped", double(s.hitBinsDropped));
+    // Over many ranks: rank 0's payload bytes exchanged with the others (rank_group.h).
+    add("ranks", double(opt.ranks ? opt.ranks->Size() : 1));
+    add("passes", double(s.passes));
+    add("bytes_sent", double(s.bytesSent));
+    add("bytes_received", double(s.bytesReceived));
+    add("pass_bytes", double(s.passBytes));
     add("bytes_used", (cache ? double(cache->BytesUsed()) : 0.0) + double(s.psrBytes));
     // The scene: its size and the meshes Embree could not take (embree_mesh.cpp's design note).
     const RenderScene::TessellationStats t = rs.LimitTessellated();
@@ -76,32 +87,65 @@ int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& o
     // persists, keyed by each object's own grids.
     AnimationFrames frames(scene, SceneOptionsFor(a, opt, scene.settings.time), opt, fps,
                            kCacheSizeOptions);
+    // Over many ranks each renders a contiguous chunk of the frames, alone, after warm-up
+    // frames that rebuild the temporal history the sequence would have (WarmUpFrames).
+    const int ranks = Job().Size(), rank = Job().Rank(), count = last - first + 1;
+    const FrameChunk chunk = ChunkOfFrames(
+        first, last,
+        a.warmupFrames >= 0 ? a.warmupFrames : WarmUpFrames(opt.texture.temporalAlpha));
+    const int from = chunk.from, chunkFirst = chunk.first, chunkLast = chunk.last;
+    const char* who = ranks > 1 ? "rank " : "";
+    const std::string rankName = ranks > 1 ? std::to_string(rank) + ": " : "";
     double total = 0.0;
-    for (int f = first; f <= last; ++f) {
+    for (int f = from; f <= chunkLast; ++f) {
         const double tf = NowSeconds();
         frames.Pose(f);
         RenderOptions& fo = frames.Options();
         fo.progress = false;
         RenderResult r = Render(frames.PosedScene(), fo, frames.Cache());
+        if (f < chunkFirst) {
+            std::printf("%s%swarm-up frame %d: %.3f s\n", who, rankName.c_str(), f,
+                        r.stats.seconds);
+            continue;
+        }
         ApplyVisibilityFilter(visibility, frames.PosedScene(), fo, &r.beauty);
         OutputPaths& out = outs[size_t(f - first)];
         AtomicFiles group;
         WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
         group.Commit();
         total += NowSeconds() - tf;
-        std::printf("frame %d (%d of %d, t = %.3f): %.3f s, %.1f%% texel hits -> %s\n", f,
-                    f - first + 1, last - first + 1, fo.frameTime, r.stats.seconds,
+        std::printf("%s%sframe %d (%d of %d, t = %.3f): %.3f s, %.1f%% texel hits -> %s\n", who,
+                    rankName.c_str(), f, f - first + 1, count, fo.frameTime, r.stats.seconds,
                     100.0 * r.stats.cache.TexelHitRate(), out.written.front().c_str());
         std::fflush(stdout);
     }
-    std::printf("rendered %d frames of %s in %.2f s (%dx%d, %d spp, integrator %s)\n",
-                last - first + 1, scene.path.c_str(), total, opt.width, opt.height, opt.spp,
-                IntegratorName(opt.integrator));
+    std::printf("%s%srendered %d frames of %s in %.2f s (%dx%d, %d spp, integrator %s)\n", who,
+                rankName.c_str(), chunkLast - chunkFirst + 1, scene.path.c_str(), total, opt.width,
+                opt.height, opt.spp, IntegratorName(opt.integrator));
     return 0;
 }
 
-int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
+FrameChunk ChunkOfFrames(int first, int last, int warm) {
+    const int ranks = Job().Size(), rank = Job().Rank();
+    if (ranks == 1) return {first, first, last};
+    const int64_t count = last - first + 1;
+    const int chunkFirst = first + int(count * rank / ranks);
+    const int chunkLast = first + int(count * (rank + 1) / ranks) - 1;
+    if (chunkLast < chunkFirst) return {chunkFirst, chunkFirst, chunkLast};  // no frames
+    return {std::max(first, chunkFirst - warm), chunkFirst, chunkLast};
+}
+
+int WarmUpFrames(float temporalAlpha) {
+    if (!(temporalAlpha > 0.0f)) return 0;
+    return int(std::ceil(std::log(0.01) / std::log(double(temporalAlpha))));
+}
+
+int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& options,
              VisibilityFilterKind visibility, OutputPaths& out, double loadSeconds) {
+    // Over many ranks each renders its rows (RenderOptions::ranks); rank 0 writes and reports.
+    RenderOptions opt = options;
+    const bool root = Job().Rank() == 0;
+    if (Job().Size() > 1) opt.ranks = &Job(), opt.progress = opt.progress && root;
     const double t0 = NowSeconds();
     RenderScene rs(scene, SceneOptionsFor(a, opt, scene.settings.time));
     const double buildSeconds = NowSeconds() - t0;
@@ -120,7 +164,9 @@ int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
     const double tCache = NowSeconds();
     if (opt.texture.enabled) cache = MakeTextureSpaceCache(rs, opt.texture, kCacheSizeOptions);
     const double cacheSeconds = NowSeconds() - tCache;
+    if (InjectedFailure("die")) std::raise(SIGKILL);  // while the others render
     RenderResult r = Render(rs, opt, cache.get());
+    if (!root) return 0;
     const double visibilitySeconds = ApplyVisibilityFilter(visibility, rs, opt, &r.beauty);
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
@@ -179,6 +225,14 @@ int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& opt,
             (unsigned long long)p.built, (unsigned long long)p.evictions,
             double(r.stats.psrBytes) / (1 << 20));
     }
+    if (Job().Size() > 1)
+        std::printf(
+            "ranks: %d, rows in bands of %d; rank 0 exchanged %.1f KiB sent, %.1f KiB received: "
+            "%.1f KiB a pass (%d passes), %.1f KiB of rows gathered\n",
+            Job().Size(), RowSplit::kRows, double(r.stats.bytesSent) / 1024.0,
+            double(r.stats.bytesReceived) / 1024.0,
+            double(r.stats.passBytes) / 1024.0 / std::max(r.stats.passes, 1), r.stats.passes,
+            double(r.stats.bytesSent + r.stats.bytesReceived - r.stats.passBytes) / 1024.0);
     std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
     for (const std::string& f : out.written) std::printf("wrote %s\n", f.c_str());
     return 0;

@@ -34,6 +34,7 @@
 #include <cstdlib>
 #include <memory>
 #include <new>
+#include <vector>
 
 #include "texcache/huge_pages.h"
 #include "texcache/texel_key.h"
@@ -160,23 +161,41 @@ public:
     /// Adds `v` to bin `key` (a TexelKey of the bin's face, level and coordinates). False when
     /// the table had no room (the add is dropped and counted).
     bool Add(const TexelKey& key, const Value& v) {
-        const uint64_t bk = BlockKey(key);
-        size_t i = Home(bk);
-        for (int p = 0; p < kMaxProbes; ++p, i = (i + 1) & (blocks_ - 1)) {
-            std::atomic<uint64_t>& slot = bins_[i].key;
-            uint64_t k = slot.load(std::memory_order_acquire);
-            if (k == TexelKey::kEmpty) {
-                if (slot.compare_exchange_strong(k, bk, std::memory_order_acq_rel)) {
-                    k = bk;  // claimed
-                    used_.fetch_add(1, std::memory_order_relaxed);
-                }  // else lost the race: `k` now holds the winner's key
-            }
-            if (k != bk) continue;
-            Bin::AddTo(&bins_[i].w[Lane(key) * Bin::kWords], v);
-            return true;
+        Block* b = Claim(BlockKey(key));
+        if (b) Bin::AddTo(&b->w[Lane(key) * Bin::kWords], v);
+        return b != nullptr;
+    }
+
+    /// Words of a record of ExportBlocks: the block's key, then its 16 bins' words.
+    static constexpr size_t kRecordWords = 1 + 16 * Bin::kWords;
+    /// Appends every block in use as a record to `out`: what a table of the same kind in
+    /// another process adds (AddBlocks) to hold the sums of both.
+    void ExportBlocks(std::vector<uint64_t>* out) const {
+        for (size_t i = 0; i < blocks_; ++i) {
+            const uint64_t k = bins_[i].key.load(std::memory_order_relaxed);
+            if (k == TexelKey::kEmpty) continue;
+            out->push_back(k);
+            for (const auto& w : bins_[i].w) out->push_back(w.load(std::memory_order_relaxed));
         }
-        dropped_.fetch_add(1, std::memory_order_relaxed);
-        return false;
+    }
+    /// Adds `n` records of ExportBlocks (another table's) to this one, bin by bin (the same
+    /// saturating sums as Add); the number of records that found no room (dropped, counted).
+    uint64_t AddBlocks(const uint64_t* records, size_t n) {
+        uint64_t lost = 0;
+        for (size_t r = 0; r < n; ++r, records += kRecordWords) {
+            Block* b = Claim(records[0]);
+            if (!b) {
+                ++lost;
+                continue;
+            }
+            for (int lane = 0; lane < 16; ++lane) {
+                std::atomic<uint64_t> words[Bin::kWords];
+                for (int k = 0; k < Bin::kWords; ++k)
+                    words[k].store(records[1 + lane * Bin::kWords + k], std::memory_order_relaxed);
+                Bin::AddTo(&b->w[lane * Bin::kWords], Bin::Load(words));
+            }
+        }
+        return lost;
     }
 
     /// The value of bin `key` (zero when nothing was added to it).
@@ -259,6 +278,24 @@ private:
     };
     static constexpr size_t kBytesPerBlock = sizeof(Block);
 
+    /// The block of key `bk`, claimed if it is new; null (the add dropped and counted) when no
+    /// block within kMaxProbes is free.
+    Block* Claim(uint64_t bk) {
+        size_t i = Home(bk);
+        for (int p = 0; p < kMaxProbes; ++p, i = (i + 1) & (blocks_ - 1)) {
+            std::atomic<uint64_t>& slot = bins_[i].key;
+            uint64_t k = slot.load(std::memory_order_acquire);
+            if (k == TexelKey::kEmpty) {
+                if (slot.compare_exchange_strong(k, bk, std::memory_order_acq_rel)) {
+                    k = bk;  // claimed
+                    used_.fetch_add(1, std::memory_order_relaxed);
+                }  // else lost the race: `k` now holds the winner's key
+            }
+            if (k == bk) return &bins_[i];
+        }
+        dropped_.fetch_add(1, std::memory_order_relaxed);
+        return nullptr;
+    }
     static uint64_t BlockKey(const TexelKey& k) {
         TexelKey b = k;
         b.iu = uint16_t(k.iu >> 2), b.iv = uint16_t(k.iv >> 2);
