@@ -52,6 +52,9 @@ std::string Quoted(std::string_view t) {
 /// (its FLT_LARGE), and a cage that large cannot be framed by a camera in float either.
 constexpr float kMaxCoordinate = 1e18f;
 
+/// OpenSubdiv's limit on face sizes and vertex valences (Far::VALENCE_LIMIT).
+constexpr int kMaxValence = (1 << 16) - 1;
+
 class Parser {
 public:
     Parser(const std::string& name, std::vector<std::string>* warnings)
@@ -215,6 +218,9 @@ private:
             ++n;
         }
         if (n < 3) Fail("face has " + std::to_string(n) + " vertices (at least 3 needed)");
+        if (n > kMaxValence)
+            Fail("face has " + std::to_string(n) + " vertices; OpenSubdiv takes at most " +
+                 std::to_string(kMaxValence));
         if (withUv != 0 && withUv != n)
             Fail("face gives texture coordinates for " + std::to_string(withUv) + " of its " +
                  std::to_string(n) + " corners (all or none needed)");
@@ -237,6 +243,13 @@ private:
         }
         if (repeated >= 0)
             Fail("degenerate face: it repeats vertex " + std::to_string(repeated + 1));
+        if (facesAt_.size() < cage_.positions.size()) facesAt_.resize(cage_.positions.size(), 0);
+        for (int i = 0; i < n; ++i)
+            if (++facesAt_[size_t(v[i])] >= kMaxValence)
+                Fail("vertex " + std::to_string(v[i] + 1) + " is in " +
+                     std::to_string(kMaxValence) +
+                     " faces; OpenSubdiv takes a valence of at most " +
+                     std::to_string(kMaxValence) + " edges");
         int& firstLine = withUv ? firstUvFaceLine_ : firstNoUvFaceLine_;
         if (firstLine == 0) firstLine = line_;
         cage_.faceVertexCounts.push_back(n);
@@ -420,6 +433,7 @@ private:
     bool warnedNormal_ = false;
     std::vector<int> faceUv_;   ///< parallel to faceVertexIndices, -1 = no vt
     std::vector<int> scratch_;  ///< long n-gons' duplicate check
+    std::vector<int> facesAt_;  ///< per vertex, the faces using it so far
     int firstUvFaceLine_ = 0, firstNoUvFaceLine_ = 0;
     std::map<std::string, std::pair<int, int>, std::less<>>
         unknownStatements_;         ///< first line, count

@@ -575,7 +575,7 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
     unsigned prim = 0;
     float U = c.u, V = c.v;
-    if (!mesh.limit) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
+    if (!mesh.tessellated) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
     alignas(16) float P[4], du[4], dv[4];
     if (!mesh.Eval(c, prim, U, V, P, du, dv)) return false;
     const glm::mat4 M = I.Transform(object, time);
