@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
 #include <new>
 #include <utility>
 
@@ -96,6 +97,16 @@ CachedLight ParseCachedLight(const std::string& name, const std::string& where) 
 bool CachesDirectLight(CachedLight choice, bool softLight, TextureSamples samples) {
     return choice == CachedLight::All ||
            (choice == CachedLight::Auto && softLight && samples == TextureSamples::Hits);
+}
+
+void CheckStereoShear(const StereoRig& rig, const std::string& where) {
+    if (rig.eyeSeparation <= 100.0f * rig.convergence) return;
+    char msg[160];
+    std::snprintf(msg, sizeof msg,
+                  "the eyes are %g apart but converge at %g, more than 100 times closer: their "
+                  "views would not overlap",
+                  double(rig.eyeSeparation), double(rig.convergence));
+    throw InputError(where, msg);
 }
 
 }  // namespace texcache

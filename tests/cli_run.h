@@ -3,8 +3,11 @@
 #pragma once
 #include <sys/wait.h>
 
+#include <gtest/gtest.h>
+
 #include <array>
 #include <cstdio>
+#include <filesystem>
 #include <string>
 
 namespace texcache::test {
@@ -25,6 +28,13 @@ inline CliRun Texcache(const std::string& args) {
     const int status = pclose(p);
     r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return r;
+}
+
+/// A directory of the test's temporary directory (created), for one test file's files.
+inline std::filesystem::path CliTempDir(const std::string& name) {
+    const std::filesystem::path d = std::filesystem::path(::testing::TempDir()) / name;
+    std::filesystem::create_directories(d);
+    return d;
 }
 
 }  // namespace texcache::test

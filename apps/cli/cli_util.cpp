@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <charconv>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -187,6 +188,14 @@ Image Montage(const std::vector<std::vector<const Image*>>& rows, int gap) {
         y0 += row.front()->height + gap;
     }
     return out;
+}
+
+void WarnUntracedRays(const RenderScene& rs) {
+    if (const uint64_t n = rs.UntracedRays(); n > 0)
+        std::fprintf(stderr,
+                     "texcache: warning: %llu rays were not traced (non-finite or out of Embree's "
+                     "range; they count as misses): please report this scene\n",
+                     (unsigned long long)n);
 }
 
 double NowSeconds() {

@@ -11,6 +11,7 @@
 #include "preview.h"
 #include "renderer/render.h"
 #include "renderer/scene/scene_loader.h"
+#include "renderer/scene/scene_units.h"
 #include "renderer/texture_space/stereo.h"
 #include "renderer/texture_space/texture_space.h"
 
@@ -97,7 +98,9 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.eyeSeparation) {
         if (!a.stereo) throw InputError("--eye-separation", "sets the stereo rig: give --stereo");
         CheckStereoRig({*a.eyeSeparation, 1.0f}, "--eye-separation");
-        s.eyeSeparation = *a.eyeSeparation;
+        // In the scene file's units; the preview works in render units (scene_units.h).
+        s.eyeSeparation = float(std::min(double(*a.eyeSeparation) * scene.unitScale, 1e30));
+        CheckSceneReach(scene, 0.5f * s.eyeSeparation, "--eye-separation");
     } else if (scene.camera.eyeSeparation > 0.0f) {
         s.eyeSeparation = scene.camera.eyeSeparation;
     }

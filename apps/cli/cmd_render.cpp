@@ -28,10 +28,13 @@ int RunRender(const RenderArgs& a) {
 
     // Command-line values override the scene's render settings.
     RenderSettings& s = scene.settings;
-    ApplySettings(a, &s);
+    ApplySettings(a, &s, scene.unitScale);
     if (a.demodulate && a.denoise.empty())
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
     CheckStereoOptions(a);
+    WarnIfNothingVisible(a, scene);
+    WarnIfUnlit(
+        scene, !a.frameBuffers.empty() || !a.denoise.empty() ? IntegratorKind::Path : s.integrator);
     const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
         if (const std::string why = FrameBufferCameraProblem(scene.camera); !why.empty())

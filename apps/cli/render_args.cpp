@@ -3,6 +3,7 @@
 // and the checks across them: options that would be ignored, outputs that would clash with
 // inputs. The decisions themselves (texture-space `auto` choices, cache sizes) are the
 // renderer's (renderer/render_policy.h); this file maps the options onto them.
+#include <algorithm>
 #include <charconv>
 #include <climits>
 #include <cstdio>
@@ -13,10 +14,12 @@
 #include "render_command.h"
 #include "renderer/integrators/product_sampling.h"
 #include "renderer/render_policy.h"
+#include "renderer/scene/envmap.h"
+#include "renderer/scene/scene_units.h"
 
 namespace texcache::cli {
 
-void ApplySettings(const RenderArgs& a, RenderSettings* settings) {
+void ApplySettings(const RenderArgs& a, RenderSettings* settings, double unitScale) {
     RenderSettings& s = *settings;
     if (a.Given("--spp")) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
     if (a.Given("--seconds")) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
@@ -27,12 +30,64 @@ void ApplySettings(const RenderArgs& a, RenderSettings* settings) {
     if (a.Given("--max-depth")) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
     if (a.Given("--ao-samples")) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
     if (a.Given("--ao-distance"))
-        s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
+        s.aoDistance = float(std::min(
+            double(CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f)) * unitScale, 1e30));
     if (a.Given("--tessellation-rate"))
         s.tessellationRate = CheckRange("--tessellation-rate", a.tessellationRate, 1.0f, 64.0f);
     if (a.Given("--time")) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     CheckRange("--threads", a.threads, 0, 4096);
     CheckRange("--exposure", a.exposure, -64.0f, 64.0f);  // stops: 2^64 is far beyond any scene
+}
+
+void WarnIfNothingVisible(const RenderArgs& a, const Scene& scene) {
+    const RenderSettings& s = scene.settings;
+    std::vector<float> times{s.time};
+    if (!a.frames.empty()) {
+        // Up to 1000 frames spread over the range: the check costs a few projections each.
+        int first = 0, last = 0;
+        ParseFrames(a.frames, &first, &last);
+        const float fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
+        const int step = std::max(1, (last - first + 1) / 1000);
+        times.clear();
+        for (int f = first; f <= last; f += step)
+            times.push_back(AnimationFrameTime(s.time, f, fps));
+    }
+    std::string problem;
+    for (const float t : times) {
+        problem = CameraViewProblem(scene, t, s.width, s.height);
+        if (problem.empty()) return;
+    }
+    std::fprintf(stderr, "texcache: warning: %s: %s%s\n", scene.path.c_str(), problem.c_str(),
+                 times.size() > 1 ? " (in every frame)" : "");
+}
+
+void WarnIfUnlit(const Scene& scene, IntegratorKind integrator) {
+    // The first environment is the one used; a map is read here (and kept for the render), so
+    // that its repairs are reported and a bad file fails before anything renders.
+    std::shared_ptr<const EnvironmentMap> map;
+    if (!scene.environments.empty() && !scene.environments[0].path.empty()) {
+        const EnvironmentLight& e = scene.environments[0];
+        map = EnvironmentMap::Shared(e.path, e.intensity, e.rotationDegrees);
+        if (!map->Repairs().empty())
+            std::fprintf(stderr, "texcache: warning: %s: environment map has %s\n", e.path.c_str(),
+                         map->Repairs().c_str());
+    }
+    if (!IntegratorUsesLights(integrator)) return;
+    const auto bright = [](glm::vec3 c) { return std::max({c.x, c.y, c.z}) > 0.0f; };
+    bool lights = false, lit = false;
+    for (const QuadLight& q : scene.quadLights) lights = true, lit = lit || bright(q.radiance);
+    for (const DistantLight& d : scene.distantLights)
+        lights = true, lit = lit || bright(d.irradiance);
+    if (!scene.environments.empty()) {
+        const EnvironmentLight& e = scene.environments[0];
+        lights = true;
+        lit = lit || bright(map ? map->AverageRadiance() : e.constant * e.intensity);
+    }
+    if (lights && !lit)
+        std::fprintf(stderr,
+                     "texcache: warning: %s: every light is black (zero radiance): the '%s' "
+                     "integrator will render black\n",
+                     scene.path.c_str(), IntegratorName(integrator));
 }
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, bool softLight) {

@@ -88,8 +88,18 @@ inline constexpr const char* kCacheSizeOptions = "--sample-cache-mb/--texel-cach
 
 // render_args.cpp: arguments -> options, and the checks across them.
 
-/// The scene's render settings with the command line's values on top, each checked.
-void ApplySettings(const RenderArgs& a, RenderSettings* settings);
+/// The scene's render settings with the command line's values on top, each checked; lengths
+/// (--ao-distance) are in the scene file's units and stored in render units (`unitScale`,
+/// renderer/scene/scene_units.h).
+void ApplySettings(const RenderArgs& a, RenderSettings* settings, double unitScale);
+/// A warning when the camera shows none of the scene's objects in the frame (or in any frame of
+/// --frames): CameraViewProblem.
+void WarnIfNothingVisible(const RenderArgs& a, const Scene& scene);
+/// A warning when the integrator `integrator` needs light and every light of the scene is black
+/// (the loader already warns about a scene without lights), and one naming the environment map
+/// and what its loading repaired (EnvironmentMap::Repairs). Reads the map, so that a bad one
+/// fails before anything renders (EnvironmentMap::Shared keeps it for the render).
+void WarnIfUnlit(const Scene& scene, IntegratorKind integrator);
 
 /// The texture-space options of the command line. `softLight`: the scene's direct light has no
 /// delta light (distant lights), so `--cached-light auto` may cache it (CachesDirectLight).

@@ -137,6 +137,10 @@ struct Scene {
     std::vector<QuadLight> quadLights;
     std::vector<DistantLight> distantLights;
     RenderSettings settings;
+    /// Render units (renderer/scene/scene_units.h): positions here are the file's minus
+    /// unitOrigin, times unitScale; the identity for scenes of ordinary size near the origin.
+    glm::dvec3 unitOrigin{0.0};
+    double unitScale = 1.0;
 };
 
 }  // namespace texcache
