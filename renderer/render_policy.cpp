@@ -94,9 +94,21 @@ CachedLight ParseCachedLight(const std::string& name, const std::string& where) 
     return ParseEnum(kCachedLights, name, where, "value");
 }
 
-bool CachesDirectLight(CachedLight choice, bool softLight, TextureSamples samples) {
-    return choice == CachedLight::All ||
-           (choice == CachedLight::Auto && softLight && samples == TextureSamples::Hits);
+LightKinds SceneLightKinds(const Scene& scene) {
+    LightKinds k;
+    k.soft = !scene.environments.empty() || !scene.quadLights.empty();
+    for (const DistantLight& d : scene.distantLights)
+        (d.angleDegrees > 0.0f ? k.soft : k.delta) = true;
+    for (const PointLight& p : scene.pointLights) (p.radius > 0.0f ? k.soft : k.delta) = true;
+    for (const Object& o : scene.objects) k.soft |= o.Emissive();
+    return k;
+}
+
+CachedDirect CachedDirectLight(CachedLight choice, LightKinds kinds, TextureSamples samples) {
+    if (choice == CachedLight::All) return {true, false};
+    if (choice == CachedLight::Indirect || samples != TextureSamples::Hits || !kinds.soft)
+        return {false, false};
+    return {true, kinds.delta};
 }
 
 void CheckStereoShear(const StereoRig& rig, const std::string& where) {

@@ -95,14 +95,32 @@ double PhysicalMemoryMiB();
 TextureSamples AutoTextureSamples(bool gridAsked);
 
 /// Which diffuse light the path (and direct) integrator caches in texture space: indirect only
-/// (direct light stays per hit), all of it, or Auto (CachesDirectLight).
+/// (direct light stays per hit), all of it, or Auto (CachedDirectLight).
 enum class CachedLight { Auto, All, Indirect };
 /// "auto", "all" or "indirect"; throws InputError naming `where` and the valid names otherwise.
 CachedLight ParseCachedLight(const std::string& name, const std::string& where);
-/// TextureSpaceOptions::cacheDirect for `choice`. Auto caches direct light too when it is soft
-/// (`softLight`: an environment, area lights, no distant light, whose sharp shadows stay per
-/// hit) and shaded at the hits (`samples`), where its bins beat per-hit direct light at equal
-/// time; on the grid, filtering would blur its shadows (TextureSpaceOptions::cacheDirect).
-bool CachesDirectLight(CachedLight choice, bool softLight, TextureSamples samples);
+
+/// The kinds of light a scene has: soft (an environment, quad lights, point and spot lights with
+/// a radius, distant lights with an angular size, emissive objects: their shadows have
+/// penumbrae) and delta (point and spot lights without a radius, distant lights without an
+/// angular size: their shadows are sharp).
+struct LightKinds {
+    bool soft = false, delta = false;
+};
+LightKinds SceneLightKinds(const Scene& scene);
+
+/// TextureSpaceOptions::cacheDirect and deltaDirectPerHit.
+struct CachedDirect {
+    bool cacheDirect = false, deltaDirectPerHit = false;
+};
+/// The direct light cached for `choice` on a scene with `kinds` of light shaded on `samples`.
+/// All caches every light's; Indirect none. Auto caches, at the hits, the direct light of soft
+/// lights and keeps delta lights' per hit (soft lights: all their light cached; delta lights:
+/// their indirect light only): a bin averages a few texels, which costs a soft light's smooth
+/// penumbrae nothing while its noise falls, and beats per-hit direct light at equal time, but
+/// would blur a delta light's sharp shadow edge, which is noise-free per hit anyway (one
+/// shadow ray). On the grid Auto caches no direct light: its filters would blur every shadow
+/// (TextureSpaceOptions::cacheDirect).
+CachedDirect CachedDirectLight(CachedLight choice, LightKinds kinds, TextureSamples samples);
 
 }  // namespace texcache

@@ -22,8 +22,8 @@
 #include "cli_run.h"
 #include "renderer/image/image.h"
 #include "renderer/library_versions.h"
-#include "support/cages.h"
 #include "test_util.h"
+#include "testing/cages.h"
 
 namespace texcache {
 namespace {
@@ -51,8 +51,8 @@ TEST(Cli, RendersAnObjToExrAndPng) {
     EXPECT_TRUE(fs::exists(Dir() / "cube.png"));
 }
 
-// Issue 18: a 16-gon aborted the program inside Embree (exit 134). Now it renders through the
-// limit tessellation, and the scene statistics say which faces needed it.
+// A 16-gon is past Embree's limits: it renders through the limit tessellation, and the scene
+// statistics say which faces needed it.
 TEST(Cli, RendersA16GonAndCountsTheFacesPastEmbreesLimits) {
     const fs::path obj = Dir() / "prism16.obj", out = Dir() / "prism16.exr";
     test::WriteObj(test::PrismCage(16), obj.string());
@@ -455,7 +455,7 @@ std::string RefusalName(const ::testing::TestParamInfo<Refusal>& info) {
 #define RENDER_SCENE "render {scene} --spp 1 --resolution 8x8 -q "
 #define RENDER_CUBE "render {cube} --spp 1 -q -o {dir}/x.png "
 
-// Item 2 of issue 18: no flag can destroy a file. An output that is an input (the scene, its
+// No flag can destroy a file. An output that is an input (the scene, its
 // mesh, its environment map, a compared image) or another output (the PNG beside the EXR,
 // --stats) is refused, and so is an output that cannot be written (missing directory, a
 // directory in the way, a path under a regular file), all before anything renders.
@@ -482,7 +482,7 @@ INSTANTIATE_TEST_SUITE_P(
                 "--stats: cannot write"}),
     RefusalName);
 
-// Item 4: numbers are taken as written or refused (no wraparound, NaN is not "not given"),
+// Numbers are taken as written or refused (no wraparound, NaN is not "not given"),
 // empty values and combinations that would silently drop something are errors naming the option.
 INSTANTIATE_TEST_SUITE_P(
     Numbers, CliRefuses,
@@ -513,7 +513,7 @@ INSTANTIATE_TEST_SUITE_P(
                 "do not fit in this machine's"}),
     RefusalName);
 
-// Item 5: CLI11's own errors (a bad number, an unknown option, a repeated option, a missing
+// CLI11's own errors (a bad number, an unknown option, a repeated option, a missing
 // argument) in the same one-line form, pointing at --help.
 INSTANTIATE_TEST_SUITE_P(
     Messages, CliRefuses,
@@ -541,7 +541,7 @@ TEST(Cli, CompareDecodesSrgbAgainstLinearAndSaysSo) {
 }
 
 // compare never trusts an EXR header's size: a 23 KB file claiming 46340x46340 pixels is refused
-// at once (it took 8.5 GB and 37 s before failing).
+// at once, before anything is allocated for the size it claims (8.5 GB).
 TEST(Cli, CompareRefusesHeadersClaimingHugeSizes) {
     const fs::path liar = Dir() / "liar.exr";
     WriteImage(liar.string(), Image(64, 64, 1, 0.5f));
@@ -680,7 +680,7 @@ TEST(Cli, LightSamplingCpisReportsRecordBytes) {
 
 // `bench peer` compares like with like: both sides' high-sample renders show the same light. The
 // peer's diffuse response is twice ours (cmd_bench_peer.cpp says how it was measured) and its
-// pixels clip at 1, so its scene takes half the albedo; without that the car's body was 1.0 on
+// pixels clip at 1, so its scene takes half the albedo; without that the car's body would be 1.0 on
 // its side against 0.5 on ours: relMSE ~0.1 between the references, where noise at 64 spp on
 // 48x48 pixels gives ~0.005. Needs Embree's pathtracer (scripts/setup.sh installs embree-tools).
 TEST(Cli, BenchPeerReferencesShowTheSameLight) {

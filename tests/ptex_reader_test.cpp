@@ -263,7 +263,7 @@ TEST(PtexReader, FaceIdsAndAdjacencyMatchTheCageTopology) {
             const ptex::FaceInfo& fi = t.Face(f);
             EXPECT_EQ(fi.subface, !topo.IsQuad(topo.CoarseFace(f))) << "face " << f;
             for (int e = 0; e < 4; ++e) {
-                const std::array<int, 2> n = test::FileNeighbour(topo, f, e);
+                const std::array<int, 2> n = ptex::FileNeighbour(topo, f, e);
                 const bool same =
                     n[0] == fi.adjFaces[size_t(e)] && (n[0] < 0 || n[1] == fi.adjEdges[size_t(e)]);
                 mismatches += !same;

@@ -1,12 +1,12 @@
 // SPDX-License-Identifier: Apache-2.0
-// Helpers for the Ptex tests: the bundled Ptex sets, Ptex face info from the project's cage
-// topology, and points on a cage's (bilinear) Ptex faces.
+// Helpers for the Ptex tests: the bundled Ptex sets, and points on a cage's (bilinear) Ptex faces.
 #pragma once
 #include <array>
 #include <string>
 #include <vector>
 
 #include "test_util.h"
+#include "texcache/ptex/mesh_faces.h"
 #include "texcache/ptex/texture.h"
 #include "texcache/topology.h"
 
@@ -14,37 +14,6 @@ namespace texcache::test {
 
 inline std::string PtexPath(const std::string& rel) {
     return SceneDir() + "/ptex/" + rel;
-}
-
-/// The face across edge `e` of a Ptex face as a Ptex file records it: where the edge meets two
-/// n-gon sub-faces, the one covering the first half of this edge (the first met going
-/// counter-clockwise round this face). {-1, 0} at a boundary.
-inline std::array<int, 2> FileNeighbour(const PtexTopology& topo, int face, int e) {
-    const PtexTopology::EdgeLink l = topo.Edge(face, e);
-    if (l.count == 0) return {-1, 0};
-    int j = 0;
-    // Our parameter runs the shared cage edge the other way: a segment covers our first half
-    // when its middle lies in the second half of its own parameter.
-    if (l.count == 2 && l.segStart[1] + 0.5f * l.segLength[1] > 0.5f) j = 1;
-    return {l.face[j], l.edge[j]};
-}
-
-/// Ptex face info (adjacency, sub-face flag, a resolution) of every Ptex face of a topology:
-/// what a writer of textures for this cage stores.
-inline std::vector<ptex::FaceInfo> PtexFaces(const PtexTopology& topo, ptex::Res quadRes,
-                                             ptex::Res subfaceRes) {
-    std::vector<ptex::FaceInfo> faces(size_t(topo.NumPtexFaces()));
-    for (int f = 0; f < topo.NumPtexFaces(); ++f) {
-        ptex::FaceInfo& fi = faces[size_t(f)];
-        fi.subface = !topo.IsQuad(topo.CoarseFace(f));
-        fi.res = fi.subface ? subfaceRes : quadRes;
-        for (int e = 0; e < 4; ++e) {
-            const std::array<int, 2> n = FileNeighbour(topo, f, e);
-            fi.adjFaces[size_t(e)] = n[0];
-            fi.adjEdges[size_t(e)] = uint8_t(n[1]);
-        }
-    }
-    return faces;
 }
 
 /// The point `along` edge `e` of face `f` (counter-clockwise parameter) seen from the face

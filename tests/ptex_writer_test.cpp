@@ -247,7 +247,7 @@ TEST(PtexWriter, WritesThroughATemporaryFile) {
 /// n-gon's sub-face quad), with the topology's adjacency or (`alone`) none.
 Texture PositionTexture(const ControlCage& cage, const PtexTopology& topo, bool alone) {
     FaceSet faces;
-    faces.infos = test::PtexFaces(topo, Res{4, 4}, Res{3, 3});
+    faces.infos = ptex::MeshFaces(topo, Res{4, 4}, Res{3, 3});
     for (int f = 0; f < topo.NumPtexFaces(); ++f) {
         const Res r = faces.infos[size_t(f)].res;
         std::vector<float> t;

@@ -79,7 +79,7 @@ TEST(SceneLoader, ValidSceneRoundTrips) {
     EXPECT_EQ(red.type, Material::Type::GGX);
     EXPECT_FLOAT_EQ(red.albedo.value.g, 0.1f);
     EXPECT_FLOAT_EQ(red.roughness.value, 0.3f);
-    EXPECT_FLOAT_EQ(red.specular.r, 0.05f);
+    EXPECT_FLOAT_EQ(red.specular.value.r, 0.05f);
     EXPECT_EQ(red.cacheFilter, "gaussian");
     EXPECT_EQ(red.cacheRadius, 3);
     const Material& chk = s.materials[size_t(s.objects[1].material)];
@@ -288,8 +288,8 @@ TEST(SceneLoader, BadInputNamesFileAndKey) {
         {"\"scale\": 2", "\"scale\": 0", "key 'objects[1].transform.scale'"},
         {"\"transform\": {\"scale\": 2}", "\"transform\": {\"scale\": 2}, \"keyframes\": []",
          "not both"},
-        {"\"type\": \"distant\"", "\"type\": \"spot\"",
-         "unknown light type 'spot' (valid: environment, quad, distant)"},
+        {"\"type\": \"distant\"", "\"type\": \"laser\"",
+         "unknown light type 'laser' (valid: environment, quad, distant, sun, point, spot)"},
         {"\"irradiance\": [2,2,2]", "\"irradiance\": [2,2]",
          "key 'lights[2].irradiance': expected an array of 3 numbers, got an array of 2"},
         {"\"direction\": [0,-2,0]", "\"direction\": [0,0,0]", "direction is zero"},

@@ -45,7 +45,7 @@ int RunRender(const RenderArgs& a) {
         RenderOptions fbo = common;
         fbo.integrator = IntegratorKind::Path;
         fbo.seconds = 0.0f;
-        fbo.texture = ParseTextureOptions(a, false);  // the stage's split: direct per hit
+        fbo.texture = ParseTextureOptions(a, LightKinds{});  // the stage's split: direct per hit
         // The frame buffers' renderer caches on the grid only (its caches must not be sized
         // for hits, which never fill them).
         fbo.texture.samples = TextureSamples::Grid;
@@ -63,7 +63,7 @@ int RunRender(const RenderArgs& a) {
     opt.aovs = ParseAovs(a.aovs);
     const VisibilityFilterKind visibility =
         ParseVisibilityFilter(a.visibilityFilter, "--visibility-filter");
-    opt.texture = ParseTextureOptions(a, scene.distantLights.empty());
+    opt.texture = ParseTextureOptions(a, SceneLightKinds(scene));
     SizeCaches(a, &opt, a.stereo ? 2 : 1);
     ParseLightSamplingOptions(a, scene, &opt);
     opt.progress = !a.quiet;
@@ -171,8 +171,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
            "materials, and the diffuse base of glossy ones; specular lobes stay per "
            "hit): indirect (direct light stays per hit; the direct integrator then "
            "caches its shadows on the grid), all (direct light cached and filtered too: for soft "
-           "lighting; blurs hard shadows) or auto (all when shaded at the hits and the "
-           "scene has no distant light, else indirect)")
+           "lighting; blurs hard shadows) or auto (when shaded at the hits: soft lights' "
+           "direct light cached too, delta lights' (points, spots and distant lights of no "
+           "size: sharp shadows) per hit; on the grid: indirect)")
         ->capture_default_str();
     cmd->add_option("--filter", args->filter,
                     std::string("Texture-space filter: ") + TextureFilterNames())

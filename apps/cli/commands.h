@@ -15,5 +15,9 @@ void AddBenchCommand(CLI::App& app, int& exitCode);
 void AddBenchPeerCommand(CLI::App& bench, int& exitCode);
 void AddPreviewCommand(CLI::App& app, int& exitCode);
 void AddExperimentCommand(CLI::App& app, int& exitCode);
+/// `ptex info` (cmd_ptex.cpp).
+void AddPtexCommand(CLI::App& app, int& exitCode);
+/// `bake` (cmd_bake.cpp).
+void AddBakeCommand(CLI::App& app, int& exitCode);
 
 }  // namespace texcache::cli

@@ -57,6 +57,8 @@ int main(int argc, char** argv) {
     texcache::cli::AddBenchCommand(app, exitCode);
     texcache::cli::AddExperimentCommand(app, exitCode);
     texcache::cli::AddPreviewCommand(app, exitCode);
+    texcache::cli::AddPtexCommand(app, exitCode);
+    texcache::cli::AddBakeCommand(app, exitCode);
     RejectEmptyValues(&app);
     try {
         app.parse(argc, argv);

@@ -90,7 +90,7 @@ void WarnIfUnlit(const Scene& scene, IntegratorKind integrator) {
                      scene.path.c_str(), IntegratorName(integrator));
 }
 
-TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, bool softLight) {
+TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights) {
     TextureSpaceOptions t;
     if (a.shading != "hit" && a.shading != "texture")
         throw InputError("--shading", "unknown mode '" + a.shading + "' (valid: hit, texture)");
@@ -134,8 +134,10 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, bool softLight) {
     t.cache.referenceMode = a.referenceCache;
     t.cache.texelTwoChoices = t.cache.sampleTwoChoices = !a.directMapped;
     t.indirectSamples = CheckRange("--indirect-samples", a.indirectSamples, 1, 1 << 16);
-    t.cacheDirect =
-        CachesDirectLight(ParseCachedLight(a.cachedLight, "--cached-light"), softLight, t.samples);
+    const CachedDirect direct =
+        CachedDirectLight(ParseCachedLight(a.cachedLight, "--cached-light"), lights, t.samples);
+    t.cacheDirect = direct.cacheDirect;
+    t.deltaDirectPerHit = direct.deltaDirectPerHit;
     if (a.cachedVisibility && (!t.enabled || (a.frameBuffers.empty() && a.denoise.empty())))
         throw InputError("--cached-visibility",
                          "fills the screen-space frame buffers: needs --shading texture and "

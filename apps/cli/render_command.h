@@ -17,6 +17,7 @@
 #include "cli_util.h"
 #include "renderer/render.h"
 #include "renderer/render_options.h"
+#include "renderer/render_policy.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/texture_space/texture_space.h"
 #include "renderer/texture_space/visibility_pass.h"
@@ -101,9 +102,9 @@ void WarnIfNothingVisible(const RenderArgs& a, const Scene& scene);
 /// fails before anything renders (EnvironmentMap::Shared keeps it for the render).
 void WarnIfUnlit(const Scene& scene, IntegratorKind integrator);
 
-/// The texture-space options of the command line. `softLight`: the scene's direct light has no
-/// delta light (distant lights), so `--cached-light auto` may cache it (CachesDirectLight).
-TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, bool softLight);
+/// The texture-space options of the command line; `lights`: the kinds of light the scene has,
+/// which `--cached-light auto` decides by (CachedDirectLight).
+TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights);
 /// The cache sizes of a render of `opt` (`views` images): those given, else sized to the frame
 /// (SizeTextureCaches), checked against this machine's memory.
 void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views);

@@ -40,7 +40,7 @@ void FillAovs(const Context& c, const Ray& ray, const Hit& hit, const SurfaceInt
 
 /// Differentials feed the cache's mip selection and the debug views; they are skipped otherwise.
 bool NeedsDifferentials(const Context& c) {
-    return c.tsc != nullptr || c.psrCache != nullptr ||
+    return c.tsc != nullptr || c.psrCache != nullptr || c.textureFootprints ||
            c.opt.integrator == IntegratorKind::Normal || c.opt.integrator == IntegratorKind::Ptex ||
            c.opt.integrator == IntegratorKind::Uv;
 }
@@ -57,14 +57,16 @@ glm::vec3 ShadeCameraSample(const Context& c, int x, int y, int s, CameraSample&
 
     const IntegratorKind k = c.opt.integrator;
     if (k == IntegratorKind::Direct || k == IntegratorKind::Path) {
-        // A camera ray that hits nothing sees the environment, whatever the integrator does at
+        // A camera ray that hits nothing sees the environment (and the suns' discs), whatever the
+        // integrator does at
         // hits (LiPath's first miss: no MIS weight): most samples of an object under a sky. Not
         // through LiPath, whose call and 1 KB stack frame would weigh on a sky-only frame.
-        if (!found) return c.env ? c.env->Eval(ray.dir) : glm::vec3(0.0f);
+        if (!found) return c.Background(ray.dir);
         // Differentials tell LiPath that its first hit is a camera hit, which product sampling
-        // needs; otherwise none, so that MIS does not compute a footprint it never uses.
+        // needs, and give Ptex textures their filter width; otherwise none, so that MIS does not
+        // compute a footprint it never uses.
         const RayDifferentials* productDiff =
-            c.lightSampling != LightSampling::Mis ? &diff : nullptr;
+            c.lightSampling != LightSampling::Mis || c.textureFootprints ? &diff : nullptr;
         if (aov && found && hit.object >= 0) FillAovs(c, ray, hit, c.rs.Interact(ray, hit), aov);
         if (c.tsc && k == IntegratorKind::Path) {
             // Diffuse light is view-independent: diffuse materials and the diffuse base of

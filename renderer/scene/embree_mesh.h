@@ -16,6 +16,7 @@
 #include <embree3/rtcore.h>
 #include <glm/glm.hpp>
 
+#include "renderer/scene/plain_mesh.h"
 #include "renderer/scene/scene.h"
 #include "renderer/texture_space/ptex_mapping.h"
 #include "texcache/limit_tessellation.h"
@@ -41,7 +42,7 @@ struct EmbreeMesh {
     bool tessellated = false;
     std::unique_ptr<LimitSurface> limit;
     std::vector<LimitTessellation::Square> squares;
-    std::vector<std::array<float, 2>> cornerUvs;
+    std::vector<std::array<float, 2>> cornerUvs;  // also a plain mesh's, per quad
     // Limit tessellation of a cage with faces too large for OpenSubdiv's patches (see
     // FacetFaces): per Ptex face, the first of its quads when it is evaluated on them, else -1
     // (empty when no face is); the quads' vertices and indices are the Embree geometry's.
@@ -49,9 +50,14 @@ struct EmbreeMesh {
     int facetLevel = 0;                    // refinements of the tessellation
     const float* quadPositions = nullptr;  // 4 floats per vertex
     const unsigned* quadIndices = nullptr;
+    // Plain meshes (plain_mesh.h): one Embree quad per Ptex face, whose (u,v) is the face's;
+    // its 4 corners in Embree's vertex buffer (16-byte stride), which this points into.
+    bool plain = false;
+    const float* plainCorners = nullptr;
 
     /// Ptex location of a hit (Embree's primitive and hit parameters).
     PtexCoord ToPtex(unsigned prim, float U, float V) const {
+        if (plain) return {int(prim), std::clamp(U, 0.0f, 1.0f), std::clamp(V, 0.0f, 1.0f)};
         if (!tessellated) return EmbreeToPtex(*topo, prim, U, V);
         const LimitTessellation::Square& s = squares[prim];
         return {s.face, std::clamp(s.u0 + s.size * U, 0.0f, 1.0f),
@@ -62,6 +68,7 @@ struct EmbreeMesh {
     /// Embree's (prim, U, V) on a subdivision mesh (16-byte aligned outputs); false on a hole.
     bool Eval(const PtexCoord& c, unsigned prim, float U, float V, float* P, float* du,
               float* dv) const {
+        if (plain) return PlainQuadEval(plainCorners + 16 * size_t(c.face), c.u, c.v, P, du, dv);
         if (regular->Has(c.face)) {
             // Regular patches: our bicubic evaluation, several times cheaper than rtcInterpolate
             // (the same surface).
@@ -95,7 +102,7 @@ struct EmbreeMesh {
 
     /// Texture coordinates at a hit (only when hasUv).
     glm::vec2 Uv(unsigned prim, float U, float V) const {
-        if (tessellated) {
+        if (tessellated || plain) {
             // Bilinear in the quad, whose corners carry OpenSubdiv's limit uvs.
             const auto* c = &cornerUvs[size_t(prim) * 4];
             auto at = [&](int k) { return glm::vec2(c[k][0], c[k][1]); };
@@ -125,6 +132,11 @@ void BuildIrregularPatches(const ControlCage& cage, const std::vector<int>& face
 /// `withUv`); sets mesh's hole flags and hasUv.
 RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, float rate,
                                    bool withUv, EmbreeMesh* mesh);
+
+/// The cage as a plain mesh (plain_mesh.h): one quad per Ptex face (mesh->topo must be set);
+/// sets mesh's plain corners and uvs.
+RTCGeometry NewPlainQuadGeometry(RTCDevice device, const ControlCage& cage, bool withUv,
+                                 EmbreeMesh* mesh);
 
 /// The cage as quads on its limit surface, as many per cage quad edge as Embree's grids at
 /// `rate`; sets mesh's limit surface, Ptex squares and uvs.

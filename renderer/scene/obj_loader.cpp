@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <unordered_map>
 
 #include "texcache/error.h"
 
@@ -67,8 +68,8 @@ std::string Fmt(double v) {
 
 class Parser {
 public:
-    Parser(const std::string& name, std::vector<std::string>* warnings)
-        : name_(name), warnings_(warnings) {}
+    Parser(const std::string& name, std::vector<std::string>* warnings, ObjFaceTags* tags)
+        : name_(name), warnings_(warnings), faceTags_(tags) {}
 
     ControlCage Parse(std::string_view text) {
         cage_.sourcePath = name_;
@@ -111,8 +112,11 @@ public:
                 ParseFace(c);
             } else if (kw == "t") {
                 ParseTag(c);
-            } else if (kw == "o" || kw == "g" || kw == "s" || kw == "usemtl" || kw == "mtllib") {
-                // Names, smoothing groups and materials do not change the cage.
+            } else if (kw == "o" || kw == "g" || kw == "usemtl" || kw == "mtllib") {
+                // Names and materials do not change the cage; they are kept when asked for.
+                if (faceTags_) Tag(kw, c);
+            } else if (kw == "s") {
+                // Smoothing groups: the limit surface defines the normals.
             } else {
                 // Warn once per keyword: a file full of `l` lines should not bury other warnings.
                 auto it = unknownStatements_.find(kw);
@@ -358,6 +362,35 @@ private:
         if (firstLine == 0) firstLine = line_;
         if (firstFaceLine_ == 0) firstFaceLine_ = line_;
         cage_.faceVertexCounts.push_back(n);
+        if (faceTags_) {
+            faceTags_->faceMaterial.push_back(material_);
+            faceTags_->faceGroup.push_back(group_);
+        }
+    }
+
+    /// `mtllib a.mtl [b.mtl ...]`, `usemtl name`, `g name`, `o name` (names may hold spaces).
+    void Tag(std::string_view kw, Cursor& c) {
+        if (kw == "mtllib") {
+            for (std::string_view t = c.Token(); !t.empty(); t = c.Token())
+                faceTags_->libraries.push_back({std::string(t), line_});
+            return;
+        }
+        c.SkipSpace();
+        std::string_view name = c.s.substr(c.pos);
+        while (!name.empty() && IsSpace(name.back())) name.remove_suffix(1);
+        const bool isMaterial = kw == "usemtl";
+        std::vector<ObjFaceTags::Named>& names =
+            isMaterial ? faceTags_->materials : faceTags_->groups;
+        // `g` alone, or `usemtl` with no name: back to none.
+        int id = -1;
+        if (!name.empty()) {
+            // A hash per kind: a file may name a new material on every face.
+            auto& index = isMaterial ? materialIds_ : groupIds_;
+            const auto [it, added] = index.emplace(std::string(name), int(names.size()));
+            if (added) names.push_back({it->first, line_});
+            id = it->second;
+        }
+        (isMaterial ? material_ : group_) = id;
     }
 
     struct PendingTag {
@@ -535,6 +568,9 @@ private:
     int line_ = 0;
     ControlCage cage_;
     size_t numNormals_ = 0;
+    ObjFaceTags* faceTags_;
+    int material_ = -1, group_ = -1;  ///< the current usemtl and g/o (into faceTags_)
+    std::unordered_map<std::string, int> materialIds_, groupIds_;
     bool warnedNormal_ = false;
     std::vector<int> faceUv_;                   ///< parallel to faceVertexIndices, -1 = no vt
     std::vector<int> scratch_;                  ///< long n-gons' duplicate check
@@ -550,11 +586,13 @@ private:
 }  // namespace
 
 ControlCage ParseObj(std::string_view text, const std::string& name,
-                     std::vector<std::string>* warnings) {
-    return Parser(name, warnings).Parse(text);
+                     std::vector<std::string>* warnings, ObjFaceTags* tags) {
+    if (tags) *tags = ObjFaceTags();
+    return Parser(name, warnings, tags).Parse(text);
 }
 
-ControlCage LoadObj(const std::string& path, std::vector<std::string>* warnings) {
+ControlCage LoadObj(const std::string& path, std::vector<std::string>* warnings,
+                    ObjFaceTags* tags) {
     // A directory opens as a stream on Linux and reports a nonsense size: rule it out first.
     std::error_code ec;
     if (std::filesystem::is_directory(path, ec))
@@ -566,7 +604,7 @@ ControlCage LoadObj(const std::string& path, std::vector<std::string>* warnings)
     std::string text(size_t(size), '\0');
     f.seekg(0);
     if (!f.read(text.data(), size)) throw InputError(path, "cannot read OBJ file");
-    return ParseObj(text, path, warnings);
+    return ParseObj(text, path, warnings, tags);
 }
 
 }  // namespace texcache

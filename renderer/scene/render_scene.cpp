@@ -7,6 +7,7 @@
 #include "renderer/scene/render_scene.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -72,6 +73,10 @@ struct RenderScene::Impl {
     std::vector<Instance> objects;  // by Scene::objects index
     // Top-level geomID -> object or quad light (-1: not that kind); geomIDs are small and dense.
     std::vector<int> geomToObject, geomToLight;
+    // The point and spot lights with a radius, as one geometry of spheres: its geomID, and per
+    // sphere its Hit::light (after the quad lights).
+    unsigned sphereGeom = RTC_INVALID_GEOMETRY_ID;
+    std::vector<int> sphereToLight;
     static void Map(std::vector<int>& v, unsigned id, int value) {
         if (v.size() <= id) v.resize(id + 1, -1);
         v[id] = value;
@@ -144,9 +149,31 @@ struct RenderScene::Impl {
             hit->Ng = WorldNormal(hit->object, time, Ng);
         } else {
             hit->object = -1;
-            hit->light = geomToLight[geomID];
+            hit->light = geomID == sphereGeom ? sphereToLight[primID] : geomToLight[geomID];
             hit->Ng = Ng;
         }
+    }
+
+    /// The point and spot lights with a radius, posed at `time`, as spheres that camera and BSDF
+    /// rays see (lights without one are points: nothing to hit).
+    void AddSphereLights(const Scene& scene, float time) {
+        std::vector<glm::vec4> spheres;
+        for (size_t l = 0; l < scene.pointLights.size(); ++l) {
+            const PointLight& p = scene.pointLights[l];
+            if (!(p.radius > 0.0f)) continue;
+            const glm::vec3 c(p.transform.Eval(time) * glm::vec4(p.position, 1.0f));
+            spheres.emplace_back(c, p.radius);
+            sphereToLight.push_back(int(scene.quadLights.size() + l));
+        }
+        if (spheres.empty()) return;
+        RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SPHERE_POINT);
+        auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+            g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 4 * sizeof(float), spheres.size()));
+        for (size_t i = 0; i < spheres.size(); ++i)
+            for (int k = 0; k < 4; ++k) v[4 * i + k] = spheres[i][k];
+        rtcCommitGeometry(g);
+        sphereGeom = rtcAttachGeometry(top, g);
+        rtcReleaseGeometry(g);
     }
 
     glm::mat4 Transform(int object, float time) const {
@@ -173,8 +200,16 @@ private:
     std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 
-static bool MaterialUsesTextures(const Material& m) {
-    return m.albedo.texture >= 0 || m.roughness.texture >= 0;
+/// The texture indices a material's parameters look up (-1: a constant).
+static std::array<int, 4> MaterialTextures(const Material& m) {
+    return {m.albedo.texture, m.roughness.texture, m.specular.texture, m.emission.texture};
+}
+
+static bool ObjectUsesTextures(const Scene& scene, const Object& o) {
+    for (const int m : o.Materials())
+        for (const int t : MaterialTextures(scene.materials[size_t(m)]))
+            if (t >= 0) return true;
+    return false;
 }
 
 RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
@@ -188,13 +223,20 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     rtcSetDeviceMemoryMonitorFunction(I.device, EmbreeMemory::Count, &I.embreeMemory);
     I.top = rtcNewScene(I.device);
 
-    // Which meshes are used, and which of them need face-varying uvs (textured materials only).
+    // Which meshes are used, and which of them need face-varying uvs (textured materials only),
+    // are plain meshes or emit light.
     const size_t numMeshes = scene.meshes.size();
-    std::vector<char> used(numMeshes, 0), needUv(numMeshes, 0);
+    std::vector<char> used(numMeshes, 0), needUv(numMeshes, 0), plain(numMeshes, 0),
+        emissive(numMeshes, 0);
     for (const Object& o : scene.objects) {
+        if (used[o.mesh] && plain[o.mesh] != !o.subdivide)
+            throw InputError(scene.path, "object '" + o.name +
+                                             "' shares its mesh with an object of the other "
+                                             "subdivision (give each form its own mesh)");
         used[o.mesh] = 1;
-        if (options.needTextures && MaterialUsesTextures(scene.materials[o.material]))
-            needUv[o.mesh] = 1;
+        plain[o.mesh] = !o.subdivide;
+        emissive[o.mesh] |= o.Emissive();
+        if (options.needTextures && ObjectUsesTextures(scene, o)) needUv[o.mesh] = 1;
     }
 
     I.meshes.resize(numMeshes);
@@ -206,9 +248,11 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         CageTopology t = BuildCageTopology(cage);
         mesh.topo = std::make_shared<const PtexTopology>(std::move(t.ptex));
         mesh.regular = std::make_unique<RegularPatches>(std::move(t.regular));
-        const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
-        const bool tessellate = beyond > 0 || options.tessellateAll;
-        if (!tessellate && options.irregularPatches) {
+        const size_t beyond = plain[m] ? 0 : FacesBeyondEmbree(cage, *mesh.topo);
+        // An emissive subdivision surface is rendered as its limit tessellation, the surface its
+        // light samples are taken on (lights.h, MeshEmitter).
+        const bool tessellate = !plain[m] && (beyond > 0 || options.tessellateAll || emissive[m]);
+        if (!tessellate && !plain[m] && options.irregularPatches) {
             // rtcInterpolate re-derives a face's patch on every call (about a microsecond): a
             // large share of a path-traced frame's CPU time when many faces are off the fast
             // path, as most of the car's are. OpenSubdiv's patches at isolation level 6 evaluate
@@ -222,7 +266,11 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         mesh.scene = rtcNewScene(I.device);
         const bool wantUv = needUv[m] && !cage.uvs.empty();
         RTCGeometry g;
-        if (tessellate) {
+        if (plain[m]) {
+            g = NewPlainQuadGeometry(I.device, cage, wantUv, &mesh);
+            // Watertight: neighbouring quads share corners (see the limit quads below).
+            rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
+        } else if (tessellate) {
             g = NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
                                      &mesh);
             clock.Charge(&I.build.opensubdiv);
@@ -230,9 +278,11 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             // may slip between its quads (ctest -R EmbreeLimits.ClosedCagesHaveNoHoles aims
             // rays at the limit points on the n-gons' edges).
             rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
-            ++I.tessellation.meshes;
-            I.tessellation.cageFaces += size_t(cage.numFaces());
-            I.tessellation.beyondEmbree += beyond;
+            if (beyond > 0 || options.tessellateAll) {  // not counted: emitters' (by choice)
+                ++I.tessellation.meshes;
+                I.tessellation.cageFaces += size_t(cage.numFaces());
+                I.tessellation.beyondEmbree += beyond;
+            }
         } else {
             g = NewSubdivisionGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
                                        &mesh);
@@ -297,6 +347,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             Impl::Map(I.geomToLight, rtcAttachGeometry(I.top, g), int(l));
             rtcReleaseGeometry(g);
         }
+        I.AddSphereLights(scene, options.frameTime);
         if (options.needEnvironment && !scene.environments.empty()) {
             const EnvironmentLight& e = scene.environments.front();
             env_ = e.path.empty() ? std::make_shared<const EnvironmentMap>(
@@ -311,11 +362,10 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     if (options.needTextures) {
         // Only textures some object's material references are loaded.
         std::vector<char> texUsed(scene.textures.size(), 0);
-        for (const Object& o : scene.objects) {
-            const Material& m = scene.materials[o.material];
-            if (m.albedo.texture >= 0) texUsed[m.albedo.texture] = 1;
-            if (m.roughness.texture >= 0) texUsed[m.roughness.texture] = 1;
-        }
+        for (const Object& o : scene.objects)
+            for (const int m : o.Materials())
+                for (const int t : MaterialTextures(scene.materials[size_t(m)]))
+                    if (t >= 0) texUsed[size_t(t)] = 1;
         I.textures.resize(scene.textures.size());
         for (size_t t = 0; t < scene.textures.size(); ++t) {
             if (!texUsed[t]) continue;
@@ -327,8 +377,27 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
                 throw InputError(scene.textures[t].where, e.what());
             }
         }
+        CheckPtexFaceCounts(scene, I);
     }
     clock.Charge(&I.build.other);
+}
+
+void RenderScene::CheckPtexFaceCounts(const Scene& scene, const Impl& I) {
+    // A Ptex file holds one texel grid per Ptex face of the mesh it was painted on: another
+    // count means another mesh, whose faces would get unrelated texels (or none).
+    for (const Object& o : scene.objects)
+        for (const int m : o.Materials())
+            for (const int t : MaterialTextures(scene.materials[size_t(m)])) {
+                if (t < 0 || !I.textures[size_t(t)]) continue;
+                const int faces = I.textures[size_t(t)]->PtexFaces();
+                const int meshFaces = I.meshes[size_t(o.mesh)].topo->NumPtexFaces();
+                if (faces >= 0 && faces != meshFaces)
+                    throw InputError(
+                        scene.textures[size_t(t)].where,
+                        "'" + scene.textures[size_t(t)].path + "' has " + std::to_string(faces) +
+                            " faces, but object '" + o.name + "' (mesh '" + o.objPath + "') has " +
+                            std::to_string(meshFaces) + " Ptex faces (a quad is one, an n-gon n)");
+            }
 }
 
 RenderScene::~RenderScene() = default;
@@ -556,10 +625,10 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     const Impl::Mesh& mesh = I.meshes[I.objects[hit.object].mesh];
     SurfaceInteraction si;
     si.object = hit.object;
-    si.material = scene_.objects[hit.object].material;
     si.P = ray.org + hit.t * ray.dir;
 
     si.ptex = mesh.ToPtex(hit.primID, hit.U, hit.V);
+    si.material = scene_.objects[hit.object].MaterialOfFace(mesh.topo->CoarseFace(si.ptex.face));
     // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
     alignas(16) float du[4] = {0, 0, 0, 0}, dv[4] = {0, 0, 0, 0};
     mesh.Eval(si.ptex, hit.primID, hit.U, hit.V, nullptr, du, dv);
@@ -612,6 +681,25 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     return si;
 }
 
+std::vector<glm::vec3> RenderScene::QuadCorners(int object) const {
+    const Impl& I = *impl_;
+    const Impl::Mesh& mesh = I.meshes[size_t(I.objects[size_t(object)].mesh)];
+    std::vector<glm::vec3> corners;
+    if (!mesh.plain && !mesh.tessellated) return corners;
+    const auto* v =
+        static_cast<const float*>(rtcGetGeometryBufferData(mesh.geom, RTC_BUFFER_TYPE_VERTEX, 0));
+    const auto* idx =
+        static_cast<const unsigned*>(rtcGetGeometryBufferData(mesh.geom, RTC_BUFFER_TYPE_INDEX, 0));
+    const size_t quads = mesh.plain ? size_t(mesh.topo->NumPtexFaces()) : mesh.squares.size();
+    const glm::mat4 M = I.Transform(object, 0.0f);
+    corners.reserve(4 * quads);
+    for (size_t i = 0; i < 4 * quads; ++i) {
+        const float* p = v + 4 * size_t(idx[i]);
+        corners.emplace_back(M * glm::vec4(p[0], p[1], p[2], 1.0f));
+    }
+    return corners;
+}
+
 PtexCoord RenderScene::HitPtex(const Hit& hit) const {
     return impl_->meshes[impl_->objects[hit.object].mesh].ToPtex(hit.primID, hit.U, hit.V);
 }
@@ -623,7 +711,7 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
     unsigned prim = 0;
     float U = c.u, V = c.v;
-    if (!mesh.tessellated) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
+    if (!mesh.tessellated && !mesh.plain) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
     alignas(16) float P[4], du[4], dv[4];
     if (!mesh.Eval(c, prim, U, V, P, du, dv)) return false;
     const glm::mat4 M = I.Transform(object, time);
@@ -637,20 +725,73 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
     return true;
 }
 
+namespace {
+/// A shading point's texture lookup: Ptex filter width from its footprint (the larger extent
+/// of a pixel in u or v; 0 without differentials).
+TextureQuery QueryOf(const SurfaceInteraction& si) {
+    const float w =
+        std::max({std::abs(si.dudx), std::abs(si.dudy), std::abs(si.dvdx), std::abs(si.dvdy)});
+    return {si.uv, si.ptex.face, si.ptex.u, si.ptex.v, std::isfinite(w) ? w : 0.0f};
+}
+}  // namespace
+
+glm::vec3 RenderScene::ColorAt(const ColorParam& p, const TextureQuery& q) const {
+    if (p.texture >= 0 && impl_->textures[size_t(p.texture)])
+        return impl_->textures[size_t(p.texture)]->Color(q);
+    return p.value;
+}
+
 glm::vec3 RenderScene::Albedo(const SurfaceInteraction& si) const {
-    const ColorParam& a = scene_.materials[si.material].albedo;
-    if (a.texture >= 0 && impl_->textures[a.texture])
-        return impl_->textures[a.texture]->Eval(si.uv);
-    return a.value;
+    // Clamped: a float texture above 1 would create energy.
+    return glm::clamp(ColorAt(scene_.materials[si.material].albedo, QueryOf(si)), 0.0f, 1.0f);
+}
+
+glm::vec3 RenderScene::Specular(const SurfaceInteraction& si) const {
+    return glm::clamp(ColorAt(scene_.materials[si.material].specular, QueryOf(si)), 0.0f, 1.0f);
 }
 
 float RenderScene::Roughness(const SurfaceInteraction& si) const {
     const FloatParam& r = scene_.materials[si.material].roughness;
-    if (r.texture >= 0 && impl_->textures[r.texture]) {
-        const glm::vec3 c = impl_->textures[r.texture]->Eval(si.uv);
-        return glm::clamp(0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z, 0.0f, 1.0f);
-    }
+    if (r.texture >= 0 && impl_->textures[size_t(r.texture)])
+        return glm::clamp(impl_->textures[size_t(r.texture)]->Scalar(QueryOf(si)), 0.0f, 1.0f);
     return r.value;
+}
+
+glm::vec3 RenderScene::Emission(const Hit& hit) const {
+    if (hit.object < 0) return glm::vec3(0.0f);
+    const Impl::Mesh& mesh = impl_->meshes[size_t(impl_->objects[size_t(hit.object)].mesh)];
+    const PtexCoord c = mesh.ToPtex(hit.primID, hit.U, hit.V);
+    const Object& o = scene_.objects[size_t(hit.object)];
+    const ColorParam& e =
+        scene_.materials[size_t(o.MaterialOfFace(mesh.topo->CoarseFace(c.face)))].emission;
+    if (e.texture < 0) return e.value;
+    const glm::vec2 uv = mesh.hasUv ? mesh.Uv(hit.primID, hit.U, hit.V) : glm::vec2(c.u, c.v);
+    return glm::max(ColorAt(e, {uv, c.face, c.u, c.v, 0.0f}), glm::vec3(0.0f));
+}
+
+glm::vec3 RenderScene::AlbedoAt(int object, const PtexCoord& c, float width) const {
+    const Object& o = scene_.objects[size_t(object)];
+    const Impl::Mesh& mesh = impl_->meshes[size_t(impl_->objects[size_t(object)].mesh)];
+    const Material& m = scene_.materials[size_t(o.MaterialOfFace(mesh.topo->CoarseFace(c.face)))];
+    // A Ptex location carries no cage uv: image textures read at the Ptex (u,v) here, as on
+    // cages without uvs.
+    return glm::clamp(ColorAt(m.albedo, {glm::vec2(c.u, c.v), c.face, c.u, c.v, width}), 0.0f,
+                      1.0f);
+}
+
+bool RenderScene::PtexTextured() const {
+    for (const auto& t : impl_->textures)
+        if (t && t->PtexFaces() >= 0) return true;
+    return false;
+}
+
+bool RenderScene::Emissive() const {
+    for (const Object& o : scene_.objects)
+        for (const int m : o.Materials()) {
+            const ColorParam& e = scene_.materials[size_t(m)].emission;
+            if (e.texture >= 0 || e.value != glm::vec3(0.0f)) return true;
+        }
+    return false;
 }
 
 }  // namespace texcache

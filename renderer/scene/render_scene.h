@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
-// The ray-traceable form of a Scene: Embree subdivision geometry per mesh (object space), one
-// instance per object, quad-light geometry, the environment and textures — each built only when
-// the render uses it.
+// The ray-traceable form of a Scene: Embree subdivision geometry per mesh (object space; quads for
+// plain meshes), one instance per object, quad and sphere light geometry, the environment and
+// textures — each built only when the render uses it.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -17,6 +17,7 @@ namespace texcache {
 
 class EnvironmentMap;
 class TextureImage;
+struct TextureQuery;
 
 struct Ray {
     glm::vec3 org, dir;
@@ -37,7 +38,9 @@ struct RayDifferentials {
 struct Hit {
     float t = 0.0f;
     int object = -1;  ///< index into Scene::objects, -1 for lights
-    int light = -1;   ///< index into Scene::quadLights when a light was hit
+    /// When a light was hit: an index into Scene::quadLights, or past them, the quad lights'
+    /// count plus an index into Scene::pointLights (a sphere).
+    int light = -1;
     unsigned primID = 0;
     float U = 0.0f, V = 0.0f;  ///< Embree's hit parameters (encoded on n-gons)
     glm::vec3 Ng{0.0f};        ///< world-space geometric normal of the tessellated surface
@@ -111,6 +114,10 @@ public:
     /// fields are filled when `diff` is given.
     SurfaceInteraction Interact(const Ray& ray, const Hit& hit,
                                 const RayDifferentials* diff = nullptr) const;
+    /// The corners (4 per Embree quad, in primitive order) of an object rendered as quads (a
+    /// plain mesh, a limit tessellation), in world space at the frame time; empty for an object
+    /// that is Embree's subdivision surface. Emissive objects are sampled on these.
+    std::vector<glm::vec3> QuadCorners(int object) const;
     /// Ptex location of a hit on an object (the Embree primitive's mapping of its mesh).
     PtexCoord HitPtex(const Hit& hit) const;
     /// Limit surface at (ptex face, u, v) of an object at normalized shutter time `time`.
@@ -128,10 +135,22 @@ public:
     size_t EmbreeBytes() const;
     size_t EmbreePeakBytes() const;
     const EnvironmentMap* environment() const { return env_.get(); }
-    /// Albedo at a shading point (constant or texture).
+    /// Albedo at a shading point (constant or texture), in [0,1]. Ptex textures are filtered
+    /// over the point's footprint (its ray differentials; the finest level without them).
     glm::vec3 Albedo(const SurfaceInteraction& si) const;
-    /// Roughness at a shading point (constant or texture luminance), in [0,1].
+    /// Roughness at a shading point (constant, texture luminance or a Ptex channel), in [0,1].
     float Roughness(const SurfaceInteraction& si) const;
+    /// GGX F0 at a shading point (constant or texture), in [0,1].
+    glm::vec3 Specular(const SurfaceInteraction& si) const;
+    /// Radiance a hit surface emits (its material's emission, both sides; 0 for lights).
+    glm::vec3 Emission(const Hit& hit) const;
+    /// Whether any object's material emits (Emission is then worth asking).
+    bool Emissive() const;
+    /// Whether any object's material reads a Ptex texture (filtered by the hits' footprints).
+    bool PtexTextured() const;
+    /// Albedo of an object at a Ptex location, Ptex textures filtered over `width` (in the
+    /// face's parameter units): a texel's albedo in texture space.
+    glm::vec3 AlbedoAt(int object, const PtexCoord& c, float width) const;
     /// Object-to-world transform at normalized shutter time.
     glm::mat4 ObjectToWorld(int object, float time) const;
     /// Embree scene handle (for raw-throughput benchmarks).
@@ -166,6 +185,10 @@ public:
 
 private:
     struct Impl;
+    /// Throws InputError when a Ptex texture's face count differs from its object's mesh's.
+    static void CheckPtexFaceCounts(const Scene& scene, const Impl& I);
+    glm::vec3 ColorAt(const ColorParam& p, const TextureQuery& q) const;
+
     const Scene& scene_;
     std::unique_ptr<Impl> impl_;
     std::shared_ptr<const EnvironmentMap> env_;  // shared by the scenes of an animation's frames

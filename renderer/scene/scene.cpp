@@ -45,4 +45,11 @@ bool TransformTrack::IsAnimated() const {
     return false;
 }
 
+std::vector<int> Object::Materials() const {
+    std::vector<int> ids{material};
+    for (const int m : faceMaterials)
+        if (std::find(ids.begin(), ids.end(), m) == ids.end()) ids.push_back(m);
+    return ids;
+}
+
 }  // namespace texcache

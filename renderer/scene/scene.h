@@ -46,13 +46,17 @@ struct Camera {
     float convergence = 0.0f;  ///< 0: not given (the distance to the look-at point)
 };
 
-/// A 2D texture: an image file (sRGB-decoded for colours) or a procedural checker, looked up by
-/// the cage's face-varying uvs when it has them, else by the Ptex face (u,v).
+/// A texture: an image file (sRGB-decoded for colours) or a procedural checker, looked up by
+/// the cage's face-varying uvs when it has them, else by the Ptex face (u,v); or a Ptex file,
+/// one texel grid per Ptex face of the mesh, looked up at the hit's Ptex face and (u,v).
 struct Texture {
-    enum class Kind { Image, Checker } kind = Kind::Checker;
-    std::string path;                      ///< Image
+    enum class Kind { Image, Checker, Ptex } kind = Kind::Checker;
+    std::string path;                      ///< Image, Ptex
     glm::vec3 colorA{0.8f}, colorB{0.2f};  ///< Checker
     float scale = 8.0f;                    ///< Checker: squares per uv unit
+    /// Ptex: the file's channel a scalar reads, or a colour's first (a colour reads three; from a
+    /// file with one channel left from there, that one as grey).
+    int channel = 0;
     /// Where the scene file names it ("scene.json: key 'materials.m.albedo.texture'"), for
     /// errors found when the image is read; empty for textures made in code.
     std::string where;
@@ -77,7 +81,10 @@ struct Material {
     /// tangent of the anisotropic lobe is the limit surface's dP/du.
     bool anisotropic = false;
     float roughnessV = 0.5f;
-    glm::vec3 specular{0.04f};  ///< GGX Schlick F0
+    ColorParam specular{glm::vec3(0.04f)};  ///< GGX Schlick F0
+    /// Radiance the surface emits, on both sides: seen by camera and BSDF rays (never sampled as
+    /// a light), e.g. baked shading (`texcache bake`) shown as it was baked.
+    ColorParam emission{glm::vec3(0.0f)};
     /// Texture-space filter of this material's cached term ("" = the render's default).
     std::string cacheFilter;
     int cacheRadius = -1;  ///< footprint radius override (-1 = the render's default)
@@ -87,8 +94,28 @@ struct Object {
     std::string name;
     std::string objPath;  ///< absolute, resolved by the loader
     int mesh = -1;        ///< index into Scene::meshes (meshes may be shared)
-    int material = 0;
+    int material = 0;     ///< every face's, unless faceMaterials says otherwise
+    /// Per cage face (OBJ usemtl), empty: `material` everywhere.
+    std::vector<int> faceMaterials;
     TransformTrack transform;
+    /// false ("subdivision": "none"): the cage's polygons are rendered as they are, flat (a
+    /// plain mesh), each Ptex (sub-)face one Embree quad. Objects that share a mesh share this.
+    bool subdivide = true;
+    /// Radiance emitted from the surface (after the scene file's scale); any non-zero value makes
+    /// the object a light, sampled by area (renderer/scene/lights.h).
+    glm::vec3 emission{0.0f};
+    /// Emits on both sides; otherwise on the side the faces' winding (counter-clockwise seen from
+    /// outside) points to.
+    bool emissionTwoSided = false;
+
+    bool Emissive() const { return emission != glm::vec3(0.0f); }
+
+    /// The material of cage face `coarseFace`.
+    int MaterialOfFace(int coarseFace) const {
+        return faceMaterials.empty() ? material : faceMaterials[size_t(coarseFace)];
+    }
+    /// Every material the object uses, each once, `material` first.
+    std::vector<int> Materials() const;
 };
 
 struct EnvironmentLight {
@@ -110,6 +137,23 @@ struct QuadLight {
 struct DistantLight {
     glm::vec3 direction{0.0f, -1.0f, 0.0f};  ///< direction the light travels (towards the scene)
     glm::vec3 irradiance{1.0f};              ///< on a surface facing the light
+    /// Angular diameter in degrees (the sun: 0.53): a disc of uniform radiance, sampled by its
+    /// cone; 0 = a delta light.
+    float angleDegrees = 0.0f;
+    TransformTrack transform;
+};
+
+/// A point light ("point") or a spot light ("spot"): a sphere of uniform radiance
+/// intensity / (pi radius^2), or a delta light when the radius is 0.
+struct PointLight {
+    glm::vec3 position{0.0f};   ///< in the light's frame (transform)
+    glm::vec3 intensity{1.0f};  ///< W/sr (on the axis for a spot): irradiance I cos / d^2
+    float radius = 0.0f;
+    bool spot = false;
+    glm::vec3 direction{0.0f, -1.0f, 0.0f};  ///< spot: the axis it shines along (normalised)
+    /// Spot: half-angles in degrees; full intensity inside `innerDegrees`, none outside
+    /// `outerDegrees`, a smoothstep in cos between.
+    float innerDegrees = 25.0f, outerDegrees = 30.0f;
     TransformTrack transform;
 };
 
@@ -136,6 +180,7 @@ struct Scene {
     std::vector<EnvironmentLight> environments;  ///< at most one is used
     std::vector<QuadLight> quadLights;
     std::vector<DistantLight> distantLights;
+    std::vector<PointLight> pointLights;  ///< point and spot lights
     RenderSettings settings;
     /// Render units (renderer/scene/scene_units.h): positions here are the file's minus
     /// unitOrigin, times unitScale; the identity for scenes of ordinary size near the origin.

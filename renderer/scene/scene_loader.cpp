@@ -18,6 +18,7 @@
 
 #include "filters/texture_filters.h"
 #include "renderer/scene/obj_loader.h"
+#include "renderer/scene/obj_materials.h"
 #include "renderer/scene/scene_units.h"
 #include "texcache/error.h"
 
@@ -270,9 +271,23 @@ void ParseCamera(const Node& n, Camera* cam) {
     if (n.Has("stereo")) ParseStereo(n["stereo"], cam);
 }
 
-/// TEXTURE: {"texture": "checker", "colors": [[..],[..]], "scale": s} or {"texture": "file"}.
+/// TEXTURE: {"texture": "checker", "colors": [[..],[..]], "scale": s}, {"texture": "file"} or
+/// {"ptex": "file.ptx", "channel": c}.
 int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
     Texture t;
+    if (!n.Has("texture") && !n.Has("ptex"))
+        n.Fail("a texture needs 'texture' (checker, or an image file) or 'ptex' (a Ptex file)");
+    if (n.Has("ptex")) {
+        n.Keys({"ptex", "channel"});
+        t.kind = Texture::Kind::Ptex;
+        t.path = Resolve(base, n["ptex"].String());
+        RequireFile(n["ptex"], t.path, "Ptex file");
+        // Ptex files hold at most 255 channels (one byte in the header).
+        if (n.Has("channel")) t.channel = int(n["channel"].Int(0, 254));
+        t.where = n["ptex"].Where();
+        scene->textures.push_back(t);
+        return int(scene->textures.size()) - 1;
+    }
     const std::string name = n["texture"].String();
     if (name == "checker") {
         n.Keys({"texture", "colors", "scale"});
@@ -306,7 +321,7 @@ int ParseTexture(const Node& n, const fs::path& base, Scene* scene) {
 
 void ParseMaterial(const Node& n, const std::string& name, const fs::path& base, Scene* scene,
                    std::vector<std::string>* warnings) {
-    n.Keys({"type", "albedo", "roughness", "specular", "filter", "filter_radius"});
+    n.Keys({"type", "albedo", "roughness", "specular", "emission", "filter", "filter_radius"});
     Material m;
     m.name = name;
     const std::string type = n.Has("type") ? n["type"].String() : "diffuse";
@@ -316,13 +331,18 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
         m.type = Material::Type::GGX;
     else
         n["type"].Fail("unknown material type '" + Excerpt(type) + "' (valid: diffuse, ggx)");
-    if (n.Has("albedo")) {
-        const Node a = n["albedo"];
-        if (a.raw().is_object())
-            m.albedo.texture = ParseTexture(a, base, scene);
+    // A colour [r,g,b] within [lo, hi], or a TEXTURE.
+    auto color = [&](const char* key, double lo, double hi, ColorParam* p) {
+        if (!n.Has(key)) return;
+        const Node c = n[key];
+        if (c.raw().is_object())
+            p->texture = ParseTexture(c, base, scene);
         else
-            m.albedo.value = a.Vec3(0.0f, 1.0f);  // > 1 would create energy
-    }
+            p->value = c.Vec3(lo, hi);
+    };
+    color("albedo", 0.0, 1.0, &m.albedo);  // > 1 would create energy
+    color("specular", 0.0, 1.0, &m.specular);
+    color("emission", 0.0, kBig, &m.emission);
     if (n.Has("roughness")) {
         const Node r = n["roughness"];
         if (r.raw().is_object()) {
@@ -341,7 +361,6 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
             m.roughness.value = r.Number(0.0f, 1.0f);
         }
     }
-    if (n.Has("specular")) m.specular = n["specular"].Vec3(0.0f, 1.0f);
     if (m.type == Material::Type::Diffuse && warnings)
         for (const char* k : {"roughness", "specular"})
             if (n.Has(k))
@@ -352,6 +371,13 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
     }
     if (n.Has("filter_radius")) m.cacheRadius = int(n["filter_radius"].Int(0, 32));
     scene->materials.push_back(m);
+}
+
+/// A non-zero direction, normalised.
+glm::vec3 UnitDirection(const Node& n) {
+    const glm::vec3 d = n.Vec3();
+    if (!(glm::length(d) > 1e-12f)) n.Fail("direction is zero");
+    return glm::normalize(d);
 }
 
 void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
@@ -385,19 +411,59 @@ void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
         if (n.Has("two_sided")) q.twoSided = n["two_sided"].Bool();
         q.transform = ParseTrack(n);
         scene->quadLights.push_back(q);
-    } else if (type == "distant") {
-        n.Keys({"type", "direction", "irradiance", "transform", "keyframes"});
+    } else if (type == "distant" || type == "sun") {
+        n.Keys({"type", "direction", "irradiance", "angle", "transform", "keyframes"});
         DistantLight d;
-        d.direction = n["direction"].Vec3();
-        if (!(glm::length(d.direction) > 1e-12f)) n["direction"].Fail("direction is zero");
-        d.direction = glm::normalize(d.direction);
+        d.direction = UnitDirection(n["direction"]);
         d.irradiance = n["irradiance"].Vec3(0.0f, kBig);
+        // The sun's disc is 0.53 degrees across; "distant" stays the delta light it always was.
+        d.angleDegrees = type == "sun" ? 0.53f : 0.0f;
+        if (n.Has("angle")) d.angleDegrees = n["angle"].Number(0.0, 90.0);
         d.transform = ParseTrack(n);
         scene->distantLights.push_back(d);
+    } else if (type == "point" || type == "spot") {
+        const bool spot = type == "spot";
+        if (spot)
+            n.Keys({"type", "position", "intensity", "radius", "direction", "inner_angle",
+                    "outer_angle", "transform", "keyframes"});
+        else
+            n.Keys({"type", "position", "intensity", "radius", "transform", "keyframes"});
+        PointLight p;
+        p.spot = spot;
+        p.position = n["position"].Vec3();
+        p.intensity = n["intensity"].Vec3(0.0f, kBig);
+        if (n.Has("radius")) p.radius = n["radius"].Number(0.0, kBig);
+        if (spot) {
+            p.direction = UnitDirection(n["direction"]);
+            if (n.Has("outer_angle")) p.outerDegrees = n["outer_angle"].NumberOpen(0.0, 180.0);
+            // Without an inner angle the falloff takes the outer sixth of the cone.
+            p.innerDegrees = n.Has("inner_angle") ? n["inner_angle"].Number(0.0, 180.0)
+                                                  : p.outerDegrees * (5.0f / 6.0f);
+            if (p.innerDegrees > p.outerDegrees)
+                n["inner_angle"].Fail("the inner angle " + Fmt(p.innerDegrees) +
+                                      " is larger than the outer angle " + Fmt(p.outerDegrees));
+        }
+        p.transform = ParseTrack(n);
+        scene->pointLights.push_back(p);
     } else {
         n["type"].Fail("unknown light type '" + Excerpt(type) +
-                       "' (valid: environment, quad, distant)");
+                       "' (valid: environment, quad, distant, sun, point, spot)");
     }
+}
+
+/// An object's "emission": [r,g,b] radiance, or {"radiance": [r,g,b], "scale": s,
+/// "two_sided": b}.
+void ParseEmission(const Node& n, Object* obj) {
+    if (n.raw().is_array()) {
+        obj->emission = n.Vec3(0.0f, kBig);
+        return;
+    }
+    n.Keys({"radiance", "scale", "two_sided"});
+    const float scale = n.Has("scale") ? n["scale"].Number(0.0, kBig) : 1.0f;
+    obj->emission = n["radiance"].Vec3(0.0f, kBig) * scale;
+    if (!std::isfinite(obj->emission.x + obj->emission.y + obj->emission.z))
+        n["scale"].Fail("radiance x scale overflows a float");
+    if (n.Has("two_sided")) obj->emissionTwoSided = n["two_sided"].Bool();
 }
 
 void ParseRender(const Node& n, RenderSettings* s) {
@@ -635,18 +701,48 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
     const Node objs = root["objects"];
     if (objs.ArraySize() == 0) objs.Fail("needs at least one object");
     std::map<std::string, int> meshIds;
+    std::vector<ObjFaceTags> meshTags;  // by mesh id: the OBJ's usemtl faces and libraries
+    std::map<std::string, int> mtlIds;  // materials read from MTL files (AssignObjMaterials)
     int defaultMaterial = -1;
+    auto fallback = [&] {
+        if (defaultMaterial < 0) {
+            Material grey;
+            grey.name = "default";
+            scene.materials.push_back(grey);
+            defaultMaterial = int(scene.materials.size()) - 1;
+        }
+        return defaultMaterial;
+    };
     for (size_t i = 0; i < objs.ArraySize(); ++i) {
         const Node o = objs.At(i);
-        o.Keys({"name", "mesh", "material", "transform", "keyframes"});
+        o.Keys({"name", "mesh", "material", "transform", "keyframes", "subdivision", "emission"});
         Object obj;
         obj.name = o.Has("name") ? o["name"].String() : "object" + std::to_string(i);
         obj.objPath = Resolve(base, o["mesh"].String());
-        auto it = meshIds.find(obj.objPath);
+        if (o.Has("subdivision")) {
+            const std::string sub = o["subdivision"].String();
+            if (sub != "catmull-clark" && sub != "none")
+                o["subdivision"].Fail("unknown subdivision '" + Excerpt(sub) +
+                                      "' (valid: catmull-clark, none)");
+            obj.subdivide = sub == "catmull-clark";
+        }
+        if (o.Has("emission")) ParseEmission(o["emission"], &obj);
+        // A mesh is one Embree geometry of one form: a file used both ways gets two copies.
+        const auto key = [&](bool subdivide) { return (subdivide ? "s:" : "p:") + obj.objPath; };
+        auto it = meshIds.find(key(obj.subdivide));
         if (it == meshIds.end()) {
-            RequireFile(o["mesh"], obj.objPath, "mesh file");
-            scene.meshes.push_back(LoadObj(obj.objPath, warnings));  // errors name the OBJ line
-            it = meshIds.emplace(obj.objPath, int(scene.meshes.size()) - 1).first;
+            const auto other = meshIds.find(key(!obj.subdivide));
+            if (other != meshIds.end()) {
+                ControlCage copy = scene.meshes[size_t(other->second)];
+                scene.meshes.push_back(std::move(copy));
+                meshTags.push_back(meshTags[size_t(other->second)]);
+            } else {
+                RequireFile(o["mesh"], obj.objPath, "mesh file");
+                meshTags.emplace_back();
+                // Errors name the OBJ's line.
+                scene.meshes.push_back(LoadObj(obj.objPath, warnings, &meshTags.back()));
+            }
+            it = meshIds.emplace(key(obj.subdivide), int(scene.meshes.size()) - 1).first;
         }
         obj.mesh = it->second;
         if (o.Has("material")) {
@@ -659,14 +755,12 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
                                    (known.empty() ? "none" : Excerpt(known, 200)) + ")");
             }
             obj.material = mit->second;
+        } else if (!meshTags[size_t(obj.mesh)].materials.empty()) {
+            // The OBJ's own materials, per face (a scene material of the same name overrides).
+            AssignObjMaterials(meshTags[size_t(obj.mesh)], obj.objPath, materialIds, fallback,
+                               &mtlIds, &scene, &obj, warnings);
         } else {
-            if (defaultMaterial < 0) {
-                Material grey;
-                grey.name = "default";
-                scene.materials.push_back(grey);
-                defaultMaterial = int(scene.materials.size()) - 1;
-            }
-            obj.material = defaultMaterial;
+            obj.material = fallback();
         }
         obj.transform = ParseTrack(o);
         scene.objects.push_back(obj);
@@ -675,8 +769,11 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         const Node ls = root["lights"];
         for (size_t i = 0; i < ls.ArraySize(); ++i) ParseLight(ls.At(i), base, &scene);
     }
-    const bool lit =
-        !scene.environments.empty() || !scene.quadLights.empty() || !scene.distantLights.empty();
+    bool lit = !scene.environments.empty() || !scene.quadLights.empty() ||
+               !scene.distantLights.empty() || !scene.pointLights.empty();
+    for (const Object& o : scene.objects) lit |= o.Emissive();
+    for (const Material& m : scene.materials)
+        lit |= m.emission.texture >= 0 || m.emission.value != glm::vec3(0.0f);
     if (!lit && warnings && IntegratorUsesLights(scene.settings.integrator))
         warnings->push_back(path + ": no lights: the '" +
                             std::string(IntegratorName(scene.settings.integrator)) +
@@ -709,16 +806,22 @@ Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath
                    std::vector<std::string>* warnings) {
     Scene scene;
     scene.path = objPath;
-    scene.meshes.push_back(LoadObj(objPath, warnings));
+    ObjFaceTags tags;
+    scene.meshes.push_back(LoadObj(objPath, warnings, &tags));
     Object o;
     o.name = fs::path(objPath).stem().string();
     o.objPath = fs::absolute(objPath).lexically_normal().string();
     o.mesh = 0;
-    scene.objects.push_back(o);
     Material m;
     m.name = "default";
     m.albedo.value = glm::vec3(0.6f);
     scene.materials.push_back(m);
+    // The OBJ's own materials when it names some; grey where it does not.
+    std::map<std::string, int> loaded;
+    if (!tags.materials.empty())
+        AssignObjMaterials(
+            tags, o.objPath, {}, [] { return 0; }, &loaded, &scene, &o, warnings);
+    scene.objects.push_back(o);
     EnvironmentLight env;
     std::error_code ec;
     if (fs::is_regular_file(defaultEnvPath, ec)) {

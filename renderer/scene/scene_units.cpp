@@ -80,6 +80,11 @@ void ForPosedLightCorners(const QuadLight& q, F&& f) {
     }
 }
 
+/// "point light 2", "spot light 1": the scene's point lights by their place in the list.
+std::string PointLightName(const PointLight& p, size_t i) {
+    return (p.spot ? "spot light " : "point light ") + std::to_string(i + 1);
+}
+
 }  // namespace
 
 void NormalizeSceneUnits(Scene* scene) {
@@ -156,6 +161,28 @@ void NormalizeSceneUnits(Scene* scene) {
             key.scale = glm::vec3(glm::dvec3(key.scale) * k);
         }
     }
+    // Point and spot lights: their position moves with their transform, their radius is a
+    // length, and their intensity keeps its irradiance (I / d^2) at distances scaled by k.
+    for (size_t i = 0; i < s.pointLights.size(); ++i) {
+        PointLight& p = s.pointLights[i];
+        const std::string name = PointLightName(p, i);
+        const glm::dvec3 at(p.position);
+        ForPosedCorners(p.transform, at, at, 1.0,
+                        [&](glm::dvec3 w) { place(w, "lights", name.c_str()); });
+        for (Keyframe& key : Keys(&p.transform)) {
+            key.translation = glm::vec3((glm::dvec3(key.translation) - origin) * k);
+            key.scale = glm::vec3(glm::dvec3(key.scale) * k);
+        }
+        p.radius = length(p.radius, "lights");
+        const glm::dvec3 intensity = glm::dvec3(p.intensity) * k * k;
+        const double brightest = MaxAbs(intensity);
+        if (!(brightest <= 1e30) ||
+            (brightest < double(std::numeric_limits<float>::min()) && MaxAbs(p.intensity) > 0.0))
+            throw InputError(where("lights"),
+                             name + ": its intensity cannot be kept in float next to objects " +
+                                 Fmt(span) + " across (the irradiance scales as 1/distance^2)");
+        p.intensity = glm::vec3(intensity);
+    }
     s.unitOrigin = origin;
     s.unitScale = k;
 }
@@ -182,6 +209,19 @@ void CheckSceneReach(const Scene& scene, float cameraSpread, const std::string& 
                                             Fmt(kMaxRenderReach * toFile) + ")");
             reach = std::max(reach, MaxAbs(w));
         });
+    for (size_t i = 0; i < scene.pointLights.size(); ++i) {
+        const PointLight& p = scene.pointLights[i];
+        const glm::dvec3 at(p.position);
+        ForPosedCorners(p.transform, at, at, 1.0, [&](glm::dvec3 w) {
+            const double r = MaxAbs(w) + double(p.radius);
+            if (!(r <= kMaxRenderReach))
+                throw InputError(where, PointLightName(p, i) + " reaches " + Fmt(r * toFile) +
+                                            " from the objects' centre: too far for float to "
+                                            "place rays (keep it within " +
+                                            Fmt(kMaxRenderReach * toFile) + ")");
+            reach = std::max(reach, r);
+        });
+    }
     for (const Object& o : scene.objects) {
         glm::dvec3 lo, hi;
         CageBox(scene.meshes[size_t(o.mesh)], &lo, &hi);

@@ -29,17 +29,18 @@ namespace texcache {
 /// 2^24 there). Embree takes 1.8e18; the margin is for the objects' own spaces.
 inline constexpr double kMaxRenderReach = 17592186044416.0;  // 2^44
 
-/// Moves and scales a loaded scene into render units (the design note above): object, camera
-/// and quad-light poses, lens and stereo distances, the AO distance; folds each cage's
-/// unitExponent into its objects' transforms; records the change in scene->unitOrigin and
-/// unitScale. Throws InputError naming the scene file when the objects reach beyond +-1e18 or
-/// a camera or light lies too far from them. Call before a default camera is made.
+/// Moves and scales a loaded scene into render units (the design note above): object, camera,
+/// quad, point and spot light poses (with point lights' radii and intensities), lens and stereo
+/// distances, the AO distance; folds each cage's unitExponent into its objects' transforms; records
+/// the change in scene->unitOrigin and unitScale. Throws InputError naming the scene file when the
+/// objects reach beyond +-1e18 or a camera or light lies too far from them. Call before a default
+/// camera is made.
 void NormalizeSceneUnits(Scene* scene);
 
 /// Throws InputError naming `where` unless every ray the scene makes can start where Embree takes
 /// it: the camera (at every key, widened by `cameraSpread`: a lens radius, half an eye
-/// separation) and the quad lights within kMaxRenderReach of the origin, and every object large
-/// enough that rays from that far stay within Embree's range in its own space.
+/// separation), the quad, point and spot lights within kMaxRenderReach of the origin, and every
+/// object large enough that rays from that far stay within Embree's range in its own space.
 void CheckSceneReach(const Scene& scene, float cameraSpread, const std::string& where);
 
 /// Why the scene's camera at scene time `time`, making a width x height image, shows none of the

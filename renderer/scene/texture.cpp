@@ -23,6 +23,14 @@ bool IsFloatFormat(const std::string& path) {
 }  // namespace
 
 TextureImage::TextureImage(const Texture& desc) : desc_(desc) {
+    if (desc.kind == Texture::Kind::Ptex) {
+        ptex_ = ptex::Texture::Open(desc.path);
+        if (desc.channel >= ptex_->NumChannels())
+            throw InputError(desc.path, "channel " + std::to_string(desc.channel) +
+                                            " asked for, but the file has " +
+                                            std::to_string(ptex_->NumChannels()) + " channels");
+        return;
+    }
     if (desc.kind != Texture::Kind::Image) return;
     Image img = ReadImageRGB(desc.path);
     // NaN or infinity would make every pixel that samples the texel NaN (a float image can hold
@@ -77,6 +85,24 @@ glm::vec3 TextureImage::Eval(glm::vec2 uv) const {
     };
     return glm::mix(glm::mix(at(x0, y0), at(x0 + 1, y0), fx),
                     glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx), fy);
+}
+
+glm::vec3 TextureImage::Color(const TextureQuery& q) const {
+    if (!ptex_) return Eval(q.uv);
+    float c[3] = {0.0f, 0.0f, 0.0f};
+    const int n = std::min(3, ptex_->NumChannels() - desc_.channel);
+    ptex_->Lookup(q.face, q.u, q.v, q.width, c, desc_.channel, n);
+    return n == 3 ? glm::vec3(c[0], c[1], c[2]) : glm::vec3(c[0]);
+}
+
+float TextureImage::Scalar(const TextureQuery& q) const {
+    if (!ptex_) {
+        const glm::vec3 c = Eval(q.uv);
+        return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
+    }
+    float x = 0.0f;
+    ptex_->Lookup(q.face, q.u, q.v, q.width, &x, desc_.channel, 1);
+    return x;
 }
 
 }  // namespace texcache

@@ -125,7 +125,9 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
 /// two levels above its texel, and the hit's albedo kept beside its record; phase 2
 /// (PathHitsResolve) adds albedo x the bins' reconstruction. With opt.texture.cacheDirect false,
 /// only E's indirect part is binned and its direct part (NEE and the first bounce's MIS-weighted
-/// emission: sharp shadows) stays per hit. A glossy material's diffuse base is binned the same way
+/// emission: sharp shadows) stays per hit; with deltaDirectPerHit too, the delta lights' direct
+/// part stays per hit and the soft lights' is binned. An emissive surface's own emission is per
+/// hit. A glossy material's diffuse base is binned the same way
 /// (its albedo x (1 - F0) applied in phase 2); its specular lobe, which depends on the view, is
 /// estimated by the same path (FirstHitLight::specular) and stays per hit. Everything per hit is
 /// summed per pixel into `perHit` (misses, lights, specular lobes), which phase 2 adds with the
@@ -142,9 +144,11 @@ void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     thread_local std::vector<CameraSample> cs;
     if (cs.size() < total) cs.resize(total);
-    const bool productDiff = c.lightSampling != LightSampling::Mis;
+    // Differentials for product sampling's records and for Ptex textures' filter widths.
+    const bool productDiff = c.lightSampling != LightSampling::Mis || c.textureFootprints;
     HitsCameraRays(c, r, s0, s1, cs.data(), total, productDiff, rays);
     const bool all = c.opt.texture.cacheDirect;
+    const bool keepDelta = all && c.opt.texture.deltaDirectPerHit;
     const int spp = s1 - s0, paths = std::max(c.opt.hitSamples, 1);
     const int maxDepth = c.opt.integrator == IntegratorKind::Direct ? 1 : c.opt.maxDepth;
     const PixelSequence seq(c.opt, s0, s1);
@@ -162,7 +166,7 @@ void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
         const RayDifferentials* diff = productDiff ? &p.diff : nullptr;
         glm::vec3 L(0.0f);
         if (!p.found) {
-            L = c.env ? c.env->Eval(p.ray.dir) : glm::vec3(0.0f);
+            L = c.Background(p.ray.dir);
         } else if (p.hit.object < 0) {
             L = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
                 const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
@@ -172,20 +176,23 @@ void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
         } else {
             const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit, diff);
             const bool glossy = c.scene.materials[si.material].type != Material::Type::Diffuse;
-            glm::vec3 direct(0.0f), specular(0.0f);
-            const FirstHitLight split{&si, &direct, glossy ? &specular : nullptr};
+            glm::vec3 direct(0.0f), specular(0.0f), deltaDirect(0.0f);
+            FirstHitLight split{&si, &direct, glossy ? &specular : nullptr};
+            if (keepDelta) split.deltaDirect = &deltaDirect;
             const glm::vec3 E = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
                 const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
                 return LiPath(c, p.ray, p.hit, true, rng, maxDepth, rays, true, NoCachedTerm(),
                               diff, &split, &first);
             });
-            direct /= float(paths);
+            // The direct light that stays per hit: none, the delta lights', or all of it.
+            const glm::vec3 kept =
+                (all ? (keepDelta ? deltaDirect : glm::vec3(0.0f)) : direct) / float(paths);
             // The glossy layer's specular lobe stays per hit; its diffuse base is binned.
             const glm::vec3 albedo =
                 glossy ? MakeBsdf(c, si).DiffuseReflectance() : c.rs.Albedo(si);
-            L = specular / float(paths);
-            if (!all) L += albedo * direct;
-            const glm::vec3 binned = all ? E : glm::max(E - direct, glm::vec3(0.0f));
+            // An emissive surface's own light is seen per hit.
+            L = specular / float(paths) + albedo * kept + c.HitEmission(p.ray, p.hit);
+            const glm::vec3 binned = all && !keepDelta ? E : glm::max(E - kept, glm::vec3(0.0f));
             RadianceBin::Value v;
             // A NaN or infinite estimate is dropped, as per-hit drops such a sample.
             if (RadianceBin::FromRadiance(&binned.x, &v)) {

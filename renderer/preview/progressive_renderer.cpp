@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "progressive_renderer.h"
+#include "renderer/preview/progressive_renderer.h"
 
 #include <algorithm>
 #include <chrono>
@@ -258,6 +258,7 @@ SceneAnimation AnimationOf(const Scene& scene) {
     for (const Object& o : scene.objects) track(o.transform, false);
     for (const QuadLight& l : scene.quadLights) track(l.transform, false);
     for (const DistantLight& l : scene.distantLights) track(l.transform, false);
+    for (const PointLight& l : scene.pointLights) track(l.transform, false);
     return a;
 }
 
