@@ -17,8 +17,11 @@ struct CliRun {
     std::string out;  ///< stdout + stderr
 };
 
-inline CliRun Texcache(const std::string& args) {
-    const std::string cmd = std::string(TEXCACHE_BIN_DIR) + "/texcache " + args + " 2>&1";
+/// `texcache ARGS`; killed after `timeoutSeconds` when > 0 (exit code 137).
+inline CliRun Texcache(const std::string& args, int timeoutSeconds = 0) {
+    const std::string limit =
+        timeoutSeconds > 0 ? "timeout -s KILL " + std::to_string(timeoutSeconds) + " " : "";
+    const std::string cmd = limit + std::string(TEXCACHE_BIN_DIR) + "/texcache " + args + " 2>&1";
     FILE* p = popen(cmd.c_str(), "r");
     CliRun r{-1, ""};
     if (!p) return r;

@@ -4,12 +4,18 @@
 // textures that are not finite are repaired with a warning or refused on one line, and a render
 // that cannot show anything says why. Every refusal is one line and exit code 2.
 #include <gtest/gtest.h>
+#include <signal.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
+#include <regex>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "cli_run.h"
 #include "renderer/image/image.h"
@@ -218,6 +224,242 @@ TEST(NonFiniteLight, TexturesWithNanOrNegativeTexelsAreOneLine) {
         EXPECT_TRUE(OneLineError(r)) << bad;
         EXPECT_NE(r.out.find("1 of its 64 texels"), std::string::npos) << r.out;
     }
+}
+
+// ---- Flags that do nothing
+// -----------------------------------------------------------------------
+
+// An option the integrator, the shading mode or the other options leave unused is one line
+// naming it (each would otherwise be ignored in silence).
+TEST(UnusedFlags, AreOneLineNamingTheOption) {
+    const std::string cube = " " + test::MeshPath("catmark_cube");
+    const std::string png = " -q --spp 1 --resolution 16x16 -o " + (Dir() / "flag.png").string();
+    const std::string exr = " -q --spp 1 --resolution 16x16 -o " + (Dir() / "flag.exr").string();
+    struct Case {
+        std::string args, names;
+    };
+    for (const Case& c : {
+             Case{"render --integrator path --ao-distance 3" + cube + png, "--ao-distance"},
+             Case{"render --integrator direct --ao-samples 3" + cube + png, "--ao-samples"},
+             Case{"render --integrator ao --max-depth 3" + cube + png, "--max-depth"},
+             Case{"render --integrator ao --hit-samples 2" + cube + png, "--hit-samples"},
+             Case{"render --pass-spp 4" + cube + png, "--pass-spp"},
+             Case{"render --filter gaussian" + cube + png, "--filter"},
+             Case{"render --direct-mapped" + cube + png, "--direct-mapped"},
+             Case{"render --shadow-samples 8" + cube + png, "--shadow-samples"},
+             Case{"render --psr-cache-mb 4" + cube + png, "--psr-cache-mb"},
+             Case{"render --psr-lod-bias 2" + cube + png, "--psr-lod-bias"},
+             Case{"render --fps 10" + cube + png, "--fps"},
+             Case{"render --seed 18446744073709551616" + cube + png, "--seed"},
+             Case{"render --seed 0x10" + cube + png, "--seed"},
+             Case{"render --seed -1" + cube + png, "--seed"},
+             Case{"render --no-png" + cube + png, "--no-png"},
+             Case{"render --no-png --exposure 2" + cube + exr, "--exposure"},
+             Case{"preview --bench --frames 3 --bench-frames 1" + cube, "--frames"},
+             Case{"preview --fps 10" + cube, "--fps"},
+             Case{"experiment cpis --methods per-hit --quick --out " + (Dir() / "x").string(),
+                  "--methods"},
+             Case{"experiment cpis --ablation --quick --out " + (Dir() / "x").string(),
+                  "--ablation"},
+         }) {
+        const CliRun r = Texcache(c.args);
+        EXPECT_TRUE(OneLineError(r)) << c.args;
+        EXPECT_NE(r.out.find("error: " + c.names + ":"), std::string::npos) << c.args << "\n"
+                                                                            << r.out;
+    }
+    EXPECT_FALSE(fs::exists(Dir() / "x"));
+    // The whole documented range of --seed is taken.
+    const CliRun top = Texcache("render --seed 18446744073709551615" + cube + png);
+    EXPECT_EQ(top.code, 0) << top.out;
+}
+
+// ---- Outputs
+// -------------------------------------------------------------------------------------
+
+// montage refuses to write over one of its inputs, which stays as it was; --exposure on an EXR
+// output is an error.
+TEST(Outputs, MontageNeverOverwritesItsInput) {
+    const fs::path a = Dir() / "montage_in.exr";
+    WriteImage(a.string(), Image(4, 2, 3, 0.25f));
+    const auto before = fs::file_size(a);
+    const auto mtime = fs::last_write_time(a);
+    const CliRun r = Texcache("montage " + a.string() + " " + a.string() + " -o " + a.string());
+    EXPECT_TRUE(OneLineError(r));
+    EXPECT_EQ(fs::file_size(a), before);
+    EXPECT_EQ(fs::last_write_time(a), mtime);
+    const CliRun e = Texcache("montage --exposure 3 " + a.string() + " -o " +
+                              (Dir() / "montage_out.exr").string());
+    EXPECT_TRUE(OneLineError(e));
+    EXPECT_NE(e.out.find("--exposure"), std::string::npos) << e.out;
+}
+
+// An output name of up to 255 bytes is written (its temporary name is cut to fit, with a hash),
+// EXR and PNG beside it, and a longer one is refused before rendering.
+TEST(Outputs, AnyLegalFileNameIsWritten) {
+    const std::string cube = " " + test::MeshPath("catmark_cube") + " -q --spp 1 --resolution 8x8";
+    const fs::path exr = Dir() / (std::string(251, 'e') + ".exr");
+    const CliRun r = Texcache("render" + cube + " -o " + exr.string());
+    EXPECT_EQ(r.code, 0) << r.out;
+    EXPECT_TRUE(fs::exists(exr));
+    EXPECT_TRUE(fs::exists(fs::path(exr).replace_extension(".png")));
+    for (const auto& e : fs::directory_iterator(Dir()))
+        EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+    const CliRun tooLong =
+        Texcache("render" + cube + " -o " + (Dir() / (std::string(300, 'z') + ".png")).string());
+    EXPECT_TRUE(OneLineError(tooLong));
+    EXPECT_NE(tooLong.out.find("255"), std::string::npos) << tooLong.out;
+}
+
+// Temporaries left by a killed run (its pid gone) are removed by the next run writing into the
+// directory; those of a live process (pid 1) and other files are kept.
+TEST(Outputs, StaleTemporariesOfDeadProcessesAreRemoved) {
+    const fs::path d = Dir() / "stale";
+    fs::create_directories(d);
+    pid_t dead = 4000000;
+    while (dead > 2 && !(::kill(dead, 0) != 0 && errno == ESRCH)) --dead;
+    const std::string deadPid = std::to_string(dead);
+    for (const std::string& name :
+         std::vector<std::string>{"a.png.tmp-" + deadPid, "b.exr.probe-" + deadPid, "c.png.tmp-1",
+                                  "d.tmp-x" + deadPid, "notes.txt"})
+        Write(d / name, "x");
+    const CliRun r = Texcache("render " + test::MeshPath("catmark_cube") +
+                              " -q --spp 1 --resolution 8x8 -o " + (d / "out.png").string());
+    EXPECT_EQ(r.code, 0) << r.out;
+    EXPECT_FALSE(fs::exists(d / ("a.png.tmp-" + deadPid)));
+    EXPECT_FALSE(fs::exists(d / ("b.exr.probe-" + deadPid)));
+    EXPECT_TRUE(fs::exists(d / "c.png.tmp-1"));
+    EXPECT_TRUE(fs::exists(d / ("d.tmp-x" + deadPid)));
+    EXPECT_TRUE(fs::exists(d / "notes.txt"));
+}
+
+// ---- One line
+// ------------------------------------------------------------------------------------
+
+// An unknown subcommand or experiment is named; an experiment refusing its options leaves no
+// empty --out directory.
+TEST(OneLine, UnknownWordsAreNamedAndNothingIsLeft) {
+    const CliRun bench = Texcache("bench bogus");
+    EXPECT_TRUE(OneLineError(bench));
+    EXPECT_NE(bench.out.find("'bogus'"), std::string::npos) << bench.out;
+    const CliRun exp = Texcache("experiment bogus --out " + (Dir() / "e").string());
+    EXPECT_TRUE(OneLineError(exp));
+    EXPECT_NE(exp.out.find("'bogus'"), std::string::npos) << exp.out;
+    const fs::path out = Dir() / "exp_nope";
+    const CliRun methods =
+        Texcache("experiment speed-vs-error --quick --methods nope --out " + out.string());
+    EXPECT_TRUE(OneLineError(methods));
+    EXPECT_FALSE(fs::exists(out));
+}
+
+// ---- Fuzzing the whole program
+// -------------------------------------------------------------------
+
+/// The numbers most likely to break a renderer: beyond float, at Embree's and the loader's
+/// limits, below float's normal range, zero, negative, not a number.
+const char* const kHostile[] = {"1e30", "-1e30", "5e17",       "1e18", "-7e17", "1e-40",
+                                "1e-8", "0",     "-0",         "nan",  "inf",   "-1",
+                                "3e38", "1e10",  "2147483648", "-5"};
+
+/// Replaces one number of `text` (chosen by `rng`) with a hostile one, or every number with
+/// itself times a hostile scale (`scaleAll`, OBJ vertices only).
+std::string MutateNumbers(const std::string& text, std::mt19937& rng, bool scaleAll) {
+    static const std::regex number(R"(-?[0-9]+(\.[0-9]+)?(e-?[0-9]+)?)");
+    std::vector<std::pair<size_t, size_t>> spans;
+    for (auto it = std::sregex_iterator(text.begin(), text.end(), number);
+         it != std::sregex_iterator(); ++it)
+        spans.emplace_back(size_t(it->position()), size_t(it->length()));
+    if (spans.empty()) return text;
+    const char* hostile = kHostile[rng() % std::size(kHostile)];
+    if (!scaleAll) {
+        const auto [at, n] = spans[rng() % spans.size()];
+        return text.substr(0, at) + hostile + text.substr(at + n);
+    }
+    std::string out;
+    size_t last = 0;
+    for (const auto& [at, n] : spans) {
+        out += text.substr(last, at - last);
+        const bool vertex = at > 1 && text.compare(text.rfind('\n', at) + 1, 2, "v ") == 0;
+        char buf[64];
+        std::snprintf(buf, sizeof buf, "%.9g",
+                      std::stod(text.substr(at, n)) * std::strtod(hostile, nullptr));
+        out += vertex ? std::string(buf) : text.substr(at, n);
+        last = at + n;
+    }
+    return out + text.substr(last);
+}
+
+// Seeded mutations of a small scene that uses every input kind (an OBJ cage, a JSON scene with a
+// camera, stereo rig, material texture and each kind of light, an EXR environment map and
+// texture), rendered by the program with each integrator at a tiny size: every run exits 0, or
+// 2 with one error line (after any warnings); never a signal, never past the time limit. 160 runs,
+// about 20 s in Release.
+TEST(FuzzRender, MutatedScenesRenderOrAreOneLine) {
+    const fs::path d = Dir() / "fuzz";
+    fs::create_directories(d);
+    std::ifstream cubeFile(test::MeshPath("catmark_cube"));
+    const std::string cube((std::istreambuf_iterator<char>(cubeFile)), {});
+    const std::string scene = R"({
+  "camera": {"position": [3, 2, 4], "look_at": [0, 0, 0], "fov": 40, "lens_radius": 0.01,
+             "focus_distance": 5, "stereo": {"eye_separation": 0.1, "convergence": 5}},
+  "materials": {"m": {"type": "ggx", "albedo": {"texture": "tex.exr"}, "roughness": [0.3, 0.2]}},
+  "objects": [{"mesh": "cube.obj", "material": "m",
+               "transform": {"translate": [0, 0, 0], "rotate": [30, 0, 1, 0], "scale": 1}}],
+  "lights": [{"type": "environment", "file": "env.exr", "intensity": 1},
+             {"type": "quad", "corner": [-1, 3, -1], "edge1": [2, 0, 0], "edge2": [0, 0, 2],
+              "radiance": [2, 2, 2]},
+             {"type": "distant", "direction": [-0.4, -1, -0.5], "irradiance": [1, 1, 1]},
+             {"type": "point", "position": [2, 2, 2], "intensity": [3, 3, 3], "radius": 0.1}],
+  "render": {"resolution": [16, 12], "spp": 1, "max_depth": 3, "ao_distance": 2}
+})";
+    std::mt19937 rng(47);
+    const char* integrators[] = {"normal", "ao", "direct", "path"};
+    const float texel[] = {NAN, INFINITY, -INFINITY, -3.0f, 3e38f, 0.0f, 1e-40f};
+    int refused = 0;
+    constexpr int kRuns = 160;
+    for (int i = 0; i < kRuns; ++i) {
+        std::string obj = cube, json = scene;
+        Image env(16, 8, 3, 1.0f), tex(4, 4, 3, 0.5f);
+        switch (i % 4) {
+            case 0:
+                obj = MutateNumbers(cube, rng, rng() % 3 == 0);
+                break;
+            case 1:
+            case 2:
+                json = MutateNumbers(scene, rng, false);
+                break;
+            default:
+                for (Image* img : {&env, &tex})
+                    for (int k = int(rng() % 4); k >= 0; --k)
+                        img->data[rng() % img->data.size()] = texel[rng() % std::size(texel)];
+        }
+        Write(d / "cube.obj", obj);
+        Write(d / "scene.json", json);
+        WriteImage((d / "env.exr").string(), env);
+        WriteImage((d / "tex.exr").string(), tex);
+        const std::string args = "render " + (d / "scene.json").string() + " --integrator " +
+                                 integrators[(i / 4) % 4] + (i % 7 == 0 ? " --stereo" : "") +
+                                 " -q -o " + (d / "out.png").string();
+        const CliRun r = Texcache(args, 60);
+        // A refusal is one error line, the last; warnings about other inputs may precede it.
+        size_t errors = 0, others = 0;
+        std::istringstream lines(r.out);
+        for (std::string line; std::getline(lines, line);)
+            (line.starts_with("texcache: error: ") ? errors : others) +=
+                !line.starts_with("texcache: warning: ");
+        const bool ok = r.code == 0 || (r.code == 2 && errors == 1 && others == 0 &&
+                                        r.out.rfind("texcache: error: ") ==
+                                            r.out.rfind('\n', r.out.size() - 2) + 1);
+        EXPECT_TRUE(ok) << "run " << i << " (" << args << "): exit " << r.code << "\n"
+                        << r.out << "\nscene:\n"
+                        << json << "\n";
+        if (!ok)
+            fs::copy(d, Dir() / ("fuzz_failed_" + std::to_string(i)),
+                     fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+        refused += r.code == 2;
+    }
+    // Most mutations are still renderable scenes: the test exercises the renderer, not only the
+    // loader's refusals.
+    EXPECT_LT(refused, kRuns * 3 / 4);
 }
 
 }  // namespace

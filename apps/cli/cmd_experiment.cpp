@@ -1,9 +1,14 @@
 // SPDX-License-Identifier: Apache-2.0
 // `texcache experiment <name> --out DIR [--quick]`: reproduce a claim of the paper on our scenes
 // and write CSV + PNG plots + a markdown summary into DIR.
+#include <algorithm>
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "cli_util.h"
 #include "commands.h"
@@ -23,6 +28,7 @@ struct ExperimentArgs {
     std::string methods;
     int cameraSpp = 0;
     bool ablation = false;
+    std::set<std::string> given;  ///< options on the command line
 };
 
 const std::map<std::string, std::function<int(const experiments::Setup&)>>& Experiments() {
@@ -52,8 +58,25 @@ int RunExperiment(const ExperimentArgs& a) {
     if (a.name != "all" && !all.count(a.name))
         throw InputError("experiment",
                          "unknown experiment '" + a.name + "' (valid: " + ExperimentNames() + ")");
+    // Options of some experiments only: given to another, they would do nothing.
+    const std::pair<const char*, std::vector<std::string>> scoped[] = {
+        {"--only", {"speed-vs-error", "temporal"}},
+        {"--methods", {"speed-vs-error"}},
+        {"--camera-spp", {"speed-vs-error"}},
+        {"--ablation", {"temporal"}}};
+    for (const auto& [option, experiments] : scoped) {
+        if (a.name == "all" || !a.given.count(option)) continue;
+        if (std::find(experiments.begin(), experiments.end(), a.name) != experiments.end())
+            continue;
+        std::string list;
+        for (const std::string& e : experiments) list += (list.empty() ? "" : " and ") + e;
+        throw InputError(option, "applies to the " + list + " experiment" +
+                                     (experiments.size() > 1 ? "s" : "") + ", not '" + a.name +
+                                     "'");
+    }
     namespace fs = std::filesystem;
     std::error_code ec;
+    const bool created = !fs::exists(a.out, ec);
     fs::create_directories(a.out, ec);
     if (!fs::is_directory(a.out))
         throw InputError("--out", "cannot create directory '" + a.out + "'");
@@ -65,8 +88,14 @@ int RunExperiment(const ExperimentArgs& a) {
     experiments::Setup s{a.out, a.scenes, a.quick, a.only, a.methods, a.cameraSpp, a.ablation};
     const double t0 = NowSeconds();
     int code = 0;
-    for (const auto& [name, fn] : all)
-        if (a.name == "all" || a.name == name) code = std::max(code, fn(s));
+    try {
+        for (const auto& [name, fn] : all)
+            if (a.name == "all" || a.name == name) code = std::max(code, fn(s));
+    } catch (...) {
+        // A refused option (an unknown --methods name, say) leaves no empty --out behind.
+        if (created && fs::is_empty(a.out, ec)) fs::remove(a.out, ec);
+        throw;
+    }
     std::printf("experiment %s finished in %.1f s\n", a.name.c_str(), NowSeconds() - t0);
     return code;
 }
@@ -97,7 +126,11 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
                   "SVGF's and in Zeng's order, summarised in temporal_ablation.md");
     cmd->add_option("--scenes", args->scenes, "Directory of the bundled scenes")
         ->capture_default_str();
-    cmd->callback([args, &exitCode] { exitCode = RunExperiment(*args); });
+    cmd->callback([args, cmd, &exitCode] {
+        for (const CLI::Option* o : cmd->get_options())
+            if (o->count() > 0) args->given.insert(o->get_name());
+        exitCode = RunExperiment(*args);
+    });
 }
 
 }  // namespace texcache::cli

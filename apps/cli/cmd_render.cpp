@@ -66,6 +66,7 @@ int RunRender(const RenderArgs& a) {
     opt.texture = ParseTextureOptions(a, SceneLightKinds(scene));
     SizeCaches(a, &opt, a.stereo ? 2 : 1);
     ParseLightSamplingOptions(a, scene, &opt);
+    CheckOptionsUsed(a, opt);
     opt.progress = !a.quiet;
     int first = 0, last = 0;
     float fps = 0.0f;
@@ -146,7 +147,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "cpis: mip levels above the pixel-sized texel at which records are cached "
                     "(plus one per doubling of the lobe's width past GGX alpha 0.1)")
         ->capture_default_str();
-    cmd->add_option("--seed", args->seed, "Random seed (same seed, same image for any --threads)");
+    cmd->add_option("--seed", args->seed,
+                    "Random seed, an integer in [0, 18446744073709551615] (same seed, same image "
+                    "for any --threads)");
     cmd->add_option("--threads", args->threads, "Worker threads (0 = all cores)");
     cmd->add_option("--tessellation-rate", args->tessellationRate,
                     "Embree subdivision tessellation rate");

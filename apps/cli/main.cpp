@@ -3,6 +3,8 @@
 #include <cstdio>
 #include <exception>
 #include <new>
+#include <string>
+#include <vector>
 
 #include "commands.h"
 #include "renderer/library_versions.h"
@@ -42,6 +44,24 @@ std::string CommandPath(const CLI::App& app) {
     }
 }
 
+/// When the innermost parsed command needs a subcommand and was given an unknown word instead
+/// (`texcache bench bogus`), a message naming the word and the valid ones; else empty.
+std::string UnknownSubcommand(const CLI::App& app) {
+    const CLI::App* at = &app;
+    for (;;) {
+        const std::vector<const CLI::App*> parsed =
+            at->get_subcommands([](const CLI::App* s) { return s->parsed(); });
+        if (parsed.empty()) break;
+        at = parsed.front();
+    }
+    const std::vector<const CLI::App*> subs = at->get_subcommands({});
+    const std::vector<std::string> rest = at->remaining();
+    if (subs.empty() || rest.empty() || rest.front().starts_with("-")) return "";
+    std::string valid;
+    for (const CLI::App* s : subs) valid += (valid.empty() ? "" : ", ") + s->get_name();
+    return CommandPath(app) + ": unknown subcommand '" + rest.front() + "' (valid: " + valid + ")";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -66,6 +86,11 @@ int main(int argc, char** argv) {
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
         // Malformed options exit 2 like any other bad input, in the same one-line form.
+        if (const std::string unknown = UnknownSubcommand(app); !unknown.empty()) {
+            std::fprintf(stderr, "texcache: error: %s\n",
+                         texcache::internal::OneLine(unknown).c_str());
+            return 2;
+        }
         std::fprintf(stderr, "texcache: error: %s (see %s --help)\n",
                      texcache::internal::OneLine(e.what()).c_str(), CommandPath(app).c_str());
         return 2;

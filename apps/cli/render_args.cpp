@@ -24,8 +24,13 @@ void ApplySettings(const RenderArgs& a, RenderSettings* settings, double unitSca
     if (a.Given("--spp")) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
     if (a.Given("--seconds")) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
     if (a.Given("--resolution")) ParseResolution(a.resolution, &s.width, &s.height);
-    if (a.Given("--seed"))
-        s.seed = uint64_t(CheckRange("--seed", a.seed, 0LL, std::numeric_limits<long long>::max()));
+    if (a.Given("--seed")) {
+        const char* end = a.seed.data() + a.seed.size();
+        const auto r = std::from_chars(a.seed.data(), end, s.seed);
+        if (a.seed.empty() || r.ec != std::errc() || r.ptr != end)
+            throw InputError("--seed",
+                             "'" + a.seed + "' is not an integer in [0, 18446744073709551615]");
+    }
     if (a.Given("--integrator")) s.integrator = ParseIntegrator(a.integrator, "--integrator");
     if (a.Given("--max-depth")) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
     if (a.Given("--ao-samples")) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
@@ -149,6 +154,13 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights) 
         if (a.visibilityRadius != -1) CheckFilterRadius(a.visibilityRadius, "--visibility-radius");
     }
     t.visibilityRadius = a.visibilityRadius;
+    if (!t.enabled)
+        for (const char* o :
+             {"--ts-samples", "--cached-light", "--filter", "--filter-radius", "--footprint",
+              "--shadow-samples", "--indirect-samples", "--pass-spp", "--lod-bias",
+              "--sample-cache-mb", "--texel-cache-mb", "--direct-mapped", "--reference-cache"})
+            if (a.Given(o))
+                throw InputError(o, "applies to texture-space shading: give --shading texture");
     t.cache.Validate();
     return t;
 }
@@ -254,6 +266,29 @@ void CheckCombinations(const RenderArgs& a, const RenderSettings& s, const Rende
         throw InputError("--aov", "AOV layers are written to EXR files only: give -o NAME.exr");
     if (a.Given("--stats") && !a.frames.empty())
         throw InputError("--stats", "reports one frame: drop --frames");
+    if (a.noPng && out.exr.empty())
+        throw InputError("--no-png", "the output is a PNG: drop --no-png, or give -o NAME.exr");
+    if (a.Given("--exposure") && out.png.empty())
+        throw InputError("--exposure", "sets the PNG's exposure, and --no-png writes none");
+}
+
+void CheckOptionsUsed(const RenderArgs& a, const RenderOptions& opt) {
+    const auto integrator = [&](const char* o, const char* which) {
+        throw InputError(o, std::string("applies to the ") + which + " (the integrator is " +
+                                IntegratorName(opt.integrator) + ")");
+    };
+    const IntegratorKind k = opt.integrator;
+    if (a.Given("--max-depth") && k != IntegratorKind::Path)
+        integrator("--max-depth", "path integrator");
+    if (a.Given("--hit-samples") && k != IntegratorKind::Direct && k != IntegratorKind::Path)
+        integrator("--hit-samples", "direct and path integrators");
+    for (const char* o : {"--ao-samples", "--ao-distance"})
+        if (a.Given(o) && k != IntegratorKind::AO) integrator(o, "ao integrator");
+    for (const char* o : {"--psr-cache-mb", "--psr-lod-bias"})
+        if (a.Given(o) && opt.lightSampling != LightSampling::Cpis)
+            throw InputError(o, "applies to --light-sampling cpis");
+    if (a.Given("--fps") && a.frames.empty())
+        throw InputError("--fps", "sets the frame rate of an animation: give --frames");
 }
 
 void CheckFiles(const Scene& scene, const std::vector<OutputPaths>& outs,

@@ -35,7 +35,7 @@ struct RenderArgs {
     float seconds = 0.0f;
     std::string resolution;
     int threads = 0;
-    long long seed = 0;
+    std::string seed;
     std::string integrator;
     int maxDepth = 0;
     int aoSamples = 0;
@@ -93,6 +93,10 @@ inline constexpr const char* kCacheSizeOptions = "--sample-cache-mb/--texel-cach
 /// (--ao-distance) are in the scene file's units and stored in render units (`unitScale`,
 /// renderer/scene/scene_units.h).
 void ApplySettings(const RenderArgs& a, RenderSettings* settings, double unitScale);
+/// Throws InputError for an option that the integrator or the other options leave unused
+/// (--max-depth without the path integrator, --psr-cache-mb without cpis, --fps without
+/// --frames...): images and stereo pairs, not the frame buffers' split.
+void CheckOptionsUsed(const RenderArgs& a, const RenderOptions& opt);
 /// A warning when the camera shows none of the scene's objects in the frame (or in any frame of
 /// --frames): CameraViewProblem.
 void WarnIfNothingVisible(const RenderArgs& a, const Scene& scene);
