@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
 #include <new>
 #include <utility>
 
@@ -108,6 +109,16 @@ CachedDirect CachedDirectLight(CachedLight choice, LightKinds kinds, TextureSamp
     if (choice == CachedLight::Indirect || samples != TextureSamples::Hits || !kinds.soft)
         return {false, false};
     return {true, kinds.delta};
+}
+
+void CheckStereoShear(const StereoRig& rig, const std::string& where) {
+    if (rig.eyeSeparation <= 100.0f * rig.convergence) return;
+    char msg[160];
+    std::snprintf(msg, sizeof msg,
+                  "the eyes are %g apart but converge at %g, more than 100 times closer: their "
+                  "views would not overlap",
+                  double(rig.eyeSeparation), double(rig.convergence));
+    throw InputError(where, msg);
 }
 
 }  // namespace texcache

@@ -12,6 +12,7 @@
 
 #include "renderer/render.h"
 #include "renderer/scene/render_scene.h"
+#include "renderer/texture_space/stereo.h"
 #include "renderer/texture_space/texture_space.h"
 
 namespace texcache {
@@ -78,6 +79,11 @@ struct GivenCacheSizes {
 /// shading or with unbounded (reference) caches.
 void SizeTextureCaches(RenderOptions* opt, int views, GivenCacheSizes given,
                        const std::string& where);
+
+/// Throws InputError naming `where` when the eyes of `rig` are so far apart for its convergence
+/// distance (more than 100 times) that their sheared frustums look away from each other: past
+/// that the camera's ray directions lose their precision and then overflow.
+void CheckStereoShear(const StereoRig& rig, const std::string& where);
 
 /// This machine's physical memory in MiB.
 double PhysicalMemoryMiB();

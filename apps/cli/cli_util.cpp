@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <charconv>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -75,12 +76,14 @@ void CheckWritable(const std::string& path, const std::string& option) {
     const fs::file_status st = fs::status(path, ec);
     if (fs::is_directory(st)) fail("it is a directory");
     if (fs::exists(st) && !fs::is_regular_file(st)) fail("it is not a regular file");
+    if (const size_t n = fs::path(path).filename().string().size(); n > 255)
+        fail("its name is " + std::to_string(n) + " bytes, more than a file system takes (255)");
     const fs::path parent = fs::path(path).parent_path();
     const fs::path dir = parent.empty() ? fs::path(".") : parent;
     if (!fs::is_directory(dir, ec)) fail("directory '" + dir.string() + "' does not exist");
     // A probe file, the way the real one will be made: permissions, read-only mounts and a full
     // directory all show up here rather than after the render.
-    const std::string probe = path + ".probe-" + std::to_string(::getpid());
+    const std::string probe = TemporaryPath(path, "probe");
     const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0644);
     if (fd < 0) {
         if (errno != EEXIST)
@@ -187,6 +190,14 @@ Image Montage(const std::vector<std::vector<const Image*>>& rows, int gap) {
         y0 += row.front()->height + gap;
     }
     return out;
+}
+
+void WarnUntracedRays(const RenderScene& rs) {
+    if (const uint64_t n = rs.UntracedRays(); n > 0)
+        std::fprintf(stderr,
+                     "texcache: warning: %llu rays were not traced (non-finite or out of Embree's "
+                     "range; they count as misses): please report this scene\n",
+                     (unsigned long long)n);
 }
 
 double NowSeconds() {

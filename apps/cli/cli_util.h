@@ -9,6 +9,7 @@
 
 #include "renderer/image/atomic_files.h"
 #include "renderer/image/image.h"
+#include "renderer/scene/render_scene.h"
 #include "renderer/scene/scene.h"
 #include "texcache/error.h"
 
@@ -82,6 +83,9 @@ void WriteText(const std::string& path, const std::string& text, AtomicFiles& gr
 /// Images in a grid, rows top to bottom and each row left to right, `gap` black pixels apart
 /// (montage, bench peer's side-by-side picture). Every image of a row has the row's height.
 Image Montage(const std::vector<std::vector<const Image*>>& rows, int gap);
+
+/// A warning line when `rs` left rays untraced (RenderScene::UntracedRays: none should exist).
+void WarnUntracedRays(const RenderScene& rs);
 
 double NowSeconds();
 /// Peak resident memory of this process so far.

@@ -48,16 +48,10 @@ int RunCompare(const CompareArgs& a) {
     Image ref = ReadImageRGB(a.ref, &refEnc);
     // A PNG holds display values (sRGB OETF), an EXR linear light: comparing them as they are
     // would measure the encoding. The sRGB one is decoded to linear and the user told so (its
-    // values were clipped to [0, 1] and quantized when it was written, which stays in the error).
-    if (testEnc != refEnc) {
-        const bool testSrgb = testEnc == ColorEncoding::Srgb;
-        SrgbToLinear(testSrgb ? &test : &ref);
-        std::fprintf(stderr,
-                     "texcache: note: %s is %s and %s %s: %s decoded to linear light for the "
-                     "comparison\n",
-                     a.test.c_str(), EncodingName(testEnc), a.ref.c_str(), EncodingName(refEnc),
-                     testSrgb ? a.test.c_str() : a.ref.c_str());
-    }
+    // values were clipped to [0, 1] and quantized when it was written, which stays in the error),
+    // once the comparison has succeeded: a refusal stays one line.
+    const bool mixed = testEnc != refEnc, testSrgb = testEnc == ColorEncoding::Srgb;
+    if (mixed) SrgbToLinear(testSrgb ? &test : &ref);
     if (test.width != ref.width || test.height != ref.height)
         throw InputError(a.test, "size " + std::to_string(test.width) + "x" +
                                      std::to_string(test.height) + " differs from the reference " +
@@ -69,6 +63,12 @@ int RunCompare(const CompareArgs& a) {
     } catch (const InputError& err) {  // name the files, not just "compare"
         throw InputError(a.test + " vs " + a.ref, err.what());
     }
+    if (mixed)
+        std::fprintf(stderr,
+                     "texcache: note: %s is %s and %s %s: %s decoded to linear light for the "
+                     "comparison\n",
+                     a.test.c_str(), EncodingName(testEnc), a.ref.c_str(), EncodingName(refEnc),
+                     testSrgb ? a.test.c_str() : a.ref.c_str());
     if (a.json) {
         std::printf(
             "{\"relmse\": %s, \"rmse\": %s, \"psnr\": %s, \"ssim\": %s, \"nonfinite\": %zu, "

@@ -6,7 +6,9 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cli_util.h"
@@ -30,6 +32,7 @@ struct ExperimentArgs {
     bool ablation = false;
     std::string set =
         (std::filesystem::path(TEXCACHE_SCENES_DIR).parent_path() / "validation").string();
+    std::set<std::string> given;  ///< options on the command line
 };
 
 const std::map<std::string, std::function<int(const experiments::Setup&)>>& Experiments() {
@@ -72,14 +75,32 @@ std::vector<std::string> Names(const std::string& list) {
     return names;
 }
 
-/// The arguments checked, the output directory made.
-void CheckExperiment(const ExperimentArgs& a) {
+/// The arguments checked, the output directory made; true when this call made it.
+bool CheckExperiment(const ExperimentArgs& a) {
     for (const std::string& name : Names(a.name))
         if (!Experiments().count(name))
             throw InputError("experiment", "unknown experiment '" + name +
                                                "' (valid: " + ExperimentNames() + ")");
+    // Options of some experiments only: given to another, they would do nothing.
+    const std::pair<const char*, std::vector<std::string>> scoped[] = {
+        {"--only", {"speed-vs-error", "temporal", "equal-time"}},
+        {"--methods", {"speed-vs-error"}},
+        {"--camera-spp", {"speed-vs-error"}},
+        {"--ablation", {"temporal"}},
+        {"--set", {"equal-time"}}};
+    for (const auto& [option, experiments] : scoped) {
+        if (a.name == "all" || !a.given.count(option)) continue;
+        for (const std::string& name : Names(a.name)) {
+            if (std::find(experiments.begin(), experiments.end(), name) != experiments.end())
+                continue;
+            std::string list;
+            for (const std::string& e : experiments) list += (list.empty() ? "" : ", ") + e;
+            throw InputError(option, "applies to " + list + ", not '" + name + "'");
+        }
+    }
     namespace fs = std::filesystem;
     std::error_code ec;
+    const bool created = !fs::exists(a.out, ec);
     fs::create_directories(a.out, ec);
     if (!fs::is_directory(a.out))
         throw InputError("--out", "cannot create directory '" + a.out + "'");
@@ -88,11 +109,13 @@ void CheckExperiment(const ExperimentArgs& a) {
     if (a.cameraSpp < 0 || a.cameraSpp > 1024)
         throw InputError("--camera-spp",
                          "must be in 1..1024 (got " + std::to_string(a.cameraSpp) + ")");
+    return created;
 }
 
 int RunExperiment(const ExperimentArgs& a) {
     // Over many ranks every rank checks first (one line if one fails).
-    OnEveryRank([&] { CheckExperiment(a); });
+    bool created = false;
+    OnEveryRank([&] { created = CheckExperiment(a); });
     experiments::Setup s{a.out,     a.scenes,    a.quick,    a.only,
                          a.methods, a.cameraSpp, a.ablation, a.set};
     const double t0 = NowSeconds();
@@ -103,12 +126,20 @@ int RunExperiment(const ExperimentArgs& a) {
     RankGroup& job = Job();
     int index = 0;
     std::string mine;
-    for (const std::string& name : Names(a.name)) {
-        if (index++ % job.Size() != job.Rank()) continue;
-        const double te = NowSeconds();
-        code = std::max(code, Experiments().at(name)(s));
-        mine += experiments::Format("experiment %s on rank %d of %d: %.1f s\n", name.c_str(),
-                                    job.Rank(), job.Size(), NowSeconds() - te);
+    try {
+        for (const std::string& name : Names(a.name)) {
+            if (index++ % job.Size() != job.Rank()) continue;
+            const double te = NowSeconds();
+            code = std::max(code, Experiments().at(name)(s));
+            mine += experiments::Format("experiment %s on rank %d of %d: %.1f s\n", name.c_str(),
+                                        job.Rank(), job.Size(), NowSeconds() - te);
+        }
+    } catch (...) {
+        // A refused option (an unknown --methods name, say) leaves no empty --out behind.
+        namespace fs = std::filesystem;
+        std::error_code ec;
+        if (created && fs::is_empty(a.out, ec)) fs::remove(a.out, ec);
+        throw;
     }
     if (job.Size() > 1) {
         // Rank 0 reports every rank's experiments (their files are already in --out).
@@ -156,7 +187,11 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
                     "equal-time: the directory of scenes it compares per hit and texture space on "
                     "(scenes no setting was chosen on)")
         ->capture_default_str();
-    cmd->callback([args, &exitCode] { exitCode = RunExperiment(*args); });
+    cmd->callback([args, cmd, &exitCode] {
+        for (const CLI::Option* o : cmd->get_options())
+            if (o->count() > 0) args->given.insert(o->get_name());
+        exitCode = RunExperiment(*args);
+    });
 }
 
 }  // namespace texcache::cli

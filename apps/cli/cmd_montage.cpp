@@ -2,6 +2,7 @@
 // `texcache montage A B ... -o out.png`: images of the same height side by side, left to right,
 // `--gap` black columns apart (scripts/demo.sh's per-hit | texture-space picture).
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -20,12 +21,22 @@ struct MontageArgs {
     std::string output;
     int gap = 4;
     float exposure = 0.0f;
+    bool exposureGiven = false;  ///< --exposure on the command line
 };
 
 int RunMontage(const MontageArgs& a) {
     CheckImageOutputPath(a.output);  // a bad name fails before anything is read
     const int gap = CheckRange("--gap", a.gap, 0, 4096);
     const float exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
+    if (a.exposureGiven && std::filesystem::path(a.output).extension() != ".png")
+        throw InputError("--exposure",
+                         "sets a PNG output's exposure, and '" + a.output + "' is not a PNG");
+    // The output may not overwrite an input (it is written after all are read, but a failed
+    // montage must leave the inputs as they were, and a good one keep them).
+    FileSet files;
+    for (const std::string& path : a.inputs) files.Input(path, "an input image");
+    files.Output(a.output, "--output");
+    files.Check();
     std::vector<Image> images;
     for (const std::string& path : a.inputs) {
         images.push_back(ReadImageRGB(path));
@@ -56,7 +67,10 @@ void AddMontageCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--gap", args->gap, "Black columns between images")->capture_default_str();
     cmd->add_option("--exposure", args->exposure, "Exposure in stops for a PNG output")
         ->capture_default_str();
-    cmd->callback([args, &exitCode] { exitCode = RunMontage(*args); });
+    cmd->callback([args, cmd, &exitCode] {
+        args->exposureGiven = cmd->count("--exposure") > 0;
+        exitCode = RunMontage(*args);
+    });
 }
 
 }  // namespace texcache::cli

@@ -11,6 +11,7 @@
 #include "preview.h"
 #include "renderer/render.h"
 #include "renderer/scene/scene_loader.h"
+#include "renderer/scene/scene_units.h"
 #include "renderer/texture_space/stereo.h"
 #include "renderer/texture_space/texture_space.h"
 
@@ -38,6 +39,7 @@ struct PreviewCliArgs {
     float time = NAN;  // NAN: the scene's render.time
     bool play = false;
     float fps = 24.0f;
+    bool fpsGiven = false;  ///< --fps on the command line
     bool saveCamera = false;
     std::string denoise = "off";
     bool demodulate = false;
@@ -97,7 +99,9 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.eyeSeparation) {
         if (!a.stereo) throw InputError("--eye-separation", "sets the stereo rig: give --stereo");
         CheckStereoRig({*a.eyeSeparation, 1.0f}, "--eye-separation");
-        s.eyeSeparation = *a.eyeSeparation;
+        // In the scene file's units; the preview works in render units (scene_units.h).
+        s.eyeSeparation = float(std::min(double(*a.eyeSeparation) * scene.unitScale, 1e30));
+        CheckSceneReach(scene, 0.5f * s.eyeSeparation, "--eye-separation");
     } else if (scene.camera.eyeSeparation > 0.0f) {
         s.eyeSeparation = scene.camera.eyeSeparation;
     }
@@ -133,6 +137,12 @@ int RunPreview(const PreviewCliArgs& a) {
         throw InputError("--save-camera", "needs a .json scene file, got '" + a.scene + "'");
     if (!a.screenshot.empty() && p.frames == 0)
         throw InputError("--screenshot", "needs --frames N (the headless test mode)");
+    if (a.fpsGiven && p.frames == 0)
+        throw InputError("--fps", "sets the pace of the timeline of --frames: give --frames");
+    if (a.bench && p.frames > 0)
+        throw InputError("--frames",
+                         "sets the window's timeline, which --bench has not: drop it "
+                         "(--bench-frames sets the timed frames)");
     if (a.bench) {
         preview::BenchArgs b;
         b.frames = CheckRange("--bench-frames", a.benchFrames, 1, 10000);
@@ -245,7 +255,10 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
                     "128 path traced)");
     cmd->add_option("--bench-out", a->benchOut, "Bench: prefix of the images written")
         ->capture_default_str();
-    cmd->callback([a, &exitCode] { exitCode = RunPreview(*a); });
+    cmd->callback([a, cmd, &exitCode] {
+        a->fpsGiven = cmd->count("--fps") > 0;
+        exitCode = RunPreview(*a);
+    });
 }
 
 }  // namespace texcache::cli

@@ -36,10 +36,13 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
 
     // Command-line values override the scene's render settings.
     RenderSettings& s = scene.settings;
-    ApplySettings(a, &s);
+    ApplySettings(a, &s, scene.unitScale);
     if (a.demodulate && a.denoise.empty())
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
     CheckStereoOptions(a);
+    WarnIfNothingVisible(a, scene);
+    WarnIfUnlit(
+        scene, !a.frameBuffers.empty() || !a.denoise.empty() ? IntegratorKind::Path : s.integrator);
     const RenderOptions common = RenderOptionsFrom(s);
     if (!a.frameBuffers.empty() || !a.denoise.empty()) {
         if (ranks && (!a.frameBuffers.empty() || a.frames.empty()))
@@ -78,6 +81,7 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
     opt.texture = ParseTextureOptions(a, SceneLightKinds(scene));
     SizeCaches(a, &opt, a.stereo ? 2 : 1);
     ParseLightSamplingOptions(a, scene, &opt);
+    CheckOptionsUsed(a, opt);
     opt.progress = !a.quiet;
     int first = 0, last = 0;
     float fps = 0.0f;
@@ -177,7 +181,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "cpis: mip levels above the pixel-sized texel at which records are cached "
                     "(plus one per doubling of the lobe's width past GGX alpha 0.1)")
         ->capture_default_str();
-    cmd->add_option("--seed", args->seed, "Random seed (same seed, same image for any --threads)");
+    cmd->add_option("--seed", args->seed,
+                    "Random seed, an integer in [0, 18446744073709551615] (same seed, same image "
+                    "for any --threads)");
     cmd->add_option("--threads", args->threads, "Worker threads (0 = all cores)");
     cmd->add_option("--tessellation-rate", args->tessellationRate,
                     "Embree subdivision tessellation rate");

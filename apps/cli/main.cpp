@@ -5,6 +5,7 @@
 #include <memory>
 #include <new>
 #include <string>
+#include <vector>
 
 #include "commands.h"
 #include "job.h"
@@ -43,6 +44,24 @@ std::string CommandPath(const CLI::App& app) {
         at = parsed.front();
         path += " " + at->get_name();
     }
+}
+
+/// When the innermost parsed command needs a subcommand and was given an unknown word instead
+/// (`texcache bench bogus`), a message naming the word and the valid ones; else empty.
+std::string UnknownSubcommand(const CLI::App& app) {
+    const CLI::App* at = &app;
+    for (;;) {
+        const std::vector<const CLI::App*> parsed =
+            at->get_subcommands([](const CLI::App* s) { return s->parsed(); });
+        if (parsed.empty()) break;
+        at = parsed.front();
+    }
+    const std::vector<const CLI::App*> subs = at->get_subcommands({});
+    const std::vector<std::string> rest = at->remaining();
+    if (subs.empty() || rest.empty() || rest.front().starts_with("-")) return "";
+    std::string valid;
+    for (const CLI::App* s : subs) valid += (valid.empty() ? "" : ", ") + s->get_name();
+    return CommandPath(app) + ": unknown subcommand '" + rest.front() + "' (valid: " + valid + ")";
 }
 
 }  // namespace
@@ -93,9 +112,14 @@ int main(int argc, char** argv) {
         return rank == 0 ? app.exit(e) : 0;
     } catch (const CLI::ParseError& e) {
         // Malformed options exit 2 like any other bad input, in the same one-line form (once).
-        if (rank == 0)
-            std::fprintf(stderr, "texcache: error: %s (see %s --help)\n",
-                         texcache::internal::OneLine(e.what()).c_str(), CommandPath(app).c_str());
+        if (rank != 0) return 2;
+        if (const std::string unknown = UnknownSubcommand(app); !unknown.empty()) {
+            std::fprintf(stderr, "texcache: error: %s\n",
+                         texcache::internal::OneLine(unknown).c_str());
+            return 2;
+        }
+        std::fprintf(stderr, "texcache: error: %s (see %s --help)\n",
+                     texcache::internal::OneLine(e.what()).c_str(), CommandPath(app).c_str());
         return 2;
     } catch (const texcache::cli::JobFailed& e) {  // reported by rank 0 (AgreeOrFail)
         return e.code;

@@ -3,6 +3,7 @@
 // and the checks across them: options that would be ignored, outputs that would clash with
 // inputs. The decisions themselves (texture-space `auto` choices, cache sizes) are the
 // renderer's (renderer/render_policy.h); this file maps the options onto them.
+#include <algorithm>
 #include <charconv>
 #include <climits>
 #include <cstdio>
@@ -13,26 +14,85 @@
 #include "render_command.h"
 #include "renderer/integrators/product_sampling.h"
 #include "renderer/render_policy.h"
+#include "renderer/scene/envmap.h"
+#include "renderer/scene/scene_units.h"
 
 namespace texcache::cli {
 
-void ApplySettings(const RenderArgs& a, RenderSettings* settings) {
+void ApplySettings(const RenderArgs& a, RenderSettings* settings, double unitScale) {
     RenderSettings& s = *settings;
     if (a.Given("--spp")) s.spp = CheckRange("--spp", a.spp, 1, 1 << 20);
     if (a.Given("--seconds")) s.seconds = CheckRange("--seconds", a.seconds, 0.0f, 1e6f);
     if (a.Given("--resolution")) ParseResolution(a.resolution, &s.width, &s.height);
-    if (a.Given("--seed"))
-        s.seed = uint64_t(CheckRange("--seed", a.seed, 0LL, std::numeric_limits<long long>::max()));
+    if (a.Given("--seed")) {
+        const char* end = a.seed.data() + a.seed.size();
+        const auto r = std::from_chars(a.seed.data(), end, s.seed);
+        if (a.seed.empty() || r.ec != std::errc() || r.ptr != end)
+            throw InputError("--seed",
+                             "'" + a.seed + "' is not an integer in [0, 18446744073709551615]");
+    }
     if (a.Given("--integrator")) s.integrator = ParseIntegrator(a.integrator, "--integrator");
     if (a.Given("--max-depth")) s.maxDepth = CheckRange("--max-depth", a.maxDepth, 0, 1000);
     if (a.Given("--ao-samples")) s.aoSamples = CheckRange("--ao-samples", a.aoSamples, 1, 1 << 16);
     if (a.Given("--ao-distance"))
-        s.aoDistance = CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f);
+        s.aoDistance = float(std::min(
+            double(CheckRange("--ao-distance", a.aoDistance, 1e-6f, 1e30f)) * unitScale, 1e30));
     if (a.Given("--tessellation-rate"))
         s.tessellationRate = CheckRange("--tessellation-rate", a.tessellationRate, 1.0f, 64.0f);
     if (a.Given("--time")) s.time = CheckRange("--time", a.time, -1e6f, 1e6f);
     CheckRange("--threads", a.threads, 0, 4096);
     CheckRange("--exposure", a.exposure, -64.0f, 64.0f);  // stops: 2^64 is far beyond any scene
+}
+
+void WarnIfNothingVisible(const RenderArgs& a, const Scene& scene) {
+    const RenderSettings& s = scene.settings;
+    std::vector<float> times{s.time};
+    if (!a.frames.empty()) {
+        // Up to 1000 frames spread over the range: the check costs a few projections each.
+        int first = 0, last = 0;
+        ParseFrames(a.frames, &first, &last);
+        const float fps = CheckRange("--fps", a.fps, 1e-3f, 1e4f);
+        const int step = std::max(1, (last - first + 1) / 1000);
+        times.clear();
+        for (int f = first; f <= last; f += step)
+            times.push_back(AnimationFrameTime(s.time, f, fps));
+    }
+    std::string problem;
+    for (const float t : times) {
+        problem = CameraViewProblem(scene, t, s.width, s.height);
+        if (problem.empty()) return;
+    }
+    std::fprintf(stderr, "texcache: warning: %s: %s%s\n", scene.path.c_str(), problem.c_str(),
+                 times.size() > 1 ? " (in every frame)" : "");
+}
+
+void WarnIfUnlit(const Scene& scene, IntegratorKind integrator) {
+    // The first environment is the one used; a map is read here (and kept for the render), so
+    // that its repairs are reported and a bad file fails before anything renders.
+    std::shared_ptr<const EnvironmentMap> map;
+    if (!scene.environments.empty() && !scene.environments[0].path.empty()) {
+        const EnvironmentLight& e = scene.environments[0];
+        map = EnvironmentMap::Shared(e.path, e.intensity, e.rotationDegrees);
+        if (!map->Repairs().empty())
+            std::fprintf(stderr, "texcache: warning: %s: environment map has %s\n", e.path.c_str(),
+                         map->Repairs().c_str());
+    }
+    if (!IntegratorUsesLights(integrator)) return;
+    const auto bright = [](glm::vec3 c) { return std::max({c.x, c.y, c.z}) > 0.0f; };
+    bool lights = false, lit = false;
+    for (const QuadLight& q : scene.quadLights) lights = true, lit = lit || bright(q.radiance);
+    for (const DistantLight& d : scene.distantLights)
+        lights = true, lit = lit || bright(d.irradiance);
+    if (!scene.environments.empty()) {
+        const EnvironmentLight& e = scene.environments[0];
+        lights = true;
+        lit = lit || bright(map ? map->AverageRadiance() : e.constant * e.intensity);
+    }
+    if (lights && !lit)
+        std::fprintf(stderr,
+                     "texcache: warning: %s: every light is black (zero radiance): the '%s' "
+                     "integrator will render black\n",
+                     scene.path.c_str(), IntegratorName(integrator));
 }
 
 TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights) {
@@ -94,6 +154,13 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights) 
         if (a.visibilityRadius != -1) CheckFilterRadius(a.visibilityRadius, "--visibility-radius");
     }
     t.visibilityRadius = a.visibilityRadius;
+    if (!t.enabled)
+        for (const char* o :
+             {"--ts-samples", "--cached-light", "--filter", "--filter-radius", "--footprint",
+              "--shadow-samples", "--indirect-samples", "--pass-spp", "--lod-bias",
+              "--sample-cache-mb", "--texel-cache-mb", "--direct-mapped", "--reference-cache"})
+            if (a.Given(o))
+                throw InputError(o, "applies to texture-space shading: give --shading texture");
     t.cache.Validate();
     return t;
 }
@@ -199,6 +266,29 @@ void CheckCombinations(const RenderArgs& a, const RenderSettings& s, const Rende
         throw InputError("--aov", "AOV layers are written to EXR files only: give -o NAME.exr");
     if (a.Given("--stats") && !a.frames.empty())
         throw InputError("--stats", "reports one frame: drop --frames");
+    if (a.noPng && out.exr.empty())
+        throw InputError("--no-png", "the output is a PNG: drop --no-png, or give -o NAME.exr");
+    if (a.Given("--exposure") && out.png.empty())
+        throw InputError("--exposure", "sets the PNG's exposure, and --no-png writes none");
+}
+
+void CheckOptionsUsed(const RenderArgs& a, const RenderOptions& opt) {
+    const auto integrator = [&](const char* o, const char* which) {
+        throw InputError(o, std::string("applies to the ") + which + " (the integrator is " +
+                                IntegratorName(opt.integrator) + ")");
+    };
+    const IntegratorKind k = opt.integrator;
+    if (a.Given("--max-depth") && k != IntegratorKind::Path)
+        integrator("--max-depth", "path integrator");
+    if (a.Given("--hit-samples") && k != IntegratorKind::Direct && k != IntegratorKind::Path)
+        integrator("--hit-samples", "direct and path integrators");
+    for (const char* o : {"--ao-samples", "--ao-distance"})
+        if (a.Given(o) && k != IntegratorKind::AO) integrator(o, "ao integrator");
+    for (const char* o : {"--psr-cache-mb", "--psr-lod-bias"})
+        if (a.Given(o) && opt.lightSampling != LightSampling::Cpis)
+            throw InputError(o, "applies to --light-sampling cpis");
+    if (a.Given("--fps") && a.frames.empty())
+        throw InputError("--fps", "sets the frame rate of an animation: give --frames");
 }
 
 void CheckFiles(const Scene& scene, const std::vector<OutputPaths>& outs,

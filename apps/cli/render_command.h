@@ -35,7 +35,7 @@ struct RenderArgs {
     float seconds = 0.0f;
     std::string resolution;
     int threads = 0;
-    long long seed = 0;
+    std::string seed;
     std::string integrator;
     int maxDepth = 0;
     int aoSamples = 0;
@@ -92,8 +92,22 @@ inline constexpr const char* kCacheSizeOptions = "--sample-cache-mb/--texel-cach
 
 // render_args.cpp: arguments -> options, and the checks across them.
 
-/// The scene's render settings with the command line's values on top, each checked.
-void ApplySettings(const RenderArgs& a, RenderSettings* settings);
+/// The scene's render settings with the command line's values on top, each checked; lengths
+/// (--ao-distance) are in the scene file's units and stored in render units (`unitScale`,
+/// renderer/scene/scene_units.h).
+void ApplySettings(const RenderArgs& a, RenderSettings* settings, double unitScale);
+/// Throws InputError for an option that the integrator or the other options leave unused
+/// (--max-depth without the path integrator, --psr-cache-mb without cpis, --fps without
+/// --frames...): images and stereo pairs, not the frame buffers' split.
+void CheckOptionsUsed(const RenderArgs& a, const RenderOptions& opt);
+/// A warning when the camera shows none of the scene's objects in the frame (or in any frame of
+/// --frames): CameraViewProblem.
+void WarnIfNothingVisible(const RenderArgs& a, const Scene& scene);
+/// A warning when the integrator `integrator` needs light and every light of the scene is black
+/// (the loader already warns about a scene without lights), and one naming the environment map
+/// and what its loading repaired (EnvironmentMap::Repairs). Reads the map, so that a bad one
+/// fails before anything renders (EnvironmentMap::Shared keeps it for the render).
+void WarnIfUnlit(const Scene& scene, IntegratorKind integrator);
 
 /// The texture-space options of the command line; `lights`: the kinds of light the scene has,
 /// which `--cached-light auto` decides by (CachedDirectLight).

@@ -109,6 +109,7 @@ int RunAnimation(const RenderArgs& a, const Scene& scene, const RenderOptions& o
             continue;
         }
         ApplyVisibilityFilter(visibility, frames.PosedScene(), fo, &r.beauty);
+        WarnUntracedRays(frames.PosedScene());
         OutputPaths& out = outs[size_t(f - first)];
         AtomicFiles group;
         WriteOutputs(out, r.beauty, r.aovs, a.exposure, group);
@@ -168,6 +169,7 @@ int RunImage(const RenderArgs& a, const Scene& scene, const RenderOptions& optio
     RenderResult r = Render(rs, opt, cache.get());
     if (!root) return 0;
     const double visibilitySeconds = ApplyVisibilityFilter(visibility, rs, opt, &r.beauty);
+    WarnUntracedRays(rs);
     if (a.overshading && referenceShaded > 0)
         overshading = double(r.stats.cache.samplesShaded) / double(referenceShaded) - 1.0;
     // Every output into one group, renamed only once all are complete.

@@ -8,6 +8,7 @@
 
 #include "render_command.h"
 #include "renderer/render_policy.h"
+#include "renderer/scene/scene_units.h"
 #include "renderer/texture_space/stereo.h"
 
 namespace texcache::cli {
@@ -16,19 +17,25 @@ namespace {
 
 /// --stereo's rig: the scene camera's, with --eye-separation / --convergence on top; without a
 /// separation from either, DefaultEyeSeparation.
-StereoRig StereoRigFrom(const RenderArgs& a, const Camera& camera) {
-    StereoRig rig = StereoRigOf(camera);
+StereoRig StereoRigFrom(const RenderArgs& a, const Scene& scene) {
+    StereoRig rig = StereoRigOf(scene.camera);
+    // The options are in the scene file's units, the rig in render units (scene_units.h).
     if (a.Given("--convergence")) {
-        rig.convergence = a.convergence;
-        CheckStereoRig({0.0f, rig.convergence}, "--convergence");
+        CheckStereoRig({0.0f, a.convergence}, "--convergence");
+        rig.convergence = float(std::min(double(a.convergence) * scene.unitScale, 1e30));
     }
     if (a.Given("--eye-separation")) {
-        rig.eyeSeparation = a.eyeSeparation;
-        CheckStereoRig({rig.eyeSeparation, 1.0f}, "--eye-separation");
+        CheckStereoRig({a.eyeSeparation, 1.0f}, "--eye-separation");
+        rig.eyeSeparation = float(std::min(double(a.eyeSeparation) * scene.unitScale, 1e30));
     } else if (rig.eyeSeparation == 0.0f) {
         rig.eyeSeparation = DefaultEyeSeparation(rig.convergence);
     }
-    CheckStereoRig(rig, camera.convergence > 0.0f ? "camera.stereo" : "--convergence");
+    const std::string where = a.Given("--eye-separation") ? "--eye-separation"
+                              : a.Given("--convergence")  ? "--convergence"
+                                                          : scene.path + ": key 'camera.stereo'";
+    CheckStereoRig(rig, where);
+    CheckStereoShear(rig, where);
+    CheckSceneReach(scene, 0.5f * rig.eyeSeparation, where);
     return rig;
 }
 
@@ -71,7 +78,7 @@ void CheckStereoOptions(const RenderArgs& a) {
 }
 
 int RunStereo(const RenderArgs& a, const Scene& scene, const RenderOptions& opt) {
-    const StereoRig rig = StereoRigFrom(a, scene.camera);
+    const StereoRig rig = StereoRigFrom(a, scene);
     const std::filesystem::path o(a.output);
     std::vector<OutputPaths> outs;
     for (const char* eye : {"_left", "_right"})
@@ -85,6 +92,7 @@ int RunStereo(const RenderArgs& a, const Scene& scene, const RenderOptions& opt)
     std::unique_ptr<TextureSpaceCache> cache;
     if (opt.texture.enabled) cache = MakeTextureSpaceCache(rs, opt.texture, kCacheSizeOptions);
     StereoResult r = RenderStereo(rs, opt, rig, cache.get(), ParseStereoReuse(a.stereoReuse));
+    WarnUntracedRays(rs);
 
     AtomicFiles group;
     WriteOutputs(outs[0], r.left.beauty, r.left.aovs, a.exposure, group);

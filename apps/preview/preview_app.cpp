@@ -387,10 +387,20 @@ void SaveImage(Ui& ui, const ProgressiveRenderer& r) {
     }
 }
 
+/// The orbit camera written into the scene file, in the file's units (the preview works in
+/// render units: renderer/scene/scene_units.h).
+void SaveSceneCamera(const Ui& ui) {
+    const Scene& s = ui.sceneCopy;
+    const auto file = [&](glm::vec3 p) {
+        return glm::vec3(glm::dvec3(p) / s.unitScale + s.unitOrigin);
+    };
+    SaveCameraToSceneFile(ui.scenePath, file(ui.camera.Position()), file(ui.camera.Target()),
+                          glm::vec3(0.0f, 1.0f, 0.0f), ui.camera.FovY());
+}
+
 void SaveCamera(Ui& ui) {
     try {
-        SaveCameraToSceneFile(ui.scenePath, ui.camera.Position(), ui.camera.Target(),
-                              glm::vec3(0.0f, 1.0f, 0.0f), ui.camera.FovY());
+        SaveSceneCamera(ui);
         ui.status = "camera saved to " + ui.scenePath;
     } catch (const std::exception& e) {
         ui.status = std::string("camera not saved: ") + e.what();
@@ -697,8 +707,7 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
                 }
             }
             if (exitCode == 0 && args.saveCamera) {
-                SaveCameraToSceneFile(ui.scenePath, ui.camera.Position(), ui.camera.Target(),
-                                      glm::vec3(0.0f, 1.0f, 0.0f), ui.camera.FovY());
+                SaveSceneCamera(ui);
                 std::printf("saved the camera to %s\n", ui.scenePath.c_str());
             }
             if (exitCode == 0) {

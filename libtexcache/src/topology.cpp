@@ -156,14 +156,15 @@ PtexTopology TopologyBuilder::Ptex(const ControlCage& cage, const Far::TopologyR
             const int e = fEdges[a];
             const auto eFaces = level.GetEdgeFaces(e);
             if (eFaces.size() != 2) continue;  // boundary or non-manifold: no neighbour
-            const int g = eFaces[0] == f ? eFaces[1] : eFaces[0];
+            const int other = eFaces[0] == f ? 1 : 0;
+            const int g = eFaces[other];
             if (g == f || hole[g]) continue;
             const auto gVerts = level.GetFaceVertices(g);
-            const auto gEdges = level.GetFaceEdges(g);
             const int m = gVerts.size();
-            int b = -1;
-            for (int k = 0; k < m; ++k)
-                if (gEdges[k] == e) b = k;
+            // The edge's place in the neighbour from OpenSubdiv rather than a scan of its edges:
+            // a scan costs the neighbour's size per edge, the square of a face's size when two
+            // large n-gons share their edges.
+            const int b = level.GetEdgeFaceLocalIndices(e)[other];
             // Consistently oriented neighbours traverse the shared edge in opposite directions;
             // anything else (non-orientable) is treated as a boundary.
             if (b < 0 || gVerts[b] != fVerts[(a + 1) % n] || gVerts[(b + 1) % m] != fVerts[a])
@@ -216,13 +217,23 @@ bool PtexTopology::Cross(int ptexFace, int edge, float along, float outside, int
 RegularPatches internal::TopologyBuilder::Regular(const ControlCage& cage,
                                                   Far::TopologyRefiner& refiner) {
     RegularPatches r;
-    // One adaptive level is enough to tell regular faces (depth-0 regular patches) from the rest.
-    refiner.RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(1));
-    Far::PatchTableFactory::Options options(1);
-    options.endCapType = Far::PatchTableFactory::Options::ENDCAP_BILINEAR_BASIS;
-    std::unique_ptr<Far::PatchTable> table(Far::PatchTableFactory::Create(refiner, options));
     Far::PtexIndices ptex(refiner);
     r.index_.assign(ptex.GetNumFaces(), -1);
+    r.positions_ = cage.positions;
+    // Only quads can be regular patches, so only quads are refined and patched: the end caps
+    // around an n-gon's centre (valence n) take stencils of n points each, n of them, which on
+    // one 2,000-gon cost more than the rest of the scene build.
+    std::vector<Far::Index> quads;
+    for (int f = 0; f < cage.numFaces(); ++f)
+        if (cage.faceVertexCounts[f] == 4) quads.push_back(f);
+    if (quads.empty()) return r;  // an empty selection would mean every face to OpenSubdiv
+    const Far::ConstIndexArray selected(quads.data(), int(quads.size()));
+    // One adaptive level is enough to tell regular faces (depth-0 regular patches) from the rest.
+    refiner.RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(1), selected);
+    Far::PatchTableFactory::Options options(1);
+    options.endCapType = Far::PatchTableFactory::Options::ENDCAP_BILINEAR_BASIS;
+    std::unique_ptr<Far::PatchTable> table(
+        Far::PatchTableFactory::Create(refiner, options, selected));
     const int numCoarse = cage.numVertices();
     for (int a = 0; a < table->GetNumPatchArrays(); ++a) {
         if (table->GetPatchArrayDescriptor(a).GetType() != Far::PatchDescriptor::REGULAR) continue;
@@ -246,7 +257,6 @@ RegularPatches internal::TopologyBuilder::Regular(const ControlCage& cage,
         }
     }
     r.cvs_.shrink_to_fit();
-    r.positions_ = cage.positions;
     return r;
 }
 

@@ -8,11 +8,21 @@
 
 namespace texcache {
 
-/// A group of files written together. Stage(path) names the temporary file ("<path>.tmp-<pid>",
-/// in the target's directory so that the rename stays within one file system) to write `path`
-/// into; Commit() renames every staged file over its target once all are complete. Temporaries
-/// not committed (an exception on the way) are removed by the destructor, so the targets keep
-/// their old contents.
+/// The temporary file "<path>.<tag>-<pid>" of this process for `path` (tag "tmp", "probe"), in
+/// the target's directory so that a rename stays within one file system. A file name too long
+/// for that (file names hold 255 bytes) is cut and a hash of the whole added, so that any legal
+/// output name has a legal temporary.
+std::string TemporaryPath(const std::string& path, const char* tag);
+
+/// Removes the temporaries (TemporaryPath: "<name>.tmp-<pid>", "<name>.probe-<pid>") in
+/// `path`'s directory whose process is gone: a killed run leaves them behind. Each directory is
+/// scanned once per process; files of live processes (or of any other form) are left alone.
+void RemoveStaleTemporaries(const std::string& path);
+
+/// A group of files written together. Stage(path) names the temporary file (TemporaryPath,
+/// after RemoveStaleTemporaries) to write `path` into; Commit() renames every staged file over its
+/// target once all are complete. Temporaries not committed (an exception on the way) are removed by
+/// the destructor, so the targets keep their old contents.
 class AtomicFiles {
 public:
     AtomicFiles() = default;

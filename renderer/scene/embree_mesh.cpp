@@ -82,6 +82,16 @@ constexpr int kEmbreeMaxRingVertices = 128;
 /// Isolation level of the patches OffFastPathFaces' faces get.
 constexpr int kIrregularPatchLevel = 6;
 
+// OpenSubdiv's patches around a vertex of valence n (an n-gon's centre is one) take end caps whose
+// points are stencils of the vertex's whole ring: n^2 weights (a 2,000-gon: 3.5 s and 550 MB, a
+// 20,000-gon past 60 s and 12 GB); the faces next to a large face cost about a millisecond and
+// 100 KB each (its 2,000 neighbours: 1.9 s, 390 MB). Faces larger than this, faces sharing a
+// vertex with one, and faces around a vertex of higher valence are evaluated on the limit
+// tessellation's quads instead (FacetFaces), which keeps the cost linear in the cage; the bound
+// keeps the quadratic part of the others below a tenth of a second per face.
+constexpr int kMaxPatchedFaceSize = 256;
+constexpr int kMaxPatchedValence = 256;
+
 /// Tessellation level matching Embree's rate: `rate` segments per quad edge, at least one
 /// refinement (so every quad lies in one Ptex face), at most 4 (256 quads per cage quad: the
 /// refined topology OpenSubdiv holds while building grows as 4^level).
@@ -274,11 +284,82 @@ RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, fl
     return g;
 }
 
+/// Per cage face: evaluated on the limit tessellation's quads (too large, or around a vertex of
+/// too high a valence, for OpenSubdiv's patches at a linear cost; kMaxPatchedFaceSize).
+std::vector<char> FacetFaces(const ControlCage& cage, const PtexTopology& topo) {
+    // Vertices of a large face or of too high a valence; then the faces that touch one.
+    std::vector<char> marked(size_t(cage.numVertices()), 0);
+    for (int v = 0; v < cage.numVertices(); ++v)
+        marked[size_t(v)] = topo.Valence(v) > kMaxPatchedValence;
+    size_t offset = 0;
+    for (int f = 0; f < cage.numFaces(); ++f) {
+        const int n = cage.faceVertexCounts[f];
+        if (n > kMaxPatchedFaceSize)
+            for (int i = 0; i < n; ++i)
+                marked[size_t(cage.faceVertexIndices[offset + size_t(i)])] = 1;
+        offset += size_t(n);
+    }
+    std::vector<char> facet(size_t(cage.numFaces()), 0);
+    offset = 0;
+    for (int f = 0; f < cage.numFaces(); ++f) {
+        const int n = cage.faceVertexCounts[f];
+        for (int i = 0; i < n && !facet[size_t(f)]; ++i)
+            facet[size_t(f)] = marked[size_t(cage.faceVertexIndices[offset + size_t(i)])];
+        offset += size_t(n);
+    }
+    return facet;
+}
+
+bool EmbreeMesh::EvalFacet(const PtexCoord& c, float* P, float* du, float* dv) const {
+    // The face's quads in the tessellation's order: the quadrant digits, coarsest first.
+    const int digits = topo->IsQuad(topo->CoarseFace(c.face)) ? facetLevel : facetLevel - 1;
+    const float u = std::clamp(c.u, 0.0f, 1.0f), v = std::clamp(c.v, 0.0f, 1.0f);
+    size_t q = size_t(facetQuad[size_t(c.face)]);
+    float u0 = 0.0f, v0 = 0.0f, size = 1.0f;
+    for (int d = digits - 1; d >= 0; --d) {
+        size *= 0.5f;
+        const bool right = u >= u0 + size, up = v >= v0 + size;
+        const size_t k = up ? (right ? 2 : 3) : (right ? 1 : 0);
+        q += k << (2 * d);
+        u0 += right ? size : 0.0f;
+        v0 += up ? size : 0.0f;
+    }
+    const float s = std::clamp((u - u0) / size, 0.0f, 1.0f),
+                t = std::clamp((v - v0) / size, 0.0f, 1.0f);
+    // As Embree parametrizes a quad, so that the point is the one a ray hitting the quad at
+    // (s, t) reports: two triangles, (0, 1, 3) below the diagonal and (2, 3, 1) above it.
+    const unsigned* idx = quadIndices + 4 * q;
+    const bool upper = s + t > 1.0f;
+    for (int k = 0; k < 3; ++k) {
+        const float p0 = quadPositions[4 * idx[0] + k], p1 = quadPositions[4 * idx[1] + k];
+        const float p2 = quadPositions[4 * idx[2] + k], p3 = quadPositions[4 * idx[3] + k];
+        if (upper) {
+            if (P) P[k] = p2 + (1.0f - s) * (p3 - p2) + (1.0f - t) * (p1 - p2);
+            du[k] = (p2 - p3) / size;
+            dv[k] = (p2 - p1) / size;
+        } else {
+            if (P) P[k] = p0 + s * (p1 - p0) + t * (p3 - p0);
+            du[k] = (p1 - p0) / size;
+            dv[k] = (p3 - p0) / size;
+        }
+    }
+    return true;
+}
+
 /// The cage as quads on its limit surface (see the design note at the top).
 RTCGeometry NewLimitQuadGeometry(RTCDevice device, const ControlCage& cage, float rate, bool withUv,
                                  EmbreeMesh* mesh) {
-    LimitTessellation t = TessellateLimitSurface(cage, LimitTessellationLevel(rate), withUv);
-    mesh->limit = std::make_unique<LimitSurface>(cage);
+    const int level = LimitTessellationLevel(rate);
+    LimitTessellation t = TessellateLimitSurface(cage, level, withUv);
+    mesh->tessellated = true;
+    const std::vector<char> facet = FacetFaces(cage, *mesh->topo);
+    std::vector<int> patched;
+    for (int f = 0; f < cage.numFaces(); ++f)
+        if (!facet[size_t(f)]) patched.push_back(f);
+    if (patched.size() == size_t(cage.numFaces()))
+        mesh->limit = std::make_unique<LimitSurface>(cage);
+    else if (!patched.empty())  // (an empty selection would mean every face to OpenSubdiv)
+        mesh->limit = std::make_unique<LimitSurface>(cage, kIrregularPatchLevel, patched);
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
     // 16-byte stride with w = 0, as for the subdivision cage's vertices.
     auto* pos = static_cast<float*>(rtcSetNewGeometryBuffer(
@@ -291,6 +372,16 @@ RTCGeometry NewLimitQuadGeometry(RTCDevice device, const ControlCage& cage, floa
         g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), t.quads.size()));
     for (size_t q = 0; q < t.quads.size(); ++q)
         for (int k = 0; k < 4; ++k) idx[4 * q + k] = unsigned(t.quads[q][k]);
+    if (patched.size() < size_t(cage.numFaces())) {
+        // A face's quads are consecutive, so its first one is where the walk in EvalFacet starts.
+        mesh->facetQuad.assign(size_t(mesh->topo->NumPtexFaces()), -1);
+        for (size_t q = t.squares.size(); q-- > 0;)
+            if (facet[size_t(mesh->topo->CoarseFace(t.squares[q].face))])
+                mesh->facetQuad[size_t(t.squares[q].face)] = int(q);
+        mesh->facetLevel = level;
+        mesh->quadPositions = pos;
+        mesh->quadIndices = idx;
+    }
     mesh->squares = std::move(t.squares);
     mesh->cornerUvs = std::move(t.cornerUvs);
     mesh->hasUv = !mesh->cornerUvs.empty();

@@ -37,10 +37,19 @@ struct EmbreeMesh {
     static constexpr uint8_t kNoPart = 255;
     bool hasUv = false;
     std::vector<uint8_t> isHole;  // per coarse face, only for subdivision cages with holes
-    // Limit tessellation only: the general evaluator, and per quad its Ptex square and uvs.
+    // Limit tessellation only (`tessellated`): the general evaluator (null when every face is
+    // a facet face, below), and per quad its Ptex square and uvs.
+    bool tessellated = false;
     std::unique_ptr<LimitSurface> limit;
     std::vector<LimitTessellation::Square> squares;
     std::vector<std::array<float, 2>> cornerUvs;  // also a plain mesh's, per quad
+    // Limit tessellation of a cage with faces too large for OpenSubdiv's patches (see
+    // FacetFaces): per Ptex face, the first of its quads when it is evaluated on them, else -1
+    // (empty when no face is); the quads' vertices and indices are the Embree geometry's.
+    std::vector<int> facetQuad;
+    int facetLevel = 0;                    // refinements of the tessellation
+    const float* quadPositions = nullptr;  // 4 floats per vertex
+    const unsigned* quadIndices = nullptr;
     // Plain meshes (plain_mesh.h): one Embree quad per Ptex face, whose (u,v) is the face's;
     // its 4 corners in Embree's vertex buffer (16-byte stride), which this points into.
     bool plain = false;
@@ -49,7 +58,7 @@ struct EmbreeMesh {
     /// Ptex location of a hit (Embree's primitive and hit parameters).
     PtexCoord ToPtex(unsigned prim, float U, float V) const {
         if (plain) return {int(prim), std::clamp(U, 0.0f, 1.0f), std::clamp(V, 0.0f, 1.0f)};
-        if (!limit) return EmbreeToPtex(*topo, prim, U, V);
+        if (!tessellated) return EmbreeToPtex(*topo, prim, U, V);
         const LimitTessellation::Square& s = squares[prim];
         return {s.face, std::clamp(s.u0 + s.size * U, 0.0f, 1.0f),
                 std::clamp(s.v0 + s.size * V, 0.0f, 1.0f)};
@@ -76,7 +85,10 @@ struct EmbreeMesh {
             }
             return true;
         };
-        if (limit) return patches(*limit);
+        if (tessellated) {
+            if (!facetQuad.empty() && facetQuad[c.face] >= 0) return EvalFacet(c, P, du, dv);
+            return limit && patches(*limit);
+        }
         if (!irregularPart.empty() && irregularPart[c.face] != kNoPart &&
             patches(*irregular[irregularPart[c.face]]))
             return true;
@@ -84,9 +96,13 @@ struct EmbreeMesh {
         return true;
     }
 
+    /// The limit tessellation's quad at `c` (a facet face's, facetQuad), as Embree
+    /// parametrizes it: its position and its derivatives in Ptex (u,v).
+    bool EvalFacet(const PtexCoord& c, float* P, float* du, float* dv) const;
+
     /// Texture coordinates at a hit (only when hasUv).
     glm::vec2 Uv(unsigned prim, float U, float V) const {
-        if (limit || plain) {
+        if (tessellated || plain) {
             // Bilinear in the quad, whose corners carry OpenSubdiv's limit uvs.
             const auto* c = &cornerUvs[size_t(prim) * 4];
             auto at = [&](int k) { return glm::vec2(c[k][0], c[k][1]); };

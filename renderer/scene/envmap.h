@@ -29,6 +29,9 @@ public:
     /// time, so an edited file is read again.
     static std::shared_ptr<const EnvironmentMap> Shared(const std::string& path, float intensity,
                                                         float rotationDegrees);
+    /// What Load() repaired in the file (NaN, infinite, negative or too bright texels, with their
+    /// counts), for a warning naming the file; empty when nothing.
+    const std::string& Repairs() const { return repairs_; }
     /// A uniform environment of the given radiance (white-furnace tests).
     static EnvironmentMap Constant(glm::vec3 radiance);
 
@@ -89,6 +92,7 @@ private:
 
     int width_ = 0, height_ = 0;
     std::vector<glm::vec3> texels_;
+    std::string repairs_;
     glm::vec3 constant_{0.0f};
     bool isConstant_ = true;
     float rotation_ = 0.0f;  // radians

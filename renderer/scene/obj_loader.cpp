@@ -53,6 +53,19 @@ std::string Quoted(std::string_view t) {
 /// (its FLT_LARGE), and a cage that large cannot be framed by a camera in float either.
 constexpr float kMaxCoordinate = 1e18f;
 
+/// OpenSubdiv's limit on face sizes and vertex valences (Far::VALENCE_LIMIT).
+constexpr int kMaxValence = (1 << 16) - 1;
+
+/// Largest coordinates in [2^kMinUnscaledExponent, 2^kMaxUnscaledExponent) keep their units
+/// (ScalePositions): the bundled cages, and anything a float holds with room to spare.
+constexpr int kMinUnscaledExponent = -8, kMaxUnscaledExponent = 24;
+
+/// Shortest round-trip form of a number, for messages.
+std::string Fmt(double v) {
+    char buf[32];
+    return std::string(buf, std::to_chars(buf, buf + sizeof buf, float(v)).ptr);
+}
+
 class Parser {
 public:
     Parser(const std::string& name, std::vector<std::string>* warnings, ObjFaceTags* tags)
@@ -77,14 +90,16 @@ public:
             if (kw == "v") {
                 // `v x y z [w]`: w (and the colours some exporters append) are ignored.
                 std::array<float, 3> p;
-                for (float& x : p) {
+                std::array<double, 3> exact;
+                for (int k = 0; k < 3; ++k) {
                     const std::string_view t = c.Token();
-                    x = Float(t, "vertex needs 3 coordinates");
-                    if (std::abs(x) > kMaxCoordinate)
+                    exact[k] = Coordinate(t, &p[k]);
+                    if (std::abs(float(exact[k])) > kMaxCoordinate)
                         Fail("vertex coordinate " + Quoted(t) +
                              " is beyond +-1e18, the range the ray tracer (Embree) handles");
                 }
                 cage_.positions.push_back(p);
+                exact_.push_back(exact);
             } else if (kw == "vt") {
                 std::array<float, 2> uv;
                 for (float& x : uv) x = Float(c.Token(), "texture coordinate needs 2 values");
@@ -115,6 +130,7 @@ public:
             Fail("no faces in the file (" + std::to_string(cage_.numVertices()) +
                  " vertices): an empty cage cannot be rendered");
         }
+        ScalePositions();
         for (const auto& [kw, at] : unknownStatements_) {
             std::string w = "unknown statement " + Quoted(kw) + " skipped";
             if (at.second > 1) w += " (" + std::to_string(at.second) + " lines)";
@@ -136,6 +152,7 @@ public:
             cage_.faceUvIndices.clear();
         }
         ResolveTags();
+        CheckSomethingRenders();
         return std::move(cage_);
     }
 
@@ -148,11 +165,14 @@ private:
     }
 
     /// A finite float; `missing` is the message when the token is absent.
-    float Float(std::string_view t, const char* missing) const {
+    float Float(std::string_view t, const char* missing) const { return Number<float>(t, missing); }
+    /// A finite T (float or double); `missing` is the message when the token is absent.
+    template <typename T>
+    T Number(std::string_view t, const char* missing) const {
         if (t.empty()) Fail(missing);
         std::string_view digits = t;
         if (digits.size() > 1 && digits[0] == '+') digits.remove_prefix(1);  // from_chars says no
-        float v = 0.0f;
+        T v = 0;
         const auto r = std::from_chars(digits.data(), digits.data() + digits.size(), v);
         if (r.ec == std::errc::result_out_of_range)
             Fail("number " + Quoted(t) + " is out of the float range");
@@ -162,6 +182,93 @@ private:
         if (!std::isfinite(v)) Fail("non-finite number " + Quoted(t));
         return v;
     }
+    /// A vertex coordinate: exactly (in double, for ScalePositions) and as the nearest float in
+    /// `*f` (what the cage keeps when it needs no scaling; 0 below the float range).
+    double Coordinate(std::string_view t, float* f) const {
+        const double v = Number<double>(t, "vertex needs 3 coordinates");
+        const size_t plus = t.size() > 1 && t[0] == '+';
+        *f = 0.0f;
+        std::from_chars(t.data() + plus, t.data() + t.size(), *f);
+        return v;
+    }
+
+    /// Cages far larger or smaller than a unit (a CAD part in micrometres, a model in light
+    /// years, down to coordinates below the float range) keep their shape in float only scaled
+    /// by a power of two: the positions are stored in units of 2^unitExponent, exactly (a
+    /// power of two changes no digit), and a scene puts the factor back into the object's
+    /// transform. Cages whose largest coordinate is in [2^-8, 2^24) stay as they are.
+    void ScalePositions() {
+        double largest = 0.0;
+        for (const auto& p : exact_)
+            for (const double x : p) largest = std::max(largest, std::abs(x));
+        if (!(largest > 0.0)) return;  // every vertex at the origin: CheckSomethingRenders says so
+        const int e = std::ilogb(largest);
+        if (e >= kMinUnscaledExponent && e < kMaxUnscaledExponent) return;
+        cage_.unitExponent = e;
+        for (size_t i = 0; i < exact_.size(); ++i)
+            for (int k = 0; k < 3; ++k) cage_.positions[i][k] = float(std::ldexp(exact_[i][k], -e));
+    }
+
+    /// A cage whose every face is a hole, or whose other faces have no area at all (every vertex
+    /// on one point or one line, in float), renders nothing: an error rather than a blank image.
+    void CheckSomethingRenders() {
+        line_ = firstFaceLine_;
+        if (cage_.holes.size() == cage_.faceVertexCounts.size())
+            Fail("every face of the cage is a hole (t hole): nothing would render");
+        // Twice the area of each face (Newell's vector area) against its own bounding box: zero
+        // (to rounding) when the face is degenerate, whatever the cage's scale.
+        std::vector<char> hole(cage_.faceVertexCounts.size(), 0);
+        for (const int h : cage_.holes) hole[size_t(h)] = 1;
+        bool someArea = false;
+        size_t at = 0;
+        for (size_t f = 0; f < cage_.faceVertexCounts.size() && !someArea; ++f) {
+            const int n = cage_.faceVertexCounts[f];
+            const size_t first = at;
+            at += size_t(n);
+            if (hole[f]) continue;
+            double a[3] = {0.0, 0.0, 0.0}, lo[3], hi[3];
+            for (int k = 0; k < 3; ++k)
+                lo[k] = hi[k] = cage_.positions[size_t(cage_.faceVertexIndices[first])][k];
+            for (int i = 0; i < n; ++i) {
+                const auto& p = cage_.positions[size_t(cage_.faceVertexIndices[first + size_t(i)])];
+                const auto& q =
+                    cage_.positions[size_t(cage_.faceVertexIndices[first + size_t((i + 1) % n)])];
+                a[0] += (double(p[1]) - q[1]) * (double(p[2]) + q[2]);
+                a[1] += (double(p[2]) - q[2]) * (double(p[0]) + q[0]);
+                a[2] += (double(p[0]) - q[0]) * (double(p[1]) + q[1]);
+                for (int k = 0; k < 3; ++k)
+                    lo[k] = std::min(lo[k], double(p[k])), hi[k] = std::max(hi[k], double(p[k]));
+            }
+            double diagonal2 = 0.0;
+            for (int k = 0; k < 3; ++k) diagonal2 += (hi[k] - lo[k]) * (hi[k] - lo[k]);
+            someArea = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]) > 1e-10 * diagonal2;
+        }
+        // Coordinates keep 7 significant digits in float: a small cage far from the origin has its
+        // vertices rounded onto each other, or far off its shape (by more than 5% of its size:
+        // past that the image is not the cage any more; a unit cube at 1e6 moves by 0.8%).
+        double reach = 0.0, moved = 0.0;
+        std::array<double, 3> exactLo = exact_.front(), exactHi = exact_.front();
+        for (size_t i = 0; i < exact_.size(); ++i)
+            for (int k = 0; k < 3; ++k) {
+                const double x = exact_[i][k];
+                reach = std::max(reach, std::abs(x));
+                exactLo[k] = std::min(exactLo[k], x), exactHi[k] = std::max(exactHi[k], x);
+                moved = std::max(
+                    moved,
+                    std::abs(std::ldexp(double(cage_.positions[i][k]), cage_.unitExponent) - x));
+            }
+        const double exactExtent =
+            std::max({exactHi[0] - exactLo[0], exactHi[1] - exactLo[1], exactHi[2] - exactLo[2]});
+        if (moved > 0.05 * exactExtent)
+            Fail("the cage is " + Fmt(exactExtent) + " across but " + Fmt(reach) +
+                 " from the origin: in float (7 significant digits) its vertices move by up to " +
+                 Fmt(moved) +
+                 ", out of shape (move it nearer the origin, and place it with a scene "
+                 "file's transform)");
+        if (!someArea)
+            Fail("the cage has no area: the vertices of every face lie on one point or one line");
+    }
+
     /// An integer; `what` names it in the message ("tag integer", "vertex index").
     long Int(std::string_view t, const char* what, const char* what2 = "") const {
         long v = 0;
@@ -219,6 +326,9 @@ private:
             ++n;
         }
         if (n < 3) Fail("face has " + std::to_string(n) + " vertices (at least 3 needed)");
+        if (n > kMaxValence)
+            Fail("face has " + std::to_string(n) + " vertices; OpenSubdiv takes at most " +
+                 std::to_string(kMaxValence));
         if (withUv != 0 && withUv != n)
             Fail("face gives texture coordinates for " + std::to_string(withUv) + " of its " +
                  std::to_string(n) + " corners (all or none needed)");
@@ -241,8 +351,16 @@ private:
         }
         if (repeated >= 0)
             Fail("degenerate face: it repeats vertex " + std::to_string(repeated + 1));
+        if (facesAt_.size() < cage_.positions.size()) facesAt_.resize(cage_.positions.size(), 0);
+        for (int i = 0; i < n; ++i)
+            if (++facesAt_[size_t(v[i])] >= kMaxValence)
+                Fail("vertex " + std::to_string(v[i] + 1) + " is in " +
+                     std::to_string(kMaxValence) +
+                     " faces; OpenSubdiv takes a valence of at most " +
+                     std::to_string(kMaxValence) + " edges");
         int& firstLine = withUv ? firstUvFaceLine_ : firstNoUvFaceLine_;
         if (firstLine == 0) firstLine = line_;
+        if (firstFaceLine_ == 0) firstFaceLine_ = line_;
         cage_.faceVertexCounts.push_back(n);
         if (faceTags_) {
             faceTags_->faceMaterial.push_back(material_);
@@ -454,8 +572,11 @@ private:
     int material_ = -1, group_ = -1;  ///< the current usemtl and g/o (into faceTags_)
     std::unordered_map<std::string, int> materialIds_, groupIds_;
     bool warnedNormal_ = false;
-    std::vector<int> faceUv_;   ///< parallel to faceVertexIndices, -1 = no vt
-    std::vector<int> scratch_;  ///< long n-gons' duplicate check
+    std::vector<int> faceUv_;                   ///< parallel to faceVertexIndices, -1 = no vt
+    std::vector<int> scratch_;                  ///< long n-gons' duplicate check
+    std::vector<int> facesAt_;                  ///< per vertex, the faces using it so far
+    std::vector<std::array<double, 3>> exact_;  ///< the positions as written (ScalePositions)
+    int firstFaceLine_ = 0;
     int firstUvFaceLine_ = 0, firstNoUvFaceLine_ = 0;
     std::map<std::string, std::pair<int, int>, std::less<>>
         unknownStatements_;         ///< first line, count

@@ -82,6 +82,43 @@ struct RenderScene::Impl {
         v[id] = value;
     }
     std::vector<std::unique_ptr<TextureImage>> textures;
+    // Rays are handed to Embree only when Traceable: starting within `reach` (render units; in
+    // every object's space that is within Embree's range) and otherwise well formed.
+    float reach = 0.0f;
+    mutable std::atomic<uint64_t> untraced{0};
+
+    /// Embree's own ray.valid() and tnear >= 0 (asserted by its kernels, also in the objects'
+    /// spaces the instances map rays into), and a shutter time in [0, 1] (asserted on motion
+    /// blur). Sums, not maxima, so that a NaN anywhere fails.
+    bool Traceable(const Ray& r) const {
+        const float o = std::abs(r.org.x) + std::abs(r.org.y) + std::abs(r.org.z);
+        const float d = std::abs(r.dir.x) + std::abs(r.dir.y) + std::abs(r.dir.z);
+        if (o <= reach && d <= 1e18f && r.tnear >= 0.0f && r.tfar == r.tfar && r.time >= 0.0f &&
+            r.time <= 1.0f)
+            return true;
+        untraced.fetch_add(1, std::memory_order_relaxed);
+        return false;
+    }
+
+    /// How far from the origin (render units, as a sum of |x|, |y|, |z|) a ray may start so that
+    /// it stays within Embree's range (FLT_LARGE, 1.8e18; 2^59 with a margin) in every object's
+    /// space too: inverse(M) maps an origin o to inverse(M) o, at most |inverse(M)|_inf |o| + |its
+    /// translation| there.
+    static float RayReach(const std::vector<Instance>& objects) {
+        constexpr double kEmbreeRange = 576460752303423488.0;  // 2^59
+        double reach = kEmbreeRange;
+        for (const auto& inst : objects)
+            for (const glm::mat4& step : inst.steps) {
+                const glm::dmat4 inv = glm::inverse(glm::dmat4(step));
+                double norm = 0.0;
+                for (int r = 0; r < 3; ++r)
+                    norm = std::max(
+                        norm, std::abs(inv[0][r]) + std::abs(inv[1][r]) + std::abs(inv[2][r]));
+                const double t = std::abs(inv[3][0]) + std::abs(inv[3][1]) + std::abs(inv[3][2]);
+                reach = std::min(reach, std::max(kEmbreeRange - t, 0.0) / std::max(norm, 1e-300));
+            }
+        return float(reach);
+    }
 
     ~Impl() {
         for (auto& m : meshes)
@@ -286,6 +323,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         inst.inverse = glm::inverse(inst.steps[0]);
         rtcReleaseGeometry(g);
     }
+    I.reach = Impl::RayReach(I.objects);
     clock.Charge(&I.build.embreeGeometry);
 
     // Quad lights are real geometry so camera and BSDF rays see them (posed at the frame time).
@@ -424,6 +462,10 @@ bool RenderScene::StaticBounds(glm::vec3* lo, glm::vec3* hi) const {
            std::isfinite(lo->x + lo->y + lo->z + hi->x + hi->y + hi->z);
 }
 
+uint64_t RenderScene::UntracedRays() const {
+    return impl_->untraced.load();
+}
+
 size_t RenderScene::NumPtexFaces() const {
     size_t n = 0;
     for (const auto& m : impl_->meshes)
@@ -447,6 +489,7 @@ static void ToRtcRay(const Ray& ray, RTCRay* r) {
 }
 
 bool RenderScene::Intersect(const Ray& ray, Hit* hit) const {
+    if (!impl_->Traceable(ray)) return false;
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
@@ -464,7 +507,7 @@ void RenderScene::Intersect16(const Ray* rays, int n, Hit* hits, bool* found) co
     alignas(64) int valid[16];
     alignas(64) RTCRayHit16 rh;
     for (int i = 0; i < 16; ++i) {
-        valid[i] = i < n ? -1 : 0;
+        valid[i] = i < n && impl_->Traceable(rays[i]) ? -1 : 0;
         const Ray& r = rays[i < n ? i : 0];  // idle lanes hold a copy, masked off by `valid`
         rh.ray.org_x[i] = r.org.x, rh.ray.org_y[i] = r.org.y, rh.ray.org_z[i] = r.org.z;
         rh.ray.dir_x[i] = r.dir.x, rh.ray.dir_y[i] = r.dir.y, rh.ray.dir_z[i] = r.dir.z;
@@ -478,7 +521,7 @@ void RenderScene::Intersect16(const Ray* rays, int n, Hit* hits, bool* found) co
     ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
     rtcIntersect16(valid, impl_->top, &ctx, &rh);
     for (int i = 0; i < n; ++i) {
-        found[i] = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+        found[i] = valid[i] && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
         if (found[i])
             impl_->ToHit(rh.ray.tfar[i], rh.hit.geomID[i], rh.hit.instID[0][i], rh.hit.primID[i],
                          rh.hit.u[i], rh.hit.v[i],
@@ -489,6 +532,7 @@ void RenderScene::Intersect16(const Ray* rays, int n, Hit* hits, bool* found) co
 
 bool RenderScene::IntersectObject(int object, const Ray& ray, Hit* hit) const {
     const Impl& I = *impl_;
+    if (!I.Traceable(ray)) return false;
     // Static instances keep their inverse: every cached sample's snap ray comes here.
     const glm::mat4 inv = I.objects[object].steps.size() == 1
                               ? I.objects[object].inverse
@@ -514,6 +558,7 @@ bool RenderScene::IntersectObject(int object, const Ray& ray, Hit* hit) const {
 }
 
 bool RenderScene::Occluded(const Ray& ray) const {
+    if (!impl_->Traceable(ray)) return true;  // no light through a ray nobody can trace
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRay r;
@@ -524,12 +569,13 @@ bool RenderScene::Occluded(const Ray& ray) const {
 
 namespace {
 /// rtcOccluded4/8/16 (`occludedN`) on rays[0, n), n <= N; idle lanes are masked off.
-template <int N, typename RayN, typename OccludedN>
-void OccludedPacket(RTCScene top, const Ray* rays, int n, bool* occluded, OccludedN occludedN) {
+template <int N, typename RayN, typename OccludedN, typename TraceableF>
+void OccludedPacket(RTCScene top, const Ray* rays, int n, bool* occluded, OccludedN occludedN,
+                    TraceableF&& traceable) {
     alignas(64) int valid[N];
     alignas(64) RayN r;
     for (int i = 0; i < N; ++i) {
-        valid[i] = i < n ? -1 : 0;
+        valid[i] = i < n && traceable(rays[i]) ? -1 : 0;
         const Ray& q = rays[i < n ? i : 0];
         r.org_x[i] = q.org.x, r.org_y[i] = q.org.y, r.org_z[i] = q.org.z;
         r.dir_x[i] = q.dir.x, r.dir_y[i] = q.dir.y, r.dir_z[i] = q.dir.z;
@@ -539,20 +585,22 @@ void OccludedPacket(RTCScene top, const Ray* rays, int n, bool* occluded, Occlud
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     occludedN(valid, top, &ctx, &r);
-    for (int i = 0; i < n; ++i) occluded[i] = r.tfar[i] < 0.0f;
+    for (int i = 0; i < n; ++i) occluded[i] = !valid[i] || r.tfar[i] < 0.0f;
 }
 }  // namespace
 
 void RenderScene::Occluded16(const Ray* rays, int n, bool* occluded) const {
     if (n <= 0) return;
+    const auto traceable = [this](const Ray& r) { return impl_->Traceable(r); };
     if (n == 1) {
         occluded[0] = Occluded(rays[0]);
     } else if (n <= 4) {
-        OccludedPacket<4, RTCRay4>(impl_->top, rays, n, occluded, rtcOccluded4);
+        OccludedPacket<4, RTCRay4>(impl_->top, rays, n, occluded, rtcOccluded4, traceable);
     } else if (n <= 8) {
-        OccludedPacket<8, RTCRay8>(impl_->top, rays, n, occluded, rtcOccluded8);
+        OccludedPacket<8, RTCRay8>(impl_->top, rays, n, occluded, rtcOccluded8, traceable);
     } else {
-        OccludedPacket<16, RTCRay16>(impl_->top, rays, std::min(n, 16), occluded, rtcOccluded16);
+        OccludedPacket<16, RTCRay16>(impl_->top, rays, std::min(n, 16), occluded, rtcOccluded16,
+                                     traceable);
     }
 }
 
@@ -637,7 +685,7 @@ std::vector<glm::vec3> RenderScene::QuadCorners(int object) const {
     const Impl& I = *impl_;
     const Impl::Mesh& mesh = I.meshes[size_t(I.objects[size_t(object)].mesh)];
     std::vector<glm::vec3> corners;
-    if (!mesh.plain && !mesh.limit) return corners;
+    if (!mesh.plain && !mesh.tessellated) return corners;
     const auto* v =
         static_cast<const float*>(rtcGetGeometryBufferData(mesh.geom, RTC_BUFFER_TYPE_VERTEX, 0));
     const auto* idx =
@@ -663,7 +711,7 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
     unsigned prim = 0;
     float U = c.u, V = c.v;
-    if (!mesh.limit && !mesh.plain) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
+    if (!mesh.tessellated && !mesh.plain) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
     alignas(16) float P[4], du[4], dv[4];
     if (!mesh.Eval(c, prim, U, V, P, du, dv)) return false;
     const glm::mat4 M = I.Transform(object, time);

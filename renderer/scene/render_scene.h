@@ -105,6 +105,11 @@ public:
     /// Closest hit along a world-space ray against one object only (other objects are ignored);
     /// false on a miss.
     bool IntersectObject(int object, const Ray& ray, Hit* hit) const;
+    /// Rays the queries above did not hand to Embree, which asserts on them (a NaN, an origin
+    /// beyond its range in some object's space, a negative tnear): they missed and were
+    /// occluded instead. None in a scene that passed CheckSceneReach (scene_units.h); a count
+    /// here is a bug to report.
+    uint64_t UntracedRays() const;
     /// Shading data at a hit (limit normal, derivatives, Ptex coordinates, uvs); the footprint
     /// fields are filled when `diff` is given.
     SurfaceInteraction Interact(const Ray& ray, const Hit& hit,

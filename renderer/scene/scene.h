@@ -185,6 +185,10 @@ struct Scene {
     std::vector<DistantLight> distantLights;
     std::vector<PointLight> pointLights;  ///< point and spot lights
     RenderSettings settings;
+    /// Render units (renderer/scene/scene_units.h): positions here are the file's minus
+    /// unitOrigin, times unitScale; the identity for scenes of ordinary size near the origin.
+    glm::dvec3 unitOrigin{0.0};
+    double unitScale = 1.0;
 };
 
 }  // namespace texcache

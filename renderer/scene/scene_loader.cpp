@@ -19,6 +19,7 @@
 #include "filters/texture_filters.h"
 #include "renderer/scene/obj_loader.h"
 #include "renderer/scene/obj_materials.h"
+#include "renderer/scene/scene_units.h"
 #include "texcache/error.h"
 
 namespace texcache {
@@ -637,17 +638,9 @@ void DefaultConvergence(glm::vec3 lo, glm::vec3 hi, Camera* cam) {
 }
 
 /// A camera pose that fits the box's bounding sphere into the narrower of the two fields of view
-/// with a 10% margin, seen from a 3/4 view above (+Y up). Objects placed beyond +-1e18 (OBJ
-/// coordinates are limited to that, transforms may move them further) cannot be framed in float:
-/// the error names the scene's objects, not the camera.
-Keyframe FrameBounds(glm::vec3 lo, glm::vec3 hi, float fovYDegrees, float aspect,
-                     const std::string& scenePath) {
-    const glm::vec3 far = glm::max(glm::abs(lo), glm::abs(hi));
-    const float reach = std::max({far.x, far.y, far.z});
-    if (!(reach <= 1e18f))
-        throw InputError(scenePath, "the objects reach " + Fmt(reach) +
-                                        " from the origin (beyond +-1e18): too large to frame "
-                                        "with the default camera or to ray trace");
+/// with a 10% margin, seen from a 3/4 view above (+Y up). The box is in render units
+/// (NormalizeSceneUnits: between 2^-8 and 2^24 across), so the pose fits any scale.
+Keyframe FrameBounds(glm::vec3 lo, glm::vec3 hi, float fovYDegrees, float aspect) {
     const glm::vec3 centre = 0.5f * (lo + hi);
     const float radius = std::max(0.5f * glm::length(hi - lo), 1e-6f);
     const float halfY = 0.5f * glm::radians(fovYDegrees);
@@ -786,14 +779,17 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         warnings->push_back(path + ": no lights: the '" +
                             std::string(IntegratorName(scene.settings.integrator)) +
                             "' integrator will render black");
+    NormalizeSceneUnits(&scene);
     if (!root.Has("camera")) {
         glm::vec3 lo, hi;
         SceneBounds(scene, scene.settings.time, &lo, &hi);
         scene.camera.pose.keys.push_back(
             FrameBounds(lo, hi, scene.camera.fovYDegrees,
-                        float(scene.settings.width) / float(scene.settings.height), scene.path));
+                        float(scene.settings.width) / float(scene.settings.height)));
         DefaultConvergence(lo, hi, &scene.camera);
     }
+    CheckSceneReach(scene, std::max(scene.camera.lensRadius, 0.5f * scene.camera.eyeSeparation),
+                    path);
     return scene;
 }
 
@@ -839,12 +835,14 @@ Scene SceneFromObj(const std::string& objPath, const std::string& defaultEnvPath
                                 ": default environment map not found; using constant white");
     }
     scene.environments.push_back(env);
+    NormalizeSceneUnits(&scene);
     glm::vec3 lo, hi;
     SceneBounds(scene, 0.0f, &lo, &hi);
     scene.camera.pose.keys.push_back(
         FrameBounds(lo, hi, scene.camera.fovYDegrees,
-                    float(scene.settings.width) / float(scene.settings.height), scene.path));
+                    float(scene.settings.width) / float(scene.settings.height)));
     DefaultConvergence(lo, hi, &scene.camera);
+    CheckSceneReach(scene, 0.0f, objPath);
     return scene;
 }
 

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "renderer/image/image.h"
 #include "texcache/error.h"
@@ -29,6 +30,27 @@ TextureImage::TextureImage(const Texture& desc) : desc_(desc) {
     }
     if (desc.kind != Texture::Kind::Image) return;
     Image img = ReadImageRGB(desc.path);
+    // NaN or infinity would make every pixel that samples the texel NaN (a float image can hold
+    // them), and a negative colour emits light from a surface: refused, with their count. Lossy
+    // float images undershoot a little next to bright texels: down to -1e-3 is clamped to 0.
+    size_t nonFinite = 0, negative = 0;
+    float lowest = 0.0f;
+    for (size_t i = 0; i < img.NumPixels(); ++i) {
+        const float* p = &img.data[i * 3];
+        const float low = std::min({p[0], p[1], p[2]});
+        nonFinite += !std::isfinite(p[0] + p[1] + p[2]);
+        negative += std::isfinite(p[0] + p[1] + p[2]) && low < -1e-3f;
+        if (std::isfinite(low)) lowest = std::min(lowest, low);
+    }
+    const std::string of = " of its " + std::to_string(img.NumPixels()) + " texels";
+    if (nonFinite > 0)
+        throw InputError(desc.path,
+                         "texture has NaN or infinite values in " + std::to_string(nonFinite) + of);
+    char low[32];
+    std::snprintf(low, sizeof low, "%g", double(lowest));
+    if (negative > 0)
+        throw InputError(desc.path, std::string("texture has negative values (down to ") + low +
+                                        ") in " + std::to_string(negative) + of);
     width_ = img.width;
     height_ = img.height;
     texels_.resize(size_t(width_) * height_);

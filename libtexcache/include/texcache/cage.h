@@ -33,6 +33,10 @@ struct ControlCage {
     BoundaryInterpolation boundary = BoundaryInterpolation::EdgeOnly;
 
     std::string sourcePath;  ///< for messages
+    /// `positions` are in units of 2^unitExponent of the file's: a cage far larger or smaller
+    /// than a unit is stored scaled by a power of two (exactly), and its objects' transforms
+    /// scale it back.
+    int unitExponent = 0;
 
     int numFaces() const { return int(faceVertexCounts.size()); }
     int numVertices() const { return int(positions.size()); }
