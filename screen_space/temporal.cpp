@@ -210,6 +210,7 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     // Everything the loop reads is copied to locals and its results go to local arrays: then the
     // compiler sees no possible aliasing and needs no run-time checks to vectorize.
     const SvgfArgs a = args;
+    const bool stream = StreamPlanes(a.w, a.h, NC + 4);
     const size_t size = size_t(a.stride) * size_t(a.h);
     constexpr int kC = kChunk;
     alignas(64) float o[3][kC], ovar[kC], om1[kC], om2[kC], olen[kC];
@@ -275,10 +276,10 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
             const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
             ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
         }
-        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
-        std::copy_n(ovar, n, a.outVar + x0);
-        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
-        std::copy_n(olen, n, a.len + x0);
+        for (int c = 0; c < NC; ++c) StoreRow(o[c], n, a.out[c] + x0, stream);
+        StoreRow(ovar, n, a.outVar + x0, stream);
+        StoreRow(om1, n, a.m1 + x0, stream), StoreRow(om2, n, a.m2 + x0, stream);
+        StoreRow(olen, n, a.len + x0, stream);
     }
 }
 
@@ -316,6 +317,7 @@ struct ReliableArgs {
 template <int NC, bool Hist, bool AlphaV>
 inline __attribute__((always_inline)) void ReliableRowImpl(const ReliableArgs& args) {
     const ReliableArgs a = args;  // locals + local results: see SvgfRowImpl
+    const bool stream = StreamPlanes(a.w, a.h, NC + 3);
     const size_t size = size_t(a.stride) * size_t(a.h);
     constexpr int kC = kChunk;
     alignas(64) float o[3][kC], ovalid[kC], osigma[kC], olen[kC];
@@ -377,9 +379,9 @@ inline __attribute__((always_inline)) void ReliableRowImpl(const ReliableArgs& a
             osigma[i] = sigma;
             olen[i] = len;
         }
-        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
-        std::copy_n(ovalid, n, a.outValid + x0);
-        std::copy_n(osigma, n, a.sigma + x0), std::copy_n(olen, n, a.len + x0);
+        for (int c = 0; c < NC; ++c) StoreRow(o[c], n, a.out[c] + x0, stream);
+        StoreRow(ovalid, n, a.outValid + x0, stream);
+        StoreRow(osigma, n, a.sigma + x0, stream), StoreRow(olen, n, a.len + x0, stream);
     }
 }
 
@@ -604,6 +606,7 @@ struct ConeArgs {
 
 template <bool Hist>
 inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
+    const bool stream = StreamPlanes(a.w, a.h, 7);
     const size_t size = size_t(a.stride) * size_t(a.h);
     constexpr int kC = kChunk;
     alignas(64) float mu[3][kC], sg[3][kC], spv[kC], hf[kC], hm1[kC], hm2[kC], hl[kC];
@@ -716,10 +719,10 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
             const bool any = cv > 0.0f || hist;
             ovar[i] = any ? (len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spv[i]) : -1.0f;
         }
-        for (int c = 0; c < 3; ++c) std::copy_n(oe[c], n, a.out[c] + x0);
-        std::copy_n(ovar, n, a.outVar + x0);
-        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
-        std::copy_n(olen, n, a.len + x0);
+        for (int c = 0; c < 3; ++c) StoreRow(oe[c], n, a.out[c] + x0, stream);
+        StoreRow(ovar, n, a.outVar + x0, stream);
+        StoreRow(om1, n, a.m1 + x0, stream), StoreRow(om2, n, a.m2 + x0, stream);
+        StoreRow(olen, n, a.len + x0, stream);
     }
 }
 
