@@ -8,6 +8,7 @@
 
 #include "renderer/image/image.h"
 #include "renderer/integrators/integrator_kind.h"
+#include "renderer/integrators/sampling.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/texture_space/texture_space.h"
 
@@ -33,7 +34,10 @@ void RecordAoRays(const RenderScene& scene, const RenderOptions& options, std::v
                   std::vector<Ray>* occlusion);
 
 /// Seed of the random stream of (pixel, sample): identical for any thread count or pass split.
-uint64_t PixelSeed(uint64_t seed, int x, int y, int width);
+/// Inline: every camera sample of every renderer starts from it.
+inline uint64_t PixelSeed(uint64_t seed, int x, int y, int width) {
+    return MixBits(seed * 0x9E3779B97F4A7C15ull + uint64_t(y) * uint64_t(width) + uint64_t(x));
+}
 
 namespace internal {
 /// What a progressive texture-space render with a time budget does after a pass (Render's

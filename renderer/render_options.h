@@ -89,6 +89,11 @@ struct TextureSpaceOptions {
     /// docs/texture-space.md, "Which light is cached"), so this is for soft lighting
     /// (environment, large area lights) and off by default.
     bool cacheDirect = false;
+    /// With cacheDirect and samples at the hits: the direct light of delta lights (point and
+    /// spot lights without a radius, distant lights without an angular size), whose shadows are
+    /// sharp, stays per hit, and only soft lights' is binned (`--cached-light auto` on a scene
+    /// with both kinds: CachedLightOptions). The grid ignores it (it caches all direct light).
+    bool deltaDirectPerHit = false;
     int shadowSamples = 4;  ///< shadow rays per cached visibility sample (soft shadows)
     /// Screen-space frame buffers (RenderFrameBuffers): also fill FrameBuffers::cachedVisibility
     /// for diffuse materials from a cached visibility (shadowSamples shadow rays per sample

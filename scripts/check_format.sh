@@ -6,7 +6,7 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 # The project's source folders only: build trees (build*/) sit at the root, outside them.
-mapfile -t files < <(find libtexcache filters screen_space renderer apps examples tests -type f \
+mapfile -t files < <(find libtexcache ptex filters screen_space renderer apps examples tests -type f \
     \( -name '*.cpp' -o -name '*.h' -o -name '*.hpp' -o -name '*.cc' -o -name '*.inl' \) | sort)
 if [ "${1:-}" = "--fix" ]; then
   clang-format -i "${files[@]}"

@@ -9,6 +9,7 @@ build="${BUILD_DIR:-$root/build}"
 pkgs=(build-essential cmake pkg-config
       libembree-dev libosd-dev libopenimageio-dev libopenexr-dev libpng-dev libglm-dev libtbb-dev
       libeigen3-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev gnuplot-nox
+      zlib1g-dev      # texcache_ptex (libpng-dev and libopenexr-dev pull it in too)
       libglfw3-dev libimgui-dev xvfb xauth libgl1-mesa-dri
       clang-format    # scripts/check_format.sh
       embree-tools)   # Embree's pathtracer, the peer of `texcache bench peer` (optional at run time)

@@ -5,7 +5,7 @@
 #  3. tsan: the cache library's tests (label `cache`) under ThreadSanitizer in build-tsan/, since
 #     the caches are shared by all render threads;
 #  4. asan: the suite under AddressSanitizer + UndefinedBehaviorSanitizer in build-asan/, all but
-#     the experiments' end-to-end runs (below);
+#     the experiments' end-to-end runs, the examples and the benchmarks' smoke runs (below);
 #  5. the whole suite in the Release build, last, so that its CTest summary closes the output.
 # Every build treats warnings in project code as errors (TEXCACHE_WERROR), here as in CI, so that
 # a run that passes here passes there; the setting stays in build/'s CMake cache. Extra arguments
@@ -41,7 +41,10 @@ sanitizer_build() {
 }
 
 phase "ThreadSanitizer: libtexcache tests (build-tsan/)"
-sanitizer_build "$root/build-tsan" thread --target cache_test record_cache_test hit_bins_test
+# The cache library's tests of what render threads share: texel keys, the direct-mapped cache,
+# footprints and visible sets, the shading cache, the record cache and the hit bins.
+sanitizer_build "$root/build-tsan" thread --target texel_key_test direct_mapped_cache_test \
+    footprint_test shading_cache_test record_cache_test hit_bins_test
 took "TSan build"
 t0=$SECONDS
 # halt_on_error: a race fails the test instead of only printing a report.
@@ -54,16 +57,19 @@ phase "AddressSanitizer + UBSan: whole suite (build-asan/)"
 # UBSan findings abort in this build (-fno-sanitize-recover, cmake/Warnings.cmake); the options
 # add stack traces. Leaks are checked (the preview tests excepted: tests/CMakeLists.txt says why).
 asan_skip='Experiment\.|SpeedVsError\.'
+asan_skip_labels='example|bench'
 export ASAN_OPTIONS="detect_leaks=1:check_initialization_order=1:strict_init_order=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 sanitizer_build "$root/build-asan" address --target texcache_test_programs
 took "ASan build"
 t0=$SECONDS
 # The experiments' end-to-end runs are left to the Release suite: they render dozens of images
-# (under ASan, about half the suite's test-seconds), their
-# rendering code is what the other tests run under ASan, and what is theirs alone is writing
-# CSV, plots and markdown.
-(cd "$root/build-asan" && ctest --output-on-failure -j"$jobs" -E "$asan_skip" "$@") ||
+# (about half the ASan suite's time on a fresh clone), their rendering code is what the other
+# tests run under ASan, and what is theirs alone is writing CSV, plots and markdown. So are the
+# examples and the benchmarks' smoke runs (labels example, bench; not built here): they check
+# that the programs still run and give their answers, on library code the tests run under ASan.
+(cd "$root/build-asan" && ctest --output-on-failure -j"$jobs" -E "$asan_skip" \
+    -LE "$asan_skip_labels" "$@") ||
     failed+=("ASan + UBSan tests")
 took "ASan tests"
 unset ASAN_OPTIONS UBSAN_OPTIONS

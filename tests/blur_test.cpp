@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// Motion and defocus blur with texture-space shading (issue 19): the primary-visibility filter
+// Motion and defocus blur with texture-space shading: the primary-visibility filter
 // (filters/visibility_filter.h) leaves sharp pixels alone and contains NaN/Inf; a moving object's
 // camera hits at different shutter times share its texels; the shadow a moving object casts is
 // smeared in the cache as in the per-hit render; bad settings are clear errors.

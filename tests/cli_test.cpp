@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -20,8 +21,9 @@
 
 #include "cli_run.h"
 #include "renderer/image/image.h"
-#include "support/cages.h"
+#include "renderer/library_versions.h"
 #include "test_util.h"
+#include "testing/cages.h"
 
 namespace texcache {
 namespace {
@@ -49,8 +51,8 @@ TEST(Cli, RendersAnObjToExrAndPng) {
     EXPECT_TRUE(fs::exists(Dir() / "cube.png"));
 }
 
-// Issue 18: a 16-gon aborted the program inside Embree (exit 134). Now it renders through the
-// limit tessellation, and the scene statistics say which faces needed it.
+// A 16-gon is past Embree's limits: it renders through the limit tessellation, and the scene
+// statistics say which faces needed it.
 TEST(Cli, RendersA16GonAndCountsTheFacesPastEmbreesLimits) {
     const fs::path obj = Dir() / "prism16.obj", out = Dir() / "prism16.exr";
     test::WriteObj(test::PrismCage(16), obj.string());
@@ -121,6 +123,74 @@ TEST(Cli, HelpOnEverySubcommand) {
         const CliRun r = Texcache(c);
         EXPECT_EQ(r.code, 0) << c << ": " << r.out;
         EXPECT_NE(r.out.find("Usage"), std::string::npos) << c;
+    }
+}
+
+// `texcache --version`: texcache's version on the first line, then each library's, as the
+// renderer reports them (no subcommand needed, exit 0).
+TEST(Cli, VersionNamesTexcacheAndItsLibraries) {
+    const CliRun r = Texcache("--version");
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(r.out.rfind(std::string("texcache ") + TexcacheVersion() + "\n", 0), 0u) << r.out;
+    const std::vector<LibraryVersion> libs = LibraryVersions();
+    ASSERT_EQ(libs.size(), 4u);
+    for (const char* name : {"Embree", "OpenSubdiv", "OpenEXR", "OpenImageIO"}) {
+        const auto it = std::find_if(libs.begin(), libs.end(),
+                                     [&](const LibraryVersion& v) { return v.name == name; });
+        ASSERT_NE(it, libs.end()) << name;
+        EXPECT_FALSE(it->version.empty()) << name;
+        EXPECT_TRUE(std::isdigit(static_cast<unsigned char>(it->version[0]))) << it->version;
+        EXPECT_NE(r.out.find(it->name + " " + it->version + "\n"), std::string::npos) << r.out;
+    }
+}
+
+// The help of the commands with many options lists them under headings, in this order, each
+// option under its own (a sample of each group).
+TEST(Cli, HelpGroupsTheOptions) {
+    struct Group {
+        std::string heading;
+        std::vector<std::string> options;
+    };
+    struct Case {
+        std::string command;
+        std::vector<Group> groups;
+    };
+    const Case cases[] = {
+        {"render --help",
+         {{"Output:", {"--output", "--aov", "--frames"}},
+          {"Sampling:", {"--spp", "--integrator", "--light-sampling"}},
+          {"Texture space:", {"--shading", "--ts-samples", "--texel-cache-mb"}},
+          {"Screen-space stage:", {"--frame-buffers", "--denoise"}},
+          {"Stereo and blur:", {"--stereo", "--visibility-filter"}},
+          {"Diagnostics:", {"--stats", "--overshading"}}}},
+        {"preview --help",
+         {{"View:", {"--resolution", "--view"}},
+          {"Texture space:", {"--shading", "--no-reshade"}},
+          {"Screen-space stage:", {"--denoise", "--motion"}},
+          {"Stereo:", {"--eye-separation"}},
+          {"Headless test mode:", {"--screenshot", "--play"}},
+          {"Benchmark:", {"--bench-frames"}}}},
+    };
+    for (const Case& c : cases) {
+        const CliRun r = Texcache(c.command);
+        ASSERT_EQ(r.code, 0) << c.command << ": " << r.out;
+        size_t last = 0;
+        for (size_t g = 0; g < c.groups.size(); ++g) {
+            const size_t at = r.out.find("\n" + c.groups[g].heading + "\n");
+            ASSERT_NE(at, std::string::npos) << c.command << ": " << c.groups[g].heading;
+            EXPECT_GT(at, last) << c.command << ": " << c.groups[g].heading << " out of order";
+            const size_t end = g + 1 < c.groups.size()
+                                   ? r.out.find("\n" + c.groups[g + 1].heading + "\n")
+                                   : r.out.size();
+            for (const std::string& o : c.groups[g].options) {
+                // The option's own line: "  --spp INT ..." or "  -o,--output TEXT ...".
+                size_t opt = r.out.find("\n  " + o + " ", at);
+                opt = std::min(opt, r.out.find("," + o + " ", at));
+                EXPECT_TRUE(opt != std::string::npos && opt < end)
+                    << c.command << ": " << o << " not under " << c.groups[g].heading;
+            }
+            last = at;
+        }
     }
 }
 
@@ -385,7 +455,7 @@ std::string RefusalName(const ::testing::TestParamInfo<Refusal>& info) {
 #define RENDER_SCENE "render {scene} --spp 1 --resolution 8x8 -q "
 #define RENDER_CUBE "render {cube} --spp 1 -q -o {dir}/x.png "
 
-// Item 2 of issue 18: no flag can destroy a file. An output that is an input (the scene, its
+// No flag can destroy a file. An output that is an input (the scene, its
 // mesh, its environment map, a compared image) or another output (the PNG beside the EXR,
 // --stats) is refused, and so is an output that cannot be written (missing directory, a
 // directory in the way, a path under a regular file), all before anything renders.
@@ -412,7 +482,7 @@ INSTANTIATE_TEST_SUITE_P(
                 "--stats: cannot write"}),
     RefusalName);
 
-// Item 4: numbers are taken as written or refused (no wraparound, NaN is not "not given"),
+// Numbers are taken as written or refused (no wraparound, NaN is not "not given"),
 // empty values and combinations that would silently drop something are errors naming the option.
 INSTANTIATE_TEST_SUITE_P(
     Numbers, CliRefuses,
@@ -443,7 +513,7 @@ INSTANTIATE_TEST_SUITE_P(
                 "do not fit in this machine's"}),
     RefusalName);
 
-// Item 5: CLI11's own errors (a bad number, an unknown option, a repeated option, a missing
+// CLI11's own errors (a bad number, an unknown option, a repeated option, a missing
 // argument) in the same one-line form, pointing at --help.
 INSTANTIATE_TEST_SUITE_P(
     Messages, CliRefuses,
@@ -471,7 +541,7 @@ TEST(Cli, CompareDecodesSrgbAgainstLinearAndSaysSo) {
 }
 
 // compare never trusts an EXR header's size: a 23 KB file claiming 46340x46340 pixels is refused
-// at once (it took 8.5 GB and 37 s before failing).
+// at once, before anything is allocated for the size it claims (8.5 GB).
 TEST(Cli, CompareRefusesHeadersClaimingHugeSizes) {
     const fs::path liar = Dir() / "liar.exr";
     WriteImage(liar.string(), Image(64, 64, 1, 0.5f));
@@ -610,7 +680,7 @@ TEST(Cli, LightSamplingCpisReportsRecordBytes) {
 
 // `bench peer` compares like with like: both sides' high-sample renders show the same light. The
 // peer's diffuse response is twice ours (cmd_bench_peer.cpp says how it was measured) and its
-// pixels clip at 1, so its scene takes half the albedo; without that the car's body was 1.0 on
+// pixels clip at 1, so its scene takes half the albedo; without that the car's body would be 1.0 on
 // its side against 0.5 on ours: relMSE ~0.1 between the references, where noise at 64 spp on
 // 48x48 pixels gives ~0.005. Needs Embree's pathtracer (scripts/setup.sh installs embree-tools).
 TEST(Cli, BenchPeerReferencesShowTheSameLight) {

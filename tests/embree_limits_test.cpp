@@ -13,8 +13,8 @@
 #include "renderer/render.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/texture_space/ptex_mapping.h"
-#include "support/cages.h"
 #include "test_util.h"
+#include "testing/cages.h"
 #include "texcache/topology.h"
 
 namespace texcache {

@@ -76,7 +76,7 @@ TEST_P(Experiment, QuickRunWritesCsvPlotsAndSummary) {
     EXPECT_NE(text.str().find("Paper"), std::string::npos) << "the summary quotes the paper";
     EXPECT_NE(text.str().find("Quick mode"), std::string::npos);
     if (e.name == "speed-vs-error") {
-        // The issue's goals per case, and for the path cases the bound the per-hit terms put
+        // The experiment's goals per case, and for the path cases the bound the per-hit terms put
         // on any method that caches the diffuse term.
         EXPECT_NE(text.str().find("## The goals"), std::string::npos);
         EXPECT_NE(text.str().find("| car-indirect | ts-normal | "), std::string::npos);
@@ -174,7 +174,7 @@ TEST(SpeedVsError, RunsOfSomeCasesKeepTheOthers) {
 
 // The temporal experiment (not in the list above: it checks more and runs once): its plots and
 // crops exist, every method and demodulation setting has a finite RMSE in [0, 10) on every frame
-// of every scene, and the summary quotes the paper and decides both goals of the issue.
+// of every scene, and the summary quotes the paper and decides both of the experiment's goals.
 TEST(TemporalExperiment, EveryMethodHasFiniteRmseOnEveryScene) {
     const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_temporal_rmse";
     fs::remove_all(out);
@@ -270,8 +270,8 @@ TEST(DisocclusionExperiment, EveryRowHasPixelsAndFiniteRmse) {
     EXPECT_EQ(rows, 4) << r.out;
 }
 
-// `experiment stereo --quick`: a CSV with the issue's columns and a row per case and separation,
-// the plot and the summary; at zero separation the second eye shades no new sample.
+// `experiment stereo --quick`: a CSV with the experiment's columns and a row per case and
+// separation, the plot and the summary; at zero separation the second eye shades no new sample.
 TEST(StereoExperiment, WritesCostsPerSeparation) {
     const fs::path out = fs::path(::testing::TempDir()) / "texcache_exp_stereo";
     fs::remove_all(out);

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // Seeded mutation fuzzing of the readers of untrusted files: OBJ cages, scene files and the
-// screen-space stage's frame-buffer EXRs (issue 18). Each target mutates the seed files of its
+// screen-space stage's frame-buffer EXRs. Each target mutates the seed files of its
 // corpus (tests/fuzz/<target>/) with a fixed seed, a bounded number of times (about a second in
 // Release; TEXCACHE_FUZZ_SCALE=N runs N times as many), and requires every input to either load
 // into a consistent result or throw InputError: any other exception fails the test, and the

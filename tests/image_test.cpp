@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // Image files: exact EXR round trips with AOV layers, the sRGB PNG encode, PFM/HDR, atomic writes
-// that never clobber a good file, and read errors that name the file.
+// that never clobber a good file, and read errors that name the file or path.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -17,6 +17,8 @@
 
 namespace texcache {
 namespace {
+
+using test::Ramp;
 
 namespace fs = std::filesystem;
 
@@ -367,6 +369,67 @@ TEST(ImageFiles, ReadsBundledEnvironmentMap) {
     EXPECT_GT(env.width, 0);
     EXPECT_EQ(ReadImageRGB(path).channels, 3);
     for (float v : ReadImageRGB(path).data) ASSERT_TRUE(std::isfinite(v));
+}
+
+// Files in one directory shared by the ImageIO tests.
+std::string Temp(const std::string& name) {
+    const fs::path dir = fs::path(::testing::TempDir()) / "texcache_images";
+    fs::create_directories(dir);
+    return (dir / name).string();
+}
+
+TEST(ImageIO, ExrRoundTripsExactlyWithLayers) {
+    const Image a = Ramp(17, 9);
+    ImageLayer depth{"depth", Image(17, 9, 1, 3.5f), {"Z"}};
+    const std::string path = Temp("roundtrip.exr");
+    WriteImage(path, a, {depth});
+    const Image b = ReadImageRGB(path);
+    ASSERT_EQ(b.width, 17);
+    ASSERT_EQ(b.height, 9);
+    EXPECT_EQ(a.data, b.data);  // 32-bit float EXR is lossless
+    const Image all = ReadImage(path);
+    ASSERT_EQ(all.channels, 4);
+    EXPECT_EQ(all.At(3, 4)[3], 3.5f);
+}
+
+TEST(ImageIO, PngIsSrgbEncodedAndSurvivesNaN) {
+    EXPECT_EQ(LinearToSrgb8(0.0f), 0);
+    EXPECT_EQ(LinearToSrgb8(1.0f), 255);
+    EXPECT_EQ(LinearToSrgb8(0.5f), 188);  // the sRGB OETF, not linear 128
+    EXPECT_EQ(LinearToSrgb8(NAN), 0);
+    EXPECT_EQ(LinearToSrgb8(INFINITY), 255);
+    Image img(4, 2, 3, 0.5f);
+    img.At(1, 1)[0] = NAN;
+    const std::string path = Temp("nan.png");
+    WriteImage(path, img);
+    const Image back = ReadImageRGB(path);
+    EXPECT_NEAR(back.At(0, 0)[0], 188.0f / 255.0f, 1e-6f);
+    EXPECT_EQ(back.At(1, 1)[0], 0.0f);
+}
+
+TEST(ImageIO, FailedWritesNeverClobberAGoodFile) {
+    const std::string path = Temp("good.png");
+    WriteImage(path, Image(2, 2, 3, 0.25f));
+    const auto before = fs::file_size(path);
+    EXPECT_THROW(WriteImage(path, Image()), InputError);                        // empty image
+    EXPECT_THROW(WriteImage(Temp("nodir/x.exr"), Image(2, 2, 3)), InputError);  // missing dir
+    EXPECT_THROW(WriteImage(Temp("x.bmpx"), Image(2, 2, 3)), InputError);       // unknown type
+    EXPECT_EQ(fs::file_size(path), before);
+    for (const auto& e : fs::directory_iterator(fs::path(path).parent_path()))
+        EXPECT_EQ(e.path().string().find(".tmp-"), std::string::npos) << "temporary file left";
+}
+
+TEST(ImageIO, UnreadableFilesNameThePath) {
+    const std::string garbage = Temp("garbage.exr");
+    std::ofstream(garbage) << "not an image";
+    for (const std::string& p : {garbage, Temp("missing.exr")}) {
+        try {
+            ReadImageRGB(p);
+            FAIL() << p;
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(p), std::string::npos) << e.what();
+        }
+    }
 }
 
 }  // namespace

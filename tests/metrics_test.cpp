@@ -14,10 +14,13 @@
 
 #include "renderer/image/image.h"
 #include "renderer/image/metrics.h"
+#include "test_util.h"
 #include "texcache/error.h"
 
 namespace texcache {
 namespace {
+
+using test::Ramp;
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr float kInf = std::numeric_limits<float>::infinity();
@@ -218,6 +221,52 @@ TEST(ErrorMetrics, LargeImageIsFastEnough) {
     EXPECT_TRUE(std::isfinite(e.ssim));
     EXPECT_LT(s, 10.0);
     RecordProperty("compare_seconds", std::to_string(s));
+}
+
+TEST(Metrics, IdenticalImages) {
+    const Image a = Ramp(32, 20);
+    const ImageErrors e = CompareImages(a, a);
+    EXPECT_EQ(e.relMSE, 0.0);
+    EXPECT_EQ(e.rmse, 0.0);
+    EXPECT_TRUE(std::isinf(e.psnr));
+    EXPECT_NEAR(e.ssim, 1.0, 1e-12);
+}
+
+TEST(Metrics, KnownAnswers) {
+    // 2x1 image, reference grey 0.5 and 0.0, test offset by 0.1 in every channel.
+    Image ref(2, 1, 3), test(2, 1, 3);
+    for (int k = 0; k < 3; ++k) ref.At(0, 0)[k] = 0.5f, ref.At(1, 0)[k] = 0.0f;
+    for (int k = 0; k < 3; ++k) test.At(0, 0)[k] = 0.6f, test.At(1, 0)[k] = 0.1f;
+    // relMSE = mean over pixels of sum_c d^2 / (gray^2 + 1e-3)
+    const double expected = 0.5 * (3 * 0.01 / (0.25 + 1e-3) + 3 * 0.01 / (0.0 + 1e-3));
+    EXPECT_NEAR(RelMSE(test, ref), expected, 1e-6 * expected);  // float inputs: 1e-6 relative
+    EXPECT_NEAR(RMSE(test, ref), 0.1, 1e-6);
+    EXPECT_NEAR(PSNR(test, ref), 20.0, 1e-4);
+}
+
+TEST(Metrics, SsimOfNoisyImageIsBetweenZeroAndOneAndSymmetric) {
+    const Image a = Ramp(64, 48);
+    Image b = a;
+    std::mt19937 gen(1);
+    std::normal_distribution<float> n(0.0f, 0.05f);
+    for (float& v : b.data) v += n(gen);
+    const double s = SSIM(a, b);
+    EXPECT_GT(s, 0.0);
+    EXPECT_LT(s, 0.99);
+    EXPECT_NEAR(s, SSIM(b, a), 1e-12);
+}
+
+TEST(Metrics, MismatchAndNonFinite) {
+    EXPECT_THROW(CompareImages(Image(4, 4, 3), Image(4, 5, 3)), InputError);
+    Image a = Ramp(8, 8), b = Ramp(8, 8);
+    a.At(2, 2)[1] = NAN;
+    a.At(3, 3)[0] = INFINITY;
+    const ImageErrors e = CompareImages(a, b);
+    EXPECT_EQ(e.nonFinite, 2u);
+    EXPECT_EQ(e.relMSE, 0.0);  // excluded, not propagated
+    EXPECT_TRUE(std::isfinite(e.ssim));
+    const Image fc = FalseColorError(a, b);
+    EXPECT_EQ(fc.At(2, 2)[1], 0.0f);  // magenta marks non-finite pixels
 }
 
 }  // namespace

@@ -17,15 +17,15 @@
 
 #include <gtest/gtest.h>
 
-#include "progressive_renderer.h"
 #include "renderer/image/image.h"
 #include "renderer/image/metrics.h"
+#include "renderer/preview/progressive_renderer.h"
 #include "renderer/render.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/scene/scene_loader.h"
 #include "renderer/texture_space/texture_space.h"
-#include "support/cages.h"
 #include "test_util.h"
+#include "testing/cages.h"
 
 namespace {
 
@@ -524,7 +524,7 @@ TEST(Preview, StageHistoryFollowsTheViewAndResetsOnChanges) {
     EXPECT_FALSE(r.Stats().staged);
 }
 
-// Issue 18: a 16-gon aborted the preview inside Embree (exit 134). It now shows the prism (AO:
+// A 16-gon is past Embree's limits (it is tessellated instead): the preview shows the prism (AO:
 // bright) in at least 5% of the 64x64 render area (13% measured).
 TEST(Preview, ShowsACagePastEmbreesLimits) {
     const fs::path dir = TempDir("prism16");
@@ -631,14 +631,13 @@ texcache::Image StillView(texcache::preview::PreviewSettings s) {
 
 }  // namespace
 
-// Issue 16: a still view converges in texture space too. Texture-space AO at 2 rays per cached
+// A still view converges in texture space too. Texture-space AO at 2 rays per cached
 // sample re-shades its cache on every accumulated frame (a progressive pass), so the mean of
 // the frames loses the shading noise and the texels' bias; reusing the first frame's cache
 // (--no-reshade) leaves both. relMSE against per-hit AO of 64 rays over 64 frames (the same
 // camera rays), 64x36, car: with re-shading 0.107 after 4 frames and 0.0077 after 64 (1/13.8);
 // without, 0.143 and 0.066 (only the anti-aliasing converges). Asserted: re-shading divides the
-// error by at least 8 over 16x the frames (the issue's convergence goal) and ends below a
-// quarter of the reused cache's.
+// error by at least 8 over 16x the frames and ends below a quarter of the reused cache's.
 TEST(Preview, StillViewConverges) {
     using namespace texcache::preview;
     PreviewSettings s;

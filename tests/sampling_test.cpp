@@ -205,8 +205,8 @@ TEST(Sampling, CosineHemispherePdfIntegratesToOne) {
 
 // A grazing view of a curved surface: wo above the geometric plane but below the shading
 // normal's (the interpolated normal leans away from the eye). The diffuse lobe shades it as any
-// other view (it had been 0: dark fringes where diffuse surfaces turn away, the clay car's lower
-// edge under a white sky at 0.23 instead of ~0.73); the specular lobe stays 0 there; Sample()
+// other view (0 there would give dark fringes where diffuse surfaces turn away, the clay car's
+// lower edge under a white sky); the specular lobe stays 0 there; Sample()
 // draws the diffuse lobe with its own pdf and weight albedo (tolerance 1e-5).
 TEST(Sampling, GrazingViewsBelowTheShadingNormalStillShadeDiffuse) {
     const glm::vec3 n = glm::normalize(glm::vec3(0.3f, 0.0f, 1.0f)), ng(0.0f, 0.0f, 1.0f);

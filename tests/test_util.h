@@ -183,6 +183,15 @@ inline std::vector<DecodedHit> DecodeHits(const RenderScene& rs, const LimitSurf
     return out;
 }
 
+/// A w x h RGB image of smooth ramps, different per channel.
+inline Image Ramp(int w, int h) {
+    Image img(w, h, 3);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            for (int k = 0; k < 3; ++k) img.At(x, y)[k] = float(x + 2 * y + k) / float(w + 2 * h);
+    return img;
+}
+
 /// Mean of an image over the mean of a reference; NaN when the image has a non-finite value.
 inline double MeanRatio(const Image& img, const Image& ref) {
     double a = 0.0, b = 0.0;

@@ -394,9 +394,9 @@ TEST(NormalWeightedFilter, PreparedTileEqualsTileForm) {
     EXPECT_GT(compared, 1000);
 }
 
-// The Gaussian weight table holds, for every squared offset, the weight the filter computed per
-// tap before it (exact: the same float expression), whether it was built for this reach, grown
-// from a smaller one, or rebuilt after another sigma.
+// The Gaussian weight table holds, for every squared offset, the weight computed per tap (exact:
+// the same float expression), whether it was built for this reach, grown from a smaller one, or
+// rebuilt after another sigma.
 TEST(NormalWeightedFilter, GaussianWeightTableIsThePerTapWeight) {
     for (float sigma : {0.5f, 3.0f, 5.5f, 0.5f}) {
         const NormalWeightedFilter f{0.9f, sigma};

@@ -15,7 +15,7 @@
 #include "../libtexcache/src/osd_refiner.h"  // the reference's refiner
 #include "libtexcache/topology_checks.h"
 #include "test_util.h"
-#include "tests/support/cages.h"
+#include "testing/cages.h"
 #include "texcache/footprint.h"
 #include "texcache/topology.h"
 
@@ -24,7 +24,7 @@ namespace {
 
 class TopologyTest : public ::testing::TestWithParam<std::string> {};
 
-// A bundled mesh, or one of the cages past Embree's limits (support/cages.h).
+// A bundled mesh, or one of the cages past Embree's limits (testing/cages.h).
 ControlCage Cage(const std::string& name) {
     const auto& beyond = test::BeyondEmbreeCages();
     if (std::find(beyond.begin(), beyond.end(), name) != beyond.end())
@@ -138,10 +138,10 @@ TEST_P(TopologyTest, OneRefinerBuildsWhatTwoDid) {
     }
 }
 
-// Issue 18 item 6: what the topology of a large cage keeps. The Ptex adjacency is two packed
-// words per Ptex edge (whole EdgeLinks took 144 bytes per Ptex face: 144 MB for a 1,000,000-quad
-// cage) and a regular patch its 16 vertex indices (its 16 points took 192 bytes). Exact byte
-// counts the structures report, bounded per Ptex face and cage vertex.
+// What the topology of a large cage keeps: the Ptex adjacency is two packed words per Ptex edge
+// (whole EdgeLinks would take 144 bytes per Ptex face: 144 MB for a 1,000,000-quad cage) and a
+// regular patch its 16 vertex indices (its 16 points would take 192 bytes). Exact byte counts
+// the structures report, bounded per Ptex face and cage vertex.
 TEST(CageTopology, BytesPerFaceAreBounded) {
     for (const ControlCage& cage : {test::GridCage(100), test::LoadMesh("catmark_car")}) {
         const CageTopology t = BuildCageTopology(cage);

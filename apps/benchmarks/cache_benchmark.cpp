@@ -7,7 +7,7 @@
 #include <cmath>
 #include <vector>
 
-#include "tests/support/cages.h"  // the tests' small cages
+#include "testing/cages.h"
 #include "texcache/shading_cache.h"
 
 namespace {

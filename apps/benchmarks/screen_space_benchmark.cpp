@@ -9,25 +9,32 @@
 // the share of the new motion vectors in both.
 //
 //     build/bin/screen_space_benchmark [--benchmark_filter=reliable]
+//
+// --smoke runs every benchmark once on frames an eighth of the size (240x135, 80x45): CTest's check
+// that the benchmark still runs (its times then mean nothing).
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "screen_space/brdf_table.h"
 #include "screen_space/screen_denoiser.h"
-#include "tests/support/screen_space_scene.h"
+#include "testing/screen_space_scene.h"
 
 namespace {
 
 using namespace texcache;
 using namespace texcache::screen;
 
+bool gSmoke = false;  // --smoke
+
 test::SynthScene Scene(int width, int height) {
     test::SynthScene sc;
-    sc.width = width, sc.height = height;
+    sc.width = gSmoke ? width / 8 : width, sc.height = gSmoke ? height / 8 : height;
     sc.eye = glm::vec3(0.0f, 2.0f, 6.0f);
     sc.lightRadius = 0.3f;
     sc.lightVelocity = glm::vec3(0.05f, 0.0f, 0.0f);
@@ -130,27 +137,34 @@ void BM_BrdfTable(benchmark::State& state) {
 }
 
 void Register() {
-    benchmark::RegisterBenchmark("brdf_table/build", BM_BrdfTable)->Unit(benchmark::kMillisecond);
+    auto* table = benchmark::RegisterBenchmark("brdf_table/build", BM_BrdfTable)
+                      ->Unit(benchmark::kMillisecond);
+    if (gSmoke) table->Iterations(1);
     for (Method m :
          {Method::SpatialOnly, Method::Baseline, Method::BaselineClamp, Method::Reliable})
         for (Demodulation d : {Demodulation::Off, Demodulation::On}) {
             const std::string name = std::string("stage/") + MethodName(m) +
                                      (d == Demodulation::On ? "/demod" : "/no-demod");
-            benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d, 1920, 4)
-                ->UseManualTime()
-                ->Unit(benchmark::kMillisecond)
-                ->MinTime(3.0);
+            auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d, 1920, 4)
+                          ->UseManualTime()
+                          ->Unit(benchmark::kMillisecond);
+            gSmoke ? b->Iterations(1) : b->MinTime(3.0);
         }
-    benchmark::RegisterBenchmark("stage/reliable/demod/640x360", BM_Stage, Method::Reliable,
-                                 Demodulation::On, 640, 3)
-        ->UseManualTime()
-        ->Unit(benchmark::kMillisecond)
-        ->MinTime(3.0);
+    auto* small = benchmark::RegisterBenchmark("stage/reliable/demod/640x360", BM_Stage,
+                                               Method::Reliable, Demodulation::On, 640, 3)
+                      ->UseManualTime()
+                      ->Unit(benchmark::kMillisecond);
+    gSmoke ? small->Iterations(1) : small->MinTime(3.0);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
+    // --smoke (see the top of this file); Google Benchmark parses the other arguments.
+    char** end = std::remove_if(argv + 1, argv + argc,
+                                [](const char* a) { return std::string_view(a) == "--smoke"; });
+    gSmoke = end != argv + argc;
+    argc = int(end - argv);
     Register();
     benchmark::Initialize(&argc, argv);
     if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

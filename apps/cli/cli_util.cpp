@@ -200,8 +200,4 @@ double PeakMemoryMiB() {
     return double(u.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
 }
 
-double PhysicalMemoryMiB() {
-    return double(::sysconf(_SC_PHYS_PAGES)) * double(::sysconf(_SC_PAGESIZE)) / (1 << 20);
-}
-
 }  // namespace texcache::cli

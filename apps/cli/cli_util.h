@@ -86,7 +86,5 @@ Image Montage(const std::vector<std::vector<const Image*>>& rows, int gap);
 double NowSeconds();
 /// Peak resident memory of this process so far.
 double PeakMemoryMiB();
-/// This machine's physical memory.
-double PhysicalMemoryMiB();
 
 }  // namespace texcache::cli

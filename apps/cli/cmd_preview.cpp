@@ -154,17 +154,27 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         "Interactive progressive preview (GLFW + OpenGL window), headless test mode, "
         "frame-rate benchmark");
     cmd->add_option("scene", a->scene, "Scene file (.json) or OBJ control cage (.obj)")->required();
-    cmd->add_option("--frames", a->frames,
-                    "Headless test mode: render N frames along a scripted orbit, then exit");
-    cmd->add_option("--screenshot", a->screenshot,
-                    "Headless: write what the window shows after the last frame (PNG)");
-    cmd->add_flag("--save-camera", a->saveCamera,
-                  "Headless: write the camera after the orbit back into the scene file");
-    cmd->add_option("--orbit", a->orbit, "Degrees the scripted camera orbits (headless, bench)")
-        ->capture_default_str();
+    // Options take the group set last (option_defaults): --help lists them group by group.
+    auto group = [cmd](const char* name) { cmd->option_defaults()->group(name); };
+
+    group("View");
     cmd->add_option("--resolution", a->resolution, "Render size WxH (default 512x512)");
     cmd->add_option("--integrator", a->integrator, std::string("One of: ") + IntegratorNames())
         ->capture_default_str();
+    cmd->add_option("--spp", a->spp, "Camera samples per pixel per frame")->capture_default_str();
+    cmd->add_option("--ao-samples", a->aoSamples, "AO rays per hit / per cached sample")
+        ->capture_default_str();
+    cmd->add_option("--view", a->view,
+                    "What the window shows: beauty, faceid, mip, texels, hitmiss (texel-cache hits "
+                    "and misses of the frame), overshading (samples shaded per pixel), motion (the "
+                    "screen-space stage's motion vectors, --motion)")
+        ->capture_default_str();
+    cmd->add_option("--exposure", a->exposure, "Display exposure in stops")->capture_default_str();
+    cmd->add_option("--time", a->time, "Scene time to render (seconds; default: the scene's)");
+    cmd->add_option("--fps", a->fps, "Frames per second of --play and of the timeline's steps")
+        ->capture_default_str();
+
+    group("Texture space");
     cmd->add_option("--shading", a->shading, "hit or texture (cache AO / diffuse indirect)")
         ->capture_default_str();
     cmd->add_option("--filter", a->filter,
@@ -176,9 +186,6 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
                     "Filter footprints: visible (texels the frame's camera rays reach), all, or "
                     "auto (visible for AO, all for direct and path)")
         ->capture_default_str();
-    cmd->add_option("--ao-samples", a->aoSamples, "AO rays per hit / per cached sample")
-        ->capture_default_str();
-    cmd->add_option("--spp", a->spp, "Camera samples per pixel per frame")->capture_default_str();
     cmd->add_option("--lod-bias", a->lodBias, "Shading LOD bias (> 0: coarser)")
         ->capture_default_str();
     cmd->add_option("--sample-cache-mb", a->sampleCacheMb, "Sample cache size (MiB)")
@@ -188,12 +195,8 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--no-reshade", a->noReshade,
                   "Keep the first frame's cache while the view is still (by default every "
                   "accumulated frame re-shades it, so texture-space noise converges too)");
-    cmd->add_option("--exposure", a->exposure, "Display exposure in stops")->capture_default_str();
-    cmd->add_option("--view", a->view,
-                    "What the window shows: beauty, faceid, mip, texels, hitmiss (texel-cache hits "
-                    "and misses of the frame), overshading (samples shaded per pixel), motion (the "
-                    "screen-space stage's motion vectors, --motion)")
-        ->capture_default_str();
+
+    group("Screen-space stage");
     cmd->add_option("--denoise", a->denoise,
                     "The screen-space stage on the preview's frames (the path tracer's split, "
                     "diffuse indirect light from the cache with --shading texture): off, spatial, "
@@ -209,11 +212,28 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--motion", a->motion,
                     "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())
         ->capture_default_str();
-    cmd->add_option("--time", a->time, "Scene time to render (seconds; default: the scene's)");
+
+    group("Stereo");
+    cmd->add_flag("--stereo", a->stereo,
+                  "Both eyes side by side, the right eye from the left eye's texture-space cache "
+                  "(converging at the orbit pivot)");
+    cmd->add_option("--eye-separation", a->eyeSeparation,
+                    "--stereo: distance between the eyes (default: the scene camera's, else 1/30 "
+                    "of the distance to the pivot)");
+
+    group("Headless test mode");
+    cmd->add_option("--frames", a->frames,
+                    "Headless test mode: render N frames along a scripted orbit, then exit");
+    cmd->add_option("--screenshot", a->screenshot,
+                    "Headless: write what the window shows after the last frame (PNG)");
+    cmd->add_flag("--save-camera", a->saveCamera,
+                  "Headless: write the camera after the orbit back into the scene file");
+    cmd->add_option("--orbit", a->orbit, "Degrees the scripted camera orbits (headless, bench)")
+        ->capture_default_str();
     cmd->add_flag("--play", a->play,
                   "Headless: advance the scene time by 1/fps per frame (animated scenes)");
-    cmd->add_option("--fps", a->fps, "Frames per second of --play and of the timeline's steps")
-        ->capture_default_str();
+
+    group("Benchmark");
     cmd->add_flag("--bench", a->bench,
                   "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
                   "(no window); with --denoise, the stage's frames (texture-space vs per-hit "
@@ -223,12 +243,6 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--reference-spp", a->referenceSpp,
                     "Bench: spp of the reference (default 32 per-hit AO x 16 rays; with --denoise "
                     "128 path traced)");
-    cmd->add_flag("--stereo", a->stereo,
-                  "Both eyes side by side, the right eye from the left eye's texture-space cache "
-                  "(converging at the orbit pivot)");
-    cmd->add_option("--eye-separation", a->eyeSeparation,
-                    "--stereo: distance between the eyes (default: the scene camera's, else 1/30 "
-                    "of the distance to the pivot)");
     cmd->add_option("--bench-out", a->benchOut, "Bench: prefix of the images written")
         ->capture_default_str();
     cmd->callback([a, &exitCode] { exitCode = RunPreview(*a); });

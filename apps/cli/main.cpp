@@ -5,6 +5,7 @@
 #include <new>
 
 #include "commands.h"
+#include "renderer/library_versions.h"
 #include "texcache/error.h"
 
 namespace {
@@ -18,6 +19,14 @@ void RejectEmptyValues(CLI::App* app) {
             "", "non-empty"));
     for (CLI::App* sub : app->get_subcommands([](CLI::App*) { return true; }))
         RejectEmptyValues(sub);
+}
+
+/// What `texcache --version` prints: texcache's version, then each library's.
+std::string VersionReport() {
+    std::string s = std::string("texcache ") + texcache::TexcacheVersion();
+    for (const texcache::LibraryVersion& v : texcache::LibraryVersions())
+        s += "\n  " + v.name + " " + v.version;
+    return s;
 }
 
 /// The name of the (innermost) subcommand being parsed, for the usage hint.
@@ -38,6 +47,9 @@ std::string CommandPath(const CLI::App& app) {
 int main(int argc, char** argv) {
     CLI::App app{"texcache: texture-space shading cache for ray-traced subdivision surfaces"};
     app.require_subcommand(1);
+    app.set_version_flag("--version", VersionReport,
+                         "Print texcache's version and its libraries' (Embree, OpenSubdiv, "
+                         "OpenEXR, OpenImageIO), then exit");
     int exitCode = 0;
     texcache::cli::AddRenderCommand(app, exitCode);
     texcache::cli::AddCompareCommand(app, exitCode);
@@ -48,7 +60,7 @@ int main(int argc, char** argv) {
     RejectEmptyValues(&app);
     try {
         app.parse(argc, argv);
-    } catch (const CLI::Success& e) {  // --help
+    } catch (const CLI::Success& e) {  // --help, --version
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
         // Malformed options exit 2 like any other bad input, in the same one-line form.

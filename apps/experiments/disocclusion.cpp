@@ -20,6 +20,7 @@
 #include "experiment_util.h"
 #include "renderer/frame_buffers/frame_buffers_render.h"
 #include "renderer/image/image.h"
+#include "renderer/render_policy.h"
 #include "renderer/scene/scene_loader.h"
 #include "renderer/texture_space/texture_space.h"
 #include "screen_space/brdf_table.h"
@@ -42,8 +43,7 @@ struct Config {
     bool cachedVisibility = false;
     int shadowSamples = TextureSpaceOptions{}.shadowSamples;        // per cached visibility sample
     int visibilityRadius = TextureSpaceOptions{}.visibilityRadius;  // -1: the object's
-    std::optional<RenderScene> rs{};  // re-posed per frame in place (the cache refers to it)
-    std::unique_ptr<TextureSpaceCache> tsc{};
+    std::optional<AnimationFrames> frames{};  // its scene and cache, posed frame by frame
     std::unique_ptr<screen::ScreenSpaceDenoiser> denoiser{};
     std::vector<glm::vec3> image{};
     // Squared error sums and pixel counts of the newly disoccluded pixels, k frames after.
@@ -107,13 +107,13 @@ int Disocclusion(const Setup& s) {
 
     Image refDirect0;
     for (int f = 0; f < frames; ++f) {
-        const float t = scene.settings.time + float(f) / kFps;
+        const float t = AnimationFrameTime(scene.settings.time, f, kFps);
         RenderSceneOptions ro;
         ro.frameTime = t;
         RenderOptions o = BaseOptions(scene, IntegratorKind::Path, W, H);
         o.frameTime = t;
         o.spp = 1;
-        o.seed = scene.settings.seed + uint64_t(f) * 0x9E3779B9ull;
+        o.seed = FrameSeed(scene.settings.seed, uint64_t(f));
         screen::FrameBuffers refFb;
         {
             const RenderScene rs(scene, ro);
@@ -130,19 +130,23 @@ int Disocclusion(const Setup& s) {
             refDirect0 = ToImage(direct, W, H);
         }
         for (Config& c : rows) {
-            c.rs.emplace(scene, ro);
-            RenderOptions co = o;
-            co.texture.enabled = c.cache;
-            co.texture.temporalAlpha = c.temporalAlpha;
-            co.texture.passSpp = 0;
-            co.texture.cachedVisibility = c.cachedVisibility;
-            co.texture.shadowSamples = c.shadowSamples;
-            co.texture.visibilityRadius = c.visibilityRadius;
-            if (c.cache && !c.tsc) c.tsc = std::make_unique<TextureSpaceCache>(*c.rs, co.texture);
-            if (c.tsc) c.tsc->BeginFrame(uint32_t(f));
+            if (!c.frames) {
+                RenderOptions co = BaseOptions(scene, IntegratorKind::Path, W, H);
+                co.spp = 1;
+                co.texture.enabled = c.cache;
+                co.texture.temporalAlpha = c.temporalAlpha;
+                co.texture.passSpp = 0;
+                co.texture.cachedVisibility = c.cachedVisibility;
+                co.texture.shadowSamples = c.shadowSamples;
+                co.texture.visibilityRadius = c.visibilityRadius;
+                c.frames.emplace(scene, RenderSceneOptions{}, co, kFps, c.name);
+            }
+            AnimationFrames& posed = *c.frames;
+            posed.Pose(f);
             screen::FrameBuffers fb;
-            c.cpu.push_back(
-                RenderFrameBuffers(*c.rs, co, t - 1.0f / kFps, &fb, c.tsc.get()).cpuSeconds);
+            c.cpu.push_back(RenderFrameBuffers(posed.PosedScene(), posed.Options(),
+                                               posed.PreviousTime(), &fb, posed.Cache())
+                                .cpuSeconds);
             c.denoiser->Denoise(fb, screen::Method::Reliable, screen::Demodulation::On, &c.image);
             const std::vector<glm::vec3> indirect = c.denoiser->Indirect();
             const std::vector<float> vis = c.denoiser->Visibility();

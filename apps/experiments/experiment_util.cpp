@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "renderer/render_policy.h"
 #include "renderer/scene/scene_loader.h"
 #include "texcache/error.h"
 
@@ -44,18 +45,20 @@ RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int wid
     return o;
 }
 
+TextureSpaceCache* FreshCache(LoadedScene& ls, const RenderOptions& o) {
+    if (!o.texture.enabled) return nullptr;
+    if (!ls.cache || !ls.cache->Reconfigure(*ls.rs, o.texture)) {
+        ls.cache.reset();  // free the old tables before mapping new ones
+        ls.cache = MakeTextureSpaceCache(*ls.rs, o.texture, "experiment cache sizes");
+    }
+    return ls.cache.get();
+}
+
 Run TimedRender(LoadedScene& ls, const RenderOptions& o, int repeats, bool warmUp) {
     const RenderScene& rs = *ls.rs;
-    // Each render gets an empty cache: Reconfigure clears it (a memset of the two tables, timed
-    // with the render), or a new cache is built untimed when the layout changed.
-    auto cache = [&]() -> TextureSpaceCache* {
-        if (!o.texture.enabled) return nullptr;
-        if (!ls.cache || !ls.cache->Reconfigure(rs, o.texture)) {
-            ls.cache.reset();  // free the old tables before mapping new ones
-            ls.cache = std::make_unique<TextureSpaceCache>(rs, o.texture);
-        }
-        return ls.cache.get();
-    };
+    // Each render gets an empty cache (FreshCache): the Reconfigure's memset is timed with the
+    // render, a new cache is built untimed.
+    auto cache = [&] { return FreshCache(ls, o); };
     if (warmUp) Render(rs, o, cache());
     Run best;
     for (int i = 0; i < std::max(repeats, 1); ++i) {

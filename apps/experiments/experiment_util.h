@@ -54,6 +54,10 @@ std::unique_ptr<LoadedScene> LoadForExperiment(const Setup& s, const std::string
 /// Render options from a scene's settings at a given size and integrator.
 RenderOptions BaseOptions(const Scene& scene, IntegratorKind integrator, int width, int height);
 
+/// The cache of `ls` emptied for a render with options `o`: Reconfigure clears it (a memset of
+/// its two tables), or a new cache is made when the layout changed. Null without texture space.
+TextureSpaceCache* FreshCache(LoadedScene& ls, const RenderOptions& o);
+
 /// One timed render: the image, its render seconds (best of `repeats`) and statistics.
 struct Run {
     Image image;

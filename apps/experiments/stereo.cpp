@@ -31,15 +31,6 @@ struct Case {
     IntegratorKind integrator;
 };
 
-/// The cache of `ls` emptied for a render with options `o` (as TimedRender).
-TextureSpaceCache* FreshCache(LoadedScene& ls, const RenderOptions& o) {
-    if (!ls.cache || !ls.cache->Reconfigure(*ls.rs, o.texture)) {
-        ls.cache.reset();
-        ls.cache = std::make_unique<TextureSpaceCache>(*ls.rs, o.texture);
-    }
-    return ls.cache.get();
-}
-
 }  // namespace
 
 int Stereo(const Setup& s) {
@@ -117,7 +108,7 @@ int Stereo(const Setup& s) {
         o.texture.enabled = true;
         o.texture.indirectSamples = 4;
         StereoRig rig = StereoRigOf(ls->scene.camera);
-        const float unit = rig.convergence / 30.0f;
+        const float unit = DefaultEyeSeparation(rig.convergence);
         // Reference of the right eye at the default separation (per hit).
         RenderOptions ro = o;
         ro.texture.enabled = false;

@@ -18,6 +18,7 @@
 #include "experiment_util.h"
 #include "renderer/frame_buffers/frame_buffers_render.h"
 #include "renderer/image/metrics.h"
+#include "renderer/render_policy.h"
 #include "renderer/scene/scene_loader.h"
 #include "screen_space/brdf_table.h"
 #include "screen_space/screen_denoiser.h"
@@ -290,21 +291,20 @@ int Temporal(const Setup& s) {
         Variant reference, input;
         std::vector<double> shadingRmse, shadingRms;
         Image lastRef, lastNoisy, lastClamp, lastReliable;
+        RenderOptions frameOptions = BaseOptions(scene, IntegratorKind::Path, W, H);
+        frameOptions.spp = 1;
+        AnimationFrames posed(scene, RenderSceneOptions{}, frameOptions, kFps, "temporal");
         for (int f = 0; f < frames; ++f) {
-            const float t = scene.settings.time + float(f) / kFps;
-            RenderSceneOptions ro;
-            ro.frameTime = t;
-            const RenderScene rs(scene, ro);
-            RenderOptions o = BaseOptions(scene, IntegratorKind::Path, W, H);
-            o.frameTime = t;
-            o.spp = 1;
-            o.seed = scene.settings.seed + uint64_t(f) * 0x9E3779B9ull;  // fresh noise per frame
+            posed.Pose(f);  // the scene at the frame's time, fresh noise per frame
+            const RenderScene& rs = posed.PosedScene();
+            const RenderOptions& o = posed.Options();
+            const float t = o.frameTime;
             screen::FrameBuffers fb, refFb;
-            RenderFrameBuffers(rs, o, t - 1.0f / kFps, &fb);
+            RenderFrameBuffers(rs, o, posed.PreviousTime(), &fb);
             RenderOptions r = o;
             r.spp = refSpp;
             r.seed = o.seed ^ 0x5851F42D4C957F2Dull;  // independent of the input's noise
-            RenderFrameBuffers(rs, r, t - 1.0f / kFps, &refFb);
+            RenderFrameBuffers(rs, r, posed.PreviousTime(), &refFb);
             const Image ref = ToImage(refFb.Compose(), W, H);
             // `shading` is the unshadowed direct light from many light samples (no rays): its
             // residual noise against the reference's.

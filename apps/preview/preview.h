@@ -4,7 +4,7 @@
 #pragma once
 #include <string>
 
-#include "progressive_renderer.h"
+#include "renderer/preview/progressive_renderer.h"
 #include "renderer/scene/scene.h"
 
 namespace texcache::preview {

@@ -18,9 +18,9 @@
 #include <imgui_impl_glfw.h>
 #include <imgui_impl_opengl3.h>
 
-#include "orbit_camera.h"
 #include "preview.h"
 #include "renderer/image/image.h"
+#include "renderer/preview/orbit_camera.h"
 #include "scene_camera_file.h"
 #include "texcache/error.h"
 

@@ -13,10 +13,10 @@
 #include <memory>
 #include <string>
 
-#include "orbit_camera.h"
 #include "preview.h"
 #include "renderer/frame_buffers/frame_buffers_render.h"
 #include "renderer/image/metrics.h"
+#include "renderer/preview/orbit_camera.h"
 #include "renderer/render.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/texture_space/texture_space.h"

@@ -66,10 +66,12 @@ constexpr int kRatioCandidates = 6;
 const glm::vec3 kNaN3(kNaN);
 
 /// Where everything that moves was at the previous frame: world at the frame time -> world at
-/// prevTime, per object and per quad light (T^-1 of Zeng eq. 1/3/5), and distant lights'
-/// direction rotations.
+/// prevTime, per object and per light that rays can hit, indexed as Hit::light (quad lights,
+/// then point and spot lights) (T^-1 of Zeng eq. 1/3/5), and distant lights' direction
+/// rotations.
 struct FrameMotion {
     std::vector<glm::mat4> object, light;
+    size_t numQuads = 0;  // the quad lights in `light`, the point lights after them
     std::vector<glm::mat3> objectN, lightN;  // their normal matrices
     std::vector<glm::mat3> distant;
     float infinity = 1e4f;  // distance at which points of lights at infinity are put
@@ -90,11 +92,13 @@ struct FrameMotion {
                 extent = std::max(extent,
                                   glm::length(glm::vec3(now * glm::vec4(p[0], p[1], p[2], 1.0f))));
         }
-        for (const QuadLight& q : scene.quadLights) {
-            light.push_back(q.transform.Eval(prevTime) *
-                            glm::inverse(q.transform.Eval(opt.frameTime)));
+        auto addLight = [&](const TransformTrack& t) {
+            light.push_back(t.Eval(prevTime) * glm::inverse(t.Eval(opt.frameTime)));
             lightN.push_back(normalMatrix(light.back()));
-        }
+        };
+        for (const QuadLight& q : scene.quadLights) addLight(q.transform);
+        numQuads = light.size();
+        for (const PointLight& l : scene.pointLights) addLight(l.transform);
         for (const DistantLight& d : scene.distantLights)
             distant.push_back(glm::mat3(d.transform.Eval(prevTime)) *
                               glm::inverse(glm::mat3(d.transform.Eval(opt.frameTime))));
@@ -159,11 +163,15 @@ struct LightWeights {
 /// visibility ratio below absorbs both in expectation.
 bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
                        glm::vec3 wo, glm::vec3* out, LightWeights* weights) {
-    if (bsdf.HasSpecular() && (c.env || !c.quads.empty())) return false;
+    // Emissive objects have none; neither has a GGX lobe under a sphere of some size.
+    if (!c.emitters.empty()) return false;
+    bool areaSpheres = false;
+    for (const SphereLight& l : c.spheres) areaSpheres |= !l.IsDelta();
+    if (bsdf.HasSpecular() && (c.env || !c.quads.empty() || areaSpheres)) return false;
     glm::vec3 S(0.0f);
     weights->n = c.numLights <= LightWeights::kMax ? c.numLights : 0;
     std::fill_n(weights->w, weights->n, 0.0f);
-    // Each light's term, in SampleLight's order (quads, distant lights, environment).
+    // Each light's term, in SampleLight's order (quads, distant lights, spheres, environment).
     auto add = [&](int light, glm::vec3 term) {
         S += term;
         if (light < weights->n) weights->w[light] = Luminance(FiniteOrZero(term));
@@ -186,6 +194,21 @@ bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsd
             add(firstDistant + int(i),
                 (fd + fs) * c.distantE[i] * std::abs(glm::dot(c.distantDir[i], si.N)));
         }
+        // A point light's I cos / d^2, exact; a sphere's too while it is wholly above the
+        // horizon (a Lambertian sphere lights a plane as a point of its intensity does), with
+        // the spot's falloff taken at the centre.
+        for (size_t i = 0; i < c.spheres.size(); ++i) {
+            const SphereLight& l = c.spheres[i];
+            const glm::vec3 d = l.center - si.P;
+            const float d2 = glm::dot(d, d);
+            if (!(d2 > l.radius * l.radius)) continue;
+            const glm::vec3 wi = d / std::sqrt(d2);
+            glm::vec3 fd, fs;
+            bsdf.EvalLobes(wo, wi, &fd, &fs);
+            add(c.FirstSphere() + int(i),
+                (fd + fs) * l.intensity *
+                    (l.Falloff(-wi) * std::max(glm::dot(wi, si.N), 0.0f) / d2));
+        }
     }
     *out = FiniteOrZero(S);
     return true;
@@ -198,9 +221,9 @@ struct PendingShadow {
     glm::vec3 P;   // the shading point: a quad's sampled point is P + dist wi
     glm::vec3 wi;  // towards the light
     float dist;
-    float w;  // luminance of the sample's unshadowed shading
-    int quad, distant;
-    int pixel;  // the pixel's index in its tile
+    float w;                                   // luminance of the sample's unshadowed shading
+    int quad, distant, sphere, emitterObject;  // the light sampled (-1: not that kind)
+    int pixel;                                 // the pixel's index in its tile
 };
 
 /// The light sample of one frame-buffer sample: unshadowed shading into `px` from
@@ -332,6 +355,8 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
     q.w = w;
     q.quad = ls.quad;
     q.distant = ls.distant;
+    q.sphere = ls.sphere;
+    q.emitterObject = ls.emitter >= 0 ? c.emitters[size_t(ls.emitter)].Object() : -1;
     q.pixel = pixel;
 }
 
@@ -346,9 +371,12 @@ void FinishShadow(const FrameMotion& motion, const PendingShadow& s, bool blocke
     sh.blockerWeight = s.w;
     sh.blocker = s.ray.org + bh.t * s.ray.dir;
     sh.prevBlocker = motion.Point(bh, sh.blocker);
-    if (s.quad >= 0) {
-        sh.light = s.P + s.dist * s.wi;  // the sampled point of the quad
-        sh.prevLight = glm::vec3(motion.light[s.quad] * glm::vec4(sh.light, 1.0f));
+    if (s.quad >= 0 || s.sphere >= 0 || s.emitterObject >= 0) {
+        sh.light = s.P + s.dist * s.wi;  // the point sampled on the light
+        const glm::mat4& m = s.quad >= 0     ? motion.light[size_t(s.quad)]
+                             : s.sphere >= 0 ? motion.light[motion.numQuads + size_t(s.sphere)]
+                                             : motion.object[size_t(s.emitterObject)];
+        sh.prevLight = glm::vec3(m * glm::vec4(sh.light, 1.0f));
     } else {
         // At infinity: a far point along the light direction from the blocker, so the line from
         // the light point through the blocker has the light's direction in both frames.
@@ -371,15 +399,16 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
     const bool found = c.rs.Intersect(ray, &hit);
     glm::vec3 L(0.0f);
     if (!found) {
-        // Direct light from the environment: the light sample's MIS partner.
+        // Direct light from the environment and the suns: the light sample's MIS partner.
         if (c.env)
             L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(si.N, wi) * c.PickPdf());
+        L += c.SunRadiance(wi, pdf);
     } else if (hit.light >= 0) {
-        L = c.QuadEmission(hit.light, wi) *
-            PowerHeuristic(1, pdf, 1, c.QuadPdf(hit.light, wi, hit.t));
+        L = c.EmittedMis(ray, hit, pdf);
     } else {
-        // Light found at the hit (NEE) and beyond; emission at this hit was handled above.
-        L = LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+        // Light found at the hit (NEE) and beyond, after an emissive surface's own.
+        L = c.EmittedMis(ray, hit, pdf) +
+            LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
     }
     px.glossySum += FiniteOrZero(weight * L);
     if (found && !std::isfinite(px.glossyHit.x)) {
@@ -456,13 +485,14 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
     const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
     ClearPixel(fb, p);
     if (!found) {
-        if (c.env) fb.emitted[p] = c.env->Eval(ray.dir);
+        fb.emitted[p] = c.Background(ray.dir);
         return;
     }
     if (hit.light >= 0) {
-        fb.emitted[p] = c.QuadEmission(hit.light, ray.dir);
+        fb.emitted[p] = c.HitEmission(ray, hit);
         const glm::vec3 P = ray.org + hit.t * ray.dir;
-        glm::vec3 n = c.quads[hit.light].n;
+        glm::vec3 n = hit.light < int(c.quads.size()) ? c.quads[size_t(hit.light)].n
+                                                      : glm::normalize(hit.Ng);  // a sphere
         if (glm::dot(n, ray.dir) > 0.0f) n = -n;
         fb.position[p] = P;
         fb.normal[p] = n;
@@ -474,6 +504,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
     const SurfaceInteraction si = c.rs.Interact(ray, hit, diff);
     const Bsdf bsdf = MakeBsdf(c, si);
     const Material& m = c.scene.materials[si.material];
+    fb.emitted[p] = c.HitEmission(ray, hit);  // an emissive object's own light
     fb.position[p] = si.P;
     fb.normal[p] = si.N;
     fb.depth[p] = hit.t;

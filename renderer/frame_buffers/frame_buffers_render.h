@@ -21,7 +21,10 @@
 //   diffuse lobe under quad lights (Lambert's polygon formula,
 //   renderer/integrators/polygon_light.h), an environment (pi L for a constant one, degree-2
 //   spherical harmonics of a map: up to ~15% off next to a sun, which only the visibility ratio
-//   sees, EnvironmentMap::Irradiance) and distant lights, and a GGX lobe under distant lights only;
+//   sees, EnvironmentMap::Irradiance), distant lights (E f cos, for suns of some size too) and
+//   point and spot lights (I f cos / d^2: exact for a delta light, and for a diffuse lobe under a
+//   sphere wholly above the horizon but for the spot's falloff, taken at the centre), and a GGX
+//   lobe under distant and delta point lights only; never with an emissive object in the scene;
 //   the ratio estimator of Heitz et al. 2018 ("Combining analytic direct illumination and
 //   stochastic shadows"), with the analytic term Zhuang et al. and Zeng et al. take as the
 //   noise-free factor. Elsewhere (a GGX lobe under an area light or an environment) estimated
@@ -55,7 +58,8 @@
 //   > 1 they are those of the blocked sample with the most shading. Lights at infinity (distant,
 //   environment) get the point 1e4 scene extents from the blocker along the light direction.
 //   prevBlocker / prevLightSample: moved to `prevTime` by the blocker's object (or light) and by
-//   the light's keyframes (distant lights: the direction rotated; the environment does not move).
+//   the light's keyframes (an emissive object's: its object's; distant lights: the direction
+//   rotated; the environment does not move).
 // * glossy: GGX materials only (0 elsewhere; empty, with glossyHit and prevGlossyHit, when the
 //   scene has no GGX material): the specular lobe's visible-normal-sampled ray,
 //   path-traced below (light hit directly MIS-weighted, see above). glossyHit: its first hit (a
@@ -77,9 +81,11 @@
 //   the camera, depth = ray distance, roughness = the GGX alpha used (max(r^2, 1e-3); 0 for
 //   diffuse), specular = F0 (0 for diffuse), objectId = scene object. prevPosition / prevNormal:
 //   moved by the object's keyframes from the frame time to `prevTime`.
-// * A quad light seen directly: `emitted` only, with position / normal / depth / prevPosition /
-//   prevNormal of the light's surface (moved by its keyframes) and objectId -1 (not an object).
-//   The environment seen directly: `emitted` only, every guide NaN / INF / -1.
+// * A quad or sphere light seen directly: `emitted` only, with position / normal / depth /
+//   prevPosition / prevNormal of the light's surface (moved by its keyframes) and objectId -1
+//   (not an object). The environment (and suns' discs) seen directly: `emitted` only, every guide
+//   NaN / INF / -1. An emissive object: its emission in `emitted`, and every buffer as for any
+//   object (its own light adds to what it reflects).
 // * Texture-space shading (options.texture.enabled): diffuse materials take `indirect` from the
 //   cache, as the path integrator does (albedo * cached indirect irradiance / pi; no diffuse ray;
 //   the six cones all hold the cached irradiance / pi, so indirect = albedo * ShadeCones(cones)

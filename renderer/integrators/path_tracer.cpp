@@ -49,6 +49,19 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
         const glm::mat3 M(d.transform.Eval(o.frameTime));
         distantDir.push_back(-glm::normalize(M * d.direction));
         distantE.push_back(d.irradiance);
+        suns.emplace_back(distantDir.back(), d.irradiance, d.angleDegrees);
+        sunDiscs |= !suns.back().IsDelta();
+    }
+    for (const PointLight& p : scene.pointLights)
+        spheres.emplace_back(p, p.transform.Eval(o.frameTime));
+    emitterOf.assign(scene.objects.size(), -1);
+    for (size_t i = 0; i < scene.objects.size(); ++i) {
+        const Object& obj = scene.objects[i];
+        if (!obj.Emissive()) continue;
+        MeshEmitter e(int(i), r.QuadCorners(int(i)), obj.emission, obj.emissionTwoSided);
+        if (!(e.Area() > 0.0f)) continue;  // nothing to sample (every face a hole)
+        emitterOf[i] = int(emitters.size());
+        emitters.push_back(std::move(e));
     }
     for (const QuadLight& q : scene.quadLights) {
         const glm::mat4 M = q.transform.Eval(o.frameTime);
@@ -63,7 +76,8 @@ Context::Context(const RenderScene& r, const RenderOptions& o)
         w.twoSided = q.twoSided;
         quads.push_back(w);
     }
-    numLights = int(quads.size() + distantDir.size()) + (env ? 1 : 0);
+    numLights =
+        int(quads.size() + distantDir.size() + spheres.size() + emitters.size()) + (env ? 1 : 0);
     if (env) lightSampling = o.lightSampling;
 }
 

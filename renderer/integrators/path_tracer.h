@@ -19,6 +19,7 @@
 #include "renderer/render_options.h"
 #include "renderer/scene/camera.h"
 #include "renderer/scene/envmap.h"
+#include "renderer/scene/lights.h"
 #include "renderer/scene/render_scene.h"
 
 namespace texcache {
@@ -48,6 +49,8 @@ struct LightSample {
     bool delta;
     int quad = -1;     // the quad light sampled, -1 for other lights
     int distant = -1;  // the distant light sampled, -1 for other lights
+    int sphere = -1;   // the point or spot light sampled (Scene::pointLights), -1 for others
+    int emitter = -1;  // the emissive object sampled (Context::emitters), -1 for others
 };
 
 /// Everything the per-sample code reads, resolved once per frame.
@@ -65,6 +68,13 @@ struct Context {
         bool twoSided;
     };
     std::vector<Quad> quads;
+    std::vector<SunDisc> suns;         // per distant light (delta: an angular size of 0)
+    bool sunDiscs = false;             // some distant light has an angular size
+    std::vector<SphereLight> spheres;  // per Scene::pointLights
+    std::vector<MeshEmitter> emitters;
+    std::vector<int> emitterOf;  // per object: its index in `emitters`, -1 if it emits nothing
+    // The lights SampleLight picks from, in its order: quads, distant lights, spheres, emitters,
+    // the environment; each with probability 1 / numLights (uniform light selection).
     int numLights = 0;
     float shutterLength;
     TextureSpaceCache* tsc = nullptr;
@@ -103,6 +113,56 @@ struct Context {
         const float c = std::abs(glm::dot(q.n, dir));
         return c > 0.0f ? dist * dist / (q.area * c) * PickPdf() : 0.0f;
     }
+    int FirstSphere() const { return int(quads.size() + distantDir.size()); }
+    int FirstEmitter() const { return FirstSphere() + int(spheres.size()); }
+
+    /// Radiance a ray receives from what it hit: a light's (quad, sphere) or an emissive
+    /// object's; 0 from any other surface.
+    glm::vec3 HitEmission(const Ray& ray, const Hit& hit) const {
+        if (hit.light >= 0)
+            return hit.light < int(quads.size())
+                       ? QuadEmission(hit.light, ray.dir)
+                       : spheres[size_t(hit.light) - quads.size()].Emission(ray.org, ray.dir);
+        const int e = emitters.empty() ? -1 : emitterOf[size_t(hit.object)];
+        if (e < 0) return glm::vec3(0.0f);
+        return emitters[size_t(e)].Emission(MeshEmitter::Triangle(hit.primID, hit.U, hit.V),
+                                            ray.dir);
+    }
+    /// The solid-angle density with which SampleLight, from the ray's origin, samples the point
+    /// the ray hit (the light's pick included): the MIS partner of a BSDF sample that found it.
+    float HitLightPdf(const Ray& ray, const Hit& hit) const {
+        if (hit.light >= 0)
+            return hit.light < int(quads.size())
+                       ? QuadPdf(hit.light, ray.dir, hit.t)
+                       : spheres[size_t(hit.light) - quads.size()].Pdf(ray.org) * PickPdf();
+        const int e = emitters.empty() ? -1 : emitterOf[size_t(hit.object)];
+        if (e < 0) return 0.0f;
+        return emitters[size_t(e)].Pdf(MeshEmitter::Triangle(hit.primID, hit.U, hit.V), ray.dir,
+                                       hit.t) *
+               PickPdf();
+    }
+    /// HitEmission weighted against the BSDF sample of density `bsdfPdf` that found it (power
+    /// heuristic); unweighted for a ray that was not a BSDF sample (bsdfPdf 0: a camera ray).
+    glm::vec3 EmittedMis(const Ray& ray, const Hit& hit, float bsdfPdf) const {
+        const glm::vec3 Le = HitEmission(ray, hit);
+        if (!(bsdfPdf > 0.0f) || Le == glm::vec3(0.0f)) return Le;
+        return Le * PowerHeuristic(1, bsdfPdf, 1, HitLightPdf(ray, hit));
+    }
+    /// Radiance of the suns' discs along `dir` (a ray that left the scene), weighted against
+    /// the BSDF sample of density `bsdfPdf` (0: unweighted).
+    glm::vec3 SunRadiance(glm::vec3 dir, float bsdfPdf) const {
+        glm::vec3 L(0.0f);
+        if (!sunDiscs) return L;
+        for (const SunDisc& sun : suns)
+            if (!sun.IsDelta() && sun.Contains(dir))
+                L += sun.radiance *
+                     (bsdfPdf > 0.0f ? PowerHeuristic(1, bsdfPdf, 1, sun.Pdf() * PickPdf()) : 1.0f);
+        return L;
+    }
+    /// What a camera ray that hits nothing sees: the environment and the suns' discs.
+    glm::vec3 Background(glm::vec3 dir) const {
+        return (env ? env->Eval(dir) : glm::vec3(0.0f)) + SunRadiance(dir, 0.0f);
+    }
 
     /// One light sample for the surface point `p` of shading normal `n` (facing the viewer); the
     /// environment is sampled from `psr` when given (a valid record).
@@ -112,12 +172,7 @@ struct Context {
         int i = std::min(int(uPick * float(numLights)), numLights - 1);
         if (i < int(quads.size())) {
             const Quad& q = quads[i];
-            const glm::vec3 x = q.corner + u.x * q.e1 + u.y * q.e2;
-            glm::vec3 d = x - p;
-            const float dist2 = glm::dot(d, d);
-            if (!(dist2 > 0.0f)) return false;
-            s->dist = std::sqrt(dist2);
-            s->wi = d / s->dist;
+            if (!Towards(p, q.corner + u.x * q.e1 + u.y * q.e2, &s->wi, &s->dist)) return false;
             s->Li = QuadEmission(i, s->wi);
             s->pdf = QuadPdf(i, s->wi, s->dist);
             s->delta = false;
@@ -126,12 +181,36 @@ struct Context {
         }
         i -= int(quads.size());
         if (i < int(distantDir.size())) {
-            s->wi = distantDir[i];
+            const SunDisc& sun = suns[size_t(i)];
             s->dist = INFINITY;
+            s->distant = i;
+            if (!sun.IsDelta()) {
+                s->wi = sun.Sample(u);
+                s->Li = sun.radiance;
+                s->pdf = sun.Pdf() * PickPdf();
+                s->delta = false;
+                return true;
+            }
+            s->wi = distantDir[i];
             s->Li = distantE[i] * float(numLights);  // divided by the pick probability
             s->pdf = 0.0f;
             s->delta = true;
-            s->distant = i;
+            return true;
+        }
+        i -= int(distantDir.size());
+        if (i < int(spheres.size() + emitters.size())) {
+            LightPoint lp;
+            const bool sphere = i < int(spheres.size());
+            if (sphere ? !spheres[size_t(i)].Sample(p, u, &lp)
+                       : !emitters[size_t(i) - spheres.size()].Sample(p, u, &lp))
+                return false;
+            s->wi = lp.wi;
+            s->dist = lp.dist;
+            s->delta = !(lp.pdf > 0.0f);
+            // A delta light's irradiance, divided by the pick probability.
+            s->Li = s->delta ? lp.Li * float(numLights) : lp.Li;
+            s->pdf = lp.pdf * PickPdf();
+            (sphere ? s->sphere : s->emitter) = sphere ? i : i - int(spheres.size());
             return true;
         }
         float pdf;
@@ -209,23 +288,39 @@ inline const ProductRecord* CameraHitRecord(const Context& c, const SurfaceInter
 
 /// Where a pass's first-bounce directions come from (AO rays, and the light and BSDF samples at
 /// the camera hits of the direct and path integrators): one Owen-scrambled Sobol' (0,2)-sequence
-/// per dimension pair over the image (OwenSobol02), its points dealt out in Morton order of the
-/// pixels, then sample by sample, then ray (or path) by ray. Every aligned 2^k x 2^k block of
-/// pixels so gets the consecutive points of a (0,m,2)-net: a pixel's samples of the pass
-/// stratify its hemisphere together, and so do a block's, which is what a bin of hit-binned
-/// shading averages (a bin spans 4x4 pixels or more). A random shift per hit would stratify
-/// only one hit's own rays; the shared sequence lowers the error of per-hit and binned shading
-/// alike, by up to half on path-traced light, at no measurable cost in `texcache bench rays`
-/// (docs/texture-space.md, "Stratification"). The grid's cache samples keep their own
-/// nets (CosineRays); later bounces draw
-/// from the sample's random stream). Each pass has its own scramble, so passes are independent and
-/// a pixel's result depends on its samples and the pass split (a render with --spp is one pass
-/// unless shaded in texture space); never on the threads or tiles.
+/// per dimension pair over the image (OwenSobol02), its points dealt out pixel by pixel in a
+/// shuffled Morton order, then sample by sample, then ray (or path) by ray.
+///
+/// The order: a camera sample's number is its pixel's Morton index with the sample's slot in the
+/// pass below it, and the base-4 digits of that number are permuted level by level from the top,
+/// each by a permutation picked by a hash of the digits above it (ShuffledMorton; Ahmed and
+/// Wonka 2020, as pbrt-v4's ZSobolSampler). A permutation of the digits keeps every aligned
+/// block together, so every aligned 2^k x 2^k block of pixels gets consecutive points of the
+/// sequence, a (0,m,2)-net: a pixel's samples of the pass stratify its hemisphere together, and so
+/// do a block's, which is what a bin of hit-binned shading averages (a bin spans 4x4 pixels or
+/// more). The shuffle is what keeps that stratification free of a pattern: in plain Morton order
+/// the strata a pixel gets depend only on its place within its 2x2, 4x4, ... blocks (the scramble
+/// of a point's leading digits depends on the index's low bits alone), so all pixels of one class
+/// (x mod 2, y mod 2) sample the same strata and the noise shows a grid of period 2 to 4 pixels;
+/// shuffled, each block deals its points in an order of its own, and a pixel's strata are random
+/// whatever its class (tests/pixel_sequence_test.cpp). The sample slots are shuffled too, so a
+/// pass of fewer samples than its power of two leaves a random slot of each pixel unused, not the
+/// same slot everywhere. The shuffle is two hashes per camera sample for all levels at once, not
+/// a hash per level, and nothing per ray.
+///
+/// A random shift per hit would stratify only one hit's own rays; the shared sequence lowers the
+/// error of per-hit and binned shading alike, by up to half on path-traced light
+/// (docs/texture-space.md, "Stratification"). The grid's cache samples keep their own nets
+/// (CosineRays); later bounces draw from the sample's random stream. Each pass has its own
+/// scramble and shuffle, so passes are independent and a pixel's result depends on its samples
+/// and the pass split (a render with --spp is one pass unless shaded in texture space); never on
+/// the threads or tiles.
 struct PixelSequence {
-    uint32_t seed;     ///< the pass's scramble
-    int s0;            ///< the pass's first sample index
-    uint32_t samples;  ///< points per pixel sample slot: the pass's samples, a power of two
-    uint32_t perHit;   ///< points per camera sample, rounded up to a power of two
+    uint32_t seed;        ///< the pass's scramble
+    int s0;               ///< the pass's first sample index
+    uint32_t samples;     ///< points per pixel sample slot: the pass's samples, a power of two
+    uint32_t perHit;      ///< points per camera sample, rounded up to a power of two
+    MortonShuffle order;  ///< the pass's order of the pixels and of their slots
 
     /// Samples [passS0, passS1) of a pass: opt.aoSamples points (rays) per camera sample for AO,
     /// opt.hitSamples (paths) for the others.
@@ -233,11 +328,14 @@ struct PixelSequence {
         : seed(uint32_t(MixBits(opt.seed * 0xA24BAED4963EE407ull + uint64_t(passS0) + 1u))),
           s0(passS0),
           samples(std::bit_ceil(uint32_t(std::max(passS1 - passS0, 1)))),
-          perHit(std::bit_ceil(uint32_t(std::max(
-              opt.integrator == IntegratorKind::AO ? opt.aoSamples : opt.hitSamples, 1)))) {}
+          perHit(std::bit_ceil(uint32_t(
+              std::max(opt.integrator == IntegratorKind::AO ? opt.aoSamples : opt.hitSamples, 1)))),
+          // The image's Morton levels (pixels past them, if any, keep their blocks' order).
+          order(seed, int(std::bit_width(uint32_t(std::max({opt.width, opt.height, 1}) - 1))),
+                std::countr_zero(samples)) {}
     /// Index of the first point of camera sample (x, y, s).
     uint64_t First(int x, int y, int s) const {
-        return (uint64_t(Morton2(uint32_t(x), uint32_t(y))) * samples + uint64_t(s - s0)) * perHit;
+        return ShuffledMorton(uint32_t(x), uint32_t(y), uint32_t(s - s0), order) * perHit;
     }
     /// The scramble of point j of dimension pair `pair`: past 2^32 points (e.g. 4096x4096
     /// pixels x 64 samples x 4 rays) the sequence restarts with another scramble, so no two
@@ -251,11 +349,12 @@ struct PixelSequence {
         return OwenSobol02(uint32_t(j), ScrambleOf(j, pair));
     }
 };
-/// What a caller that bins diffuse light at camera hits (render.cpp, PathHitsTrace) asks LiPath
-/// for: the first hit's light for a white diffuse surface (the caller applies the hit's albedo,
-/// so a textured surface keeps its detail), with its interaction computed already, and the
-/// direct part of that light (NEE at the first hit, and emission the first BSDF ray finds, MIS-
-/// weighted) added to `direct` so that it can stay per hit while the indirect rest is binned.
+/// What a caller that bins diffuse light at camera hits (texture_space/hit_binning.cpp,
+/// PathHitsTrace) asks LiPath for: the first hit's light for a white diffuse surface (the caller
+/// applies the hit's albedo, so a textured surface keeps its detail), with its interaction computed
+/// already, and the direct part of that light (NEE at the first hit, and emission the first BSDF
+/// ray finds, MIS- weighted) added to `direct` so that it can stay per hit while the indirect rest
+/// is binned.
 ///
 /// With `specular` set, the first hit keeps its own BSDF (a GGX layer over a diffuse base) and
 /// one path estimates both lobes: the diffuse lobe's light is returned for a white lobe (the
@@ -277,6 +376,10 @@ struct FirstHitLight {
     glm::vec3* direct;
     glm::vec3* specular = nullptr;
     float minSpecularProbability = 0.75f;
+    /// When given, the part of `direct` that delta lights (points, spots, distant lights
+    /// without an angular size) give is added here too: their sharp shadows can stay per hit
+    /// while soft lights' direct light is binned (TextureSpaceOptions::deltaDirectPerHit).
+    glm::vec3* deltaDirect = nullptr;
 };
 
 /// A camera hit's light sample and BSDF sample, from the pass's PixelSequence (dimension pairs
@@ -325,7 +428,13 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         *split->specular += lobeS + lobeBetaS * l;
         return lobeL + lobeBetaD * l;
     };
-    for (int depth = 0;; ++depth) {
+    int depth = 0;
+    // Light the ray being traced found (MIS-weighted already).
+    auto emitted = [&](glm::vec3 Le) {
+        L += beta * Le;
+        if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le;
+    };
+    for (;; ++depth) {
         if (depth > 0) {
             ++rays.bounce;
             found = c.rs.Intersect(ray, &hit);
@@ -343,17 +452,17 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                 L += beta * Le * w;
                 if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le * w;
             }
+            if (c.sunDiscs) emitted(c.SunRadiance(ray.dir, prevPdf));
             break;
         }
         if (hit.light >= 0) {
-            const glm::vec3 Le = c.QuadEmission(hit.light, ray.dir);
-            float w = 1.0f;
-            if (prevPdf > 0.0f)
-                w = PowerHeuristic(1, prevPdf, 1, c.QuadPdf(hit.light, ray.dir, hit.t));
-            L += beta * Le * w;
-            if (split && depth == 1) *split->direct += (lobes ? lobeBetaD : beta) * Le * w;
+            emitted(c.EmittedMis(ray, hit, prevPdf));
             break;
         }
+        // An emissive object's light; a split first hit's goes to the caller (not to be
+        // multiplied by the albedo applied to what this returns).
+        if (!c.emitters.empty() && (depth > 0 || (emitFirst && !split)))
+            emitted(c.EmittedMis(ray, hit, prevPdf));
         if (depth >= maxDepth) break;
         if (depth == 1 && baseIndirect) {
             // The first BSDF ray found its direct light for both lobes; the diffuse base's
@@ -403,15 +512,18 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
                     const float w =
                         ls.delta ? 1.0f : PowerHeuristic(1, ls.pdf, 1, bsdf.Pdf(wo, ls.wi));
                     const glm::vec3 Li = ls.Li * (ls.delta ? cosi : cosi * w / ls.pdf);
+                    glm::vec3 Ld;
                     if (lobes && depth == 0) {
-                        const glm::vec3 Ld = bsdf.DiffuseWhite(ls.wi) * Li;
+                        Ld = bsdf.DiffuseWhite(ls.wi) * Li;
                         lobeL += Ld;
                         lobeS += bsdf.EvalSpecular(wo, ls.wi) * Li;
-                        *split->direct += Ld;
                     } else {
-                        const glm::vec3 Ld = beta * f * Li;
+                        Ld = beta * f * Li;
                         L += Ld;
-                        if (split && depth == 0) *split->direct += Ld;
+                    }
+                    if (split && depth == 0) {
+                        *split->direct += Ld;
+                        if (ls.delta && split->deltaDirect) *split->deltaDirect += Ld;
                     }
                 }
             }

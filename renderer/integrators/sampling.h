@@ -189,6 +189,62 @@ inline uint32_t Morton2(uint32_t x, uint32_t y) {
     return spread(x) | (spread(y) << 1);
 }
 
+/// One random order of the pixels of an image and of their sample slots, for ShuffledMorton: its
+/// keys and masks.
+struct MortonShuffle {
+    uint32_t flipKey, swapKey;
+    int slotBits;    ///< log2 of the slots per pixel
+    int bits;        ///< the shuffled low bits of a number: the slots' and the image's levels'
+    uint32_t low;    ///< those bits
+    uint32_t high;   ///< those bits, bit-reversed
+    uint32_t yBits;  ///< the y bits of the Morton digits among them, bit-reversed
+    MortonShuffle(uint64_t seed, int pixelLevels, int slotBits_)
+        : flipKey(uint32_t(MixBits(seed ^ 0x5851F42D4C957F2Dull))),
+          swapKey(uint32_t(MixBits(seed ^ 0x14057B7EF767814Full))),
+          slotBits(slotBits_),
+          // At most 32: the levels above (blocks of 2^16 pixels and more) keep Morton order.
+          bits(slotBits + 2 * std::min(pixelLevels, (32 - slotBits) / 2)),
+          low(bits == 0 ? 0u : ~0u >> (32 - bits)),
+          high(bits == 0 ? 0u : ~0u << (32 - bits)),
+          // Morton digit k (x at bit slotBits + 2k of the number, y above it) lands
+          // bit-reversed at 31 - slotBits - 2k (x) and 30 - slotBits - 2k (y): every other bit
+          // from 32 - bits up to 30 - slotBits.
+          yBits(bits == slotBits
+                    ? 0u
+                    : (0x55555555u << (slotBits & 1)) & high & ((1u << (31 - slotBits)) - 1u)) {}
+};
+
+/// The number of sample slot `slot` (< 2^key.slotBits) of pixel (x, y) in a random order of the
+/// Morton order's numbers, Morton2(x, y) << slotBits plus the slot, that keeps every aligned
+/// block of 2^n numbers (those that share the bits above n) together, taking it to an aligned
+/// block of 2^n: a pixel's slots, and the slots of every aligned 2^k x 2^k block of pixels,
+/// keep consecutive numbers. Each node of the quadtree permutes its four children by one of 16
+/// permutations picked by a hash of the node's own place (the bits above its digit): x and y
+/// swapped or not, so that the two children that share a half of the node's numbers are the
+/// two side by side or the two above each other, either with probability 1/2; then each bit
+/// flipped by a function of the bits above it. The slots get the flips. This is the random
+/// permutation per node of Ahmed and Wonka (2020), which pbrt-v4's ZSobolSampler picks from all
+/// 24 with a hash per level; here two Laine-Karras hashes of the bit-reversed number (bit j of
+/// the hash is bit j of its input flipped by a function of bits 0..j - 1, the more significant
+/// bits of the number) pick every level's at once, for a few dozen instructions per slot; the
+/// pixel's own part, the bit-reversed Morton index, is the same for all its slots.
+inline uint64_t ShuffledMorton(uint32_t x, uint32_t y, uint32_t slot, const MortonShuffle& key) {
+    const uint32_t morton = Morton2(x, y);
+    // The number bit-reversed: the Morton digits from the top down, then the slot's bits (in
+    // reverse order of the slot's: any order of a pixel's slots will do).
+    const uint32_t r =
+        uint32_t((uint64_t(slot) << 32 | ReverseBits32(morton)) >> key.slotBits) & key.high;
+    // The flip that the first hash gives a digit's y bit decides the digit's swap: a function
+    // of the digits above alone. (The hash's bit below it is the parent's x bit flipped, so
+    // two siblings side by side would always take opposite swaps.) The swaps come before the
+    // flips: after them, the x bit (flipped by a function of the y bit) could pair diagonal
+    // neighbours.
+    const uint32_t swap = (detail::LaineKarras(r, key.swapKey) ^ r) & key.yBits;
+    const uint32_t t = (r ^ r >> 1) & swap;
+    const uint32_t shuffled = ReverseBits32(detail::LaineKarras(r ^ (t | t << 1), key.flipKey));
+    return (uint64_t(morton) << key.slotBits & ~uint64_t(key.low)) | (shuffled & key.low);
+}
+
 inline float CosineHemispherePdf(float cosTheta) {
     return std::max(cosTheta, 0.0f) * kInvPiF;
 }

@@ -78,7 +78,8 @@ public:
     /// The width of a pixel's footprint at distance `t` along a camera ray, across the ray: t
     /// times a pixel's angle at the image centre, widened to a thin lens's circle of confusion
     /// (as RenderScene::Interact widens differentials). An isotropic stand-in for ray
-    /// differentials where only a level of detail is wanted (hit-binned AO, render.cpp).
+    /// differentials where only a level of detail is wanted (hit-binned AO,
+    /// texture_space/hit_binning.cpp).
     float FootprintAt(float t) const {
         const float w = t * 2.0f * tanHalfY_ / float(height_);
         if (!(lensRadius_ > 0.0f) || !(focusDistance_ > 0.0f)) return w;

@@ -14,7 +14,7 @@ namespace {
 constexpr int kMaxFaceVertices = 15;
 constexpr int kMaxValence = 64;
 
-/// The position_indices attribute for render_scene.cpp's ToEmbree mapping, in the XML loader's
+/// The position_indices attribute for embree_mesh.cpp's ToEmbree mapping, in the XML loader's
 /// names; smooth boundaries are its default, which it has no name for ("invalid subdivision
 /// mode: smooth_boundary").
 const char* SubdivModeAttribute(BoundaryInterpolation b) {

@@ -1,32 +1,9 @@
 // SPDX-License-Identifier: Apache-2.0
-// Design note: cages Embree cannot take.
-//
-// Embree 3.13 (Debian) renders a Catmull-Clark cage as its own subdivision geometry, but not
-// every valid cage: a face of exactly 16 vertices aborts the process (`Assertion
-// 'N<MAX_PATCH_VALENCE' failed`), larger faces and every face around a vertex of valence 65 or
-// more silently vanish (embree-opensubdiv-facts.md), and so do the faces around a vertex whose
-// faces are large and many (ten 15-gons; probes of Embree alone, FacesBeyondEmbree below; ctest
-// -R EmbreeLimits renders each case). OpenSubdiv takes any face size and valence. A mesh with
-// any such face is therefore rendered, whole, as quads on its limit surface
-// (texcache/limit_tessellation.h): OpenSubdiv refines the cage uniformly (level from the
-// tessellation rate, as many segments per quad edge as Embree's grids) and moves every vertex to
-// its exact limit position. Why this and not the alternatives:
-// - Only part of a mesh cannot be handed over: Embree's patch of a face depends on its
-//   neighbours, so the faces next to a removed 16-gon (or marked as a hole: Embree turns hole
-//   edges into boundaries) would change shape, and a seam between Embree's grids and our quads
-//   only closes if both sample the shared edge identically, which Embree does not promise.
-//   One tessellation per mesh has no seam: neighbouring quads share their limit vertices.
-// - One level of refinement before Embree would fix large faces (every child is a quad) but not
-//   valence: a vertex keeps its valence under refinement. The tessellation handles both.
-// The Ptex mapping stays exact: after the first refinement every quad lies in one Ptex face (a
-// quad's child j is its quadrant j, an n-gon's child j its sub-face j), so a hit's quad (u,v)
-// maps affinely to Ptex (u,v). Shading derivatives (and the cache's surface queries) come from
-// OpenSubdiv's patches (LimitSurface) off the regular faces, which keep the bicubic fast path.
-// Ptex adjacency and footprints come from the cage alone and do not change. At a power-of-two
-// rate the quads are exactly Embree's grid (its grids sample the limit at the same dyadic Ptex
-// parameters): on cages both take, the same rays hit within 1e-6 of the diagonal on the same Ptex
-// face and (u,v). Cost (README, "Cages Embree cannot take"): render time as through Embree, scene
-// build ~0.35 s more for the car's 1576 faces (OpenSubdiv refinement and patch table).
+// RenderScene: the Embree device and the scene's two levels (one Embree scene per mesh, built
+// by embree_mesh.cpp; an instance per object, posed over the shutter; quad lights as geometry),
+// the environment and the textures; and the queries every renderer makes of it: rays traced one
+// at a time or in packets, a hit turned into a shading point (SurfaceInteraction) with its
+// limit-surface derivatives and ray differentials, the limit surface at a Ptex location.
 #include "renderer/scene/render_scene.h"
 
 #include <algorithm>
@@ -34,17 +11,17 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <limits>
 
 #include <embree3/rtcore.h>
-#include <tbb/parallel_for.h>
 
+#include "renderer/scene/embree_mesh.h"
 #include "renderer/scene/envmap.h"
 #include "renderer/scene/texture.h"
 #include "texcache/error.h"
-#include "texcache/limit_tessellation.h"
 
 namespace texcache {
+
+using namespace internal;
 
 namespace {
 
@@ -55,73 +32,6 @@ void EmbreeError(void*, RTCError code, const char* str) {
     // Called from inside Embree's C code, where no exception may pass: report and go on.
     if (code != RTC_ERROR_NONE)
         std::fprintf(stderr, "texcache: Embree error %d: %s\n", int(code), str ? str : "");
-}
-
-RTCSubdivisionMode ToEmbree(BoundaryInterpolation b) {
-    switch (b) {
-        case BoundaryInterpolation::None:
-            return RTC_SUBDIVISION_MODE_NO_BOUNDARY;
-        // Measured: PIN_CORNERS matches OSD EDGE_AND_CORNER to ~3e-6 (figure from 9bb82c3;
-        // closest command: ctest -R LimitPositionsAgreeWithOpenSubdiv).
-        case BoundaryInterpolation::EdgeAndCorner:
-            return RTC_SUBDIVISION_MODE_PIN_CORNERS;
-        // SMOOTH_BOUNDARY differs from OSD EDGE_ONLY by up to 2e-3 near valence-2 corners
-        // (figure from 9bb82c3; closest command: ctest -R LimitPositionsAgreeWithOpenSubdiv).
-        case BoundaryInterpolation::EdgeOnly:
-            return RTC_SUBDIVISION_MODE_SMOOTH_BOUNDARY;
-    }
-    return RTC_SUBDIVISION_MODE_SMOOTH_BOUNDARY;
-}
-
-float ToEmbreeSharpness(float s) {
-    // OpenSubdiv treats sharpness >= 10 as infinitely sharp; Embree needs +inf for that.
-    return s >= 10.0f ? std::numeric_limits<float>::infinity() : s;
-}
-
-void RejectHoleHits(const RTCFilterFunctionNArguments* args) {
-    const auto* isHole = static_cast<const uint8_t*>(args->geometryUserPtr);
-    for (unsigned i = 0; i < args->N; ++i)
-        if (args->valid[i] == -1 && isHole[RTCHitN_primID(args->hit, args->N, i)])
-            args->valid[i] = 0;
-}
-
-// Embree 3.13's subdivision limits (measured with probes on this machine, see the design note):
-// a face of 16 vertices aborts the process, larger faces vanish, and so does every face around a
-// vertex whose 1-ring holds more than 64 edges or more than 128 vertices (of each face around
-// it, the vertices other than itself and one of its two neighbours, which the next face shares;
-// plus the far end of a boundary edge: valence 64 quads give 128, ten 15-gons 130).
-constexpr int kEmbreeMaxFaceVertices = 15;
-constexpr int kEmbreeMaxValence = 64;
-constexpr int kEmbreeMaxRingVertices = 128;
-
-/// Cage faces Embree cannot take: too many vertices, or a vertex with too large a 1-ring.
-size_t FacesBeyondEmbree(const ControlCage& cage, const PtexTopology& topo) {
-    std::vector<int> faces(size_t(cage.numVertices()), 0), ring(size_t(cage.numVertices()), 0);
-    int offset = 0;
-    for (int f = 0; f < cage.numFaces(); ++f) {
-        for (int i = 0; i < cage.faceVertexCounts[f]; ++i) {
-            const int v = cage.faceVertexIndices[offset + i];
-            ++faces[v];
-            ring[v] += cage.faceVertexCounts[f] - 2;
-        }
-        offset += cage.faceVertexCounts[f];
-    }
-    auto vertexBeyond = [&](int v) {
-        const int boundaryEnds = std::max(0, topo.Valence(v) - faces[v]);
-        return topo.Valence(v) > kEmbreeMaxValence ||
-               ring[v] + boundaryEnds > kEmbreeMaxRingVertices;
-    };
-    size_t n = 0;
-    offset = 0;
-    for (int f = 0; f < cage.numFaces(); ++f) {
-        const int count = cage.faceVertexCounts[f];
-        bool beyond = count > kEmbreeMaxFaceVertices;
-        for (int i = 0; i < count && !beyond; ++i)
-            beyond = vertexBeyond(cage.faceVertexIndices[offset + i]);
-        n += beyond;
-        offset += count;
-    }
-    return n;
 }
 
 /// Bytes Embree holds now, and at most so far, from its memory monitor callback (atomics: Embree's
@@ -141,266 +51,6 @@ struct EmbreeMemory {
     size_t PeakBytes() const { return size_t(std::max<int64_t>(peak.load(), 0)); }
 };
 
-/// One mesh's Embree geometry and how its hits map to Ptex faces: Embree's own subdivision
-/// surface, or quads on the limit surface tessellated with OpenSubdiv (`limit` set).
-struct EmbreeMesh {
-    RTCScene scene = nullptr;
-    RTCGeometry geom = nullptr;
-    std::shared_ptr<const PtexTopology> topo;  // shared with texture-space caches
-    std::unique_ptr<RegularPatches> regular;   // fast path for rtcInterpolate
-    // Subdivision meshes: OpenSubdiv's patches for the faces `regular` leaves out (see
-    // OffFastPathFaces), in parts built in parallel; per Ptex face its part, or kNoPart.
-    std::vector<std::unique_ptr<LimitSurface>> irregular;
-    std::vector<uint8_t> irregularPart;
-    static constexpr uint8_t kNoPart = 255;
-    bool hasUv = false;
-    std::vector<uint8_t> isHole;  // per coarse face, only for subdivision cages with holes
-    // Limit tessellation only: the general evaluator, and per quad its Ptex square and uvs.
-    std::unique_ptr<LimitSurface> limit;
-    std::vector<LimitTessellation::Square> squares;
-    std::vector<std::array<float, 2>> cornerUvs;
-
-    /// Ptex location of a hit (Embree's primitive and hit parameters).
-    PtexCoord ToPtex(unsigned prim, float U, float V) const {
-        if (!limit) return EmbreeToPtex(*topo, prim, U, V);
-        const LimitTessellation::Square& s = squares[prim];
-        return {s.face, std::clamp(s.u0 + s.size * U, 0.0f, 1.0f),
-                std::clamp(s.v0 + s.size * V, 0.0f, 1.0f)};
-    }
-
-    /// Limit derivatives in Ptex (u,v), and the position when P is given, at `c`, which is
-    /// Embree's (prim, U, V) on a subdivision mesh (16-byte aligned outputs); false on a hole.
-    bool Eval(const PtexCoord& c, unsigned prim, float U, float V, float* P, float* du,
-              float* dv) const {
-        if (regular->Has(c.face)) {
-            // Regular patches: our bicubic evaluation, ~10x cheaper than rtcInterpolate (same
-            // surface; figure from 2ad54fc, nothing times it alone: closest command `texcache
-            // bench rays`).
-            regular->Eval(c.face, c.u, c.v, P, du, dv);
-            return true;
-        }
-        // OpenSubdiv's patches: the limit tessellation's evaluator, or the irregular faces'.
-        auto patches = [&](const LimitSurface& surface) {
-            LimitPoint p;
-            if (!surface.Eval(c.face, c.u, c.v, &p)) return false;
-            for (int k = 0; k < 3; ++k) {
-                if (P) P[k] = p.P[k];
-                du[k] = p.dPdu[k], dv[k] = p.dPdv[k];
-            }
-            return true;
-        };
-        if (limit) return patches(*limit);
-        if (!irregularPart.empty() && irregularPart[c.face] != kNoPart &&
-            patches(*irregular[irregularPart[c.face]]))
-            return true;
-        rtcInterpolate1(geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX, 0, P, du, dv, 3);
-        return true;
-    }
-
-    /// Texture coordinates at a hit (only when hasUv).
-    glm::vec2 Uv(unsigned prim, float U, float V) const {
-        if (limit) {
-            // Bilinear in the quad, whose corners carry OpenSubdiv's limit uvs.
-            const auto* c = &cornerUvs[size_t(prim) * 4];
-            auto at = [&](int k) { return glm::vec2(c[k][0], c[k][1]); };
-            return (1.0f - V) * ((1.0f - U) * at(0) + U * at(1)) +
-                   V * ((1.0f - U) * at(3) + U * at(2));
-        }
-        alignas(16) float uv[4];
-        rtcInterpolate1(geom, prim, U, V, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE, 0, uv, nullptr, nullptr,
-                        2);
-        return {uv[0], uv[1]};
-    }
-};
-
-/// Isolation level of the patches OffFastPathFaces' faces get.
-constexpr int kIrregularPatchLevel = 6;
-
-/// The cage faces whose limit derivatives a hit on Embree's subdivision surface takes from
-/// OpenSubdiv's patches (LimitSurface at kIrregularPatchLevel) rather than rtcInterpolate: those
-/// off the regular fast path, except holes (never hit) and faces near a crease or corner whose
-/// sharpness the patches do not reproduce:
-/// - below 1, where the two libraries subdivide differently (tests/ptex_mapping_test.cpp,
-///   FractionalCreasesDifferBetweenEmbreeAndOpenSubdiv);
-/// - above the isolation level, infinite included: the end caps smooth what sharpness is left
-///   (the rook's 7.9 creases: normals 56 degrees off Embree's, which match its positions).
-/// A face's patch depends on the vertices of its neighbours, so faces within two rings of such
-/// a vertex keep rtcInterpolate.
-std::vector<int> OffFastPathFaces(const ControlCage& cage, const PtexTopology& topo,
-                                  const RegularPatches& regular) {
-    const int numFaces = cage.numFaces();
-    auto unmatched = [](float w) {
-        return w > 0.0f && (w < 1.0f || w > float(kIrregularPatchLevel));
-    };
-    std::vector<char> near(size_t(cage.numVertices()), 0);
-    for (size_t i = 0; i < cage.creaseEdges.size(); ++i)
-        if (unmatched(cage.creaseWeights[i]))
-            near[cage.creaseEdges[i][0]] = near[cage.creaseEdges[i][1]] = 1;
-    for (size_t i = 0; i < cage.cornerVertices.size(); ++i)
-        if (unmatched(cage.cornerWeights[i])) near[cage.cornerVertices[i]] = 1;
-    std::vector<size_t> start(size_t(numFaces) + 1, 0);
-    for (int f = 0; f < numFaces; ++f) start[f + 1] = start[f] + size_t(cage.faceVertexCounts[f]);
-    auto touches = [&](int f, const std::vector<char>& marked) {
-        for (size_t i = start[f]; i < start[f + 1]; ++i)
-            if (marked[cage.faceVertexIndices[i]]) return true;
-        return false;
-    };
-    for (int ring = 0; ring < 2; ++ring) {  // grow the marked vertices by two face rings
-        std::vector<char> grown = near;
-        for (int f = 0; f < numFaces; ++f)
-            if (touches(f, near))
-                for (size_t i = start[f]; i < start[f + 1]; ++i)
-                    grown[cage.faceVertexIndices[i]] = 1;
-        near.swap(grown);
-    }
-    std::vector<char> hole(size_t(numFaces), 0);
-    for (int h : cage.holes) hole[h] = 1;
-    std::vector<int> faces;
-    for (int f = 0; f < numFaces; ++f) {
-        const bool fast = topo.IsQuad(f) && regular.Has(topo.FirstPtexFace(f));
-        if (!fast && !hole[f] && !touches(f, near)) faces.push_back(f);
-    }
-    return faces;
-}
-
-/// mesh->irregular and irregularPart for `faces`: one LimitSurface per run of consecutive faces,
-/// built in parallel (OpenSubdiv's refinement is serial; the car's 992 faces: 0.03 s in one
-/// part, 0.017 s in 7 on 2 cores, all before the first ray). The parts depend on the face count
-/// only, so the images do not depend on the thread count.
-void BuildIrregularPatches(const ControlCage& cage, const std::vector<int>& faces,
-                           EmbreeMesh* mesh) {
-    if (faces.empty()) return;
-    constexpr size_t kMinFacesPerPart = 128, kMaxParts = 8;
-    const size_t parts = std::clamp<size_t>(faces.size() / kMinFacesPerPart, 1, kMaxParts);
-    std::vector<std::vector<int>> runs(parts);
-    for (size_t i = 0; i < faces.size(); ++i) runs[i * parts / faces.size()].push_back(faces[i]);
-    mesh->irregular.resize(parts);
-    tbb::parallel_for(size_t(0), parts, [&](size_t k) {
-        mesh->irregular[k] = std::make_unique<LimitSurface>(cage, kIrregularPatchLevel, runs[k]);
-    });
-    mesh->irregularPart.assign(size_t(mesh->topo->NumPtexFaces()), EmbreeMesh::kNoPart);
-    for (size_t k = 0; k < parts; ++k)
-        for (int f : runs[k]) {
-            for (int i = mesh->topo->FirstPtexFace(f); i < mesh->topo->FirstPtexFace(f + 1); ++i)
-                mesh->irregularPart[size_t(i)] = uint8_t(k);
-        }
-}
-
-/// The cage as Embree's subdivision surface.
-RTCGeometry NewSubdivisionGeometry(RTCDevice device, const ControlCage& cage, float rate,
-                                   bool withUv, EmbreeMesh* mesh) {
-    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SUBDIVISION);
-    // Face sizes and indices are the cage's own arrays, shared rather than copied (20 MB on a
-    // 1,000,000-quad cage): validated non-negative ints, bit for bit Embree's UINTs, and the
-    // Scene outlives its RenderScene.
-    static_assert(sizeof(int) == sizeof(unsigned));
-    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_FACE, 0, RTC_FORMAT_UINT,
-                               cage.faceVertexCounts.data(), 0, sizeof(unsigned),
-                               cage.faceVertexCounts.size());
-    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
-                               cage.faceVertexIndices.data(), 0, sizeof(unsigned),
-                               cage.faceVertexIndices.size());
-    // 16-byte stride with w = 0: Embree loads vertices as 4-wide vectors, and garbage in the
-    // 4th lane (the buffer's padding after the last vertex) made rtcInterpolate read
-    // uninitialised memory and, at random, reject valid patches.
-    auto* pos = static_cast<float*>(rtcSetNewGeometryBuffer(
-        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), cage.positions.size()));
-    for (size_t i = 0; i < cage.positions.size(); ++i) {
-        for (int k = 0; k < 3; ++k) pos[4 * i + k] = cage.positions[i][k];
-        pos[4 * i + 3] = 0.0f;
-    }
-    if (!cage.creaseEdges.empty()) {
-        auto* ce = static_cast<unsigned*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_INDEX, 0, RTC_FORMAT_UINT2,
-                                    2 * sizeof(unsigned), cage.creaseEdges.size()));
-        auto* cw = static_cast<float*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT,
-                                    sizeof(float), cage.creaseEdges.size()));
-        for (size_t i = 0; i < cage.creaseEdges.size(); ++i) {
-            ce[2 * i] = unsigned(cage.creaseEdges[i][0]);
-            ce[2 * i + 1] = unsigned(cage.creaseEdges[i][1]);
-            cw[i] = ToEmbreeSharpness(cage.creaseWeights[i]);
-        }
-    }
-    if (!cage.cornerVertices.empty()) {
-        auto* vi = static_cast<unsigned*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_INDEX, 0, RTC_FORMAT_UINT,
-                                    sizeof(unsigned), cage.cornerVertices.size()));
-        auto* vw = static_cast<float*>(
-            rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_WEIGHT, 0, RTC_FORMAT_FLOAT,
-                                    sizeof(float), cage.cornerVertices.size()));
-        for (size_t i = 0; i < cage.cornerVertices.size(); ++i) {
-            vi[i] = unsigned(cage.cornerVertices[i]);
-            vw[i] = ToEmbreeSharpness(cage.cornerWeights[i]);
-        }
-    }
-    if (!cage.holes.empty()) {
-        // OpenSubdiv's holes hide a face but leave its neighbours' limit surface unchanged;
-        // Embree's hole buffer turns the hole's edges into boundaries instead (measured: up
-        // to 0.5 units on catmark_hole_test1; figure from 9bb82c3, closest command: ctest -R
-        // LimitPositionsAgreeWithOpenSubdiv/catmark_hole_test1 with the hole buffer set).
-        // So keep the face and reject its hits.
-        mesh->isHole.assign(cage.faceVertexCounts.size(), 0);
-        for (int h : cage.holes) mesh->isHole[h] = 1;
-        rtcSetGeometryUserData(g, mesh->isHole.data());
-        rtcSetGeometryIntersectFilterFunction(g, RejectHoleHits);
-        rtcSetGeometryOccludedFilterFunction(g, RejectHoleHits);
-    }
-    rtcSetGeometrySubdivisionMode(g, 0, ToEmbree(cage.boundary));
-    rtcSetGeometryTessellationRate(g, rate);
-    if (withUv) {
-        // Face-varying uvs: a second topology (uv indices) with linear boundaries, as OBJ uvs
-        // are authored on the cage.
-        rtcSetGeometryTopologyCount(g, 2);
-        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 1, RTC_FORMAT_UINT,
-                                   cage.faceUvIndices.data(), 0, sizeof(unsigned),
-                                   cage.faceUvIndices.size());
-        rtcSetGeometrySubdivisionMode(g, 1, RTC_SUBDIVISION_MODE_PIN_BOUNDARY);
-        rtcSetGeometryVertexAttributeCount(g, 1);
-        rtcSetGeometryVertexAttributeTopology(g, 0, 1);
-        auto* uv = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX_ATTRIBUTE,
-                                                               0, RTC_FORMAT_FLOAT2,
-                                                               4 * sizeof(float), cage.uvs.size()));
-        for (size_t i = 0; i < cage.uvs.size(); ++i) {
-            uv[4 * i] = cage.uvs[i][0];
-            uv[4 * i + 1] = cage.uvs[i][1];
-            uv[4 * i + 2] = uv[4 * i + 3] = 0.0f;
-        }
-        mesh->hasUv = true;
-    }
-    return g;
-}
-
-/// Tessellation level matching Embree's rate: `rate` segments per quad edge, at least one
-/// refinement (so every quad lies in one Ptex face), at most 4 (256 quads per cage quad: the
-/// refined topology OpenSubdiv holds while building grows as 4^level).
-int LimitTessellationLevel(float rate) {
-    return std::clamp(int(std::ceil(std::log2(std::max(rate, 1.0f)))), 1, 4);
-}
-
-/// The cage as quads on its limit surface (see the design note at the top).
-RTCGeometry NewLimitQuadGeometry(RTCDevice device, const ControlCage& cage, float rate, bool withUv,
-                                 EmbreeMesh* mesh) {
-    LimitTessellation t = TessellateLimitSurface(cage, LimitTessellationLevel(rate), withUv);
-    mesh->limit = std::make_unique<LimitSurface>(cage);
-    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
-    // 16-byte stride with w = 0, as for the subdivision cage's vertices.
-    auto* pos = static_cast<float*>(rtcSetNewGeometryBuffer(
-        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), t.positions.size()));
-    for (size_t i = 0; i < t.positions.size(); ++i) {
-        for (int k = 0; k < 3; ++k) pos[4 * i + k] = t.positions[i][k];
-        pos[4 * i + 3] = 0.0f;
-    }
-    auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-        g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(unsigned), t.quads.size()));
-    for (size_t q = 0; q < t.quads.size(); ++q)
-        for (int k = 0; k < 4; ++k) idx[4 * q + k] = unsigned(t.quads[q][k]);
-    mesh->squares = std::move(t.squares);
-    mesh->cornerUvs = std::move(t.cornerUvs);
-    mesh->hasUv = !mesh->cornerUvs.empty();
-    return g;
-}
-
 }  // namespace
 
 struct RenderScene::Impl {
@@ -408,7 +58,7 @@ struct RenderScene::Impl {
     EmbreeMemory embreeMemory;
     RTCScene top = nullptr;
 
-    using Mesh = EmbreeMesh;
+    using Mesh = internal::EmbreeMesh;
     std::vector<Mesh> meshes;  // by Scene::meshes index; unused meshes stay empty
     TessellationStats tessellation;
     BuildSeconds build;
@@ -422,6 +72,10 @@ struct RenderScene::Impl {
     std::vector<Instance> objects;  // by Scene::objects index
     // Top-level geomID -> object or quad light (-1: not that kind); geomIDs are small and dense.
     std::vector<int> geomToObject, geomToLight;
+    // The point and spot lights with a radius, as one geometry of spheres: its geomID, and per
+    // sphere its Hit::light (after the quad lights).
+    unsigned sphereGeom = RTC_INVALID_GEOMETRY_ID;
+    std::vector<int> sphereToLight;
     static void Map(std::vector<int>& v, unsigned id, int value) {
         if (v.size() <= id) v.resize(id + 1, -1);
         v[id] = value;
@@ -457,9 +111,31 @@ struct RenderScene::Impl {
             hit->Ng = WorldNormal(hit->object, time, Ng);
         } else {
             hit->object = -1;
-            hit->light = geomToLight[geomID];
+            hit->light = geomID == sphereGeom ? sphereToLight[primID] : geomToLight[geomID];
             hit->Ng = Ng;
         }
+    }
+
+    /// The point and spot lights with a radius, posed at `time`, as spheres that camera and BSDF
+    /// rays see (lights without one are points: nothing to hit).
+    void AddSphereLights(const Scene& scene, float time) {
+        std::vector<glm::vec4> spheres;
+        for (size_t l = 0; l < scene.pointLights.size(); ++l) {
+            const PointLight& p = scene.pointLights[l];
+            if (!(p.radius > 0.0f)) continue;
+            const glm::vec3 c(p.transform.Eval(time) * glm::vec4(p.position, 1.0f));
+            spheres.emplace_back(c, p.radius);
+            sphereToLight.push_back(int(scene.quadLights.size() + l));
+        }
+        if (spheres.empty()) return;
+        RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SPHERE_POINT);
+        auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+            g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 4 * sizeof(float), spheres.size()));
+        for (size_t i = 0; i < spheres.size(); ++i)
+            for (int k = 0; k < 4; ++k) v[4 * i + k] = spheres[i][k];
+        rtcCommitGeometry(g);
+        sphereGeom = rtcAttachGeometry(top, g);
+        rtcReleaseGeometry(g);
     }
 
     glm::mat4 Transform(int object, float time) const {
@@ -501,11 +177,19 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
     rtcSetDeviceMemoryMonitorFunction(I.device, EmbreeMemory::Count, &I.embreeMemory);
     I.top = rtcNewScene(I.device);
 
-    // Which meshes are used, and which of them need face-varying uvs (textured materials only).
+    // Which meshes are used, and which of them need face-varying uvs (textured materials only),
+    // are plain meshes or emit light.
     const size_t numMeshes = scene.meshes.size();
-    std::vector<char> used(numMeshes, 0), needUv(numMeshes, 0);
+    std::vector<char> used(numMeshes, 0), needUv(numMeshes, 0), plain(numMeshes, 0),
+        emissive(numMeshes, 0);
     for (const Object& o : scene.objects) {
+        if (used[o.mesh] && plain[o.mesh] != !o.subdivide)
+            throw InputError(scene.path, "object '" + o.name +
+                                             "' shares its mesh with an object of the other "
+                                             "subdivision (give each form its own mesh)");
         used[o.mesh] = 1;
+        plain[o.mesh] = !o.subdivide;
+        emissive[o.mesh] |= o.Emissive();
         if (options.needTextures && MaterialUsesTextures(scene.materials[o.material]))
             needUv[o.mesh] = 1;
     }
@@ -519,34 +203,41 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         CageTopology t = BuildCageTopology(cage);
         mesh.topo = std::make_shared<const PtexTopology>(std::move(t.ptex));
         mesh.regular = std::make_unique<RegularPatches>(std::move(t.regular));
-        const size_t beyond = FacesBeyondEmbree(cage, *mesh.topo);
-        const bool tessellate = beyond > 0 || options.tessellateAll;
-        if (!tessellate && options.irregularPatches) {
-            // rtcInterpolate re-derives a face's patch on every call: ~1 us, a sixth of the CPU
-            // time of a path-traced frame of the car (1.75 M camera hits, 992 of its 1575 faces
-            // off the fast path; `perf`). OpenSubdiv's patches at isolation level 6 evaluate the
-            // same surface (the car's normal view: RMSE 8e-6 against rtcInterpolate's; level 4
-            // gave 3e-3) for ~0.017 s of build on 2 cores and ~4 MiB there (single-crease
-            // patches; isolating the creases took 0.05 s and 18 MiB). Each part keeps its
-            // own copy of the cage's points (LimitSurface): a cost on huge irregular cages.
+        const size_t beyond = plain[m] ? 0 : FacesBeyondEmbree(cage, *mesh.topo);
+        // An emissive subdivision surface is rendered as its limit tessellation, the surface its
+        // light samples are taken on (lights.h, MeshEmitter).
+        const bool tessellate = !plain[m] && (beyond > 0 || options.tessellateAll || emissive[m]);
+        if (!tessellate && !plain[m] && options.irregularPatches) {
+            // rtcInterpolate re-derives a face's patch on every call (about a microsecond): a
+            // large share of a path-traced frame's CPU time when many faces are off the fast
+            // path, as most of the car's are. OpenSubdiv's patches at isolation level 6 evaluate
+            // the same surface (normals within 1e-5 RMSE of rtcInterpolate's; level 4 is 3e-3
+            // off) for a small build cost (single-crease patches: isolating the creases costs
+            // several times the time and memory). Each part keeps its own copy of the cage's
+            // points (LimitSurface): a cost on huge irregular cages.
             BuildIrregularPatches(cage, OffFastPathFaces(cage, *mesh.topo, *mesh.regular), &mesh);
         }
         clock.Charge(&I.build.opensubdiv);
         mesh.scene = rtcNewScene(I.device);
         const bool wantUv = needUv[m] && !cage.uvs.empty();
         RTCGeometry g;
-        if (tessellate) {
+        if (plain[m]) {
+            g = NewPlainQuadGeometry(I.device, cage, wantUv, &mesh);
+            // Watertight: neighbouring quads share corners (see the limit quads below).
+            rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
+        } else if (tessellate) {
             g = NewLimitQuadGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
                                      &mesh);
             clock.Charge(&I.build.opensubdiv);
             // Watertight quads: a ray through a shared vertex of the tessellation otherwise
-            // may slip between its quads (measured: 15 of 1848 rays aimed at the limit points on
-            // the n-gons' edges missed, all at cage vertices; ctest -R
-            // EmbreeLimits.ClosedCagesHaveNoHoles).
+            // may slip between its quads (ctest -R EmbreeLimits.ClosedCagesHaveNoHoles aims
+            // rays at the limit points on the n-gons' edges).
             rtcSetSceneFlags(mesh.scene, RTC_SCENE_FLAG_ROBUST);
-            ++I.tessellation.meshes;
-            I.tessellation.cageFaces += size_t(cage.numFaces());
-            I.tessellation.beyondEmbree += beyond;
+            if (beyond > 0 || options.tessellateAll) {  // not counted: emitters' (by choice)
+                ++I.tessellation.meshes;
+                I.tessellation.cageFaces += size_t(cage.numFaces());
+                I.tessellation.beyondEmbree += beyond;
+            }
         } else {
             g = NewSubdivisionGeometry(I.device, cage, scene.settings.tessellationRate, wantUv,
                                        &mesh);
@@ -610,6 +301,7 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
             Impl::Map(I.geomToLight, rtcAttachGeometry(I.top, g), int(l));
             rtcReleaseGeometry(g);
         }
+        I.AddSphereLights(scene, options.frameTime);
         if (options.needEnvironment && !scene.environments.empty()) {
             const EnvironmentLight& e = scene.environments.front();
             env_ = e.path.empty() ? std::make_shared<const EnvironmentMap>(
@@ -898,11 +590,9 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
         // Defocus: the camera samples of a pixel reach the surface anywhere in the circle of
         // confusion, and the image averages them over it; a footprint narrower than its radius
         // picked texels finer than the image shows (a pixel's differential is taken with the
-        // lens point fixed). Car AO through a lens (radius 0.08, focus 4.5; 640x360, 1 ray
-        // per cached sample, 32 spp), the footprint widened to k times the radius: k = 0: 4.35
-        // CPU s, relMSE 0.01965; k = 1: 2.74 s, 0.01979 (1.57x lower at equal time); k = 2:
-        // 2.32 s, 0.0222 (1.64x); k = 4: 2.08 s, 0.0292 (1.40x). k = 1: texels the size of the
-        // blur, a little short of the best ratio for hardly any bias.
+        // lens point fixed). The footprint is widened to the circle's radius: texels the size
+        // of the blur come near the best error at equal time for hardly any bias (wider
+        // footprints save a little more time, at the price of bias).
         if (diff->lensRadius > 0.0f && diff->focusT > 0.0f) {
             const float coc = diff->lensRadius * std::abs(1.0f - hit.t / diff->focusT);
             auto widen = [&](glm::vec3& d) {
@@ -917,6 +607,25 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     return si;
 }
 
+std::vector<glm::vec3> RenderScene::QuadCorners(int object) const {
+    const Impl& I = *impl_;
+    const Impl::Mesh& mesh = I.meshes[size_t(I.objects[size_t(object)].mesh)];
+    std::vector<glm::vec3> corners;
+    if (!mesh.plain && !mesh.limit) return corners;
+    const auto* v =
+        static_cast<const float*>(rtcGetGeometryBufferData(mesh.geom, RTC_BUFFER_TYPE_VERTEX, 0));
+    const auto* idx =
+        static_cast<const unsigned*>(rtcGetGeometryBufferData(mesh.geom, RTC_BUFFER_TYPE_INDEX, 0));
+    const size_t quads = mesh.plain ? size_t(mesh.topo->NumPtexFaces()) : mesh.squares.size();
+    const glm::mat4 M = I.Transform(object, 0.0f);
+    corners.reserve(4 * quads);
+    for (size_t i = 0; i < 4 * quads; ++i) {
+        const float* p = v + 4 * size_t(idx[i]);
+        corners.emplace_back(M * glm::vec4(p[0], p[1], p[2], 1.0f));
+    }
+    return corners;
+}
+
 PtexCoord RenderScene::HitPtex(const Hit& hit) const {
     return impl_->meshes[impl_->objects[hit.object].mesh].ToPtex(hit.primID, hit.U, hit.V);
 }
@@ -928,7 +637,7 @@ bool RenderScene::EvalSurface(int object, const PtexCoord& c, float time,
     if (c.face < 0 || c.face >= mesh.topo->NumPtexFaces()) return false;
     unsigned prim = 0;
     float U = c.u, V = c.v;
-    if (!mesh.limit) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
+    if (!mesh.limit && !mesh.plain) PtexToEmbree(*mesh.topo, c, &prim, &U, &V);
     alignas(16) float P[4], du[4], dv[4];
     if (!mesh.Eval(c, prim, U, V, P, du, dv)) return false;
     const glm::mat4 M = I.Transform(object, time);

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
-// The ray-traceable form of a Scene: Embree subdivision geometry per mesh (object space), one
-// instance per object, quad-light geometry, the environment and textures — each built only when
-// the render uses it.
+// The ray-traceable form of a Scene: Embree subdivision geometry per mesh (object space; quads for
+// plain meshes), one instance per object, quad and sphere light geometry, the environment and
+// textures — each built only when the render uses it.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -37,7 +37,9 @@ struct RayDifferentials {
 struct Hit {
     float t = 0.0f;
     int object = -1;  ///< index into Scene::objects, -1 for lights
-    int light = -1;   ///< index into Scene::quadLights when a light was hit
+    /// When a light was hit: an index into Scene::quadLights, or past them, the quad lights'
+    /// count plus an index into Scene::pointLights (a sphere).
+    int light = -1;
     unsigned primID = 0;
     float U = 0.0f, V = 0.0f;  ///< Embree's hit parameters (encoded on n-gons)
     glm::vec3 Ng{0.0f};        ///< world-space geometric normal of the tessellated surface
@@ -106,6 +108,10 @@ public:
     /// fields are filled when `diff` is given.
     SurfaceInteraction Interact(const Ray& ray, const Hit& hit,
                                 const RayDifferentials* diff = nullptr) const;
+    /// The corners (4 per Embree quad, in primitive order) of an object rendered as quads (a
+    /// plain mesh, a limit tessellation), in world space at the frame time; empty for an object
+    /// that is Embree's subdivision surface. Emissive objects are sampled on these.
+    std::vector<glm::vec3> QuadCorners(int object) const;
     /// Ptex location of a hit on an object (the Embree primitive's mapping of its mesh).
     PtexCoord HitPtex(const Hit& hit) const;
     /// Limit surface at (ptex face, u, v) of an object at normalized shutter time `time`.

@@ -89,6 +89,17 @@ struct Object {
     int mesh = -1;        ///< index into Scene::meshes (meshes may be shared)
     int material = 0;
     TransformTrack transform;
+    /// false ("subdivision": "none"): the cage's polygons are rendered as they are, flat (a
+    /// plain mesh), each Ptex (sub-)face one Embree quad. Objects that share a mesh share this.
+    bool subdivide = true;
+    /// Radiance emitted from the surface (after the scene file's scale); any non-zero value makes
+    /// the object a light, sampled by area (renderer/scene/lights.h).
+    glm::vec3 emission{0.0f};
+    /// Emits on both sides; otherwise on the side the faces' winding (counter-clockwise seen from
+    /// outside) points to.
+    bool emissionTwoSided = false;
+
+    bool Emissive() const { return emission != glm::vec3(0.0f); }
 };
 
 struct EnvironmentLight {
@@ -110,6 +121,23 @@ struct QuadLight {
 struct DistantLight {
     glm::vec3 direction{0.0f, -1.0f, 0.0f};  ///< direction the light travels (towards the scene)
     glm::vec3 irradiance{1.0f};              ///< on a surface facing the light
+    /// Angular diameter in degrees (the sun: 0.53): a disc of uniform radiance, sampled by its
+    /// cone; 0 = a delta light.
+    float angleDegrees = 0.0f;
+    TransformTrack transform;
+};
+
+/// A point light ("point") or a spot light ("spot"): a sphere of uniform radiance
+/// intensity / (pi radius^2), or a delta light when the radius is 0.
+struct PointLight {
+    glm::vec3 position{0.0f};   ///< in the light's frame (transform)
+    glm::vec3 intensity{1.0f};  ///< W/sr (on the axis for a spot): irradiance I cos / d^2
+    float radius = 0.0f;
+    bool spot = false;
+    glm::vec3 direction{0.0f, -1.0f, 0.0f};  ///< spot: the axis it shines along (normalised)
+    /// Spot: half-angles in degrees; full intensity inside `innerDegrees`, none outside
+    /// `outerDegrees`, a smoothstep in cos between.
+    float innerDegrees = 25.0f, outerDegrees = 30.0f;
     TransformTrack transform;
 };
 
@@ -136,6 +164,7 @@ struct Scene {
     std::vector<EnvironmentLight> environments;  ///< at most one is used
     std::vector<QuadLight> quadLights;
     std::vector<DistantLight> distantLights;
+    std::vector<PointLight> pointLights;  ///< point and spot lights
     RenderSettings settings;
 };
 

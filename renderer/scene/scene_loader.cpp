@@ -353,6 +353,13 @@ void ParseMaterial(const Node& n, const std::string& name, const fs::path& base,
     scene->materials.push_back(m);
 }
 
+/// A non-zero direction, normalised.
+glm::vec3 UnitDirection(const Node& n) {
+    const glm::vec3 d = n.Vec3();
+    if (!(glm::length(d) > 1e-12f)) n.Fail("direction is zero");
+    return glm::normalize(d);
+}
+
 void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
     if (!n.raw().is_object()) n.Fail("expected a light object, got " + TypeName(n.raw()));
     const std::string type = n["type"].String();
@@ -384,19 +391,59 @@ void ParseLight(const Node& n, const fs::path& base, Scene* scene) {
         if (n.Has("two_sided")) q.twoSided = n["two_sided"].Bool();
         q.transform = ParseTrack(n);
         scene->quadLights.push_back(q);
-    } else if (type == "distant") {
-        n.Keys({"type", "direction", "irradiance", "transform", "keyframes"});
+    } else if (type == "distant" || type == "sun") {
+        n.Keys({"type", "direction", "irradiance", "angle", "transform", "keyframes"});
         DistantLight d;
-        d.direction = n["direction"].Vec3();
-        if (!(glm::length(d.direction) > 1e-12f)) n["direction"].Fail("direction is zero");
-        d.direction = glm::normalize(d.direction);
+        d.direction = UnitDirection(n["direction"]);
         d.irradiance = n["irradiance"].Vec3(0.0f, kBig);
+        // The sun's disc is 0.53 degrees across; "distant" stays the delta light it always was.
+        d.angleDegrees = type == "sun" ? 0.53f : 0.0f;
+        if (n.Has("angle")) d.angleDegrees = n["angle"].Number(0.0, 90.0);
         d.transform = ParseTrack(n);
         scene->distantLights.push_back(d);
+    } else if (type == "point" || type == "spot") {
+        const bool spot = type == "spot";
+        if (spot)
+            n.Keys({"type", "position", "intensity", "radius", "direction", "inner_angle",
+                    "outer_angle", "transform", "keyframes"});
+        else
+            n.Keys({"type", "position", "intensity", "radius", "transform", "keyframes"});
+        PointLight p;
+        p.spot = spot;
+        p.position = n["position"].Vec3();
+        p.intensity = n["intensity"].Vec3(0.0f, kBig);
+        if (n.Has("radius")) p.radius = n["radius"].Number(0.0, kBig);
+        if (spot) {
+            p.direction = UnitDirection(n["direction"]);
+            if (n.Has("outer_angle")) p.outerDegrees = n["outer_angle"].NumberOpen(0.0, 180.0);
+            // Without an inner angle the falloff takes the outer sixth of the cone.
+            p.innerDegrees = n.Has("inner_angle") ? n["inner_angle"].Number(0.0, 180.0)
+                                                  : p.outerDegrees * (5.0f / 6.0f);
+            if (p.innerDegrees > p.outerDegrees)
+                n["inner_angle"].Fail("the inner angle " + Fmt(p.innerDegrees) +
+                                      " is larger than the outer angle " + Fmt(p.outerDegrees));
+        }
+        p.transform = ParseTrack(n);
+        scene->pointLights.push_back(p);
     } else {
         n["type"].Fail("unknown light type '" + Excerpt(type) +
-                       "' (valid: environment, quad, distant)");
+                       "' (valid: environment, quad, distant, sun, point, spot)");
     }
+}
+
+/// An object's "emission": [r,g,b] radiance, or {"radiance": [r,g,b], "scale": s,
+/// "two_sided": b}.
+void ParseEmission(const Node& n, Object* obj) {
+    if (n.raw().is_array()) {
+        obj->emission = n.Vec3(0.0f, kBig);
+        return;
+    }
+    n.Keys({"radiance", "scale", "two_sided"});
+    const float scale = n.Has("scale") ? n["scale"].Number(0.0, kBig) : 1.0f;
+    obj->emission = n["radiance"].Vec3(0.0f, kBig) * scale;
+    if (!std::isfinite(obj->emission.x + obj->emission.y + obj->emission.z))
+        n["scale"].Fail("radiance x scale overflows a float");
+    if (n.Has("two_sided")) obj->emissionTwoSided = n["two_sided"].Bool();
 }
 
 void ParseRender(const Node& n, RenderSettings* s) {
@@ -645,15 +692,31 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
     int defaultMaterial = -1;
     for (size_t i = 0; i < objs.ArraySize(); ++i) {
         const Node o = objs.At(i);
-        o.Keys({"name", "mesh", "material", "transform", "keyframes"});
+        o.Keys({"name", "mesh", "material", "transform", "keyframes", "subdivision", "emission"});
         Object obj;
         obj.name = o.Has("name") ? o["name"].String() : "object" + std::to_string(i);
         obj.objPath = Resolve(base, o["mesh"].String());
-        auto it = meshIds.find(obj.objPath);
+        if (o.Has("subdivision")) {
+            const std::string sub = o["subdivision"].String();
+            if (sub != "catmull-clark" && sub != "none")
+                o["subdivision"].Fail("unknown subdivision '" + Excerpt(sub) +
+                                      "' (valid: catmull-clark, none)");
+            obj.subdivide = sub == "catmull-clark";
+        }
+        if (o.Has("emission")) ParseEmission(o["emission"], &obj);
+        // A mesh is one Embree geometry of one form: a file used both ways gets two copies.
+        const auto key = [&](bool subdivide) { return (subdivide ? "s:" : "p:") + obj.objPath; };
+        auto it = meshIds.find(key(obj.subdivide));
         if (it == meshIds.end()) {
-            RequireFile(o["mesh"], obj.objPath, "mesh file");
-            scene.meshes.push_back(LoadObj(obj.objPath, warnings));  // errors name the OBJ line
-            it = meshIds.emplace(obj.objPath, int(scene.meshes.size()) - 1).first;
+            const auto other = meshIds.find(key(!obj.subdivide));
+            if (other != meshIds.end()) {
+                ControlCage copy = scene.meshes[size_t(other->second)];
+                scene.meshes.push_back(std::move(copy));
+            } else {
+                RequireFile(o["mesh"], obj.objPath, "mesh file");
+                scene.meshes.push_back(LoadObj(obj.objPath, warnings));  // errors name the line
+            }
+            it = meshIds.emplace(key(obj.subdivide), int(scene.meshes.size()) - 1).first;
         }
         obj.mesh = it->second;
         if (o.Has("material")) {
@@ -682,8 +745,9 @@ Scene LoadScene(const std::string& path, std::vector<std::string>* warnings) {
         const Node ls = root["lights"];
         for (size_t i = 0; i < ls.ArraySize(); ++i) ParseLight(ls.At(i), base, &scene);
     }
-    const bool lit =
-        !scene.environments.empty() || !scene.quadLights.empty() || !scene.distantLights.empty();
+    bool lit = !scene.environments.empty() || !scene.quadLights.empty() ||
+               !scene.distantLights.empty() || !scene.pointLights.empty();
+    for (const Object& o : scene.objects) lit |= o.Emissive();
     if (!lit && warnings && IntegratorUsesLights(scene.settings.integrator))
         warnings->push_back(path + ": no lights: the '" +
                             std::string(IntegratorName(scene.settings.integrator)) +

@@ -340,7 +340,8 @@ ShadedSample ShadeShadowSample(const Context& c, const SampleRequest& r, RayCoun
         ray.tfar = dist * (1.0f - 1e-4f);
         ++rays.shadow;
         Hit hit;
-        if (!c.rs.Intersect(ray, &hit) || hit.light >= 0) {
+        // Quad lights are see-through here (a sphere light is not).
+        if (!c.rs.Intersect(ray, &hit) || (hit.light >= 0 && hit.light < int(c.quads.size()))) {
             ++open;
             continue;
         }
@@ -407,14 +408,14 @@ ShadedSample ShadeVisibilitySample(const Context& c, const SampleRequest& r, Ray
 /// material uses another filter get the plain per-hit estimator.
 glm::vec3 LiDirectCachedShadows(const Context& c, const Ray& ray, const Hit& hit, bool found,
                                 Rng& rng, const RayDifferentials& diff, RayCounts& rays) {
-    if (!found) return c.env ? c.env->Eval(ray.dir) : glm::vec3(0.0f);
-    if (hit.light >= 0) return c.QuadEmission(hit.light, ray.dir);
+    if (!found) return c.Background(ray.dir);
+    if (hit.light >= 0) return c.HitEmission(ray, hit);
     if (c.tsc->FilterOf(hit.object) != TextureFilterKind::SoftShadow)
         return LiPath(c, ray, hit, found, rng, 1, rays);
     const SurfaceInteraction si = c.rs.Interact(ray, hit, &diff);
     const Bsdf bsdf = MakeBsdf(c, si);
     const glm::vec3 wo = -ray.dir;
-    glm::vec3 L(0.0f);
+    glm::vec3 L = c.HitEmission(ray, hit);  // an emissive object's own light
     // Area lights: unshadowed estimate times cached visibility.
     const int m = c.opt.texture.shadowSamples;
     glm::vec3 unshadowed(0.0f);

@@ -97,7 +97,7 @@ public:
         ctx.tsc = cache_ = cache;
         ctx.cacheStats = &stats_;
         // Footprints of visible texels only: the prepass of each pass marks them. Shading at
-        // the hits has no footprints (render.cpp, AoHitsBin, PathHitsTrace; a render with AOVs
+        // the hits has no footprints (hit_binning.cpp: AoHitsBin, PathHitsTrace; a render with AOVs
         // shades on the grid).
         const bool hits = ShadesAtHits(opt);
         if (prepass == Prepass::Allowed && !hits && VisibleOnly(opt.texture.footprint, k) &&

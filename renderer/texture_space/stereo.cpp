@@ -94,6 +94,10 @@ StereoRig StereoRigOf(const Camera& camera) {
     return {camera.eyeSeparation, camera.convergence};
 }
 
+float DefaultEyeSeparation(float convergence) {
+    return convergence / 30.0f;
+}
+
 void CheckStereoRig(const StereoRig& rig, const std::string& where) {
     if (!(std::isfinite(rig.eyeSeparation) && rig.eyeSeparation >= 0.0f))
         throw InputError(where, "the eye separation must be a finite number >= 0 (got " +

@@ -70,6 +70,10 @@ struct StereoRig {
 /// The scene camera's rig (Camera::eyeSeparation, Camera::convergence).
 StereoRig StereoRigOf(const Camera& camera);
 
+/// The eye separation of a rig given none: 1/30 of the convergence distance (the
+/// stereographers' rule of thumb for comfortable parallax).
+float DefaultEyeSeparation(float convergence);
+
 /// Throws InputError naming `where` unless the separation is finite and >= 0 and the
 /// convergence finite and > 0.
 void CheckStereoRig(const StereoRig& rig, const std::string& where);

@@ -101,13 +101,13 @@ float MipZeroTexelSize(glm::vec3 lo, glm::vec3 hi, float texelFraction = 1.0f / 
 /// door between the renderer and libtexcache: it picks each hit's texel and each object's
 /// filter, and blends texels over frames; nothing else touches the ShadingCache inside.
 namespace internal {
-/// A camera sample of a pass as the visibility prepass saw it (see render.cpp's PassTexels).
+/// A camera sample of a pass as the visibility prepass saw it (see render_internal.h's PassTexels).
 struct PassTexel {
     uint64_t key;     ///< TexelKey::Pack()
     int32_t mesh;     ///< the texel's cache mesh, or a PassTexels marker (< 0)
     glm::vec3 found;  ///< the texel's value, when the prepass found it cached
 };
-/// A camera sample of a pass of hit-binned AO (render.cpp, AoHitsBin): where it hit, for the
+/// A camera sample of a pass of hit-binned AO (hit_binning.cpp, AoHitsBin): where it hit, for the
 /// reconstruction that reads the bins around it. 12 bytes: a pass's records are written once and
 /// read once, and 1920x1080 at 4 spp holds 8.3M of them.
 struct HitRecord {
@@ -124,9 +124,9 @@ struct HitRecord {
         return uint16_t(std::min(x * kUvScale, kUvScale - 1.0f));
     }
 };
-/// A binned diffuse hit of a pass of hit-binned light (render.cpp, PathHitsTrace): the light it
-/// bins, the albedo its reconstruction is multiplied by, and the level of its texel (its bins lie
-/// levels above it, chosen once the pass's noise is known).
+/// A binned diffuse hit of a pass of hit-binned light (hit_binning.cpp, PathHitsTrace): the light
+/// it bins, the albedo its reconstruction is multiplied by, and the level of its texel (its bins
+/// lie levels above it, chosen once the pass's noise is known).
 struct BinnedHit {
     glm::vec3 light, albedo;
     int32_t texelLevel;

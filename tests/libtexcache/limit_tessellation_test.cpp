@@ -9,7 +9,7 @@
 #include <map>
 #include <string>
 
-#include "support/cages.h"
+#include "testing/cages.h"
 #include "texcache/limit_tessellation.h"
 #include "texcache/topology.h"
 

@@ -7,7 +7,7 @@
 #include <thread>
 #include <vector>
 
-#include "tests/support/cages.h"
+#include "testing/cages.h"
 #include "texcache/record_cache.h"
 
 namespace texcache {

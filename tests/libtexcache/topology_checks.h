@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// GoogleTest checks of a PtexTopology, shared by cache_test and topology_test.
+// GoogleTest checks of a PtexTopology, shared by footprint_test and topology_test.
 #pragma once
 #include <string>
 

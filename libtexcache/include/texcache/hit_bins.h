@@ -243,7 +243,7 @@ public:
     static constexpr size_t BytesFor(size_t blocks) { return blocks * kBytesPerBlock; }
     /// What the table holds, as a number no other table's contents and no earlier contents of
     /// this one had (a new one at each Clear, process-wide): a reader may keep what it read
-    /// from the table while the generation stays (render.cpp's per-thread reconstruction memo).
+    /// from the table while the generation stays (the renderer's per-thread reconstruction memo).
     uint64_t Generation() const { return generation_; }
     /// Adds that found no room since the last Clear.
     uint64_t Dropped() const { return dropped_.load(std::memory_order_relaxed); }

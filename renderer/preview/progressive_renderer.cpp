@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "progressive_renderer.h"
+#include "renderer/preview/progressive_renderer.h"
 
 #include <algorithm>
 #include <chrono>
@@ -10,6 +10,7 @@
 #include <tbb/parallel_for.h>
 
 #include "renderer/frame_buffers/frame_buffers_render.h"
+#include "renderer/render_policy.h"
 #include "renderer/scene/camera.h"
 #include "renderer/scene/render_scene.h"
 #include "renderer/texture_space/stereo.h"
@@ -257,6 +258,7 @@ SceneAnimation AnimationOf(const Scene& scene) {
     for (const Object& o : scene.objects) track(o.transform, false);
     for (const QuadLight& l : scene.quadLights) track(l.transform, false);
     for (const DistantLight& l : scene.distantLights) track(l.transform, false);
+    for (const PointLight& l : scene.pointLights) track(l.transform, false);
     return a;
 }
 
@@ -480,7 +482,7 @@ void ProgressiveRenderer::Run() {
                     scene_.materials[m].cacheRadius =
                         m < cur.materialRadius.size() ? cur.materialRadius[m] : -1;
                 }
-                cache = std::make_unique<TextureSpaceCache>(*rs, TextureOptionsOf(cur));
+                cache = MakeTextureSpaceCache(*rs, TextureOptionsOf(cur), "sample/texel cache MiB");
                 built = eff;
             }
 
@@ -518,7 +520,7 @@ void ProgressiveRenderer::Run() {
                 opt.width = cur.width, opt.height = cur.height;
                 opt.spp = cur.sppPerFrame;
                 // A new seed per frame: the stage's history averages independent estimates.
-                opt.seed = cur.seed + stageFrames++ * 0x9E3779B9ull;
+                opt.seed = FrameSeed(cur.seed, stageFrames++);
                 opt.maxDepth = cur.maxDepth;
                 opt.frameTime = frameTime;
                 opt.progress = false;
@@ -568,7 +570,7 @@ void ProgressiveRenderer::Run() {
                 opt.width = cur.width, opt.height = cur.height;
                 opt.spp = cur.sppPerFrame;
                 // A new seed per accumulated frame: frames are independent estimates.
-                opt.seed = cur.seed + uint64_t(accumulated) * 0x9E3779B9ull;
+                opt.seed = FrameSeed(cur.seed, uint64_t(accumulated));
                 opt.maxDepth = cur.maxDepth;
                 opt.aoSamples = cur.aoSamples;
                 opt.aoDistance = cur.aoDistance;
@@ -591,9 +593,10 @@ void ProgressiveRenderer::Run() {
                 RenderResult r;
                 if (stereo) {
                     const float convergence = glm::length(cam.Target() - cam.Position());
-                    const StereoRig rig{
-                        cur.eyeSeparation >= 0.0f ? cur.eyeSeparation : convergence / 30.0f,
-                        std::max(convergence, 1e-6f)};
+                    const StereoRig rig{cur.eyeSeparation >= 0.0f
+                                            ? cur.eyeSeparation
+                                            : DefaultEyeSeparation(convergence),
+                                        std::max(convergence, 1e-6f)};
                     const StereoResult both = RenderStereo(*rs, opt, rig, tsc);
                     r.beauty = SideBySide(both.left.beauty, both.right.beauty);
                     r.stats = BothEyes(both);

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
-// Progressive rendering for the preview on a worker thread.
+// Progressive rendering for the preview on a worker thread: the preview's rendering engine, without
+// a window (apps/preview draws what it publishes; the tests drive it directly).
 //
 // Threading: the UI thread only posts settings and camera (Post, RequestPick)
 // and reads results (WithDisplay, Stats, CopyImage); it never waits for a frame (except the
@@ -32,8 +33,8 @@
 #include <thread>
 #include <vector>
 
-#include "orbit_camera.h"
 #include "renderer/image/image.h"
+#include "renderer/preview/orbit_camera.h"
 #include "renderer/render.h"
 #include "renderer/scene/scene.h"
 #include "screen_space/screen_denoiser.h"
@@ -93,8 +94,8 @@ struct PreviewSettings {
     screen::MotionKind motionKind = screen::MotionKind::Traditional;
     /// Stereo (renderer/texture_space/stereo.h): the beauty and debug-integrator views show both
     /// eyes side by side, the right eye from the left eye's cache, converging at the orbit's pivot;
-    /// the eyes `eyeSeparation` apart (< 0: 1/30 of the distance to the pivot). Cache and heat
-    /// views and the screen-space stage stay mono.
+    /// the eyes `eyeSeparation` apart (< 0: DefaultEyeSeparation of the distance to the pivot).
+    /// Cache and heat views and the screen-space stage stay mono.
     bool stereo = false;
     float eyeSeparation = -1.0f;
 

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "orbit_camera.h"
+#include "renderer/preview/orbit_camera.h"
 
 #include <algorithm>
 #include <cmath>

@@ -169,8 +169,8 @@ inline screen::FrameCamera SynthCamera(const SynthScene& sc, float frame) {
 /// Renders frame `frame` with `spp` samples per pixel averaged (spp > 1 approaches the noise-free
 /// components; the motion-vector inputs are those of the first sample). Defined in
 /// screen_space_scene.cpp, which every build compiles optimized: the caster is most of the
-/// screen-space tests' time, and at the -O0 of the sanitizer builds' test files (glm not
-/// inlined) it was 82% of the slowest one's.
+/// screen-space tests' time, the more so at the -O0 of the sanitizer builds' test files (glm not
+/// inlined).
 FrameBuffers SynthRender(const SynthScene& sc, int frame, uint32_t seed, int spp = 1);
 
 /// RMSE between two images over the pixels where `mask` (if given) is true.

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // The synthetic frames' ray caster (screen_space_scene.h says what it renders).
-#include "tests/support/screen_space_scene.h"
+#include "testing/screen_space_scene.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

@@ -1,0 +1,11 @@
+# Runs an example for CTest (cmake -P): PROGRAM with ARGS (a list) must exit 0 and write IMAGE.
+get_filename_component(dir "${IMAGE}" DIRECTORY)
+file(MAKE_DIRECTORY "${dir}")
+file(REMOVE "${IMAGE}")
+execute_process(COMMAND "${PROGRAM}" ${ARGS} RESULT_VARIABLE code)
+if(NOT code EQUAL 0)
+  message(FATAL_ERROR "${PROGRAM} exited with ${code}")
+endif()
+if(NOT EXISTS "${IMAGE}")
+  message(FATAL_ERROR "${PROGRAM} did not write ${IMAGE}")
+endif()

@@ -1,0 +1,113 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "renderer/render_policy.h"
+
+#include <unistd.h>
+
+#include <cmath>
+#include <new>
+#include <utility>
+
+#include "texcache/enum_names.h"
+#include "texcache/error.h"
+
+namespace texcache {
+
+namespace {
+constexpr EnumName<CachedLight> kCachedLights[] = {
+    {"auto", CachedLight::Auto}, {"all", CachedLight::All}, {"indirect", CachedLight::Indirect}};
+}  // namespace
+
+float AnimationFrameTime(float start, int frame, float fps) {
+    return start + float(frame) / fps;
+}
+
+uint64_t FrameSeed(uint64_t seed, uint64_t frame) {
+    return seed + frame * 0x9E3779B9ull;
+}
+
+std::unique_ptr<TextureSpaceCache> MakeTextureSpaceCache(const RenderScene& rs,
+                                                         const TextureSpaceOptions& t,
+                                                         const std::string& where) {
+    try {
+        return std::make_unique<TextureSpaceCache>(rs, t);
+    } catch (const std::bad_alloc&) {
+        throw InputError(where, "cannot allocate the texture-space caches (" +
+                                    std::to_string(t.cache.sampleCacheBytes >> 20) + " + " +
+                                    std::to_string(t.cache.texelCacheBytes >> 20) + " MiB)");
+    }
+}
+
+AnimationFrames::AnimationFrames(const texcache::Scene& scene,
+                                 const RenderSceneOptions& sceneOptions,
+                                 const RenderOptions& options, float fps, std::string cacheWhere)
+    : scene_(scene),
+      sceneOptions_(sceneOptions),
+      base_(options),
+      fps_(fps),
+      cacheWhere_(std::move(cacheWhere)),
+      options_(options) {}
+
+void AnimationFrames::Pose(int frame) {
+    sceneOptions_.frameTime = AnimationFrameTime(base_.frameTime, frame, fps_);
+    rs_.emplace(scene_, sceneOptions_);
+    if (base_.texture.enabled && !cache_)
+        cache_ = MakeTextureSpaceCache(*rs_, base_.texture, cacheWhere_);
+    if (cache_) cache_->BeginFrame(uint32_t(frame));
+    options_ = base_;
+    options_.frameTime = sceneOptions_.frameTime;
+    options_.seed = FrameSeed(base_.seed, uint64_t(frame));
+}
+
+void SizeTextureCaches(RenderOptions* opt, int views, GivenCacheSizes given,
+                       const std::string& where) {
+    TextureSpaceOptions& t = opt->texture;
+    if (!t.enabled || t.cache.referenceMode) return;
+    CacheSettings fit = t.cache;
+    // Cached visibility keeps a second term per texel under keys of its own (texture_space.h).
+    const int terms = t.cachedVisibility ? 2 : 1;
+    SizeCachesToFrame(&fit, opt->width, opt->height, views * terms, opt->integrator, t.footprint);
+    // Shading at the hits keeps its bins beside the grid caches, which it never fills: they take
+    // a token 64 KiB each instead of tens of MiB zeroed for nothing.
+    if (ShadesAtHits(*opt)) fit.sampleCacheBytes = fit.texelCacheBytes = size_t(64) << 10;
+    if (!given.sample) t.cache.sampleCacheBytes = fit.sampleCacheBytes;
+    if (!given.texel) t.cache.texelCacheBytes = fit.texelCacheBytes;
+    const double mib = 1.0 / double(1 << 20);
+    const double sample = double(t.cache.sampleCacheBytes) * mib,
+                 texel = double(t.cache.texelCacheBytes) * mib, have = PhysicalMemoryMiB();
+    if (sample + texel > have)
+        throw InputError(where, "the caches (" + std::to_string(llround(sample)) + " + " +
+                                    std::to_string(llround(texel)) +
+                                    " MiB) do not fit in this machine's " +
+                                    std::to_string(llround(have)) + " MiB of memory");
+}
+
+double PhysicalMemoryMiB() {
+    return double(::sysconf(_SC_PHYS_PAGES)) * double(::sysconf(_SC_PAGESIZE)) / (1 << 20);
+}
+
+TextureSamples AutoTextureSamples(bool gridAsked) {
+    return gridAsked ? TextureSamples::Grid : TextureSamples::Hits;
+}
+
+CachedLight ParseCachedLight(const std::string& name, const std::string& where) {
+    return ParseEnum(kCachedLights, name, where, "value");
+}
+
+LightKinds SceneLightKinds(const Scene& scene) {
+    LightKinds k;
+    k.soft = !scene.environments.empty() || !scene.quadLights.empty();
+    for (const DistantLight& d : scene.distantLights)
+        (d.angleDegrees > 0.0f ? k.soft : k.delta) = true;
+    for (const PointLight& p : scene.pointLights) (p.radius > 0.0f ? k.soft : k.delta) = true;
+    for (const Object& o : scene.objects) k.soft |= o.Emissive();
+    return k;
+}
+
+CachedDirect CachedDirectLight(CachedLight choice, LightKinds kinds, TextureSamples samples) {
+    if (choice == CachedLight::All) return {true, false};
+    if (choice == CachedLight::Indirect || samples != TextureSamples::Hits || !kinds.soft)
+        return {false, false};
+    return {true, kinds.delta};
+}
+
+}  // namespace texcache

@@ -1,0 +1,263 @@
+// SPDX-License-Identifier: Apache-2.0
+// Shading at the camera's hits, phase 2 of a pass: each camera sample's value read back from the
+// bins phase 1 (hit_binning.cpp) filled, by a bilinear reconstruction over the 2x2 bins around
+// its hit, across face edges through the Ptex adjacency, blended towards the level above by the
+// two levels' difference and the finer one's noise (the note at the top of texture_space.h).
+// Neighbouring samples read mostly the same bins: each thread keeps the cells it read last.
+#include <algorithm>
+#include <array>
+#include <memory>
+
+#include "renderer/render_internal.h"
+
+namespace texcache::internal {
+
+namespace {
+
+/// The bilinear reconstruction of hit-binned shading at a camera sample: the 2x2 bins around its
+/// (u,v) at one of its bin levels, across face edges through the Ptex adjacency, each weighted
+/// by its bilinear weight and its count.
+///
+/// Neighbouring samples mostly read the same 2x2 bins, so a sample whose cell is one its level
+/// kept (CellSet) reuses its values (BinCell); other cells' bins are found through a small memo
+/// of the thread's (BinMemo, kept from tile to tile: ThreadCells), keyed by the bin's
+/// coordinates before any edge crossing: a hit there saves the crossing and the probe of the
+/// shared table.
+template <typename Bin>
+struct BinMemo {
+    static constexpr int kLog2 = 8;
+    struct Entry {  // the value is uninitialised until the key is set (see HitBins::Batch)
+        Entry() {}
+        uint64_t key = TexelKey::kEmpty;
+        union {
+            typename Bin::Value n;
+        };
+    } at[1 << kLog2];
+};
+template <typename Bin>
+struct BinCell {
+    int32_t mesh = -1, face = -1, level = -1, i0 = 0, j0 = 0;
+    typename Bin::Value n[4];  ///< bins (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
+    float w[4];                ///< the current sample's bilinear weights
+};
+/// The values of the 2x2 bins from (i0, j0) of a face at `level` (res a side) into `cell`.
+template <typename Bin>
+void FetchCell(const MeshGrids& g, const BinTable<Bin>& bins, int face, int level, int res, int i0,
+               int j0, BinMemo<Bin>& memo, BinCell<Bin>* cell) {
+    for (int k = 0; k < 4; ++k) {
+        typename Bin::Value& out = cell->n[k];
+        out = {};
+        const int i = i0 + (k & 1), j = j0 + (k >> 1);
+        const bool outU = i < 0 || i >= res, outV = j < 0 || j >= res;
+        if (outU && outV) continue;  // a corner bin: diagonal across a vertex
+        // Coordinates shifted by one (-1 and res are the neighbours across the edges).
+        const uint64_t local = TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
+                                        uint16_t(i + 1), uint16_t(j + 1)}
+                                   .Pack();
+        auto& m = memo.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - BinMemo<Bin>::kLog2)];
+        if (m.key == local) {
+            out = m.n;
+            continue;
+        }
+        TexelKey key;
+        if (!outU && !outV) {
+            key = {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(i), uint16_t(j)};
+        } else {
+            const int edge = j < 0 ? 0 : i >= res ? 1 : j >= res ? 2 : 3;
+            float along, inward;
+            UvToEdge(edge, (float(i) + 0.5f) / float(res), (float(j) + 0.5f) / float(res), &along,
+                     &inward);
+            int nf, ne;
+            float nu, nv, scale;
+            if (!g.Topology().Cross(face, edge, along, -inward, &nf, &nu, &nv, &ne, &scale)) {
+                m.key = local, m.n = {};  // a boundary: no bin
+                continue;
+            }
+            const int nl = g.ClampMip(nf, level);
+            const int nres = g.Res(nf, nl);
+            key = {g.FaceOffset() + uint32_t(nf), uint8_t(nl), uint16_t(QuantizeCoord(nu, nres)),
+                   uint16_t(QuantizeCoord(nv, nres))};
+        }
+        out = bins.Find(key);
+        m.key = local, m.n = out;
+    }
+}
+/// The cells a level keeps between samples, one per parity of the cell's corner (i0, j0): the
+/// four cells around a bin centre. A pixel's jittered samples straddle cell edges when bins are
+/// a few pixels wide: with one cell kept, a large share of the reads would fetch it again.
+template <typename Bin>
+using CellSet = std::array<BinCell<Bin>, 4>;
+/// The 2x2 bins around point (u,v) of `face` at `level` of mesh `mesh` (grids `g`) in the cell of
+/// `cells` for their corner's parity (fetched unless they are that cell's already), and the
+/// point's bilinear weights in its w.
+template <typename Bin>
+const BinCell<Bin>& CellAt(const MeshGrids& g, const BinTable<Bin>& bins, int mesh, int face,
+                           int level, float u, float v, BinMemo<Bin>& memo, CellSet<Bin>& cells) {
+    const int res = g.Res(face, level);
+    const float x = u * float(res) - 0.5f, y = v * float(res) - 0.5f;
+    // floor() by hand: std::floor is a libm call on baseline x86-64 (no SSE4.1 roundss), a
+    // visible share of this function's time; x and y lie in [-0.5, res).
+    int i0 = int(x), j0 = int(y);
+    i0 -= float(i0) > x ? 1 : 0, j0 -= float(j0) > y ? 1 : 0;
+    const float fx = x - float(i0), fy = y - float(j0);
+    BinCell<Bin>& cell = cells[size_t((i0 & 1) | ((j0 & 1) << 1))];
+    if (cell.mesh != mesh || cell.face != face || cell.level != level || cell.i0 != i0 ||
+        cell.j0 != j0) {
+        FetchCell(g, bins, face, level, res, i0, j0, memo, &cell);
+        cell.mesh = mesh, cell.face = face, cell.level = level, cell.i0 = i0, cell.j0 = j0;
+    }
+    cell.w[0] = (1.0f - fx) * (1.0f - fy), cell.w[1] = fx * (1.0f - fy);
+    cell.w[2] = (1.0f - fx) * fy, cell.w[3] = fx * fy;
+    return cell;
+}
+/// What a thread's reconstructions keep between samples: the cells of a record's level and of the
+/// one above it, each level with its own memo (in a shared one, the two levels' bins would evict
+/// each other).
+template <typename Bin>
+struct LevelCells {
+    BinMemo<Bin> fineMemo, coarseMemo;
+    CellSet<Bin> fine, coarse;
+};
+/// The calling thread's LevelCells for reading `bins`: kept from tile to tile while the table
+/// holds the same bins (its Generation), so that a tile finds the bins its neighbours, read
+/// before on this thread, fetched already; emptied when the table changed.
+template <typename Bin>
+LevelCells<Bin>& ThreadCells(const BinTable<Bin>& bins) {
+    thread_local uint64_t generation = 0;
+    thread_local std::unique_ptr<LevelCells<Bin>> cells;
+    if (!cells || generation != bins.Generation()) {
+        if (cells)
+            *cells = LevelCells<Bin>();
+        else
+            cells = std::make_unique<LevelCells<Bin>>();
+        generation = bins.Generation();
+    }
+    return *cells;
+}
+/// A cell's bilinear estimate: the weighted mean of its bins, the weighted count (sum w n) and
+/// the squared-weight count (sum w^2 n): its variance is a sample's variance x count2 / count^2.
+struct CellEstimate {
+    glm::vec3 mean{0.0f};
+    float count = 0.0f, count2 = 0.0f;
+};
+CellEstimate EstimateOf(const BinCell<CountBin>& c) {
+    CellEstimate e;
+    float num = 0.0f;
+    for (int k = 0; k < 4; ++k) {
+        const float w = c.w[k], n = float(c.n[k].trials);
+        num += w * float(c.n[k].successes), e.count += w * n, e.count2 += w * w * n;
+    }
+    e.mean = glm::vec3(e.count > 0.0f ? num / e.count : 0.0f);
+    return e;
+}
+CellEstimate EstimateOf(const BinCell<RadianceBin>& c) {
+    CellEstimate e;
+    glm::dvec3 num(0.0);  // fixed-point sums: up to 2^64, beyond a float's precision
+    for (int k = 0; k < 4; ++k) {
+        const RadianceBin::Value& n = c.n[k];
+        const double w = double(c.w[k]);
+        num += w * glm::dvec3(double(n.sum[0]), double(n.sum[1]), double(n.sum[2]));
+        e.count += c.w[k] * float(n.count), e.count2 += c.w[k] * c.w[k] * float(n.count);
+    }
+    if (e.count > 0.0f) e.mean = glm::vec3(num / (double(e.count) * RadianceBin::kScale));
+    return e;
+}
+/// The reconstruction at record `h` from its level's bins and the level above (the note at the
+/// top of texture_space.h): fine + alpha (coarse - fine), alpha = CoarseWeight of their
+/// luminance difference and of the fine estimate's variance, `variance(fine, coarse)`. With
+/// k = 0, h's level alone (its record then names the level of a stochastic blend); the same
+/// where h's level is its face's coarsest (both levels' bins were clamped to it).
+template <typename Bin, typename Variance>
+glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins, const HitRecord& h,
+                      LevelCells<Bin>& cells, double k, Variance&& variance) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level();
+    const float u = h.U(), v = h.V();
+    const CellEstimate fine =
+        EstimateOf(CellAt(g, bins, h.mesh, face, level, u, v, cells.fineMemo, cells.fine));
+    const int up = g.ClampMip(face, level + 1);
+    if (!(k > 0.0) || up == level) return fine.mean;
+    const CellEstimate coarse =
+        EstimateOf(CellAt(g, bins, h.mesh, face, up, u, v, cells.coarseMemo, cells.coarse));
+    if (!(coarse.count > 0.0f)) return fine.mean;
+    if (!(fine.count > 0.0f)) return coarse.mean;
+    const glm::vec3 d = coarse.mean - fine.mean;
+    return fine.mean + float(CoarseWeight(Luminance(d), variance(fine, coarse), k)) * d;
+}
+float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
+                    LevelCells<CountBin>& cells) {
+    return Reconstruct(tsc, bins, h, cells, kAoCoarseWeightK,
+                       [](const CellEstimate& fine, const CellEstimate& coarse) {
+                           // Binomial, with the coarse level's steadier mean (kept off 0 and 1,
+                           // where one bin's count would claim no noise at all).
+                           const double p = std::clamp(double(coarse.mean.x), 0.02, 0.98);
+                           return p * (1.0 - p) * double(fine.count2) /
+                                  (double(fine.count) * double(fine.count));
+                       })
+        .x;
+}
+/// `relativeVariance`: one binned sample's variance over its mean squared, measured over the
+/// pass (PathHitsTrace); 0 when not measured.
+glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const RadianceBins& bins,
+                              const HitRecord& h, LevelCells<RadianceBin>& cells,
+                              double relativeVariance) {
+    return Reconstruct(tsc, bins, h, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
+                       [&](const CellEstimate& fine, const CellEstimate& coarse) {
+                           const double y = Luminance(coarse.mean);
+                           return relativeVariance * y * y * double(fine.count2) /
+                                  (double(fine.count) * double(fine.count));
+                       });
+}
+
+/// Phase 2 of hit binning for one tile: each pixel's sum, from `start(pixel)` on, of
+/// `shade(i)` for the records i of its spp camera samples of the pass, in sample order, added to
+/// the frame's sums once.
+template <typename Start, typename Shade>
+void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, double* sum,
+                 Start&& start, Shade&& shade) {
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+            const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
+            glm::dvec3 acc = start(pixel);
+            for (int s = 0; s < spp; ++s) acc += shade(pixel * size_t(spp) + size_t(s));
+            double* px = &sum[3 * pixel];
+            px[0] += acc.x, px[1] += acc.y, px[2] += acc.z;
+        }
+}
+
+}  // namespace
+
+/// Hit-binned AO, phase 2 of a pass, for one tile: each camera sample's reconstruction, added to
+/// its pixel in sample order.
+void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                   const HitRecord* records, const HitBins& bins, double* sum) {
+    LevelCells<CountBin>& cells = ThreadCells(bins);
+    ResolveTile(
+        c, r, s1 - s0, sum, [](size_t) { return glm::dvec3(0.0); },
+        [&](size_t i) {
+            const HitRecord& h = records[i];
+            return glm::dvec3(h.mesh == PassTexels::kMiss ? 0.0
+                              : h.mesh == PassTexels::kLight
+                                  ? 1.0
+                                  : double(ReconstructAo(*c.tsc, bins, h, cells)));
+        });
+}
+
+/// Hit-binned diffuse light, phase 2 of a pass, for one tile: each pixel's per-hit part, then
+/// albedo x the reconstruction of each binned camera sample, in sample order
+/// (`relativeVariance`: see ReconstructRadiance).
+void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                     const HitRecord* records, const BinnedHit* binnedHits,
+                     const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
+                     double* sum) {
+    LevelCells<RadianceBin>& cells = ThreadCells(bins);
+    ResolveTile(
+        c, r, s1 - s0, sum, [&](size_t pixel) { return perHit[pixel]; },
+        [&](size_t i) {
+            if (records[i].mesh < 0) return glm::dvec3(0.0);
+            return glm::dvec3(binnedHits[i].albedo * ReconstructRadiance(*c.tsc, bins, records[i],
+                                                                         cells, relativeVariance));
+        });
+}
+
+}  // namespace texcache::internal

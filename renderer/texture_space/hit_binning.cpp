@@ -1,0 +1,246 @@
+// SPDX-License-Identifier: Apache-2.0
+// Shading at the camera's hits (TextureSamples::Hits), phase 1 of a pass: each camera sample
+// traced and shaded as per-hit shading shades it (same rays, same random streams), and what its
+// hit receives added to bins of a coarser level of its object's texel grids, at two levels so
+// that phase 2 (bin_reconstruction.cpp) can blend them. A sample's record keeps where it hit.
+// The note at the top of texture_space.h says why the bins' estimate converges.
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "renderer/render_internal.h"
+
+namespace texcache::internal {
+
+namespace {
+
+/// The camera rays of a hit-binned tile, traced: per-hit shading's rays and random streams,
+/// without differentials unless `diff` (product sampling at camera hits needs them): the bins'
+/// level needs only the footprint's size (BinHit).
+void HitsCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                    CameraSample* cs, size_t total, bool diff, RayCounts& rays) {
+    Cursor gen(r, s0);
+    if (c.camera.IsPinhole() && !c.cameraMoves && !diff) {
+        for (size_t b = 0; b < total; b += kCameraBlock)
+            PinholeCameraRays(c, r, s0, s1, gen, cs + b, std::min(kCameraBlock, total - b));
+    } else {
+        for (size_t i = 0; i < total; ++i, gen.Next(r, s0, s1))
+            CameraRay(c, gen.x, gen.y, gen.s, &cs[i].rng, &cs[i].ray, diff ? &cs[i].diff : nullptr);
+    }
+    IntersectCameraRays(
+        c, cs, total, rays,
+        c.hitRect.Outside(r.cols().begin(), r.rows().begin(), r.cols().end(), r.rows().end()));
+}
+
+/// The level of the texel a camera hit at distance `t` lands on (eq. 1 with the pixel's
+/// footprint taken as a disc across the ray: the minor axis of its ellipse on the surface, which
+/// eq. 1's minimum picks), on the grids of `mesh`.
+int HitTexelLevel(const Context& c, const SurfaceInteraction& si, float t, int mesh) {
+    const MeshGrids& g = c.tsc->Grids(mesh);
+    const float w = c.camera.FootprintAt(t);
+    return ComputeMip(g.Log2Res(si.ptex.face), w / glm::length(si.dPdu), 0.0f, 0.0f,
+                      w / glm::length(si.dPdv), c.opt.texture.cache.lodBias);
+}
+/// The bins of point (u,v) of `face` at the levels `bias` and `bias` + 1 above `texelLevel`.
+void BinKeys(const MeshGrids& g, int face, float u, float v, int texelLevel, int bias,
+             TexelKey keys[2]) {
+    for (int k = 0; k < 2; ++k) {
+        const int level = g.ClampMip(face, texelLevel + bias + k);
+        const int res = g.Res(face, level);
+        keys[k] = {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(QuantizeCoord(u, res)),
+                   uint16_t(QuantizeCoord(v, res))};
+    }
+}
+/// Whether camera sample (x, y, s) reads its upper bin level: with probability `blend`, the
+/// lower one otherwise (stochastic filtering: in expectation the blend of the two, for one
+/// reconstruction instead of two), decided by a hash of its pixel and index rather than its
+/// random stream, which stays the one per-hit shading draws from.
+bool ReadsUpperLevel(const Context& c, int x, int y, int s, float blend) {
+    const uint64_t u =
+        MixBits(PixelSeed(c.opt.seed, x, y, c.opt.width) ^ (uint64_t(s) * 0xD1B54A32D192ED03ull));
+    return float(u >> 40) * (1.0f / float(1u << 24)) < blend;
+}
+
+/// Where a camera sample hitting `si` at distance `t` adds its AO: its bins at the two levels
+/// `bias` and `bias` + 1 above its texel's (keys[0], keys[1]); and its record, which names the
+/// finer (the reconstruction reads both, ReconstructAo).
+void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, TexelKey keys[2],
+            HitRecord* h) {
+    const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
+    BinKeys(c.tsc->Grids(mesh), face, si.ptex.u, si.ptex.v, HitTexelLevel(c, si, t, mesh), bias,
+            keys);
+    *h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
+          uint32_t(face) << 4 | keys[0].mip};
+}
+
+}  // namespace
+
+/// Hit-binned texture-space AO, phase 1 of a pass, for one tile: traces its camera rays, shades
+/// AO at each hit exactly as per-hit AO does (same rays, same random numbers, 16-ray packets
+/// across the tile's hits), and adds each hit's escaped rays to its bins at the two levels
+/// `bias` and `bias` + 1 above its texel's. Records where each camera sample hit, for phase 2
+/// (AoHitsResolve).
+void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
+               HitRecord* records, HitBins& bins, RayCounts& rays) {
+    const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
+    thread_local std::vector<CameraSample> cs;
+    thread_local std::vector<TexelKey> keys;
+    thread_local AoRayBatch aoRays;
+    thread_local std::vector<uint32_t> open;
+    if (cs.size() < total) cs.resize(total);
+    keys.resize(2 * total);
+    HitsCameraRays(c, r, s0, s1, cs.data(), total, false, rays);
+    aoRays.Clear();
+    open.assign(total, 0);
+    Cursor at(r, s0);
+    const int spp = s1 - s0;
+    const PixelSequence seq(c.opt, s0, s1);
+    for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
+        CameraSample& p = cs[i];
+        HitRecord& h = records[(size_t(at.y) * size_t(c.opt.width) + size_t(at.x)) * size_t(spp) +
+                               size_t(at.s - s0)];
+        if (!p.found || p.hit.object < 0) {
+            h.mesh = !p.found ? PassTexels::kMiss : PassTexels::kLight;
+            continue;
+        }
+        const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit);
+        BinHit(c, si, p.hit.t, bias, &keys[2 * i], &h);
+        aoRays.Queue(c, p.ray, si, seq, seq.First(at.x, at.y, at.s), uint32_t(i));
+    }
+    aoRays.Trace(c, open.data(), rays);
+    HitBins::Batch batch(bins);
+    for (size_t i = 0; i < total; ++i) {
+        const CameraSample& p = cs[i];
+        if (!p.found || p.hit.object < 0) continue;
+        const CountBin::Value v{open[i], uint32_t(c.opt.aoSamples)};
+        batch.Add(keys[2 * i], v);
+        if (!(keys[2 * i + 1] == keys[2 * i])) batch.Add(keys[2 * i + 1], v);  // not clamped
+    }
+}
+
+/// Hit-binned diffuse light (the path integrator, or the direct one: paths of one bounce), phase
+/// 1 of a pass, for one tile. Every camera sample is path traced as per hit (same rays, same
+/// random streams, opt.hitSamples paths at its hit), but at a diffuse hit the first surface is
+/// white (LiPath's FirstHitLight): the light it receives, E, is binned as AO's escaped rays are, at
+/// two levels above its texel, and the hit's albedo kept beside its record; phase 2
+/// (PathHitsResolve) adds albedo x the bins' reconstruction. With opt.texture.cacheDirect false,
+/// only E's indirect part is binned and its direct part (NEE and the first bounce's MIS-weighted
+/// emission: sharp shadows) stays per hit; with deltaDirectPerHit too, the delta lights' direct
+/// part stays per hit and the soft lights' is binned. An emissive surface's own emission is per
+/// hit. A glossy material's diffuse base is binned the same way
+/// (its albedo x (1 - F0) applied in phase 2); its specular lobe, which depends on the view, is
+/// estimated by the same path (FirstHitLight::specular) and stays per hit. Everything per hit is
+/// summed per pixel into `perHit` (misses, lights, specular lobes), which phase 2 adds with the
+/// binned part: each pixel's sum then does not depend on the tiles, and a pass binned again (its
+/// table overflowed) just writes it again.
+///
+/// The bins' level depends on the pass's noise, known only once every hit is shaded: this
+/// phase keeps each binned hit's light and texel level (`binned`) and each pixel's noise
+/// (`noise`: the variance of its samples' binned luminance, and their mean squared), and
+/// PathHitsAdd bins them.
+void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
+                   HitRecord* records, BinnedHit* binnedHits, glm::dvec3* perHit, glm::dvec2* noise,
+                   RayCounts& rays) {
+    const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
+    thread_local std::vector<CameraSample> cs;
+    if (cs.size() < total) cs.resize(total);
+    const bool productDiff = c.lightSampling != LightSampling::Mis;
+    HitsCameraRays(c, r, s0, s1, cs.data(), total, productDiff, rays);
+    const bool all = c.opt.texture.cacheDirect;
+    const bool keepDelta = all && c.opt.texture.deltaDirectPerHit;
+    const int spp = s1 - s0, paths = std::max(c.opt.hitSamples, 1);
+    const int maxDepth = c.opt.integrator == IntegratorKind::Direct ? 1 : c.opt.maxDepth;
+    const PixelSequence seq(c.opt, s0, s1);
+    Cursor at(r, s0);
+    glm::dvec3 acc(0.0);
+    double sum = 0.0, sum2 = 0.0;  // the pixel's binned luminances
+    int count = 0;
+    for (size_t i = 0; i < total; ++i, at.Next(r, s0, s1)) {
+        CameraSample& p = cs[i];
+        const size_t pixel = size_t(at.y) * size_t(c.opt.width) + size_t(at.x);
+        const size_t index = pixel * size_t(spp) + size_t(at.s - s0);
+        HitRecord& h = records[index];
+        h.mesh = PassTexels::kMiss;  // nothing binned to read (unless below)
+        if (at.s == s0) acc = glm::dvec3(0.0), sum = sum2 = 0.0, count = 0;
+        const RayDifferentials* diff = productDiff ? &p.diff : nullptr;
+        glm::vec3 L(0.0f);
+        if (!p.found) {
+            L = c.Background(p.ray.dir);
+        } else if (p.hit.object < 0) {
+            L = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
+                const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
+                return LiPath(c, p.ray, p.hit, true, rng, maxDepth, rays, true, NoCachedTerm(),
+                              diff, nullptr, &first);
+            });
+        } else {
+            const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit, diff);
+            const bool glossy = c.scene.materials[si.material].type != Material::Type::Diffuse;
+            glm::vec3 direct(0.0f), specular(0.0f), deltaDirect(0.0f);
+            FirstHitLight split{&si, &direct, glossy ? &specular : nullptr};
+            if (keepDelta) split.deltaDirect = &deltaDirect;
+            const glm::vec3 E = SplitAtHit(c, at.x, at.y, at.s, p.rng, [&](Rng& rng, int hp) {
+                const FirstBounce first(seq, seq.First(at.x, at.y, at.s) + uint64_t(hp));
+                return LiPath(c, p.ray, p.hit, true, rng, maxDepth, rays, true, NoCachedTerm(),
+                              diff, &split, &first);
+            });
+            // The direct light that stays per hit: none, the delta lights', or all of it.
+            const glm::vec3 kept =
+                (all ? (keepDelta ? deltaDirect : glm::vec3(0.0f)) : direct) / float(paths);
+            // The glossy layer's specular lobe stays per hit; its diffuse base is binned.
+            const glm::vec3 albedo =
+                glossy ? MakeBsdf(c, si).DiffuseReflectance() : c.rs.Albedo(si);
+            // An emissive surface's own light is seen per hit.
+            L = specular / float(paths) + albedo * kept + c.HitEmission(p.ray, p.hit);
+            const glm::vec3 binned = all && !keepDelta ? E : glm::max(E - kept, glm::vec3(0.0f));
+            RadianceBin::Value v;
+            // A NaN or infinite estimate is dropped, as per-hit drops such a sample.
+            if (RadianceBin::FromRadiance(&binned.x, &v)) {
+                const int mesh = c.tsc->MeshOf(si.object, si.backFacing);
+                h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
+                     uint32_t(si.ptex.face) << 4};
+                binnedHits[index] = {binned, albedo, HitTexelLevel(c, si, p.hit.t, mesh)};
+                const double e = double(Luminance(binned));
+                sum += e, sum2 += e * e, ++count;
+            }
+        }
+        // A NaN/Inf sample would poison the pixel forever: drop it (as ShadeTile does).
+        if (std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z)) acc += glm::dvec3(L);
+        if (at.s == s1 - 1) {
+            perHit[pixel] = acc;
+            const double mean = count ? sum / count : 0.0;
+            noise[pixel] =
+                count >= 2
+                    ? glm::dvec2(std::max(0.0, sum2 - count * mean * mean) / double(count - 1),
+                                 mean * mean)
+                    : glm::dvec2(0.0);
+        }
+    }
+}
+
+/// Hit-binned diffuse light, phase 1 of a pass continued (PathHitsTrace shaded the hits): adds
+/// each binned hit of the tile to its bins at the levels `bias` and `bias` + 1 above its texel's,
+/// and sets the level its record reads. Binning again (the table overflowed) adds the same.
+void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
+                 float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins) {
+    RadianceBins::Batch batch(bins);
+    const int spp = s1 - s0;
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+        for (int x = r.cols().begin(); x < r.cols().end(); ++x)
+            for (int s = s0; s < s1; ++s) {
+                const size_t index =
+                    (size_t(y) * size_t(c.opt.width) + size_t(x)) * size_t(spp) + size_t(s - s0);
+                HitRecord& h = records[index];
+                if (h.mesh < 0) continue;
+                const BinnedHit& b = binnedHits[index];
+                TexelKey keys[2];
+                BinKeys(c.tsc->Grids(h.mesh), h.Face(), h.U(), h.V(), b.texelLevel, bias, keys);
+                RadianceBin::Value v;
+                RadianceBin::FromRadiance(&b.light.x, &v);  // finite: checked when shaded
+                batch.Add(keys[0], v);
+                if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
+                h.faceLevel =
+                    uint32_t(h.Face()) << 4 | keys[ReadsUpperLevel(c, x, y, s, blend) ? 1 : 0].mip;
+            }
+}
+
+}  // namespace texcache::internal
