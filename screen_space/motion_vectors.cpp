@@ -267,7 +267,10 @@ inline float SplatBase(float t, int x) {
 // eq. 3 for one row: in-shadow pixels' vectors, eq. 4's alpha^V, and the splat inputs.
 TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
     const ShadowRowArgs a = args;
-    const bool stream = StreamPlanes(a.w, a.h, 7);
+    // The vectors are read after the splat's box sums, which pass a dozen planes through the
+    // caches in between: streamed when large (StoreRow). The splat inputs are read by the very
+    // next pass, while most of them are still in the L3 cache: ordinary stores.
+    const bool stream = StreamPlanes(a.w, a.h, 3);
     constexpr int kC = 256;
     // Two loops per chunk (geometry, then eq. 4 and the taps): one loop with everything has too
     // many conditionals for GCC's if-conversion, and then it does not vectorize.
@@ -367,9 +370,8 @@ TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
         for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
         StoreRow(ox, n, a.ox + x0, stream), StoreRow(oy, n, a.oy + x0, stream),
             StoreRow(oa, n, a.oa + x0, stream);
-        StoreRow(mk, n, a.mask + x0, stream), StoreRow(sdx, n, a.sdx + x0, stream),
-            StoreRow(sdy, n, a.sdy + x0, stream);
-        StoreRow(sal, n, a.sal + x0, stream);
+        CopyRow(mk, n, a.mask + x0), CopyRow(sdx, n, a.sdx + x0), CopyRow(sdy, n, a.sdy + x0);
+        CopyRow(sal, n, a.sal + x0);
     }
 }
 
