@@ -242,9 +242,10 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
 
     group("Benchmark");
     cmd->add_flag("--bench", a->bench,
-                  "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
-                  "(no window); with --denoise, the stage's frames (texture-space vs per-hit "
-                  "indirect light, render and stage times, relMSE)");
+                  "Benchmark (no window): with the stage on (--denoise; auto turns it on for "
+                  "path-traced scenes), its frames while orbiting (texture-space vs per-hit "
+                  "indirect light, render and stage times, relMSE); with --denoise off, warm "
+                  "texture-space AO vs per-hit AO at equal relMSE");
     cmd->add_option("--bench-frames", a->benchFrames, "Bench: timed orbit frames")
         ->capture_default_str();
     cmd->add_option("--reference-spp", a->referenceSpp,
