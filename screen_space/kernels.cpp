@@ -139,7 +139,8 @@ template <int NC, bool Lum>
 inline __attribute__((always_inline)) void AtrousComponentChunk(const AtrousArgs& a,
                                                                 const AtrousComponent& c,
                                                                 const int* rows, int x0, int n,
-                                                                const float (*wg)[kChunk], int y) {
+                                                                const float (*wg)[kChunk], int y,
+                                                                bool stream) {
     const int s = a.step;
     // Tap pointers (row, column offset); rows outside the image point at the centre row with a
     // zero geometric weight.
@@ -189,17 +190,20 @@ inline __attribute__((always_inline)) void AtrousComponentChunk(const AtrousArgs
         if constexpr (NC == 3) o1[i] = a1 * inv, o2[i] = a2 * inv;
         ov[i] = wsum > 0.0f ? av * inv * inv : -1.0f;
     }
-    std::copy_n(o0, n, c.out[0]->Row(y) + x0);
+    StoreRow(o0, n, c.out[0]->Row(y) + x0, stream);
     if constexpr (NC == 3) {
-        std::copy_n(o1, n, c.out[1]->Row(y) + x0);
-        std::copy_n(o2, n, c.out[2]->Row(y) + x0);
+        StoreRow(o1, n, c.out[1]->Row(y) + x0, stream);
+        StoreRow(o2, n, c.out[2]->Row(y) + x0, stream);
     }
-    std::copy_n(ov, n, c.outVar->Row(y) + x0);
+    StoreRow(ov, n, c.outVar->Row(y) + x0, stream);
 }
 
 inline __attribute__((always_inline)) void AtrousRowImpl(const AtrousArgs& a, int y) {
     const Guides& g = *a.g;
     const int w = g.depth.Width(), h = g.depth.Height();
+    int planes = 0;  // written by the level
+    for (const AtrousComponent& c : a.comp) planes += c.nc + (c.outVar ? 1 : 0);
+    const bool stream = StreamPlanes(w, h, planes);
     const int s = a.step;
     const int rows[3] = {y - s >= 0 ? y - s : y, y, y + s < h ? y + s : y};
     const bool rowOk[3] = {y - s >= 0, true, y + s < h};
@@ -245,14 +249,14 @@ inline __attribute__((always_inline)) void AtrousRowImpl(const AtrousArgs& a, in
         for (const AtrousComponent& c : a.comp) {
             if (c.nc == 3) {
                 if (c.luminance)
-                    AtrousComponentChunk<3, true>(a, c, rows, x0, n, wg, y);
+                    AtrousComponentChunk<3, true>(a, c, rows, x0, n, wg, y, stream);
                 else
-                    AtrousComponentChunk<3, false>(a, c, rows, x0, n, wg, y);
+                    AtrousComponentChunk<3, false>(a, c, rows, x0, n, wg, y, stream);
             } else if (c.nc == 1) {
                 if (c.luminance)
-                    AtrousComponentChunk<1, true>(a, c, rows, x0, n, wg, y);
+                    AtrousComponentChunk<1, true>(a, c, rows, x0, n, wg, y, stream);
                 else
-                    AtrousComponentChunk<1, false>(a, c, rows, x0, n, wg, y);
+                    AtrousComponentChunk<1, false>(a, c, rows, x0, n, wg, y, stream);
             }
         }
     }

@@ -110,6 +110,7 @@ inline void TapPassPair(const TradRowArgs& a, int idx, float inL, float inR, int
 
 TEXCACHE_SCREEN_CLONES void TradRow(const TradRowArgs& args) {
     const TradRowArgs a = args;
+    const bool stream = StreamPlanes(a.w, a.h, 2);
     constexpr int kC = 256;
     alignas(64) int mask[kC];
     alignas(64) float ox[kC], oy[kC];  // local results: no aliasing with the gathers
@@ -156,7 +157,7 @@ TEXCACHE_SCREEN_CLONES void TradRow(const TradRowArgs& args) {
             mask[i] = int(okf * (m0 + 2.0f * m1 + 4.0f * m2 + 8.0f * m3));
         }
         for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(mask[i]);
-        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0);
+        StoreRow(ox, n, a.ox + x0, stream), StoreRow(oy, n, a.oy + x0, stream);
     }
 }
 
@@ -266,6 +267,10 @@ inline float SplatBase(float t, int x) {
 // eq. 3 for one row: in-shadow pixels' vectors, eq. 4's alpha^V, and the splat inputs.
 TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
     const ShadowRowArgs a = args;
+    // The vectors are read after the splat's box sums, which pass a dozen planes through the
+    // caches in between: streamed when large (StoreRow). The splat inputs are read by the very
+    // next pass, while most of them are still in the L3 cache: ordinary stores.
+    const bool stream = StreamPlanes(a.w, a.h, 3);
     constexpr int kC = 256;
     // Two loops per chunk (geometry, then eq. 4 and the taps): one loop with everything has too
     // many conditionals for GCC's if-conversion, and then it does not vectorize.
@@ -363,7 +368,8 @@ TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
             sal[i] = has ? av : 0.0f;
         }
         for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
-        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0), CopyRow(oa, n, a.oa + x0);
+        StoreRow(ox, n, a.ox + x0, stream), StoreRow(oy, n, a.oy + x0, stream),
+            StoreRow(oa, n, a.oa + x0, stream);
         CopyRow(mk, n, a.mask + x0), CopyRow(sdx, n, a.sdx + x0), CopyRow(sdy, n, a.sdy + x0);
         CopyRow(sal, n, a.sal + x0);
     }
@@ -389,6 +395,7 @@ struct SplatRowArgs {
 // or the traditional one far from shadows.
 TEXCACHE_SCREEN_CLONES void SplatRow(const SplatRowArgs& args) {
     const SplatRowArgs a = args;
+    const bool stream = StreamPlanes(a.w, a.h, 3);
     constexpr int kC = 256;
     alignas(64) float ox[kC], oy[kC], oa[kC];
     alignas(64) int om[kC];
@@ -439,7 +446,8 @@ TEXCACHE_SCREEN_CLONES void SplatRow(const SplatRowArgs& args) {
             om[i] = splat ? (okf > 0.0f ? mask4 : 0) : trad ? tm : own;
         }
         for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
-        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0), CopyRow(oa, n, a.oa + x0);
+        StoreRow(ox, n, a.ox + x0, stream), StoreRow(oy, n, a.oy + x0, stream),
+            StoreRow(oa, n, a.oa + x0, stream);
     }
 }
 
@@ -525,6 +533,7 @@ struct GlossyRowArgs {
 
 TEXCACHE_SCREEN_CLONES void GlossyRow(const GlossyRowArgs& args) {
     const GlossyRowArgs a = args;
+    const bool stream = StreamPlanes(a.w, a.h, 2);
     constexpr int kC = 256;
     // Two loops per chunk (eq. 5's vectors, then the lobe's jitter and the taps): one loop holds
     // more live values than there are vector registers, and its spills cost more than these
@@ -543,7 +552,8 @@ TEXCACHE_SCREEN_CLONES void GlossyRow(const GlossyRowArgs& args) {
             for (int i = 0; i < n && !any; ++i) any = std::isfinite(a.phg[3 * (x0 + i)]);
             if (!any) {
                 for (int i = 0; i < n; ++i) a.om[x0 + i] = a.tm[x0 + i];
-                CopyRow(a.tx + x0, n, a.ox + x0), CopyRow(a.ty + x0, n, a.oy + x0);
+                StoreRow(a.tx + x0, n, a.ox + x0, stream),
+                    StoreRow(a.ty + x0, n, a.oy + x0, stream);
                 continue;
             }
         }
@@ -646,7 +656,7 @@ TEXCACHE_SCREEN_CLONES void GlossyRow(const GlossyRowArgs& args) {
             om[i] = ok ? MaskBits(m0, m1, m2, m3) : tm;
         }
         for (int i = 0; i < n; ++i) a.om[x0 + i] = uint8_t(om[i]);
-        CopyRow(ox, n, a.ox + x0), CopyRow(oy, n, a.oy + x0);
+        StoreRow(ox, n, a.ox + x0, stream), StoreRow(oy, n, a.oy + x0, stream);
     }
 }
 
@@ -730,6 +740,7 @@ void OcclusionMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& 
     const int w = f.width, h = f.height;
     const Guides& pg = *prev.g;
     // 1. Pixels the traditional vector fails for: which previous-frame object was at y.
+    const bool stream = StreamPlanes(w, h, 2);
     tbb::combinable<std::vector<int>> idsTls;
     ForRows(h, [&](int y) {
         std::vector<int>& ids = idsTls.local();
@@ -738,7 +749,7 @@ void OcclusionMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& 
         const float* ty = trad.y.Row(y);
         const uint8_t* tm = trad.taps.Row(y);
         const uint8_t* ok = cur.valid.Row(y);
-        std::copy_n(tx, w, out->x.Row(y)), std::copy_n(ty, w, out->y.Row(y));
+        StoreRow(tx, w, out->x.Row(y), stream), StoreRow(ty, w, out->y.Row(y), stream);
         std::copy_n(tm, w, out->taps.Row(y));
         std::fill_n(oc, w, -1);
         for (int x = 0; x < w; ++x) {

@@ -27,6 +27,16 @@ namespace texcache::screen::internal {
 /// level 4: 2 x 16).
 inline constexpr int kPad = 32;
 
+/// Whether a pass over a w x h frame that writes `planes` float planes writes them with
+/// non-temporal stores (StoreRow): when they add up to 24 MB or more. Less than that is still
+/// in the 32 MB L3 cache (shared with the other core) when the next pass reads it; at 640x360
+/// (1 MB planes) no pass writes that much, at 1920x1080 (8.5 MB planes) every pass of three
+/// planes or more does.
+inline bool StreamPlanes(int w, int h, int planes) {
+    const size_t plane = (size_t(w) + 2 * kPad) * size_t(h) * sizeof(float);
+    return plane * size_t(planes) >= (size_t(24) << 20);
+}
+
 /// Heap array for large per-frame buffers: 2 MB aligned and advised onto transparent huge pages
 /// when it spans at least one, because first-touch page faults are what a fresh 8 MB plane costs
 /// most (tens of microseconds per 4 KB fault on a virtual machine, over 100 ms for a 24 MB

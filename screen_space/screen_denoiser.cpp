@@ -282,6 +282,7 @@ constexpr int kPrepChunk = 256;
 // Guides and visibility of one row.
 struct GuideRow {
     int w;
+    bool stream;       // StoreRow
     const float* pos;  // xyz interleaved
     const float* nrm;
     const float* depth;
@@ -318,10 +319,13 @@ TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
             const float vg = good * Fin(v);
             vv[i] = vg > 0.0f ? v : 0.0f, vok[i] = vg;
         }
-        CopyRow(px, n, a.px + x0), CopyRow(py, n, a.py + x0), CopyRow(pz, n, a.pz + x0);
-        CopyRow(nx, n, a.nx + x0), CopyRow(ny, n, a.ny + x0), CopyRow(nz, n, a.nz + x0);
-        CopyRow(dz, n, a.dz + x0), CopyRow(vv, n, a.vv + x0), CopyRow(vok, n, a.vok + x0);
-        CopyRow(oid, n, a.oid + x0);
+        StoreRow(px, n, a.px + x0, a.stream), StoreRow(py, n, a.py + x0, a.stream),
+            StoreRow(pz, n, a.pz + x0, a.stream);
+        StoreRow(nx, n, a.nx + x0, a.stream), StoreRow(ny, n, a.ny + x0, a.stream),
+            StoreRow(nz, n, a.nz + x0, a.stream);
+        StoreRow(dz, n, a.dz + x0, a.stream), StoreRow(vv, n, a.vv + x0, a.stream),
+            StoreRow(vok, n, a.vok + x0, a.stream);
+        StoreRow(oid, n, a.oid + x0, a.stream);
         for (int i = 0; i < n; ++i) a.ok[x0 + i] = okf[i] > 0.0f ? 1 : 0;
     }
 }
@@ -330,6 +334,7 @@ TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
 // demodulating.
 struct GlossyRow {
     int w;
+    bool stream;
     const float* c;   // glossy, xyz interleaved
     const float* f0;  // specular
     const float* rough;
@@ -382,8 +387,9 @@ inline __attribute__((always_inline)) void PrepGlossyImpl(const GlossyRow& args)
             gv[2][i] = cg > 0.0f ? c2 / r2 : 0.0f;
             gr[0][i] = r0, gr[1][i] = r1, gr[2][i] = r2, gok[i] = cg;
         }
-        for (int c = 0; c < 3; ++c) CopyRow(gv[c], n, a.v[c] + x0), CopyRow(gr[c], n, a.r[c] + x0);
-        CopyRow(gok, n, a.valid + x0);
+        for (int c = 0; c < 3; ++c)
+            StoreRow(gv[c], n, a.v[c] + x0, a.stream), StoreRow(gr[c], n, a.r[c] + x0, a.stream);
+        StoreRow(gok, n, a.valid + x0, a.stream);
     }
 }
 TEXCACHE_SCREEN_CLONES void PrepGlossy(const GlossyRow& a) {
@@ -397,6 +403,7 @@ TEXCACHE_SCREEN_CLONES void PrepGlossyDemod(const GlossyRow& a) {
 // the cones' diffuse shading (the albedo multiplies it back in any mode).
 struct IndirectRow {
     int w;
+    bool stream;
     const float* c;       // indirect, xyz interleaved (colour path)
     const float* cones;   // 18 floats per pixel (cones path)
     const float* albedo;  // xyz interleaved (null on the colour path without demodulation)
@@ -460,8 +467,9 @@ inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& a
             iv[2][i] = cg > 0.0f ? c2 : 0.0f;
             ir[0][i] = r0, ir[1][i] = r1, ir[2][i] = r2, iok[i] = cg;
         }
-        for (int c = 0; c < 3; ++c) CopyRow(iv[c], n, a.v[c] + x0), CopyRow(ir[c], n, a.r[c] + x0);
-        CopyRow(iok, n, a.valid + x0);
+        for (int c = 0; c < 3; ++c)
+            StoreRow(iv[c], n, a.v[c] + x0, a.stream), StoreRow(ir[c], n, a.r[c] + x0, a.stream);
+        StoreRow(iok, n, a.valid + x0, a.stream);
     }
 }
 #define TEXCACHE_PREP_IND(name, M)                           \
@@ -500,10 +508,13 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
     ComponentPlanes& vis = s.comp[kVis];
     ComponentPlanes& gl = s.comp[kGlossy];
     ComponentPlanes& ind = s.comp[kIndirect];
+    // Guides, visibility and its validity; each further component's 3 values, 3 factors, validity.
+    const int planes = 11 + (gl.present ? 7 : 0) + (ind.present ? 7 : 0);
+    const bool stream = StreamPlanes(s.w, s.h, planes);
     ForRows(s.h, [&](int y) {
         const size_t row = size_t(y) * size_t(w);
         GuideRow a;
-        a.w = w;
+        a.w = w, a.stream = stream;
         a.pos = &f.position[row].x, a.nrm = &f.normal[row].x;
         a.depth = &f.depth[row], a.id = &f.objectId[row], a.vis = &f.visibility[row];
         a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
@@ -520,7 +531,7 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
         }
         if (gl.present) {
             GlossyRow b;
-            b.w = w, b.c = &f.glossy[row].x;
+            b.w = w, b.stream = stream, b.c = &f.glossy[row].x;
             const bool dm = demod && brdf;
             b.f0 = dm ? &f.specular[row].x : nullptr, b.rough = dm ? &f.roughness[row] : nullptr;
             b.table = dm ? &brdf->Data()->x : nullptr;
@@ -535,7 +546,7 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
         }
         if (ind.present) {
             IndirectRow c;
-            c.w = w, c.c = &f.indirect[row].x;
+            c.w = w, c.stream = stream, c.c = &f.indirect[row].x;
             c.cones = s.conesPath ? &f.cones[row * kNumCones].x : nullptr;
             c.albedo = f.albedo.empty() ? nullptr : &f.albedo[row].x;
             c.ok = g.valid.Row(y);
@@ -683,11 +694,12 @@ struct ComposeRowArgs {
     const float* rm[2][3];  // glossy / indirect remodulation factors (null: component absent)
     const float* res[2][3];
     float* out;  // xyz interleaved
+    bool stream;
 };
 TEXCACHE_SCREEN_CLONES void ComposeRow(const ComposeRowArgs& args) {
     const ComposeRowArgs a = args;
     constexpr int kC = kPrepChunk;
-    alignas(64) float o[3][kC];
+    alignas(64) float o[3][kC], local[3 * kC];
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
         for (int i = 0; i < n; ++i) {
@@ -720,16 +732,18 @@ TEXCACHE_SCREEN_CLONES void ComposeRow(const ComposeRowArgs& args) {
                 for (int i = 0; i < n; ++i) o[c][i] += rm[i] * rs[i];
             }
         }
-        for (int i = 0; i < n; ++i) {
-            const int x = x0 + i;
-            a.out[3 * x] = o[0][i], a.out[3 * x + 1] = o[1][i], a.out[3 * x + 2] = o[2][i];
-        }
+        // Interleaved into a local row first only to stream it (StoreRow).
+        float* rgb = a.stream ? local : a.out + 3 * x0;
+        for (int i = 0; i < n; ++i)
+            rgb[3 * i] = o[0][i], rgb[3 * i + 1] = o[1][i], rgb[3 * i + 2] = o[2][i];
+        if (a.stream) StoreRow(local, 3 * n, a.out + 3 * x0, true);
     }
 }
 
 void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<glm::vec3>* out) {
     out->resize(size_t(s.w) * size_t(s.h));
     const ComponentPlanes* parts[2] = {&s.comp[kGlossy], &s.comp[kIndirect]};
+    const bool stream = StreamPlanes(s.w, s.h, 3);  // the RGB image
     ForRows(s.h, [&](int y) {
         const size_t row = size_t(y) * size_t(s.w);
         ComposeRowArgs a;
@@ -743,6 +757,7 @@ void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<g
                 a.res[k][c] = parts[k]->present ? parts[k]->res[c]->Row(y) : nullptr;
             }
         a.out = &(*out)[row].x;
+        a.stream = stream;
         ComposeRow(a);
     });
 }

@@ -65,16 +65,120 @@ inline __attribute__((always_inline)) Stats3x3 Neighbourhood(const float* const 
     return st;
 }
 
-// A chunk's pixels [x0, x0 + n) through pixels(uniform, i0, i1, run): in runs of one history
-// tap offset (ForTapRuns) when there is a history, else in one go.
-template <bool Hist, class Args, class Pixels>
-inline __attribute__((always_inline)) void RunPixels(const Args& a, int x0, int n,
-                                                     Pixels&& pixels) {
-    if constexpr (Hist)
-        ForTapRuns(a.mx, a.my, a.mt, x0, n, a.w, a.h, a.stride, size_t(a.stride) * size_t(a.h),
-                   pixels);
-    else
-        pixels(std::false_type{}, 0, n, TapRun{});
+// ---- The history of a chunk of pixels ---------------------------------------------------------
+//
+// A temporal pass first fetches, for every pixel of a chunk, the bilinear history of each plane
+// it reads (BilinearTaps: 4 taps, weights renormalized over the usable ones) into local arrays,
+// and then runs its per-pixel arithmetic over the chunk in one loop. Motion is smooth, so
+// along a run of consecutive pixels the taps' column offset (tap index - x) is usually a single
+// value: such a run reads each plane with contiguous vector loads at x + d00 (+1) and x + d01
+// (+1). A run where the offset changes (the motion crosses a pixel boundary) is tried again in
+// shorter pieces, and only the pieces with the change load tap by tap, where a vector loop
+// would have to assemble each vector lane by lane (on the AMD Zen 4 machines a 16-lane gather
+// costs about as much as the rest of a temporal kernel's arithmetic). Every path evaluates the
+// same expression in the same order, so a pixel's history does not depend on the path.
+
+constexpr int kChunk = 256;  // pixels per chunk of a row
+constexpr int kRun = 64;     // pixels per run (RunOffsets)
+constexpr int kSubRun = 16;  // pieces of a run that is not uniform
+
+// The taps of a chunk's pixels (chunk position i, pixel x = x0 + i), and for RunTaps the taps'
+// offsets relative to the chunk position (tap 00 of position i is at e00 + i) as the bounds of
+// a run's minimum and maximum: a pixel without a usable tap has zero weights and takes any
+// offset, so it widens neither (lo = +inf, hi = -inf).
+struct ChunkTaps {
+    alignas(64) int i00[kChunk], i01[kChunk];  // indices of taps 00 and 01
+    alignas(64) float w00[kChunk], w10[kChunk], w01[kChunk], w11[kChunk], ok[kChunk];
+    alignas(64) int lo0[kChunk], hi0[kChunk], lo1[kChunk], hi1[kChunk];
+};
+
+// Fills `t` for pixels x0 .. x0 + n - 1 of a row whose motion is (mx, my, mt).
+inline __attribute__((always_inline)) void MakeChunkTaps(const float* mx, const float* my,
+                                                         const uint8_t* mt, int x0, int n,
+                                                         int width, int height, int stride,
+                                                         ChunkTaps* t) {
+    constexpr int kBig = 1 << 30;
+    for (int i = 0; i < n; ++i) {
+        const int x = x0 + i;
+        const Bilinear b = BilinearTaps(mx[x], my[x], int(mt[x]), width, height, stride);
+        t->i00[i] = b.i00, t->i01[i] = b.i01;
+        t->w00[i] = b.w00, t->w10[i] = b.w10, t->w01[i] = b.w01, t->w11[i] = b.w11;
+        t->ok[i] = b.ok;
+        const bool has = mt[x] != 0;
+        const int e0 = b.i00 - i, e1 = b.i01 - i;
+        t->lo0[i] = has ? e0 : kBig, t->hi0[i] = has ? e0 : -kBig;
+        t->lo1[i] = has ? e1 : kBig, t->hi1[i] = has ? e1 : -kBig;
+    }
+}
+
+// Whether chunk positions [i0, i1) share their tap offsets, and those offsets. Uniform only if
+// every address the run implies lies inside a plane of `size` floats.
+struct RunOffsets {
+    int e00 = 0, e01 = 0;
+    bool uniform = false;
+};
+inline __attribute__((always_inline)) RunOffsets RunTaps(const ChunkTaps& t, int i0, int i1,
+                                                         size_t size) {
+    int lo0 = 1 << 30, hi0 = -(1 << 30), lo1 = 1 << 30, hi1 = -(1 << 30);
+    for (int i = i0; i < i1; ++i) lo0 = std::min(lo0, t.lo0[i]), hi0 = std::max(hi0, t.hi0[i]);
+    for (int i = i0; i < i1; ++i) lo1 = std::min(lo1, t.lo1[i]), hi1 = std::max(hi1, t.hi1[i]);
+    RunOffsets r;
+    if (lo0 > hi0) {  // no usable tap: any address inside the plane will do
+        r.e00 = r.e01 = -i0;
+        r.uniform = true;
+        return r;
+    }
+    r.e00 = lo0, r.e01 = lo1;
+    r.uniform = lo0 == hi0 && lo1 == hi1 && lo0 + i0 >= 0 && lo1 + i0 >= 0 &&
+                size_t(std::max(lo0, lo1) + i1) < size;
+    return r;
+}
+
+// out[i] for chunk positions [i0, i1): the bilinear history of the plane at `base`.
+inline __attribute__((always_inline)) void FetchUniform(const ChunkTaps& t, const RunOffsets& r,
+                                                        const float* base, int i0, int i1,
+                                                        float* out) {
+    const float* p0 = base + r.e00;
+    const float* p1 = base + r.e01;
+    for (int i = i0; i < i1; ++i)
+        out[i] = t.w00[i] * p0[i] + t.w10[i] * p0[i + 1] + t.w01[i] * p1[i] + t.w11[i] * p1[i + 1];
+}
+// The same tap by tap, as scalar code: GCC would vectorize it with a lane-by-lane gather, which
+// takes about twice the instructions of the scalar loads (the empty asm keeps it scalar).
+inline __attribute__((always_inline)) void FetchTaps(const ChunkTaps& t, const float* base, int i0,
+                                                     int i1, float* out) {
+    for (int i = i0; i < i1; ++i) {
+        int a = t.i00[i], b = t.i01[i];
+        asm("" : "+r"(a), "+r"(b));
+        out[i] = t.w00[i] * base[a] + t.w10[i] * base[a + 1] + t.w01[i] * base[b] +
+                 t.w11[i] * base[b + 1];
+    }
+}
+
+// out[p][i]: the bilinear history of planes[p] (np of them, bases of planes of `size` floats)
+// for chunk positions [0, n).
+template <int NP>
+inline __attribute__((always_inline)) void FetchHistory(const ChunkTaps& t, int n, size_t size,
+                                                        const float* const (&planes)[NP],
+                                                        float (*out)[kChunk]) {
+    for (int i0 = 0; i0 < n; i0 += kRun) {
+        const int i1 = std::min(n, i0 + kRun);
+        const RunOffsets r = RunTaps(t, i0, i1, size);
+        if (r.uniform) {
+            for (int p = 0; p < NP; ++p) FetchUniform(t, r, planes[p], i0, i1, out[p]);
+            continue;
+        }
+        for (int j0 = i0; j0 < i1; j0 += kSubRun) {
+            const int j1 = std::min(i1, j0 + kSubRun);
+            const RunOffsets sub = RunTaps(t, j0, j1, size);
+            for (int p = 0; p < NP; ++p) {
+                if (sub.uniform)
+                    FetchUniform(t, sub, planes[p], j0, j1, out[p]);
+                else
+                    FetchTaps(t, planes[p], j0, j1, out[p]);
+            }
+        }
+    }
 }
 
 struct SvgfArgs {
@@ -106,75 +210,76 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     // Everything the loop reads is copied to locals and its results go to local arrays: then the
     // compiler sees no possible aliasing and needs no run-time checks to vectorize.
     const SvgfArgs a = args;
-    constexpr int kC = 256;
+    const bool stream = StreamPlanes(a.w, a.h, NC + 4);
+    const size_t size = size_t(a.stride) * size_t(a.h);
+    constexpr int kC = kChunk;
     alignas(64) float o[3][kC], ovar[kC], om1[kC], om2[kC], olen[kC];
+    alignas(64) float fetched[NC + 3][kC];  // colour, m1, m2, length
+    ChunkTaps taps;
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
-        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
-            __attribute__((always_inline)) {
-            constexpr bool kUniform = decltype(uniform)::value;
-            for (int i = i0; i < i1; ++i) {
-                const int x = x0 + i;
-                // 3x3 statistics of the current frame (valid samples only).
-                const Stats3x3 st = Neighbourhood<NC>(a.cur, a.valid, a.rowF, x);
-                const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
-                const float* s1 = st.s1;
-                const float* s2 = st.s2;
-                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
-                const float lm = sl * in;
-                const float spVar = std::max(0.0f, sl2 * in - lm * lm);
+        if constexpr (Hist) {
+            MakeChunkTaps(a.mx, a.my, a.mt, x0, n, a.w, a.h, a.stride, &taps);
+            const float* planes[NC + 3];
+            for (int c = 0; c < NC; ++c) planes[c] = a.hc[c];
+            planes[NC] = a.hm1, planes[NC + 1] = a.hm2, planes[NC + 2] = a.hlen;
+            FetchHistory(taps, n, size, planes, fetched);
+        }
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            // 3x3 statistics of the current frame (valid samples only).
+            const Stats3x3 st = Neighbourhood<NC>(a.cur, a.valid, a.rowF, x);
+            const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
+            const float* s1 = st.s1;
+            const float* s2 = st.s2;
+            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+            const float lm = sl * in;
+            const float spVar = std::max(0.0f, sl2 * in - lm * lm);
 
-                // Validity as 0/1 floats and arithmetic blends rather than bools: GCC 12 gives up
-                // on loops mixing boolean widths.
-                const float cv = a.valid[1][x];
-                float v[3] = {0, 0, 0};
+            // Validity as 0/1 floats and arithmetic blends rather than bools: GCC 12 gives up
+            // on loops mixing boolean widths.
+            const float cv = a.valid[1][x];
+            float v[3] = {0, 0, 0};
 #pragma GCC unroll 3
-                for (int c = 0; c < NC; ++c) v[c] = a.cur[c][1][x];
-                const float l = NC == 3 ? Luma(v[0], v[1], v[2]) : v[0];
+            for (int c = 0; c < NC; ++c) v[c] = a.cur[c][1][x];
+            const float l = NC == 3 ? Luma(v[0], v[1], v[2]) : v[0];
 
-                float hv[3] = {0, 0, 0}, hm1 = 0.0f, hm2 = 0.0f, hl = 0.0f, hf = 0.0f;
-                if constexpr (Hist) {
-                    const Bilinear b =
-                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
+            float hv[3] = {0, 0, 0}, hm1 = 0.0f, hm2 = 0.0f, hl = 0.0f, hf = 0.0f;
+            if constexpr (Hist) {
 #pragma GCC unroll 3
-                    for (int c = 0; c < NC; ++c) hv[c] = RunGather<kUniform>(a.hc[c], b, run, x);
-                    hm1 = RunGather<kUniform>(a.hm1, b, run, x);
-                    hm2 = RunGather<kUniform>(a.hm2, b, run, x);
-                    hl = RunGather<kUniform>(a.hlen, b, run, x);
-                    hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
-                    if constexpr (Clamp != kClampNone) {
-                        const float k = Clamp == kClampPerPixel ? a.clampKRow[x] : a.clampK;
+                for (int c = 0; c < NC; ++c) hv[c] = fetched[c][i];
+                hm1 = fetched[NC][i], hm2 = fetched[NC + 1][i], hl = fetched[NC + 2][i];
+                hf = taps.ok[i] * (hl >= 0.5f ? 1.0f : 0.0f);
+                if constexpr (Clamp != kClampNone) {
+                    const float k = Clamp == kClampPerPixel ? a.clampKRow[x] : a.clampK;
 #pragma GCC unroll 3
-                        for (int c = 0; c < NC; ++c) {
-                            const float mu = s1[c] * in;
-                            const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
-                            const float cl = std::min(std::max(hv[c], mu - k * sg), mu + k * sg);
-                            hv[c] = k > 0.0f ? cl : hv[c];  // per pixel, k = 0: not clamped
-                        }
+                    for (int c = 0; c < NC; ++c) {
+                        const float mu = s1[c] * in;
+                        const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                        const float cl = std::min(std::max(hv[c], mu - k * sg), mu + k * sg);
+                        hv[c] = k > 0.0f ? cl : hv[c];  // per pixel, k = 0: not clamped
                     }
-#pragma GCC unroll 3
-                    for (int c = 0; c < NC; ++c) hv[c] *= hf;
-                    hm1 *= hf, hm2 *= hf, hl *= hf;
                 }
-                // len: +1 with a new sample; al: max(alpha, 1/len) with history, 1 without, 0
-                // without a new sample.
-                const float len =
-                    cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
-                const float al =
-                    cv * (hf * std::max(a.alpha, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
 #pragma GCC unroll 3
-                for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (v[c] - hv[c]);
-                const float m1 = hm1 + al * (l - hm1), m2 = hm2 + al * (l * l - hm2);
-                om1[i] = m1, om2[i] = m2, olen[i] = len;
-                const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
-                ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
+                for (int c = 0; c < NC; ++c) hv[c] *= hf;
+                hm1 *= hf, hm2 *= hf, hl *= hf;
             }
-        };
-        RunPixels<Hist>(a, x0, n, pixels);
-        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
-        std::copy_n(ovar, n, a.outVar + x0);
-        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
-        std::copy_n(olen, n, a.len + x0);
+            // len: +1 with a new sample; al: max(alpha, 1/len) with history, 1 without, 0
+            // without a new sample.
+            const float len =
+                cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+            const float al = cv * (hf * std::max(a.alpha, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (v[c] - hv[c]);
+            const float m1 = hm1 + al * (l - hm1), m2 = hm2 + al * (l * l - hm2);
+            om1[i] = m1, om2[i] = m2, olen[i] = len;
+            const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
+            ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
+        }
+        for (int c = 0; c < NC; ++c) StoreRow(o[c], n, a.out[c] + x0, stream);
+        StoreRow(ovar, n, a.outVar + x0, stream);
+        StoreRow(om1, n, a.m1 + x0, stream), StoreRow(om2, n, a.m2 + x0, stream);
+        StoreRow(olen, n, a.len + x0, stream);
     }
 }
 
@@ -212,67 +317,71 @@ struct ReliableArgs {
 template <int NC, bool Hist, bool AlphaV>
 inline __attribute__((always_inline)) void ReliableRowImpl(const ReliableArgs& args) {
     const ReliableArgs a = args;  // locals + local results: see SvgfRowImpl
-    constexpr int kC = 256;
+    const bool stream = StreamPlanes(a.w, a.h, NC + 3);
+    const size_t size = size_t(a.stride) * size_t(a.h);
+    constexpr int kC = kChunk;
     alignas(64) float o[3][kC], ovalid[kC], osigma[kC], olen[kC];
+    alignas(64) float fetched[NC + 1][kC];  // colour, length
+    ChunkTaps taps;
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
-        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
-            __attribute__((always_inline)) {
-            constexpr bool kUniform = decltype(uniform)::value;
-            for (int i = i0; i < i1; ++i) {
-                const int x = x0 + i;
-                float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0};
+        if constexpr (Hist) {
+            MakeChunkTaps(a.mx, a.my, a.mt, x0, n, a.w, a.h, a.stride, &taps);
+            const float* planes[NC + 1];
+            for (int c = 0; c < NC; ++c) planes[c] = a.hc[c];
+            planes[NC] = a.hlen;
+            FetchHistory(taps, n, size, planes, fetched);
+        }
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            float cnt = 0.0f, s1[3] = {0, 0, 0}, s2[3] = {0, 0, 0};
 #pragma GCC unroll 3
-                for (int r = 0; r < 3; ++r)
+            for (int r = 0; r < 3; ++r)
 #pragma GCC unroll 3
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const float ok = a.spVar[r][x + dx] >= 0.0f ? a.rowF[r] : 0.0f;
-                        cnt += ok;
-#pragma GCC unroll 3
-                        for (int c = 0; c < NC; ++c) {
-                            const float v = a.sp[c][r][x + dx];
-                            s1[c] += ok * v, s2[c] += ok * v * v;
-                        }
-                    }
-                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
-                const float cv = a.spVar[1][x] >= 0.0f ? 1.0f : 0.0f;  // 0/1: see SvgfRowImpl
-                const float av = AlphaV ? a.alphaV[x] : a.alpha;
-                float hv[3] = {0, 0, 0}, hl = 0.0f, hf = 0.0f, sigma = 0.0f;
-                if constexpr (Hist) {
-                    const Bilinear b =
-                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
-                    hl = RunGather<kUniform>(a.hlen, b, run, x);
-                    hf = b.ok * (hl >= 0.5f ? 1.0f : 0.0f);
-                    float before = 0.0f, after = 0.0f;
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const float ok = a.spVar[r][x + dx] >= 0.0f ? a.rowF[r] : 0.0f;
+                    cnt += ok;
 #pragma GCC unroll 3
                     for (int c = 0; c < NC; ++c) {
-                        const float h = RunGather<kUniform>(a.hc[c], b, run, x);
-                        const float mu = s1[c] * in;
-                        const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
-                        hv[c] = std::min(std::max(h, mu - a.clampK * sg), mu + a.clampK * sg);
-                        before += h, after += hv[c];
-                        hv[c] *= hf;
+                        const float v = a.sp[c][r][x + dx];
+                        s1[c] += ok * v, s2[c] += ok * v * v;
                     }
-                    hl *= hf;
-                    // eq. 8 on the channel sum, eq. 7, and the clean-up std.
-                    const float wc = std::fabs(after - before) / (std::fabs(before) + 1e-3f);
-                    const float wa = (av - a.alpha) * (av - a.alpha);
-                    sigma = hf * std::min(wa + wc, 5.0f);
                 }
-                const float len =
-                    cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
-                const float al = cv * (hf * std::max(av, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+            const float cv = a.spVar[1][x] >= 0.0f ? 1.0f : 0.0f;  // 0/1: see SvgfRowImpl
+            const float av = AlphaV ? a.alphaV[x] : a.alpha;
+            float hv[3] = {0, 0, 0}, hl = 0.0f, hf = 0.0f, sigma = 0.0f;
+            if constexpr (Hist) {
+                hl = fetched[NC][i];
+                hf = taps.ok[i] * (hl >= 0.5f ? 1.0f : 0.0f);
+                float before = 0.0f, after = 0.0f;
 #pragma GCC unroll 3
-                for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (a.sp[c][1][x] - hv[c]);
-                ovalid[i] = std::max(cv, hf);
-                osigma[i] = sigma;
-                olen[i] = len;
+                for (int c = 0; c < NC; ++c) {
+                    const float h = fetched[c][i];
+                    const float mu = s1[c] * in;
+                    const float sg = std::sqrt(std::max(0.0f, s2[c] * in - mu * mu));
+                    hv[c] = std::min(std::max(h, mu - a.clampK * sg), mu + a.clampK * sg);
+                    before += h, after += hv[c];
+                    hv[c] *= hf;
+                }
+                hl *= hf;
+                // eq. 8 on the channel sum, eq. 7, and the clean-up std.
+                const float wc = std::fabs(after - before) / (std::fabs(before) + 1e-3f);
+                const float wa = (av - a.alpha) * (av - a.alpha);
+                sigma = hf * std::min(wa + wc, 5.0f);
             }
-        };
-        RunPixels<Hist>(a, x0, n, pixels);
-        for (int c = 0; c < NC; ++c) std::copy_n(o[c], n, a.out[c] + x0);
-        std::copy_n(ovalid, n, a.outValid + x0);
-        std::copy_n(osigma, n, a.sigma + x0), std::copy_n(olen, n, a.len + x0);
+            const float len =
+                cv * (hf * std::min(hl + 1.0f, kMaxLen) + (1.0f - hf)) + (1.0f - cv) * hl;
+            const float al = cv * (hf * std::max(av, 1.0f / std::max(len, 1.0f)) + 1.0f - hf);
+#pragma GCC unroll 3
+            for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (a.sp[c][1][x] - hv[c]);
+            ovalid[i] = std::max(cv, hf);
+            osigma[i] = sigma;
+            olen[i] = len;
+        }
+        for (int c = 0; c < NC; ++c) StoreRow(o[c], n, a.out[c] + x0, stream);
+        StoreRow(ovalid, n, a.outValid + x0, stream);
+        StoreRow(osigma, n, a.sigma + x0, stream), StoreRow(olen, n, a.len + x0, stream);
     }
 }
 
@@ -497,10 +606,13 @@ struct ConeArgs {
 
 template <bool Hist>
 inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
-    constexpr int kC = 128;
-    alignas(64) float mu[3][kC], sg[3][kC], spv[kC], wt[4][kC], hf[kC], hm1[kC], hm2[kC], hl[kC];
-    alignas(64) int idx[4][kC];
+    const bool stream = StreamPlanes(a.w, a.h, 7);
+    const size_t size = size_t(a.stride) * size_t(a.h);
+    constexpr int kC = kChunk;
+    alignas(64) float mu[3][kC], sg[3][kC], spv[kC], hf[kC], hm1[kC], hm2[kC], hl[kC];
+    alignas(64) float fetched[3][kC];  // length, m1, m2
     alignas(64) float oe[3][kC], om1[kC], om2[kC], olen[kC], ovar[kC];
+    ChunkTaps taps;
     const V8 shade = {kConeShadeWeight[0],
                       kConeShadeWeight[1],
                       kConeShadeWeight[2],
@@ -511,40 +623,36 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
                       0};
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
+        if constexpr (Hist) {
+            MakeChunkTaps(a.mx, a.my, a.mt, x0, n, a.w, a.h, a.stride, &taps);
+            const float* planes[3] = {a.hlen, a.hm1, a.hm2};
+            FetchHistory(taps, n, size, planes, fetched);
+        }
         // Pass 1 (vectorized across pixels): 3x3 statistics of the current shading, the history
-        // footprints and moments.
-        auto pixels = [&](auto uniform, int i0, int i1, const TapRun& run)
-            __attribute__((always_inline)) {
-            constexpr bool kUniform = decltype(uniform)::value;
-            for (int i = i0; i < i1; ++i) {
-                const int x = x0 + i;
-                const Stats3x3 st = Neighbourhood<3>(a.ec, a.valid, a.rowF, x);
-                const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
-                const float* s1 = st.s1;
-                const float* s2 = st.s2;
-                const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
+        // moments.
+        for (int i = 0; i < n; ++i) {
+            const int x = x0 + i;
+            const Stats3x3 st = Neighbourhood<3>(a.ec, a.valid, a.rowF, x);
+            const float cnt = st.cnt, sl = st.sl, sl2 = st.sl2;
+            const float* s1 = st.s1;
+            const float* s2 = st.s2;
+            const float in = cnt > 0.0f ? 1.0f / cnt : 0.0f;
 #pragma GCC unroll 3
-                for (int c = 0; c < 3; ++c) {
-                    mu[c][i] = s1[c] * in;
-                    sg[c][i] = std::sqrt(std::max(0.0f, s2[c] * in - mu[c][i] * mu[c][i]));
-                }
-                spv[i] = std::max(0.0f, sl2 * in - sl * in * sl * in);
-                if constexpr (Hist) {
-                    const Bilinear b =
-                        BilinearTaps(a.mx[x], a.my[x], int(a.mt[x]), a.w, a.h, a.stride);
-                    idx[0][i] = b.i00, idx[1][i] = b.i10, idx[2][i] = b.i01, idx[3][i] = b.i11;
-                    wt[0][i] = b.w00, wt[1][i] = b.w10, wt[2][i] = b.w01, wt[3][i] = b.w11;
-                    const float l = RunGather<kUniform>(a.hlen, b, run, x);
-                    hf[i] = b.ok * (l >= 0.5f ? 1.0f : 0.0f);
-                    hm1[i] = hf[i] * RunGather<kUniform>(a.hm1, b, run, x);
-                    hm2[i] = hf[i] * RunGather<kUniform>(a.hm2, b, run, x);
-                    hl[i] = hf[i] * l;
-                } else {
-                    hf[i] = hm1[i] = hm2[i] = hl[i] = 0.0f;
-                }
+            for (int c = 0; c < 3; ++c) {
+                mu[c][i] = s1[c] * in;
+                sg[c][i] = std::sqrt(std::max(0.0f, s2[c] * in - mu[c][i] * mu[c][i]));
             }
-        };
-        RunPixels<Hist>(a, x0, n, pixels);
+            spv[i] = std::max(0.0f, sl2 * in - sl * in * sl * in);
+            if constexpr (Hist) {
+                const float l = fetched[0][i];
+                hf[i] = taps.ok[i] * (l >= 0.5f ? 1.0f : 0.0f);
+                hm1[i] = hf[i] * fetched[1][i];
+                hm2[i] = hf[i] * fetched[2][i];
+                hl[i] = hf[i] * l;
+            } else {
+                hf[i] = hm1[i] = hm2[i] = hl[i] = 0.0f;
+            }
+        }
         // Pass 2: the cones, pixel by pixel, 8-wide across the cones of a channel.
         for (int i = 0; i < n; ++i) {
             const int x = x0 + i;
@@ -561,15 +669,17 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
             V8 cover = {1, 1, 1, 1, 1, 1, 0, 0};
             if (hist) {
                 V8 raw[3] = {V8{}, V8{}, V8{}};
+                const int idx[4] = {taps.i00[i], taps.i00[i] + 1, taps.i01[i], taps.i01[i] + 1};
+                const float wt[4] = {taps.w00[i], taps.w10[i], taps.w01[i], taps.w11[i]};
                 int dom = 0;
                 for (int k = 0; k < 4; ++k) {
-                    const float wk = wt[k][i];
-                    const float* src = a.histCones + size_t(idx[k][i]) * kConeStride;
+                    const float wk = wt[k];
+                    const float* src = a.histCones + size_t(idx[k]) * kConeStride;
                     for (int c = 0; c < 3; ++c) raw[c] += wk * Load8(src + 8 * c);
-                    dom = wk > wt[dom][i] ? k : dom;
+                    dom = wk > wt[dom] ? k : dom;
                 }
                 const glm::vec3 nc(a.nx[x], a.ny[x], a.nz[x]);
-                const int id = idx[dom][i];
+                const int id = idx[dom];
                 const glm::vec3 np(a.pnx[id], a.pny[id], a.pnz[id]);
                 ConeTransfer general;
                 const ConeTransfer* tr = a.same;
@@ -609,10 +719,10 @@ inline __attribute__((always_inline)) void ConeRowImpl(const ConeArgs& a) {
             const bool any = cv > 0.0f || hist;
             ovar[i] = any ? (len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spv[i]) : -1.0f;
         }
-        for (int c = 0; c < 3; ++c) std::copy_n(oe[c], n, a.out[c] + x0);
-        std::copy_n(ovar, n, a.outVar + x0);
-        std::copy_n(om1, n, a.m1 + x0), std::copy_n(om2, n, a.m2 + x0);
-        std::copy_n(olen, n, a.len + x0);
+        for (int c = 0; c < 3; ++c) StoreRow(oe[c], n, a.out[c] + x0, stream);
+        StoreRow(ovar, n, a.outVar + x0, stream);
+        StoreRow(om1, n, a.m1 + x0, stream), StoreRow(om2, n, a.m2 + x0, stream);
+        StoreRow(olen, n, a.len + x0, stream);
     }
 }
 

@@ -154,7 +154,9 @@ TEST(Preview, HeadlessOrbitShowsTheSceneAndReusesTheCache) {
     // a slow interactive orbit.
     const ShellResult r =
         Shell("xvfb-run -a -s '-screen 0 1280x1024x24' " + kBin + " preview " + kScene +
-              " --frames 8 --orbit 8 --resolution 256x256 --screenshot " + shot.string());
+              " --integrator ao --denoise off --frames 8 --orbit 8 --resolution 256x256 "
+              "--screenshot " +
+              shot.string());
     ASSERT_EQ(r.exitCode, 0) << r.output;
 
     // Not blank: the window shows the rendered car and ground (AO: mostly bright grey) beside the
@@ -222,12 +224,14 @@ TEST(Preview, HitMissViewShowsMissesWhenColdAndHitsAfterASmallMove) {
     const fs::path dir = TempDir("hitmiss");
     const fs::path cold = dir / "cold.png", moved = dir / "moved.png";
     const ShellResult a = Headless(
-        kScene, "--view hitmiss --frames 1 --resolution 128x128 --screenshot " + cold.string());
+        kScene, "--integrator ao --view hitmiss --frames 1 --resolution 128x128 --screenshot " +
+                    cold.string());
     ASSERT_EQ(a.exitCode, 0) << a.output;
     // 4 frames over 3 degrees: 1 degree per step.
-    const ShellResult b =
-        Headless(kScene, "--view hitmiss --frames 4 --orbit 3 --resolution 128x128 --screenshot " +
-                             moved.string());
+    const ShellResult b = Headless(
+        kScene,
+        "--integrator ao --view hitmiss --frames 4 --orbit 3 --resolution 128x128 --screenshot " +
+            moved.string());
     ASSERT_EQ(b.exitCode, 0) << b.output;
     const HitMissPixels c = ClassifyHitMiss(Screenshot(cold, 128, 128));
     const HitMissPixels m = ClassifyHitMiss(Screenshot(moved, 128, 128));
@@ -252,11 +256,12 @@ TEST(Preview, OvershadingViewShowsWhereFootprintsShadeSamples) {
     const fs::path shot = dir / "shot.png";
     // A 5x5 normal-filter footprint on a cold cache, every texel of the window (the paper's
     // footprint): misses shade up to 25 samples each.
-    const ShellResult r = Headless(kScene,
-                                   "--view overshading --filter normal --filter-radius 2 "
-                                   "--footprint all --frames 1 --resolution 128x128 "
-                                   "--screenshot " +
-                                       shot.string());
+    const ShellResult r =
+        Headless(kScene,
+                 "--integrator ao --view overshading --filter normal --filter-radius 2 "
+                 "--footprint all --frames 1 --resolution 128x128 "
+                 "--screenshot " +
+                     shot.string());
     ASSERT_EQ(r.exitCode, 0) << r.output;
     const std::string key = "overshading scale: 0 to ";
     const size_t at = r.output.find(key);
@@ -286,11 +291,12 @@ TEST(Preview, OvershadingViewShowsWhereFootprintsShadeSamples) {
     // Footprints of visible texels only (the default) shade fewer samples in all. (Not per pixel:
     // a miss there reconstructs the visible texels of its 8x8 block at once, and the samples of
     // the whole block count for the pixel whose lookup missed.)
-    const ShellResult rv = Headless(kScene,
-                                    "--view overshading --filter normal --filter-radius 2 "
-                                    "--footprint visible --frames 1 --resolution 128x128 "
-                                    "--screenshot " +
-                                        (dir / "visible.png").string());
+    const ShellResult rv =
+        Headless(kScene,
+                 "--integrator ao --view overshading --filter normal --filter-radius 2 "
+                 "--footprint visible --frames 1 --resolution 128x128 "
+                 "--screenshot " +
+                     (dir / "visible.png").string());
     ASSERT_EQ(rv.exitCode, 0) << rv.output;
     auto shaded = [](const std::string& out) {  // "..., N samples shaded" of frame 0
         const size_t end = out.find(" samples shaded");
@@ -308,8 +314,11 @@ TEST(Preview, AnimatedSceneRendersTheTimeAskedAndReshadesPerFrame) {
     const fs::path dir = TempDir("animation");
     auto run = [&](const std::string& name, const std::string& args, ShellResult* r) {
         const fs::path png = dir / (name + ".png");
-        *r = Headless(kAnimated,
-                      args + " --orbit 0 --resolution 128x128 --screenshot " + png.string());
+        *r =
+            Headless(kAnimated, args +
+                                    " --integrator ao --denoise off --orbit 0 --resolution 128x128 "
+                                    "--screenshot " +
+                                    png.string());
         EXPECT_EQ(r->exitCode, 0) << r->output;
         return Screenshot(png, 128, 128);
     };
@@ -403,7 +412,7 @@ TEST(Preview, DenoisedAnimationDiffersFromTheNoisyFrames) {
         Headless(anim, "--denoise reliable" + common + (dir / "denoised.png").string());
     ASSERT_EQ(dn.exitCode, 0) << dn.output;
     const ShellResult raw =
-        Headless(anim, "--integrator path" + common + (dir / "noisy.png").string());
+        Headless(anim, "--integrator path --denoise off" + common + (dir / "noisy.png").string());
     ASSERT_EQ(raw.exitCode, 0) << raw.output;
     const texcache::Image a = Screenshot(dir / "denoised.png", 96, 54);
     const texcache::Image b = Screenshot(dir / "noisy.png", 96, 54);
@@ -427,6 +436,49 @@ TEST(Preview, DenoisedAnimationDiffersFromTheNoisyFrames) {
     fs::remove_all(dir);
 }
 
+// `preview SCENE` opens on what the scene is: car.json's own integrator (path, with its
+// materials), texture space on, and the Reliable stage, which keeps up at this size. The
+// defaults' image is the one of those options given explicitly (the same renders: no pixel
+// differs by more than 0.02), not the AO image the preview used to open on (99.7% of the pixels
+// differ by more than 0.05 measured).
+TEST(Preview, DefaultsOpenOnTheScenesIntegratorDenoised) {
+    ASSERT_EQ(Shell("command -v xvfb-run").exitCode, 0) << "xvfb-run is not installed";
+    const fs::path dir = TempDir("defaults");
+    const std::string common = "--frames 2 --orbit 0 --resolution 96x54 --screenshot ";
+    auto run = [&](const std::string& name, const std::string& args, ShellResult* r) {
+        const fs::path png = dir / (name + ".png");
+        *r = Headless(kScene, args + common + png.string());
+        EXPECT_EQ(r->exitCode, 0) << r->output;
+        return Screenshot(png, 96, 54);
+    };
+    ShellResult rd, rp, ra;
+    const texcache::Image def = run("defaults", "", &rd);
+    const texcache::Image path =
+        run("path", "--integrator path --shading texture --denoise reliable ", &rp);
+    const texcache::Image ao = run("ao", "--integrator ao --denoise off ", &ra);
+    ASSERT_FALSE(HasFailure());
+    EXPECT_NE(rd.output.find("integrator path, texture space on, screen-space stage reliable"),
+              std::string::npos)
+        << rd.output;
+    EXPECT_NE(rd.output.find("frames of history"), std::string::npos) << rd.output;
+    std::printf("pixels differing from the explicit options %.4f, from AO %.4f\n",
+                DifferingFraction(def, path, 0.02f), DifferingFraction(def, ao, 0.05f));
+    EXPECT_EQ(DifferingFraction(def, path, 0.02f), 0.0);
+    EXPECT_GT(DifferingFraction(def, ao, 0.05f), 0.5);
+    fs::remove_all(dir);
+}
+
+// The stage is on by default up to twice 640x360's pixels (the preview's 512x512 and 640x360
+// included), off at 1280x720 and above, where it alone would take most of a 10 fps frame.
+TEST(Preview, StageIsOnByDefaultWhereItKeepsUp) {
+    using texcache::preview::StageKeepsUp;
+    EXPECT_TRUE(StageKeepsUp(512, 512));
+    EXPECT_TRUE(StageKeepsUp(640, 360));
+    EXPECT_TRUE(StageKeepsUp(960, 480));
+    EXPECT_FALSE(StageKeepsUp(1280, 720));
+    EXPECT_FALSE(StageKeepsUp(1920, 1080));
+}
+
 // Bad --denoise values are clear errors (exit 2, the option, the value and the valid names),
 // checked before any window opens.
 TEST(Preview, BadDenoiseValuesAreClearErrors) {
@@ -436,7 +488,8 @@ TEST(Preview, BadDenoiseValuesAreClearErrors) {
     EXPECT_NE(r.output.find("'svgf'"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("off, spatial, baseline, clamp, reliable"), std::string::npos)
         << r.output;
-    const ShellResult d = Shell(kBin + " preview " + kScene + " --demodulate --frames 1");
+    const ShellResult d =
+        Shell(kBin + " preview " + kScene + " --denoise off --demodulate --frames 1");
     EXPECT_EQ(d.exitCode, 2) << d.output;
     EXPECT_NE(d.output.find("--denoise"), std::string::npos) << d.output;
     const ShellResult m =
@@ -449,8 +502,8 @@ TEST(Preview, BadDenoiseValuesAreClearErrors) {
 // --cached-visibility belongs to the stage on texture-space frames: without --denoise, or with
 // per-hit shading, it is a clear error (exit 2, naming the flag) before any window opens.
 TEST(Preview, CachedVisibilityNeedsTheStageAndTextureSpace) {
-    for (const std::string& args :
-         {std::string(" --shading texture"), std::string(" --denoise reliable --shading hit")}) {
+    for (const std::string& args : {std::string(" --denoise off --shading texture"),
+                                    std::string(" --denoise reliable --shading hit")}) {
         const ShellResult r =
             Shell(kBin + " preview " + kScene + args + " --cached-visibility --frames 1");
         EXPECT_EQ(r.exitCode, 2) << args << ": " << r.output;
@@ -530,8 +583,10 @@ TEST(Preview, ShowsACagePastEmbreesLimits) {
     const fs::path dir = TempDir("prism16");
     const fs::path obj = dir / "prism16.obj", shot = dir / "shot.png";
     texcache::test::WriteObj(texcache::test::PrismCage(16), obj.string());
-    const ShellResult r =
-        Headless(obj.string(), "--frames 2 --resolution 64x64 --screenshot " + shot.string());
+    const ShellResult r = Headless(obj.string(),
+                                   "--integrator ao --denoise off --frames 2 --resolution 64x64 "
+                                   "--screenshot " +
+                                       shot.string());
     ASSERT_EQ(r.exitCode, 0) << r.output;
     const texcache::Image img = Screenshot(shot, 64, 64);
     size_t bright = 0;

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
-// Google Benchmark of the screen-space stage at 1920x1080: a synthetic frame pair (a glossy floor
+// Google Benchmark of the screen-space stage at 1920x1080 (and the Reliable stage at 640x360 with
+// the preview's 3 a-trous levels): a synthetic frame pair (a glossy floor
 // with a roughness checkerboard, a diffuse back wall, a moving box, a sphere, a moving soft light,
 // a panning camera; every component and motion-vector input filled, cones included) is denoised
 // frame 0 -> frame 1 per method, and the time of the frame-1 step is reported with its per-pass
@@ -9,8 +10,8 @@
 //
 //     build/bin/screen_space_benchmark [--benchmark_filter=reliable]
 //
-// --smoke runs every benchmark once on a 240x135 frame pair: CTest's check that the benchmark still
-// runs (its times then mean nothing).
+// --smoke runs every benchmark once on frames an eighth of the size (240x135, 80x45): CTest's check
+// that the benchmark still runs (its times then mean nothing).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -31,9 +32,9 @@ using namespace texcache::screen;
 
 bool gSmoke = false;  // --smoke
 
-test::SynthScene Scene() {
+test::SynthScene Scene(int width, int height) {
     test::SynthScene sc;
-    sc.width = gSmoke ? 240 : 1920, sc.height = gSmoke ? 135 : 1080;
+    sc.width = gSmoke ? width / 8 : width, sc.height = gSmoke ? height / 8 : height;
     sc.eye = glm::vec3(0.0f, 2.0f, 6.0f);
     sc.lightRadius = 0.3f;
     sc.lightVelocity = glm::vec3(0.05f, 0.0f, 0.0f);
@@ -64,14 +65,18 @@ test::SynthScene Scene() {
 struct Frames {
     FrameBuffers f0, f1;
     std::shared_ptr<const BrdfPreintegration> brdf = std::make_shared<BrdfPreintegration>();
-    Frames() {
-        const test::SynthScene sc = Scene();
+    Frames(int width, int height) {
+        const test::SynthScene sc = Scene(width, height);
         f0 = test::SynthRender(sc, 0, 1);
         f1 = test::SynthRender(sc, 1, 1);
     }
 };
-const Frames& Shared() {
-    static const Frames f;
+const Frames& Shared(int width) {
+    if (width == 640) {
+        static const Frames small(640, 360);
+        return small;
+    }
+    static const Frames f(1920, 1080);
     return f;
 }
 
@@ -100,9 +105,12 @@ void Report(benchmark::State& state, const std::string& prefix, const StageTimin
         sum.total > 0.0 ? 100.0 * sum.reliableMotion / sum.total : 0.0;
 }
 
-void BM_Stage(benchmark::State& state, Method method, Demodulation demod) {
-    const Frames& fr = Shared();
-    ScreenSpaceDenoiser dn(DenoiserSettings{}, fr.brdf);
+void BM_Stage(benchmark::State& state, Method method, Demodulation demod, int width,
+              int atrousLevels) {
+    const Frames& fr = Shared(width);
+    DenoiserSettings settings;
+    settings.atrousLevels = atrousLevels;
+    ScreenSpaceDenoiser dn(settings, fr.brdf);
     std::vector<glm::vec3> img;
     // Warm-up: allocates (and first-touches) both sets of guides and histories.
     dn.Denoise(fr.f0, method, demod, &img);
@@ -137,11 +145,16 @@ void Register() {
         for (Demodulation d : {Demodulation::Off, Demodulation::On}) {
             const std::string name = std::string("stage/") + MethodName(m) +
                                      (d == Demodulation::On ? "/demod" : "/no-demod");
-            auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d)
+            auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d, 1920, 4)
                           ->UseManualTime()
                           ->Unit(benchmark::kMillisecond);
             gSmoke ? b->Iterations(1) : b->MinTime(3.0);
         }
+    auto* small = benchmark::RegisterBenchmark("stage/reliable/demod/640x360", BM_Stage,
+                                               Method::Reliable, Demodulation::On, 640, 3)
+                      ->UseManualTime()
+                      ->Unit(benchmark::kMillisecond);
+    gSmoke ? small->Iterations(1) : small->MinTime(3.0);
 }
 
 }  // namespace

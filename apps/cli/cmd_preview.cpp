@@ -25,7 +25,7 @@ struct PreviewCliArgs {
     std::string screenshot;
     float orbit = 20.0f;
     std::string resolution;
-    std::string integrator = "ao";
+    std::string integrator;  // empty: the scene's
     std::string shading = "texture";
     std::string filter = "none";
     int filterRadius = 0;
@@ -41,7 +41,7 @@ struct PreviewCliArgs {
     float fps = 24.0f;
     bool fpsGiven = false;  ///< --fps on the command line
     bool saveCamera = false;
-    std::string denoise = "off";
+    std::string denoise = "auto";
     bool demodulate = false;
     bool cachedVisibility = false;
     std::string motion = "traditional";
@@ -61,7 +61,8 @@ int RunPreview(const PreviewCliArgs& a) {
         std::fprintf(stderr, "texcache: warning: %s\n", w.c_str());
 
     preview::PreviewSettings s;
-    s.integrator = ParseIntegrator(a.integrator, "--integrator");
+    s.integrator = a.integrator.empty() ? scene.settings.integrator
+                                        : ParseIntegrator(a.integrator, "--integrator");
     if (a.shading != "hit" && a.shading != "texture")
         throw InputError("--shading", "unknown mode '" + a.shading + "' (valid: hit, texture)");
     s.textureSpace = a.shading == "texture";
@@ -77,23 +78,15 @@ int RunPreview(const PreviewCliArgs& a) {
     s.exposure = CheckRange("--exposure", a.exposure, -32.0f, 32.0f);
     s.view = preview::ParseViewMode(a.view, "--view");
     s.refineCacheWhenStill = !a.noReshade;
-    s.denoise = a.denoise != "off";
+    s.denoise = a.denoise != "off" && a.denoise != "auto";
     if (s.denoise) {
         try {
             s.denoiseMethod = screen::ParseMethodKey(a.denoise, "--denoise");
         } catch (const InputError&) {
-            throw InputError("--denoise", "unknown method '" + a.denoise + "' (valid: off, " +
+            throw InputError("--denoise", "unknown method '" + a.denoise + "' (valid: auto, off, " +
                                               screen::MethodKeys() + ")");
         }
     }
-    s.demodulate = a.demodulate;
-    if (a.demodulate && !s.denoise)
-        throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
-    s.cachedVisibility = a.cachedVisibility;
-    if (a.cachedVisibility && (!s.denoise || !s.textureSpace))
-        throw InputError("--cached-visibility",
-                         "applies to the screen-space stage with texture space: give --denoise "
-                         "and --shading texture");
     s.motionKind = preview::ParseMotionKind(a.motion, "--motion");
     s.stereo = a.stereo;
     if (a.eyeSeparation) {
@@ -119,6 +112,19 @@ int RunPreview(const PreviewCliArgs& a) {
     // The preview's default is the benchmark's 512x512, not the scene's final-render size.
     s.width = s.height = 512;
     if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
+    // auto: the scene as it renders, cleaned up by the stage, where the stage has something to
+    // clean (the path tracer's split) and keeps up with the frame rate.
+    if (a.denoise == "auto")
+        s.denoise = s.integrator == IntegratorKind::Path && !a.stereo &&
+                    preview::StageKeepsUp(s.width, s.height);
+    s.demodulate = a.demodulate;
+    if (a.demodulate && !s.denoise)
+        throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    s.cachedVisibility = a.cachedVisibility;
+    if (a.cachedVisibility && (!s.denoise || !s.textureSpace))
+        throw InputError("--cached-visibility",
+                         "applies to the screen-space stage with texture space: give --denoise "
+                         "and --shading texture");
 
     preview::PreviewArgs p;
     p.scenePath = a.scene;
@@ -169,8 +175,8 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
 
     group("View");
     cmd->add_option("--resolution", a->resolution, "Render size WxH (default 512x512)");
-    cmd->add_option("--integrator", a->integrator, std::string("One of: ") + IntegratorNames())
-        ->capture_default_str();
+    cmd->add_option("--integrator", a->integrator,
+                    std::string("One of: ") + IntegratorNames() + " (default: the scene's)");
     cmd->add_option("--spp", a->spp, "Camera samples per pixel per frame")->capture_default_str();
     cmd->add_option("--ao-samples", a->aoSamples, "AO rays per hit / per cached sample")
         ->capture_default_str();
@@ -210,7 +216,8 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--denoise", a->denoise,
                     "The screen-space stage on the preview's frames (the path tracer's split, "
                     "diffuse indirect light from the cache with --shading texture): off, spatial, "
-                    "baseline, clamp or reliable")
+                    "baseline, clamp or reliable; auto: reliable for the path integrator at sizes "
+                    "where the stage keeps up (up to twice 640x360's pixels), else off")
         ->type_name("METHOD")
         ->capture_default_str();
     cmd->add_flag("--demodulate", a->demodulate,
@@ -245,9 +252,10 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
 
     group("Benchmark");
     cmd->add_flag("--bench", a->bench,
-                  "Benchmark: warm texture-space AO vs per-hit AO at equal relMSE while orbiting "
-                  "(no window); with --denoise, the stage's frames (texture-space vs per-hit "
-                  "indirect light, render and stage times, relMSE)");
+                  "Benchmark (no window): with the stage on (--denoise; auto turns it on for "
+                  "path-traced scenes), its frames while orbiting (texture-space vs per-hit "
+                  "indirect light, render and stage times, relMSE); with --denoise off, warm "
+                  "texture-space AO vs per-hit AO at equal relMSE");
     cmd->add_option("--bench-frames", a->benchFrames, "Bench: timed orbit frames")
         ->capture_default_str();
     cmd->add_option("--reference-spp", a->referenceSpp,

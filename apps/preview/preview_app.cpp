@@ -669,6 +669,10 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
             // with --play, frame i at the start time + i / fps (an animated camera followed).
             const int n = args.frames;
             const float startTime = ui.settings.time;
+            std::printf("integrator %s, texture space %s, screen-space stage %s\n",
+                        IntegratorName(ui.settings.integrator),
+                        ui.settings.textureSpace ? "on" : "off",
+                        ui.settings.denoise ? screen::MethodKey(ui.settings.denoiseMethod) : "off");
             FrameStats last;
             for (int i = 0; i < n && exitCode == 0; ++i) {
                 if (args.play) ui.settings.time = startTime + float(i) / args.fps;

@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
-// `texcache preview SCENE --bench`: the preview's frame rate while orbiting, texture-space AO with
-// the trivial filter and a cache kept across frames against per-hit AO at the same relMSE. Both
-// run the same orbit in the same process; relMSE is measured at the orbit's last view against a
-// high-sample per-hit reference of that view.
+// `texcache preview SCENE --bench`: the preview's frame rate while orbiting. With the stage off
+// (`--denoise off`), texture-space AO with the trivial filter and a cache kept across frames
+// against per-hit AO at the same relMSE; with the stage on (the default for path-traced scenes,
+// RunStageBench), its frames with texture-space against per-hit indirect light. Both run the same
+// orbit in the same process; relMSE is measured at the orbit's last view against a high-sample
+// per-hit reference of that view.
 #include <time.h>
 
 #include <algorithm>

@@ -66,6 +66,10 @@ screen::DenoiserSettings StageSettingsFor(int height) {
     return d;
 }
 
+bool StageKeepsUp(int width, int height) {
+    return int64_t(width) * int64_t(height) <= int64_t(2) * 640 * 360;
+}
+
 namespace {
 
 glm::vec3 HashColour(uint64_t h) {

@@ -113,6 +113,12 @@ TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s);
 /// figures are in results/preview.md). Two levels fewer lose visibly more.
 screen::DenoiserSettings StageSettingsFor(int height);
 
+/// Whether the screen-space stage keeps up with an interactive frame rate at width x height,
+/// which the preview's default (`--denoise auto`) asks: up to twice the pixels of 640x360, where
+/// the stage takes about 20 ms on 2 cores (results/screen_space_benchmark.md); it grows with
+/// the pixels, and at 1280x720 it alone would be most of a 10 fps frame.
+bool StageKeepsUp(int width, int height);
+
 /// Whether the screen-space stage's history survives going from settings `a` to `b`: only what
 /// moves the view along (scene time), how it is shown (exposure, view, motion kind) and the
 /// accumulation cap may differ; anything else (integrator, resolution, cache, filters,
