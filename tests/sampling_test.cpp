@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <vector>
 
@@ -301,6 +302,95 @@ TEST(Distribution, PdfIntegratesAndMatchesSamples) {
         int off = -1;
         steps.Sample(u, nullptr, &off);
         EXPECT_EQ(off, bin) << "u = " << u;
+    }
+}
+
+// The guided inversion against a plain binary search (std::upper_bound over the same CDF) and
+// the sample, density and bin that the binary search gives: equal bit for bit, on random CDFs
+// and on the hard cases (zero runs, a single non-zero bin, all equal, all zero, huge dynamic
+// range, u at 0, at the CDF's own values, just below 1, at 1, negative and NaN).
+TEST(Distribution, GuidedInversionEqualsBinarySearch) {
+    Rng rng(11, 0);
+    std::vector<std::vector<float>> cases;
+    cases.push_back({5.0f});
+    cases.push_back(std::vector<float>(1000, 0.0f));
+    cases.push_back(std::vector<float>(777, 2.5f));
+    for (const int n : {1, 2, 3, 7, 64, 1000, 4096}) {
+        std::vector<float> single(size_t(n), 0.0f);
+        single[size_t(n) / 3] = 1e-30f;
+        cases.push_back(single);
+        std::vector<float> last(size_t(n), 0.0f);
+        last.back() = 3.0f;
+        cases.push_back(last);
+    }
+    for (int c = 0; c < 40; ++c) {
+        const int n = 1 + int(rng.Next1D() * 3000.0f);
+        std::vector<float> w(static_cast<size_t>(n));
+        for (float& x : w) {
+            const float r = rng.Next1D();
+            // Runs of zeros, ordinary values, and values over 60 orders of magnitude.
+            x = r < 0.3f ? 0.0f : r < 0.6f ? rng.Next1D() : std::exp(rng.Next1D() * 140.0f - 70.0f);
+        }
+        if (c % 4 == 0)  // a long zero run in the middle
+            std::fill(w.begin() + n / 4, w.begin() + 3 * n / 4, 0.0f);
+        cases.push_back(w);
+    }
+    for (const std::vector<float>& w : cases) {
+        const Distribution1D d(w);
+        const std::vector<float>& cdf = d.Cdf();
+        const int n = d.Count();
+        std::vector<float> us = {0.0f, -0.0f, -1e-8f, -1.0f, 0x1.fffffep-1f, 0.99999994f, 1.0f,
+                                 1.5f, NAN,   1e-45f, 0.5f,  0.25f,          0.75f};
+        for (const float c : cdf)
+            us.insert(us.end(), {c, std::nextafter(c, -1.0f), std::nextafter(c, 2.0f)});
+        for (int i = 0; i < 2000; ++i) us.push_back(rng.Next1D());
+        for (const float u : us) {
+            // NaN compares false: the branch-free search has always stopped at index 0 for it.
+            const size_t expected =
+                std::isnan(u) ? 0
+                              : size_t(std::upper_bound(cdf.begin(), cdf.end(), u) - cdf.begin());
+            ASSERT_EQ(d.UpperBound(u), expected) << "n = " << n << ", u = " << u;
+            // The sample as the plain search gives it (the former Distribution1D::Sample).
+            int o = std::clamp(int(expected) - 1, 0, n - 1);
+            while (o < n - 1 && cdf[size_t(o) + 1] - cdf[size_t(o)] <= 0.0f) ++o;
+            const float width = cdf[size_t(o) + 1] - cdf[size_t(o)];
+            const float du =
+                std::clamp(width > 0.0f ? (u - cdf[size_t(o)]) / width : 0.5f, 0.0f, 1.0f);
+            const float x = std::min((float(o) + du) / float(n), 0x1.fffffep-1f);
+            float pdf = -1.0f;
+            int off = -1;
+            const float got = d.Sample(u, &pdf, &off);
+            ASSERT_EQ(off, o) << "n = " << n << ", u = " << u;
+            ASSERT_EQ(std::memcmp(&got, &x, sizeof x), 0) << "n = " << n << ", u = " << u;
+            ASSERT_EQ(pdf, width * float(n));
+        }
+    }
+    // The 2D distribution's rows, kept in one array, sample as separate 1D distributions do.
+    const int nu = 300, nv = 150;
+    std::vector<float> w(size_t(nu) * nv);
+    for (float& x : w) x = rng.Next1D() < 0.4f ? 0.0f : std::exp(rng.Next1D() * 40.0f - 20.0f);
+    std::fill(w.begin() + 10 * nu, w.begin() + 20 * nu, 0.0f);  // empty rows
+    const Distribution2D d2(w, nu, nv);
+    std::vector<float> rowSums(static_cast<size_t>(nv));
+    for (int v = 0; v < nv; ++v) {
+        double s = 0.0;
+        for (int x = 0; x < nu; ++x) s += w[size_t(v) * nu + size_t(x)];
+        rowSums[size_t(v)] = float(s / nu);
+    }
+    const Distribution1D marginal(rowSums);
+    for (int i = 0; i < 20000; ++i) {
+        const glm::vec2 u(rng.Next1D(), i == 0 ? 0x1.fffffep-1f : rng.Next1D());
+        float pv, pu, pdf;
+        int v;
+        const float sv = marginal.Sample(u.y, &pv, &v);
+        const Distribution1D row(
+            std::vector<float>(w.begin() + size_t(v) * nu, w.begin() + size_t(v + 1) * nu));
+        const float su = row.Sample(u.x, &pu, nullptr);
+        const glm::vec2 got = d2.Sample(u, &pdf);
+        ASSERT_EQ(got.x, su);
+        ASSERT_EQ(got.y, sv);
+        ASSERT_EQ(pdf, pu * pv);
+        ASSERT_EQ(d2.Pdf(got), marginal.Pdf(got.y) * row.Pdf(got.x));
     }
 }
 

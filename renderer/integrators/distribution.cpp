@@ -2,24 +2,10 @@
 #include "renderer/integrators/distribution.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 namespace texcache {
-
-Distribution1D::Distribution1D(const std::vector<float>& weights)
-    : func_(weights), cdf_(weights.size() + 1) {
-    const size_t n = func_.size();
-    for (float& f : func_)
-        if (!(f >= 0.0f) || !std::isfinite(f)) f = 0.0f, ++clampedCount;
-    // Integrate in double: 512K bins of widely ranging env-map luminance lose precision in float.
-    double acc = 0.0;
-    std::vector<double> c(n + 1, 0.0);
-    for (size_t i = 0; i < n; ++i) c[i + 1] = (acc += double(func_[i]) / double(n));
-    integral_ = float(acc);
-    for (size_t i = 0; i <= n; ++i) cdf_[i] = acc > 0.0 ? float(c[i] / acc) : float(i) / float(n);
-    cdf_[n] = 1.0f;
-    if (!(acc > 0.0)) std::fill(func_.begin(), func_.end(), 1.0f), integral_ = 1.0f;
-}
 
 namespace {
 
@@ -38,38 +24,104 @@ size_t UpperBound(const float* a, size_t count, float u) {
     return size_t(base - a) + (count > 0 && base[0] <= u ? 1 : 0);
 }
 
-}  // namespace
+// About four bins a bucket: the search within a bucket stays in one or two cache lines, and
+// the table is a quarter of the CDF's size.
+int GuideCount(size_t bins) {
+    return int(std::max<size_t>(std::bit_ceil(bins) / 4, 1));
+}
 
-float Distribution1D::Sample(float u, float* pdf, int* offset) const {
-    const int n = int(func_.size());
+// guide[k] = UpperBound(cdf, k / G) for k < G, guide[0] = 0 (a u below 0 inverts to index 0)
+// and guide[G] = the CDF's size. k / G is exact in float for a power of two G.
+void BuildGuide(const float* cdf, size_t size, int count, uint32_t* guide) {
+    size_t i = 0;
+    guide[0] = 0;
+    for (int k = 1; k < count; ++k) {
+        const float t = float(k) / float(count);
+        while (i < size && cdf[i] <= t) ++i;
+        guide[k] = uint32_t(i);
+    }
+    guide[count] = uint32_t(size);
+}
+
+// UpperBound(cdf, size, u), searching only between the cut points of u's bucket: every CDF
+// value before guide[k] is <= k / G <= u and the one at guide[k + 1] is > (k + 1) / G > u.
+// NaN and u < 1 / G fall in bucket 0, u >= 1 in the last one, whose end is the CDF's end.
+size_t GuidedUpperBound(const float* cdf, const uint32_t* guide, int count, float u) {
+    const float s = u * float(count);
+    const int k = s >= 1.0f ? std::min(int(std::min(s, float(count))), count - 1) : 0;
+    const size_t lo = guide[k], hi = guide[k + 1];
+    return lo + UpperBound(cdf + lo, hi - lo, u);
+}
+
+// Inverts one CDF of n bins (n + 1 values) at u: the continuous sample, its density and bin.
+float SampleCdf(const float* cdf, const uint32_t* guide, int guides, int n, float u, float* pdf,
+                int* offset) {
     // Last bin whose cdf <= u, skipping empty bins.
-    int o = int(UpperBound(cdf_.data(), cdf_.size(), u)) - 1;
+    int o = int(GuidedUpperBound(cdf, guide, guides, u)) - 1;
     o = std::clamp(o, 0, n - 1);
-    while (o < n - 1 && cdf_[o + 1] - cdf_[o] <= 0.0f) ++o;
+    while (o < n - 1 && cdf[o + 1] - cdf[o] <= 0.0f) ++o;
     if (offset) *offset = o;
-    const float width = cdf_[o + 1] - cdf_[o];
-    float du = width > 0.0f ? (u - cdf_[o]) / width : 0.5f;
+    const float width = cdf[o + 1] - cdf[o];
+    float du = width > 0.0f ? (u - cdf[o]) / width : 0.5f;
     du = std::clamp(du, 0.0f, 1.0f);
     if (pdf) *pdf = width * float(n);
     return std::min((float(o) + du) / float(n), 0x1.fffffep-1f);
 }
 
-float Distribution1D::Pdf(float x) const {
-    const int n = int(func_.size());
+float PdfCdf(const float* cdf, int n, float x) {
     const int o = std::clamp(int(x * float(n)), 0, n - 1);
-    return (cdf_[o + 1] - cdf_[o]) * float(n);
+    return (cdf[o + 1] - cdf[o]) * float(n);
+}
+
+}  // namespace
+
+Distribution1D::Distribution1D(const std::vector<float>& weights) : cdf_(weights.size() + 1) {
+    const size_t n = weights.size();
+    // Integrate in double: 512K bins of widely ranging env-map luminance lose precision in float.
+    double acc = 0.0;
+    std::vector<double> c(n + 1, 0.0);
+    for (size_t i = 0; i < n; ++i) {
+        float f = weights[i];
+        if (!(f >= 0.0f) || !std::isfinite(f)) f = 0.0f, ++clampedCount;
+        c[i + 1] = (acc += double(f) / double(n));
+    }
+    integral_ = float(acc);
+    for (size_t i = 0; i <= n; ++i) cdf_[i] = acc > 0.0 ? float(c[i] / acc) : float(i) / float(n);
+    cdf_[n] = 1.0f;
+    if (!(acc > 0.0)) integral_ = 1.0f;
+    const int g = GuideCount(n);
+    guide_.resize(size_t(g) + 1);
+    BuildGuide(cdf_.data(), cdf_.size(), g, guide_.data());
+}
+
+size_t Distribution1D::UpperBound(float u) const {
+    return GuidedUpperBound(cdf_.data(), guide_.data(), int(guide_.size()) - 1, u);
+}
+
+float Distribution1D::Sample(float u, float* pdf, int* offset) const {
+    return SampleCdf(cdf_.data(), guide_.data(), int(guide_.size()) - 1, Count(), u, pdf, offset);
+}
+
+float Distribution1D::Pdf(float x) const {
+    return PdfCdf(cdf_.data(), Count(), x);
 }
 
 Distribution2D::Distribution2D(const std::vector<float>& weights, int nu, int nv)
-    : nu_(nu), nv_(nv) {
+    : rowGuides_(GuideCount(size_t(nu))), nu_(nu), nv_(nv) {
     std::vector<float> rowSums(nv);
-    conditional_.reserve(nv);
+    rowCdf_.resize(size_t(nv) * size_t(nu + 1));
+    rowGuide_.resize(size_t(nv) * size_t(rowGuides_ + 1));
     for (int v = 0; v < nv; ++v) {
-        std::vector<float> row(weights.begin() + size_t(v) * nu,
-                               weights.begin() + size_t(v + 1) * nu);
-        conditional_.emplace_back(row);
+        const Distribution1D row(std::vector<float>(weights.begin() + size_t(v) * nu,
+                                                    weights.begin() + size_t(v + 1) * nu));
+        std::copy(row.cdf_.begin(), row.cdf_.end(), rowCdf_.begin() + size_t(v) * (nu + 1));
+        std::copy(row.guide_.begin(), row.guide_.end(),
+                  rowGuide_.begin() + size_t(v) * (rowGuides_ + 1));
         double s = 0.0;
-        for (float w : row) s += (w >= 0.0f && std::isfinite(w)) ? w : 0.0f;
+        for (size_t i = size_t(v) * nu; i < size_t(v + 1) * nu; ++i) {
+            const float w = weights[i];
+            s += (w >= 0.0f && std::isfinite(w)) ? w : 0.0f;
+        }
         rowSums[v] = float(s / nu);
     }
     marginal_ = Distribution1D(rowSums);
@@ -79,14 +131,16 @@ glm::vec2 Distribution2D::Sample(glm::vec2 u, float* pdf) const {
     float pv, pu;
     int v;
     const float sv = marginal_.Sample(u.y, &pv, &v);
-    const float su = conditional_[v].Sample(u.x, &pu, nullptr);
+    const float su = SampleCdf(rowCdf_.data() + size_t(v) * (nu_ + 1),
+                               rowGuide_.data() + size_t(v) * (rowGuides_ + 1), rowGuides_, nu_,
+                               u.x, &pu, nullptr);
     *pdf = pu * pv;
     return {su, sv};
 }
 
 float Distribution2D::Pdf(glm::vec2 uv) const {
     const int v = std::clamp(int(uv.y * float(nv_)), 0, nv_ - 1);
-    return marginal_.Pdf(uv.y) * conditional_[v].Pdf(uv.x);
+    return marginal_.Pdf(uv.y) * PdfCdf(rowCdf_.data() + size_t(v) * (nu_ + 1), nu_, uv.x);
 }
 
 }  // namespace texcache
