@@ -3,8 +3,11 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <fstream>
 #include <new>
 #include <utility>
 
@@ -84,6 +87,80 @@ void SizeTextureCaches(RenderOptions* opt, int views, GivenCacheSizes given,
 
 double PhysicalMemoryMiB() {
     return double(::sysconf(_SC_PHYS_PAGES)) * double(::sysconf(_SC_PAGESIZE)) / (1 << 20);
+}
+
+namespace {
+double AvailableMemoryMiB() {
+    std::ifstream in("/proc/meminfo");
+    std::string key;
+    double kib = 0.0;
+    std::string unit;
+    while (in >> key >> kib >> unit)
+        if (key == "MemAvailable:") return kib / 1024.0;
+    return PhysicalMemoryMiB();
+}
+
+double CacheMiB(const RenderOptions& opt) {
+    double bytes = 0.0;
+    if (opt.texture.enabled && !opt.texture.cache.referenceMode)
+        bytes +=
+            double(opt.texture.cache.sampleCacheBytes) + double(opt.texture.cache.texelCacheBytes);
+    if (opt.lightSampling == LightSampling::Cpis) bytes += double(opt.psrCacheBytes);
+    return bytes / double(1 << 20);
+}
+}  // namespace
+
+double MemoryBudgetMiB(double givenMiB) {
+    constexpr double kDefaultMiB = 2048.0;
+    double budget = kDefaultMiB;
+    if (givenMiB > 0.0) {
+        budget = givenMiB;
+    } else if (const char* env = std::getenv("TEXCACHE_MAX_MEMORY_MB")) {
+        char* end = nullptr;
+        const double v = std::strtod(env, &end);
+        if (end != env && v > 0.0) budget = v;
+    }
+    return std::min(budget, AvailableMemoryMiB());
+}
+
+double RenderMemoryMiB(const RenderOptions& opt, int views, bool frameBuffers) {
+    // Measured peaks per pixel of one view: the float film, its sRGB copy and the encoder's
+    // rows take about 36 bytes; each AOV layer 12 more in the film and as many in the EXR's
+    // buffers; the screen-space stage's buffers (G-buffer, split light, history) about 520.
+    const AovFlags& a = opt.aovs;
+    const int layers = int(a.albedo) + int(a.normal) + int(a.depth) + int(a.ptex) + int(a.motion);
+    const double perPixel = (frameBuffers ? 520.0 : 36.0) + 24.0 * layers;
+    const double pixels = double(std::max(opt.width, 1)) * double(std::max(opt.height, 1)) *
+                          double(std::max(views, 1));
+    constexpr double kBaseMiB = 32.0;  // the program, Embree and a small scene
+    return kBaseMiB + pixels * perPixel / double(1 << 20) + CacheMiB(opt);
+}
+
+void CheckMemoryBudget(double needMiB, double budgetMiB, const std::string& what,
+                       const std::string& where, const std::string& allow) {
+    if (needMiB <= budgetMiB) return;
+    throw InputError(where, what + " needs about " + std::to_string(llround(needMiB)) +
+                                " MiB, more than the " + std::to_string(llround(budgetMiB)) +
+                                " MiB allowed (default 2048, at most the memory available): "
+                                "make it smaller or allow it with " +
+                                allow + std::to_string(llround(std::ceil(needMiB))));
+}
+
+void CheckRenderMemory(const RenderOptions& opt, int views, bool frameBuffers, double budgetMiB) {
+    const double need = RenderMemoryMiB(opt, views, frameBuffers), caches = CacheMiB(opt);
+    if (caches > 0.5 * need) {
+        const bool psr = opt.lightSampling == LightSampling::Cpis &&
+                         double(opt.psrCacheBytes) / (1 << 20) > 0.5 * caches;
+        CheckMemoryBudget(
+            need, budgetMiB, "a render with " + std::to_string(llround(caches)) + " MiB of caches",
+            psr ? "--psr-cache-mb" : "--sample-cache-mb/--texel-cache-mb", "--max-memory-mb ");
+        return;
+    }
+    CheckMemoryBudget(need, budgetMiB,
+                      "a " + std::to_string(opt.width) + "x" + std::to_string(opt.height) +
+                          (views > 1 ? " stereo" : "") + (frameBuffers ? " frame-buffer" : "") +
+                          " render",
+                      "--resolution", "--max-memory-mb ");
 }
 
 TextureSamples AutoTextureSamples(bool gridAsked) {

@@ -88,6 +88,29 @@ void CheckStereoShear(const StereoRig& rig, const std::string& where);
 /// This machine's physical memory in MiB.
 double PhysicalMemoryMiB();
 
+/// The memory one run may take, in MiB: `givenMiB` (--max-memory-mb) when positive, else the
+/// TEXCACHE_MAX_MEMORY_MB environment variable when set (tests use it to refuse without
+/// allocating), else 2048; never more than the memory available now (MemAvailable). A render
+/// past that either pages the machine to a halt or is killed by the OOM killer long into its
+/// run, so it is refused before it starts.
+double MemoryBudgetMiB(double givenMiB);
+
+/// The peak memory in MiB a render of `opt` over `views` images (2 for stereo) is expected to
+/// take: its image buffers (the film, the tone-mapped copy and the file's buffers per pixel,
+/// each AOV layer on top, the screen-space stage's buffers when `frameBuffers`) and its caches.
+double RenderMemoryMiB(const RenderOptions& opt, int views, bool frameBuffers);
+
+/// Throws InputError naming `where` when `needMiB` is more than `budgetMiB`, in one line saying
+/// how much it would need (`what`: what takes it) and how to allow it (`allow` followed by the
+/// MiB needed: "--max-memory-mb ", or "TEXCACHE_MAX_MEMORY_MB=" for commands without it).
+void CheckMemoryBudget(double needMiB, double budgetMiB, const std::string& what,
+                       const std::string& where,
+                       const std::string& allow = "TEXCACHE_MAX_MEMORY_MB=");
+
+/// RenderMemoryMiB checked against `budgetMiB`, naming the caches' options when they take most
+/// of it and `resolution` otherwise.
+void CheckRenderMemory(const RenderOptions& opt, int views, bool frameBuffers, double budgetMiB);
+
 /// --ts-samples auto: where texture-space shading samples unless the caller asked for
 /// something only the grid has (`gridAsked`: a filter, a filter radius, footprints, temporal
 /// accumulation, stereo, the grid caches' sizes or modes): at the camera's hits, which reach a

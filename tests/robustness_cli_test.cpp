@@ -273,6 +273,76 @@ TEST(UnusedFlags, AreOneLineNamingTheOption) {
     EXPECT_EQ(top.code, 0) << top.out;
 }
 
+// ---- Sizes the machine cannot hold
+// ---------------------------------------------------------------
+
+// A render expected to need more memory than allowed (2048 MiB by default, --max-memory-mb, never
+// more than the memory available) is refused before it allocates, in one line naming the option
+// that asks for the size and the MiB it would need; the same frame renders once allowed. The
+// refusals run in milliseconds: nothing the size of the frame is allocated.
+TEST(TooBig, RendersBeyondTheMemoryBudgetAreOneLineNamingTheOption) {
+    const std::string cube = " " + test::MeshPath("catmark_cube") + " -q --spp 1 ";
+    const std::string png = " -o " + (Dir() / "big.png").string();
+    const std::string fb = " --frame-buffers " + (Dir() / "bigfb").string();
+    fs::remove(Dir() / "big.png");
+    struct Case {
+        std::string args, names;
+    };
+    for (const Case& c : {
+             Case{"--integrator normal --resolution 16384x16384" + png, "--resolution"},
+             Case{"--resolution 16384x16384 --stereo" + png, "--resolution"},
+             Case{"--integrator normal --resolution 16384x16384 --aov all -o " +
+                      (Dir() / "big.exr").string(),
+                  "--resolution"},
+             Case{"--resolution 16384x16384" + fb, "--resolution"},
+             Case{"--resolution 512x512 --max-memory-mb 8" + png, "--resolution"},
+             Case{"--resolution 48x36 --shading texture --sample-cache-mb 20000" + png,
+                  "--sample-cache-mb/--texel-cache-mb"},
+             Case{"--resolution 48x36 --shading texture --texel-cache-mb 3000" + png,
+                  "--sample-cache-mb/--texel-cache-mb"},
+         }) {
+        const CliRun r = Texcache("render" + cube + c.args, 20);
+        EXPECT_TRUE(OneLineError(r)) << c.args;
+        EXPECT_NE(r.out.find("error: " + c.names + ":"), std::string::npos) << c.args << "\n"
+                                                                            << r.out;
+        EXPECT_NE(r.out.find("needs about"), std::string::npos) << r.out;
+    }
+    EXPECT_FALSE(fs::exists(Dir() / "big.png"));
+    const CliRun psr = Texcache("render " + test::SceneDir() +
+                                "/brushed.json -q --spp 1 --resolution 48x36 --integrator direct "
+                                "--light-sampling cpis --psr-cache-mb 20000" +
+                                png);
+    EXPECT_TRUE(OneLineError(psr));
+    EXPECT_NE(psr.out.find("error: --psr-cache-mb:"), std::string::npos) << psr.out;
+    const CliRun ok = Texcache("render" + cube + "--resolution 48x36 --max-memory-mb 64" + png);
+    EXPECT_EQ(ok.code, 0) << ok.out;
+    const CliRun pv =
+        Texcache("preview --bench --resolution 16384x16384 " + test::MeshPath("catmark_cube"), 20);
+    EXPECT_TRUE(OneLineError(pv));
+    EXPECT_NE(pv.out.find("--resolution"), std::string::npos) << pv.out;
+}
+
+// montage and compare read the images' headers first and refuse, in one line, inputs whose
+// decoded pixels would not fit; TEXCACHE_MAX_MEMORY_MB sets the budget (here 32 MiB, so small
+// images stand in for huge ones).
+TEST(TooBig, MontageAndCompareCheckTheHeadersFirst) {
+    const fs::path a = Dir() / "big_in.exr";
+    WriteImage(a.string(), Image(400, 300, 3, 0.25f));
+    fs::remove(Dir() / "big_montage.exr");
+    ::setenv("TEXCACHE_MAX_MEMORY_MB", "32", 1);
+    const CliRun m = Texcache("montage " + a.string() + " " + a.string() + " -o " +
+                              (Dir() / "big_montage.exr").string());
+    const CliRun c = Texcache("compare " + a.string() + " " + a.string());
+    ::unsetenv("TEXCACHE_MAX_MEMORY_MB");
+    EXPECT_TRUE(OneLineError(m));
+    EXPECT_NE(m.out.find("TEXCACHE_MAX_MEMORY_MB="), std::string::npos) << m.out;
+    EXPECT_FALSE(fs::exists(Dir() / "big_montage.exr"));
+    EXPECT_TRUE(OneLineError(c));
+    const CliRun fine = Texcache("montage " + a.string() + " " + a.string() + " -o " +
+                                 (Dir() / "big_montage.exr").string());
+    EXPECT_EQ(fine.code, 0) << fine.out;
+}
+
 // ---- Outputs
 // -------------------------------------------------------------------------------------
 

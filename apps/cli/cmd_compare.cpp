@@ -9,6 +9,7 @@
 #include "commands.h"
 #include "renderer/image/image.h"
 #include "renderer/image/metrics.h"
+#include "renderer/render_policy.h"
 #include "texcache/error.h"
 
 namespace texcache::cli {
@@ -43,6 +44,11 @@ int RunCompare(const CompareArgs& a) {
         files.Output(a.errorImage, "--error-image");
         files.Check();
     }
+    // Both images as float RGB, the error image and the metrics' buffers: a size check on the
+    // headers refuses what would not fit before anything is decoded.
+    const uint64_t pixels = ImagePixelsClaimed(a.test) + ImagePixelsClaimed(a.ref);
+    CheckMemoryBudget(32.0 + double(pixels) * 40.0 / double(1 << 20), MemoryBudgetMiB(0.0),
+                      "comparing " + std::to_string(pixels) + " pixels", a.test);
     ColorEncoding testEnc, refEnc;
     Image test = ReadImageRGB(a.test, &testEnc);
     Image ref = ReadImageRGB(a.ref, &refEnc);

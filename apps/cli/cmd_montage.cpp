@@ -10,6 +10,7 @@
 #include "cli_util.h"
 #include "commands.h"
 #include "renderer/image/image.h"
+#include "renderer/render_policy.h"
 #include "texcache/error.h"
 
 namespace texcache::cli {
@@ -37,6 +38,12 @@ int RunMontage(const MontageArgs& a) {
     for (const std::string& path : a.inputs) files.Input(path, "an input image");
     files.Output(a.output, "--output");
     files.Check();
+    // Every input as float RGB, the montage as large again and its 8-bit copy: a size check on
+    // the headers refuses what would not fit before anything is decoded.
+    uint64_t pixels = 0;
+    for (const std::string& path : a.inputs) pixels += ImagePixelsClaimed(path);
+    CheckMemoryBudget(32.0 + double(pixels) * 40.0 / double(1 << 20), MemoryBudgetMiB(0.0),
+                      "a montage of " + std::to_string(pixels) + " pixels", a.output);
     std::vector<Image> images;
     for (const std::string& path : a.inputs) {
         images.push_back(ReadImageRGB(path));

@@ -10,6 +10,7 @@
 #include "commands.h"
 #include "preview.h"
 #include "renderer/render.h"
+#include "renderer/render_policy.h"
 #include "renderer/scene/scene_loader.h"
 #include "renderer/scene/scene_units.h"
 #include "renderer/texture_space/stereo.h"
@@ -34,6 +35,7 @@ struct PreviewCliArgs {
     int spp = 1;
     float lodBias = 1.0f;  // half the shading rate (Sec. 6.2): ~1 texel per pixel, high reuse
     double sampleCacheMb = 64.0, texelCacheMb = 64.0;
+    double maxMemoryMb = 0.0;  // 0: MemoryBudgetMiB's default
     float exposure = 0.0f;
     std::string view = "beauty";
     float time = NAN;  // NAN: the scene's render.time
@@ -53,6 +55,22 @@ struct PreviewCliArgs {
     std::optional<float> eyeSeparation;  // none: the scene camera's, else 1/30 of the orbit's
     bool noReshade = false;
 };
+
+/// Refuses a preview whose buffers and caches would not fit (render's CheckRenderMemory: the
+/// preview's frames are the render's, with the stage's buffers when it denoises).
+void CheckPreviewMemory(const preview::PreviewSettings& s, double maxMemoryMb) {
+    RenderOptions o;
+    o.width = s.width;
+    o.height = s.height;
+    o.texture.enabled = s.textureSpace;
+    o.texture.cache.sampleCacheBytes = size_t(double(s.sampleCacheMb) * (1 << 20));
+    o.texture.cache.texelCacheBytes = size_t(double(s.texelCacheMb) * (1 << 20));
+    const double budget =
+        MemoryBudgetMiB(maxMemoryMb == 0.0 ? 0.0
+                                           : CheckRange("--max-memory-mb", maxMemoryMb, 1.0,
+                                                        1024.0 * 1024.0 * 1024.0));
+    CheckRenderMemory(o, s.stereo ? 2 : 1, s.denoise, budget);
+}
 
 int RunPreview(const PreviewCliArgs& a) {
     std::vector<std::string> warnings;
@@ -121,6 +139,7 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.demodulate && !s.denoise)
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
     s.cachedVisibility = a.cachedVisibility;
+    CheckPreviewMemory(s, a.maxMemoryMb);
     if (a.cachedVisibility && (!s.denoise || !s.textureSpace))
         throw InputError("--cached-visibility",
                          "applies to the screen-space stage with texture space: give --denoise "
@@ -175,6 +194,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
 
     group("View");
     cmd->add_option("--resolution", a->resolution, "Render size WxH (default 512x512)");
+    cmd->add_option("--max-memory-mb", a->maxMemoryMb,
+                    "Refuse a preview expected to need more memory (MiB; default 2048, or "
+                    "TEXCACHE_MAX_MEMORY_MB; never more than the memory available)");
     cmd->add_option("--integrator", a->integrator,
                     std::string("One of: ") + IntegratorNames() + " (default: the scene's)");
     cmd->add_option("--spp", a->spp, "Camera samples per pixel per frame")->capture_default_str();

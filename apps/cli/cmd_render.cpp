@@ -63,6 +63,7 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
         // for hits, which never fill them).
         fbo.texture.samples = TextureSamples::Grid;
         SizeCaches(a, &fbo, 1);
+        CheckRenderMemory(fbo, 1, true, MemoryBudget(a));
         fbo.progress = false;
         int first = 0, last = 0;
         if (!a.frames.empty()) ParseFrames(a.frames, &first, &last);
@@ -82,6 +83,7 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
     SizeCaches(a, &opt, a.stereo ? 2 : 1);
     ParseLightSamplingOptions(a, scene, &opt);
     CheckOptionsUsed(a, opt);
+    CheckRenderMemory(opt, a.stereo ? 2 : 1, false, MemoryBudget(a));
     opt.progress = !a.quiet;
     int first = 0, last = 0;
     float fps = 0.0f;
@@ -140,6 +142,9 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Output image (.exr writes a .png beside it; .png only)")
         ->capture_default_str();
     cmd->add_option("--resolution", args->resolution, "Image size WxH, e.g. 1280x720");
+    cmd->add_option("--max-memory-mb", args->maxMemoryMb,
+                    "Refuse a render expected to need more memory (MiB; default 2048, or "
+                    "TEXCACHE_MAX_MEMORY_MB; never more than the memory available)");
     cmd->add_option("--aov", args->aovs,
                     "Extra EXR layers: albedo, normal, depth, ptex, motion, all")
         ->delimiter(',');

@@ -170,6 +170,12 @@ void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views) {
                       kCacheSizeOptions);
 }
 
+double MemoryBudget(const RenderArgs& a) {
+    if (!a.Given("--max-memory-mb")) return MemoryBudgetMiB(0.0);
+    return MemoryBudgetMiB(
+        CheckRange("--max-memory-mb", a.maxMemoryMb, 1.0, 1024.0 * 1024.0 * 1024.0));
+}
+
 void ParseLightSamplingOptions(const RenderArgs& a, const Scene& scene, RenderOptions* opt) {
     opt->lightSampling = ParseLightSampling(a.lightSampling, "--light-sampling");
     const double mb = CheckRange("--psr-cache-mb", a.psrCacheMb, 1.0 / 1024.0, 1024.0 * 1024.0);

@@ -62,6 +62,7 @@ struct RenderArgs {
     // (-1: enough for --temporal-alpha, WarmUpFrames).
     int warmupFrames = -1;
     double sampleCacheMb = 64.0, texelCacheMb = 64.0;
+    double maxMemoryMb = 0.0;  // 0: MemoryBudgetMiB's default
     float lodBias = 0.0f;
     bool referenceCache = false;
     bool overshading = false;
@@ -115,6 +116,8 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights);
 /// The cache sizes of a render of `opt` (`views` images): those given, else sized to the frame
 /// (SizeTextureCaches), checked against this machine's memory.
 void SizeCaches(const RenderArgs& a, RenderOptions* opt, int views);
+/// The memory a render may take (MemoryBudgetMiB of --max-memory-mb, checked when given).
+double MemoryBudget(const RenderArgs& a);
 /// --light-sampling and its record cache: product sampling needs an environment light and an
 /// integrator that samples lights (errors name the option and the problem).
 void ParseLightSamplingOptions(const RenderArgs& a, const Scene& scene, RenderOptions* opt);

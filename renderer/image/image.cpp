@@ -226,6 +226,20 @@ Image ReadImageRGB(const std::string& path, ColorEncoding* encoding) {
     return rgb;
 }
 
+uint64_t ImagePixelsClaimed(const std::string& path) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) return 0;
+    internal::ImageHeader h;
+    try {
+        h = internal::ImageReader(path).Header();
+    } catch (const std::exception&) {
+        return 0;
+    }
+    // A header that lies about its size is refused as such, not as too big to hold.
+    CheckImageSizeClaim(path, h.width, h.height, h.channels, h.rawBytes);
+    return uint64_t(std::max(h.width, 0)) * uint64_t(std::max(h.height, 0));
+}
+
 float SrgbToLinear(float v) {
     return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
 }

@@ -51,6 +51,10 @@ enum class ColorEncoding { Linear, Srgb };
 Image ReadImageRGB(const std::string& path, ColorEncoding* encoding = nullptr);
 /// Reads all channels as stored in the file (environment maps, AOVs); throws InputError.
 Image ReadImage(const std::string& path);
+/// The pixels an image file's header claims (width x height), without reading them, so that a
+/// command can check what decoding would take first; 0 when the file cannot be read (reading it
+/// then says why).
+uint64_t ImagePixelsClaimed(const std::string& path);
 /// Decodes sRGB-encoded values in [0, 1] to linear light in place (exact inverse OETF).
 void SrgbToLinear(Image* img);
 /// The same for one value.
