@@ -34,9 +34,7 @@ using test::CliRun;
 using test::Texcache;
 
 fs::path Dir() {
-    const fs::path d = fs::path(::testing::TempDir()) / "texcache_cli";
-    fs::create_directories(d);
-    return d;
+    return test::CliTempDir("texcache_cli");
 }
 
 TEST(Cli, RendersAnObjToExrAndPng) {

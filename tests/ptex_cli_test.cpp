@@ -26,9 +26,7 @@ using test::CliRun;
 using test::Texcache;
 
 fs::path Dir() {
-    const fs::path d = fs::path(::testing::TempDir()) / "texcache_ptex_cli";
-    fs::create_directories(d);
-    return d;
+    return test::CliTempDir("texcache_ptex_cli");
 }
 
 std::vector<uint8_t> Bytes(const std::string& path) {
