@@ -121,16 +121,19 @@ int EqualTime(const Setup& s) {
                 warm = false;
                 const Point p{spp, r.cpuSeconds, r.seconds, RelMSE(r.image, reference)};
                 curves[name].push_back(p);
+                Say("  %-8s %3d spp: %.3f CPU s, relMSE %.5f", name, spp, p.cpu, p.relmse);
+            }
+        // A method's rows together: gnuplot joins the points of consecutive rows only.
+        for (const auto& [name, points] : curves)
+            for (const Point& p : points)
                 table.Row()
                     .Add(ls->name)
                     .Add(integratorName)
                     .Add(name)
-                    .Add(double(spp))
+                    .Add(double(p.spp))
                     .Add(p.cpu)
                     .Add(p.seconds)
                     .Add(p.relmse);
-                Say("  %-8s %3d spp: %.3f CPU s, relMSE %.5f", name, spp, p.cpu, p.relmse);
-            }
         table.Write(csv);  // after every scene: a long run that stops keeps what it measured
 
         std::vector<double> hitCpu, hitErr;

@@ -211,7 +211,8 @@ void Draw(const Plot& p) {
     gp += "set output '" + tmpPng + "'\n";
     gp += "set datafile separator ','\n";
     gp += "set key outside right top\nset grid\n";
-    gp += "set title \"" + p.title + "\"\n";
+    // Names such as scene files carry underscores, which enhanced text would take as subscripts.
+    gp += "set title \"" + p.title + "\" noenhanced\n";
     gp += "set xlabel \"" + p.xLabel + "\"\nset ylabel \"" + p.yLabel + "\"\n";
     if (p.logX) gp += "set logscale x\n";
     if (p.logY) gp += "set logscale y\n";
@@ -222,10 +223,11 @@ void Draw(const Plot& p) {
         const std::string y =
             s.filter.empty() ? Format("%d", s.yColumn)
                              : Format("((%s) ? column(%d) : 1/0)", s.filter.c_str(), s.yColumn);
-        gp +=
-            Format("%s'%s' skip 1 using %d:%s with linespoints lw 2 pt 7 lc rgb '%s' title \"%s\"",
-                   i ? ", \\\n     " : "", s.csv.c_str(), s.xColumn, y.c_str(), kColors[i % 8],
-                   s.title.c_str());
+        gp += Format(
+            "%s'%s' skip 1 using %d:%s with linespoints lw 2 pt 7 lc rgb '%s' title \"%s\" "
+            "noenhanced",
+            i ? ", \\\n     " : "", s.csv.c_str(), s.xColumn, y.c_str(), kColors[i % 8],
+            s.title.c_str());
     }
     gp += "\n";
     const std::string script = fs::path(p.png).replace_extension(".gp").string();
