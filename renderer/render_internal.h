@@ -12,6 +12,7 @@
 // each stage's loop keeps them inlined. Internal to renderer/.
 #pragma once
 #include <algorithm>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -241,6 +242,23 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
 void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                    HitRecord* records, BinnedHit* binnedHits, glm::dvec3* perHit, glm::dvec2* noise,
                    RayCounts& rays);
+
+/// Hit binning under a material's filter (the note at the top of texture_space.h): how many
+/// levels above a hit's texel the bins of an object with filter `kind` and pass radius `radius`
+/// lie, or -1 for the schedule's (the normal filter, and softshadow, which the bins cannot
+/// serve). Gaussian and regression: bins of side 2^L in (r / 4, r / 2] texels, so that the
+/// window of radius r is 2-4 bins either side.
+inline int HitFilterLevels(TextureFilterKind kind, int radius) {
+    switch (kind) {
+        case TextureFilterKind::None:
+            return 0;
+        case TextureFilterKind::Gaussian:
+        case TextureFilterKind::Regression:
+            return radius < 4 ? 0 : std::bit_width(unsigned(radius)) - 2;
+        default:
+            return -1;
+    }
+}
 
 /// Hit-binned diffuse light, phase 1 continued: the traced hits added to their bins.
 void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,

@@ -188,6 +188,34 @@ CachedDirect CachedDirectLight(CachedLight choice, LightKinds kinds, TextureSamp
     return {true, kinds.delta};
 }
 
+void CheckMaterialFilters(const Scene& scene, const RenderOptions& opt) {
+    const IntegratorKind k = opt.integrator;
+    if (!opt.texture.enabled ||
+        (k != IntegratorKind::AO && k != IntegratorKind::Direct && k != IntegratorKind::Path))
+        return;
+    const bool hits = ShadesAtHits(opt);
+    const std::string here = std::string("the ") + IntegratorName(k) + " integrator" +
+                             (hits ? " at the hits" : " on the grid");
+    for (const Object& o : scene.objects) {
+        const Material& m = scene.materials[o.material];
+        if (m.cacheFilter.empty()) continue;
+        const std::string where = scene.path + ": material '" + m.name + "'";
+        const bool soft = ParseTextureFilter(m.cacheFilter, where) == TextureFilterKind::SoftShadow;
+        if (soft && (k != IntegratorKind::Direct || hits))
+            throw InputError(where,
+                             "filter softshadow filters area-light visibility, which only "
+                             "the direct integrator caches, with --ts-samples grid (here: " +
+                                 here + ")");
+        if (!soft && k == IntegratorKind::Direct && !hits)
+            throw InputError(where, "filter " + m.cacheFilter +
+                                        " filters cached light, which the direct integrator "
+                                        "caches only at the hits (--ts-samples auto or hits, "
+                                        "--cached-light all); on the grid it caches visibility "
+                                        "for softshadow alone (here: " +
+                                        here + ")");
+    }
+}
+
 void CheckStereoShear(const StereoRig& rig, const std::string& where) {
     if (rig.eyeSeparation <= 100.0f * rig.convergence) return;
     char msg[160];

@@ -146,4 +146,12 @@ struct CachedDirect {
 /// (TextureSpaceOptions::cacheDirect).
 CachedDirect CachedDirectLight(CachedLight choice, LightKinds kinds, TextureSamples samples);
 
+/// Throws InputError naming the scene file and the material when a material's "filter" cannot
+/// apply to the render `opt` describes (texture space with the ao, direct or path integrator).
+/// softshadow filters area-light visibility, which only the direct integrator caches, and only
+/// on the grid: the bins at the hits hold no occluder distances. The other filters filter
+/// cached AO or light: the direct integrator caches its light only at the hits (its grid
+/// caches the visibility softshadow filters, and shades everything else per hit).
+void CheckMaterialFilters(const Scene& scene, const RenderOptions& opt);
+
 }  // namespace texcache

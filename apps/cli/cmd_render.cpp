@@ -83,6 +83,7 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
     SizeCaches(a, &opt, a.stereo ? 2 : 1);
     ParseLightSamplingOptions(a, scene, &opt);
     CheckOptionsUsed(a, opt);
+    CheckMaterialFilters(scene, opt);
     CheckRenderMemory(opt, a.stereo ? 2 : 1, false, MemoryBudget(a));
     opt.progress = !a.quiet;
     int first = 0, last = 0;

@@ -6,6 +6,7 @@
 // Neighbouring samples read mostly the same bins: each thread keeps the cells it read last.
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <memory>
 
 #include "renderer/render_internal.h"
@@ -40,47 +41,53 @@ struct BinCell {
     typename Bin::Value n[4];  ///< bins (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
     float w[4];                ///< the current sample's bilinear weights
 };
+/// Memo keys shift bin coordinates by this much: a filtered reconstruction's window reaches up to
+/// kPad - 2 bins beyond the 2x2 cell around a sample, itself up to a bin beyond a face's edge.
+constexpr int kPad = 8;
+/// The value of bin (i, j) of `face` at `level` (res a side), in the face's grid extended across
+/// its edges: a bin beyond an edge is the neighbour's bin at that point (through the Ptex
+/// adjacency); none at a boundary, diagonally across a vertex, or, for a window's bin more than
+/// one bin out, past the neighbour face. Through the thread's `memo`.
+template <typename Bin>
+typename Bin::Value FindBin(const MeshGrids& g, const BinTable<Bin>& bins, int face, int level,
+                            int res, int i, int j, BinMemo<Bin>& memo) {
+    const bool outU = i < 0 || i >= res, outV = j < 0 || j >= res;
+    if (outU && outV) return {};  // a corner bin: diagonal across a vertex
+    const uint64_t local = TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
+                                    uint16_t(i + kPad), uint16_t(j + kPad)}
+                               .Pack();
+    auto& m = memo.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - BinMemo<Bin>::kLog2)];
+    if (m.key == local) return m.n;
+    TexelKey key;
+    if (!outU && !outV) {
+        key = {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(i), uint16_t(j)};
+    } else {
+        const int edge = j < 0 ? 0 : i >= res ? 1 : j >= res ? 2 : 3;
+        float along, inward;
+        UvToEdge(edge, (float(i) + 0.5f) / float(res), (float(j) + 0.5f) / float(res), &along,
+                 &inward);
+        int nf, ne;
+        float nu, nv, scale;
+        const bool far = i < -1 || i > res || j < -1 || j > res;
+        if (!g.Topology().Cross(face, edge, along, -inward, &nf, &nu, &nv, &ne, &scale) ||
+            (far && !(nu >= 0.0f && nu <= 1.0f && nv >= 0.0f && nv <= 1.0f))) {
+            m.key = local, m.n = {};  // no bin
+            return {};
+        }
+        const int nl = g.ClampMip(nf, level);
+        const int nres = g.Res(nf, nl);
+        key = {g.FaceOffset() + uint32_t(nf), uint8_t(nl), uint16_t(QuantizeCoord(nu, nres)),
+               uint16_t(QuantizeCoord(nv, nres))};
+    }
+    m.key = local, m.n = bins.Find(key);
+    return m.n;
+}
 /// The values of the 2x2 bins from (i0, j0) of a face at `level` (res a side) into `cell`.
 template <typename Bin>
 void FetchCell(const MeshGrids& g, const BinTable<Bin>& bins, int face, int level, int res, int i0,
                int j0, BinMemo<Bin>& memo, BinCell<Bin>* cell) {
-    for (int k = 0; k < 4; ++k) {
-        typename Bin::Value& out = cell->n[k];
-        out = {};
-        const int i = i0 + (k & 1), j = j0 + (k >> 1);
-        const bool outU = i < 0 || i >= res, outV = j < 0 || j >= res;
-        if (outU && outV) continue;  // a corner bin: diagonal across a vertex
-        // Coordinates shifted by one (-1 and res are the neighbours across the edges).
-        const uint64_t local = TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
-                                        uint16_t(i + 1), uint16_t(j + 1)}
-                                   .Pack();
-        auto& m = memo.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - BinMemo<Bin>::kLog2)];
-        if (m.key == local) {
-            out = m.n;
-            continue;
-        }
-        TexelKey key;
-        if (!outU && !outV) {
-            key = {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(i), uint16_t(j)};
-        } else {
-            const int edge = j < 0 ? 0 : i >= res ? 1 : j >= res ? 2 : 3;
-            float along, inward;
-            UvToEdge(edge, (float(i) + 0.5f) / float(res), (float(j) + 0.5f) / float(res), &along,
-                     &inward);
-            int nf, ne;
-            float nu, nv, scale;
-            if (!g.Topology().Cross(face, edge, along, -inward, &nf, &nu, &nv, &ne, &scale)) {
-                m.key = local, m.n = {};  // a boundary: no bin
-                continue;
-            }
-            const int nl = g.ClampMip(nf, level);
-            const int nres = g.Res(nf, nl);
-            key = {g.FaceOffset() + uint32_t(nf), uint8_t(nl), uint16_t(QuantizeCoord(nu, nres)),
-                   uint16_t(QuantizeCoord(nv, nres))};
-        }
-        out = bins.Find(key);
-        m.key = local, m.n = out;
-    }
+    for (int k = 0; k < 4; ++k)
+        cell->n[k] = FindBin(g, bins, face, level, res, i0 + (k & 1), j0 + (k >> 1), memo);
 }
 /// The cells a level keeps between samples, one per parity of the cell's corner (i0, j0): the
 /// four cells around a bin centre. A pixel's jittered samples straddle cell edges when bins are
@@ -113,10 +120,27 @@ const BinCell<Bin>& CellAt(const MeshGrids& g, const BinTable<Bin>& bins, int me
 /// What a thread's reconstructions keep between samples: the cells of a record's level and of the
 /// one above it, each level with its own memo (in a shared one, the two levels' bins would evict
 /// each other).
+/// A material filter's value at a bin centre (FilterAt): `weight` is the count behind it, 0 where
+/// its window holds no bin.
+struct FilteredValue {
+    glm::vec3 value{0.0f};
+    float weight = 0.0f;
+};
+/// The filtered values at the bin centres a thread read last (FilteredReconstruct), keyed as
+/// BinMemo: the 2x2 centres around a sample mostly served its neighbours already, and a centre's
+/// window costs up to 81 bins.
+struct FilteredMemo {
+    static constexpr int kLog2 = 10;
+    struct Entry {
+        uint64_t key = TexelKey::kEmpty;
+        FilteredValue f;
+    } at[1 << kLog2];
+};
 template <typename Bin>
 struct LevelCells {
     BinMemo<Bin> fineMemo, coarseMemo;
     CellSet<Bin> fine, coarse;
+    FilteredMemo filtered;  ///< objects whose material sets a filter (their bins: fineMemo)
 };
 /// The calling thread's LevelCells for reading `bins`: kept from tile to tile while the table
 /// holds the same bins (its Generation), so that a tile finds the bins its neighbours, read
@@ -162,6 +186,151 @@ CellEstimate EstimateOf(const BinCell<RadianceBin>& c) {
     if (e.count > 0.0f) e.mean = glm::vec3(num / (double(e.count) * RadianceBin::kScale));
     return e;
 }
+/// A bin's sum and count in common units: AO's escaped rays out of the rays traced, the light's
+/// fixed-point sums in radiance.
+double BinCount(const CountBin::Value& n) {
+    return double(n.trials);
+}
+glm::dvec3 BinSum(const CountBin::Value& n) {
+    return glm::dvec3(double(n.successes));
+}
+double BinCount(const RadianceBin::Value& n) {
+    return double(n.count);
+}
+glm::dvec3 BinSum(const RadianceBin::Value& n) {
+    return glm::dvec3(double(n.sum[0]), double(n.sum[1]), double(n.sum[2])) *
+           (1.0 / RadianceBin::kScale);
+}
+/// A material filter over the bins of one level (the note at the top of texture_space.h): its
+/// kind, its window's radius in bins, and the Gaussian's 1 / (2 sigma^2) in bins^-2.
+struct BinWindow {
+    TextureFilterKind kind;
+    int radius;
+    float inv2Sigma2;
+};
+/// The window of an object whose material sets `kind` with pass radius `r` texels, its bins
+/// HitFilterLevels(kind, r) levels above its texels: the footprint of radius r in bins (the
+/// Gaussian's sigma is r / 2 texels).
+BinWindow WindowOf(TextureFilterKind kind, int r) {
+    const float side = float(1 << std::max(HitFilterLevels(kind, r), 0));
+    const float sigma = 0.5f * float(r) / side;
+    return {kind, std::min(int(std::ceil(float(r) / side)), kPad - 2),
+            sigma > 0.0f ? 0.5f / (sigma * sigma) : 0.0f};
+}
+/// The filtered value at the centre of bin (i, j) of `face` at `level` (res a side, the face's
+/// grid extended across its edges as FindBin does). Gaussian: the mean of the window's bins
+/// weighted by count x exp(-d^2 / (2 sigma^2)). Regression: the value at the centre of a plane
+/// fitted to the bins' means, count-weighted, in bin coordinates; a direction the window barely
+/// spans (an edge's bins on a boundary, a row of bins on a thin face) is dropped from the fit
+/// by the same relative bound as the grid's regression filter's truncated SVD (singular values
+/// below 1e-2 of the largest), so a rank-deficient window falls back to a line or the mean; the
+/// result is held to the range of the bins' means and is the mean where not finite.
+template <typename Bin>
+FilteredValue FilterAt(const MeshGrids& g, const BinTable<Bin>& bins, int face, int level, int res,
+                       int i, int j, const BinWindow& w, BinMemo<Bin>& memo) {
+    const int R = w.radius;
+    double total = 0.0;
+    glm::dvec3 sum(0.0);
+    if (w.kind == TextureFilterKind::Gaussian) {
+        double wsum = 0.0;
+        for (int dj = -R; dj <= R; ++dj)
+            for (int di = -R; di <= R; ++di) {
+                const typename Bin::Value n =
+                    FindBin(g, bins, face, level, res, i + di, j + dj, memo);
+                const double count = BinCount(n);
+                if (!(count > 0.0)) continue;
+                const double k = std::exp(-double(di * di + dj * dj) * double(w.inv2Sigma2));
+                sum += k * BinSum(n), wsum += k * count, total += count;
+            }
+        if (!(wsum > 0.0)) return {};
+        return {glm::vec3(sum / wsum), float(total)};
+    }
+    // Regression: moments of the bins' positions p and means y, weighted by count.
+    double sp[2] = {0.0, 0.0}, spp[3] = {0.0, 0.0, 0.0};
+    glm::dvec3 spy[2] = {glm::dvec3(0.0), glm::dvec3(0.0)};
+    glm::dvec3 lo(INFINITY), hi(-INFINITY);
+    for (int dj = -R; dj <= R; ++dj)
+        for (int di = -R; di <= R; ++di) {
+            const typename Bin::Value n = FindBin(g, bins, face, level, res, i + di, j + dj, memo);
+            const double count = BinCount(n);
+            if (!(count > 0.0)) continue;
+            const glm::dvec3 s = BinSum(n), y = s / count;
+            const double x = di, z = dj;
+            total += count, sum += s;
+            sp[0] += count * x, sp[1] += count * z;
+            spp[0] += count * x * x, spp[1] += count * x * z, spp[2] += count * z * z;
+            spy[0] += x * s, spy[1] += z * s;
+            lo = glm::min(lo, y), hi = glm::max(hi, y);
+        }
+    if (!(total > 0.0)) return {};
+    const glm::dvec3 mean = sum / total;
+    const double mx = sp[0] / total, mz = sp[1] / total;
+    // Covariance of the positions and their covariance with the values.
+    const double cxx = spp[0] / total - mx * mx, cxz = spp[1] / total - mx * mz,
+                 czz = spp[2] / total - mz * mz;
+    const glm::dvec3 bx = spy[0] / total - mx * mean, bz = spy[1] / total - mz * mean;
+    // Eigen-decomposition of the 2x2 covariance; the gradient is its truncated pseudo-inverse
+    // applied to (bx, bz).
+    const double tr = cxx + czz, det = cxx * czz - cxz * cxz;
+    const double disc = std::sqrt(std::max(0.25 * tr * tr - det, 0.0));
+    const double l1 = 0.5 * tr + disc, l2 = 0.5 * tr - disc;
+    glm::dvec3 value = mean;
+    if (l1 > 1e-8) {
+        // Unit eigenvectors: e1 for l1, e2 orthogonal to it.
+        double ex = cxz, ez = l1 - cxx;
+        if (std::abs(ex) + std::abs(ez) < 1e-12) ex = cxx >= czz ? 1.0 : 0.0, ez = 1.0 - ex;
+        const double len = std::sqrt(ex * ex + ez * ez);
+        ex /= len, ez /= len;
+        // Relative bound on singular values (sqrt of eigenvalues) of 1e-2: 1e-4 on eigenvalues.
+        const bool both = l2 > 1e-4 * l1;
+        const glm::dvec3 along1 = (ex * bx + ez * bz) / l1;
+        const glm::dvec3 along2 = both ? (-ez * bx + ex * bz) / l2 : glm::dvec3(0.0);
+        // The plane at the centre (0, 0): mean + gradient . (0 - mean position).
+        const double p1 = -(ex * mx + ez * mz), p2 = -(-ez * mx + ex * mz);
+        value = glm::clamp(mean + along1 * p1 + along2 * p2, lo, hi);
+        if (!std::isfinite(value.x + value.y + value.z)) value = mean;
+    }
+    return {glm::vec3(value), float(total)};
+}
+/// The reconstruction at record `h` of an object whose material sets filter `kind` (pass radius
+/// `r`), from its bins at its record's level: none reads the hit's own bin; gaussian and
+/// regression read the filtered values at the 2x2 bin centres around it (FilterAt, through the
+/// thread's memo), bilinearly, skipping centres whose window holds no bin.
+template <typename Bin>
+glm::vec3 FilteredReconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins,
+                              const HitRecord& h, LevelCells<Bin>& cells, TextureFilterKind kind,
+                              int r) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level();
+    const int res = g.Res(face, level);
+    const float u = h.U(), v = h.V();
+    if (kind == TextureFilterKind::None) {
+        const typename Bin::Value n = FindBin(g, bins, face, level, res, QuantizeCoord(u, res),
+                                              QuantizeCoord(v, res), cells.fineMemo);
+        const double count = BinCount(n);
+        return count > 0.0 ? glm::vec3(BinSum(n) / count) : glm::vec3(0.0f);
+    }
+    const float x = u * float(res) - 0.5f, y = v * float(res) - 0.5f;
+    const int i0 = int(std::floor(x)), j0 = int(std::floor(y));
+    const float fx = x - float(i0), fy = y - float(j0);
+    glm::vec3 sum(0.0f);
+    float wsum = 0.0f;
+    for (int k = 0; k < 4; ++k) {
+        const int i = i0 + (k & 1), j = j0 + (k >> 1);
+        const float w = ((k & 1) ? fx : 1.0f - fx) * ((k >> 1) ? fy : 1.0f - fy);
+        const uint64_t local = TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
+                                        uint16_t(i + kPad), uint16_t(j + kPad)}
+                                   .Pack();
+        FilteredMemo::Entry& m =
+            cells.filtered.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - FilteredMemo::kLog2)];
+        if (m.key != local) {
+            m.key = local;
+            m.f = FilterAt(g, bins, face, level, res, i, j, WindowOf(kind, r), cells.fineMemo);
+        }
+        if (m.f.weight > 0.0f) sum += w * m.f.value, wsum += w;
+    }
+    return wsum > 0.0f ? sum / wsum : glm::vec3(0.0f);
+}
 /// The reconstruction at record `h` from its level's bins and the level above (the note at the
 /// top of texture_space.h): fine + alpha (coarse - fine), alpha = CoarseWeight of their
 /// luminance difference and of the fine estimate's variance, `variance(fine, coarse)`. With
@@ -170,6 +339,11 @@ CellEstimate EstimateOf(const BinCell<RadianceBin>& c) {
 template <typename Bin, typename Variance>
 glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins, const HitRecord& h,
                       LevelCells<Bin>& cells, double k, Variance&& variance) {
+    // An object whose material sets a filter the bins serve reads them through it.
+    const int object = tsc.ObjectOfMesh(h.mesh);
+    const TextureFilterKind kind = tsc.FilterOf(object);
+    if (HitFilterLevels(kind, 0) >= 0)
+        return FilteredReconstruct(tsc, bins, h, cells, kind, tsc.PassRadiusOf(object));
     const MeshGrids& g = tsc.Grids(h.mesh);
     const int face = h.Face(), level = h.Level();
     const float u = h.U(), v = h.V();

@@ -51,6 +51,14 @@ void BinKeys(const MeshGrids& g, int face, float u, float v, int texelLevel, int
                    uint16_t(QuantizeCoord(v, res))};
     }
 }
+/// The bins of a hit of scene object `object`: at the level its material's filter sets, one
+/// level only (that filter reads no other), or BinKeys' two at the schedule's `bias`.
+void ObjectBinKeys(const Context& c, int object, const MeshGrids& g, int face, float u, float v,
+                   int texelLevel, int bias, TexelKey keys[2]) {
+    const int own = HitFilterLevels(c.tsc->FilterOf(object), c.tsc->PassRadiusOf(object));
+    BinKeys(g, face, u, v, texelLevel, own < 0 ? bias : own, keys);
+    if (own >= 0) keys[1] = keys[0];
+}
 /// Whether camera sample (x, y, s) reads its upper bin level: with probability `blend`, the
 /// lower one otherwise (stochastic filtering: in expectation the blend of the two, for one
 /// reconstruction instead of two), decided by a hash of its pixel and index rather than its
@@ -67,8 +75,8 @@ bool ReadsUpperLevel(const Context& c, int x, int y, int s, float blend) {
 void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, TexelKey keys[2],
             HitRecord* h) {
     const int mesh = c.tsc->MeshOf(si.object, si.backFacing), face = si.ptex.face;
-    BinKeys(c.tsc->Grids(mesh), face, si.ptex.u, si.ptex.v, HitTexelLevel(c, si, t, mesh), bias,
-            keys);
+    ObjectBinKeys(c, si.object, c.tsc->Grids(mesh), face, si.ptex.u, si.ptex.v,
+                  HitTexelLevel(c, si, t, mesh), bias, keys);
     *h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
           uint32_t(face) << 4 | keys[0].mip};
 }
@@ -234,7 +242,8 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
                 if (h.mesh < 0) continue;
                 const BinnedHit& b = binnedHits[index];
                 TexelKey keys[2];
-                BinKeys(c.tsc->Grids(h.mesh), h.Face(), h.U(), h.V(), b.texelLevel, bias, keys);
+                ObjectBinKeys(c, c.tsc->ObjectOfMesh(h.mesh), c.tsc->Grids(h.mesh), h.Face(), h.U(),
+                              h.V(), b.texelLevel, bias, keys);
                 RadianceBin::Value v;
                 RadianceBin::FromRadiance(&b.light.x, &v);  // finite: checked when shaded
                 batch.Add(keys[0], v);

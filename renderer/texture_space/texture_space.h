@@ -64,6 +64,16 @@
 // which it stays that of level 0's bins. The bins hold integer counts, whose sums do not depend
 // on the order of the adds (see texcache/hit_bins.h), so the image is the same for any thread
 // count.
+// A material's filter on the bins. The schedule and the two-level combination above are the
+// normal filter's, which every object without a "filter" key gets. An object whose material
+// sets another filter bins its hits at a level of its own and reads them through that filter
+// (bin_reconstruction.cpp, FilteredReconstruct): none bins at the hit's texel and reads the
+// hit's bin alone; gaussian and regression bin at a level whose bins are between a quarter and
+// half the radius wide, so that the window of radius r texels is a few bins wide, and filter
+// the bins around each bin centre (Gaussian weights of sigma r / 2 texels times the counts, or
+// a count-weighted plane fit), which the sample reads bilinearly. The radius shrinks with the
+// passes as the grid's footprints do. Softshadow needs occluder distances the bins do not hold:
+// the command line refuses it here (CheckMaterialFilters).
 // The passes are deterministic (streams of key and pass, whatever thread shades a sample), so
 // the same seed still gives the same image for any thread count. Temporal accumulation
 // (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
@@ -279,6 +289,8 @@ public:
     /// Footprint radius of an object's material (its override, else the render's default), as
     /// of pass 0.
     int RadiusOf(int object) const { return radiusOf_[object]; }
+    /// RadiusOf shrunk for the current pass (PassRadius).
+    int PassRadiusOf(int object) const { return passRadiusOf_[object]; }
     /// Whether any object uses a filter (e.g. to skip what only that filter needs).
     bool Uses(TextureFilterKind kind) const;
     /// Whether any object's filter reads more than its centre texel.
