@@ -394,7 +394,7 @@ void ExpectOneLineError(const CliRun& r, const std::string& args, const std::str
 // A refused command line, one CTest case each (every case is one run of the program): the
 // placeholders {scene} (a scene with a mesh {obj} and an environment map {env}), {good} and
 // {goodpng} (outputs of an earlier run), {cube} (the bundled cube) and {dir} are replaced by the
-// fixture's files.
+// fixture's files; {dir}/soft.json is the cube with a material setting the softshadow filter.
 struct Refusal {
     const char* name;
     const char* args;
@@ -411,6 +411,9 @@ protected:
         WriteImage((dir_ / "env.exr").string(), Image(8, 4, 3, 1.0f));
         std::ofstream(dir_ / "s.json") << R"({"objects": [{"mesh": "cube.obj"}],
             "lights": [{"type": "environment", "file": "env.exr"}]})";
+        std::ofstream(dir_ / "soft.json") << R"({"objects": [{"mesh": "cube.obj",
+            "material": "clay"}], "materials": {"clay": {"type": "diffuse",
+            "filter": "softshadow"}}, "lights": [{"type": "environment", "file": "env.exr"}]})";
         WriteImage((dir_ / "good.exr").string(), Image(4, 4, 3, 0.5f));
         WriteImage((dir_ / "good.png").string(), Image(4, 4, 3, 0.5f));
         for (const auto& e : fs::directory_iterator(dir_))
@@ -506,6 +509,14 @@ INSTANTIATE_TEST_SUITE_P(
                 RENDER_CUBE "--shading texture --filter softshadow "
                             "--integrator ao",
                 "--filter: softshadow"},
+        Refusal{"MaterialSoftShadowWithAo",
+                "render {dir}/soft.json --spp 1 --resolution 8x8 -q -o {dir}/x.png "
+                "--shading texture --integrator ao",
+                "soft.json: material 'clay': filter softshadow filters area-light visibility"},
+        Refusal{"MaterialSoftShadowAtTheHits",
+                "render {dir}/soft.json --spp 1 --resolution 8x8 -q -o {dir}/x.png "
+                "--shading texture --integrator direct --cached-light all",
+                "material 'clay': filter softshadow"},
         Refusal{"AovIntoPng", RENDER_CUBE "--aov albedo", "--aov: AOV layers are written to EXR"},
         Refusal{"CacheBeyondMemory", RENDER_CUBE "--shading texture --sample-cache-mb 1048576",
                 "do not fit in this machine's"}),

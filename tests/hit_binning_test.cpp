@@ -21,16 +21,13 @@ namespace {
 
 using test::AllFiniteIn;
 using test::AoOptions;
+using test::HitsAo;
+using test::kHardCages;
 using test::MakePlaneGlossy;
+using test::PathOptions;
 using test::RenderOnThreads;
 using test::TorusAo;
 using test::TorusOnPlane;
-
-// The cages with the hard features hit binning must survive: a boundary and a hole (no
-// neighbour across an edge), n-gons (sub-faces and their adjacency), creases, extraordinary
-// vertices.
-const char* const kHardCages[] = {"catmark_hole_test1", "catmark_nonquads", "catmark_cube_creases1",
-                                  "catmark_cubes_infsharp"};
 
 // The mean absolute difference of the pixel channels to the reference, printed with `name`.
 double MeanAbsoluteDifference(const Image& img, const Image& ref, const char* name) {
@@ -51,14 +48,6 @@ float LargestPixelError(const Image& img, const Image& ref) {
     }
     std::printf("largest pixel error %.4f\n", worst);
     return worst;
-}
-
-// AO shaded at the camera's hits and binned (TextureSamples::Hits; render.cpp, AoHitsBin).
-RenderOptions HitsAo(int spp, int aoSamples) {
-    RenderOptions o = AoOptions(spp, aoSamples);
-    o.texture.enabled = true;
-    o.texture.samples = TextureSamples::Hits;
-    return o;
 }
 
 // The bins' levels above the texel: 2.5 at 4 rays per pixel, one level less per 8x the rays,
@@ -229,18 +218,6 @@ const RenderScene& LitTorus(bool glossyPlane, bool sun = false) {
                        sunlit = make(false, true);
     static const RenderScene rsDiffuse(diffuse, {}), rsGlossy(glossy, {}), rsSun(sunlit, {});
     return sun ? rsSun : glossyPlane ? rsGlossy : rsDiffuse;
-}
-
-RenderOptions PathOptions(int spp, int hitSamples, bool hits, bool cacheDirect, int scale = 1) {
-    RenderOptions o = AoOptions(spp, 1);
-    o.width *= scale, o.height *= scale;
-    o.integrator = IntegratorKind::Path;
-    o.maxDepth = 2;
-    o.hitSamples = hitSamples;
-    o.texture.enabled = hits;
-    o.texture.samples = TextureSamples::Hits;
-    o.texture.cacheDirect = cacheDirect;
-    return o;
 }
 
 // Diffuse light binned at the camera hits (render.cpp, PathHitsTrace): all of it under the white

@@ -46,6 +46,35 @@ inline RenderOptions CachedAo(int spp, int aoSamples, TextureFilterKind f) {
     return o;
 }
 
+// The cages with the hard features hit binning (and its material filters) must survive: a boundary
+// and a hole (no neighbour across an edge), n-gons (sub-faces and their adjacency), creases,
+// extraordinary vertices.
+inline const char* const kHardCages[] = {"catmark_hole_test1", "catmark_nonquads",
+                                         "catmark_cube_creases1", "catmark_cubes_infsharp"};
+
+// AO shaded at the camera's hits and binned (TextureSamples::Hits; render.cpp, AoHitsBin).
+inline RenderOptions HitsAo(int spp, int aoSamples) {
+    RenderOptions o = AoOptions(spp, aoSamples);
+    o.texture.enabled = true;
+    o.texture.samples = TextureSamples::Hits;
+    return o;
+}
+
+// The path integrator (2 bounces) with `hitSamples` paths per hit, at the hits' bins when `hits`
+// (all of the light binned with `cacheDirect`), on an image `scale` times AoOptions' size.
+inline RenderOptions PathOptions(int spp, int hitSamples, bool hits, bool cacheDirect,
+                                 int scale = 1) {
+    RenderOptions o = AoOptions(spp, 1);
+    o.width *= scale, o.height *= scale;
+    o.integrator = IntegratorKind::Path;
+    o.maxDepth = 2;
+    o.hitSamples = hitSamples;
+    o.texture.enabled = hits;
+    o.texture.samples = TextureSamples::Hits;
+    o.texture.cacheDirect = cacheDirect;
+    return o;
+}
+
 // TorusOnPlane() ready for AO (no lights), built once for the tests that only render it.
 inline const RenderScene& TorusAo() {
     static const Scene scene = TorusOnPlane();

@@ -281,8 +281,9 @@ FilteredValue FilterAt(const MeshGrids& g, const BinTable<Bin>& bins, int face, 
         if (std::abs(ex) + std::abs(ez) < 1e-12) ex = cxx >= czz ? 1.0 : 0.0, ez = 1.0 - ex;
         const double len = std::sqrt(ex * ex + ez * ez);
         ex /= len, ez /= len;
-        // Relative bound on singular values (sqrt of eigenvalues) of 1e-2: 1e-4 on eigenvalues.
-        const bool both = l2 > 1e-4 * l1;
+        // The bounds on singular values (square roots of eigenvalues): 1e-2 of the largest,
+        // and 1e-4.
+        const bool both = l2 > 1e-4 * l1 && l2 > 1e-8;
         const glm::dvec3 along1 = (ex * bx + ez * bz) / l1;
         const glm::dvec3 along2 = both ? (-ez * bx + ex * bz) / l2 : glm::dvec3(0.0);
         // The plane at the centre (0, 0): mean + gradient . (0 - mean position).
