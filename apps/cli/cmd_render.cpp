@@ -63,6 +63,7 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
         // for hits, which never fill them).
         fbo.texture.samples = TextureSamples::Grid;
         SizeCaches(a, &fbo, 1);
+        CheckMaterialFilters(scene, fbo);
         CheckRenderMemory(fbo, 1, true, MemoryBudget(a));
         fbo.progress = false;
         int first = 0, last = 0;
