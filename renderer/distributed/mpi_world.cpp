@@ -7,8 +7,10 @@
 // rank's polls take a core from the rank it waits for. So every collective here starts with
 // Arrive(): a non-blocking barrier whose wait polls for a moment and then sleeps between polls.
 // Once every rank has arrived, the collective itself runs in MPI's blocking call, polling only
-// while the data moves (which, in pieces through shared memory, needs both sides polling).
-// TEXCACHE_MPI_WAIT=poll leaves the barrier out, waiting as MPI does (to measure the
+// while the data moves (which, in pieces through shared memory, needs both sides polling), and
+// yielding its core between polls (Open MPI's mpi_yield_when_idle, set unless the environment
+// sets it), so that a rank the scheduler took off the core gets it back to send its pieces.
+// TEXCACHE_MPI_WAIT=poll leaves both out, waiting as MPI does by default (to measure the
 // difference: scripts/mpi_scaling.sh ab).
 // MPI's C API only: mpi.h otherwise brings the long-deprecated C++ bindings, whose library
 // (libmpi_cxx) the C target does not link.
@@ -39,13 +41,18 @@ void Check(int err, const char* what) {
     throw std::runtime_error(std::string(what) + ": " + std::string(text, size_t(len)));
 }
 
-/// Returns once every rank has called it (see the design note above).
-void Arrive() {
+/// Whether to wait as MPI does by default (TEXCACHE_MPI_WAIT=poll; see the design note above).
+bool PollAsMpiDoes() {
     static const bool poll = [] {
         const char* v = std::getenv("TEXCACHE_MPI_WAIT");
         return v && std::strcmp(v, "poll") == 0;
     }();
-    if (poll) return;
+    return poll;
+}
+
+/// Returns once every rank has called it (see the design note above).
+void Arrive() {
+    if (PollAsMpiDoes()) return;
     MPI_Request request;
     Check(MPI_Ibarrier(MPI_COMM_WORLD, &request), "MPI_Ibarrier");
     int done = 0;
@@ -68,6 +75,7 @@ int Elements(size_t n) {
 class MpiRankGroup final : public RankGroup {
 public:
     MpiRankGroup(int* argc, char*** argv) {
+        if (!PollAsMpiDoes()) setenv("OMPI_MCA_mpi_yield_when_idle", "1", /*overwrite=*/0);
         int provided = 0;
         Check(MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided), "MPI_Init_thread");
         MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
