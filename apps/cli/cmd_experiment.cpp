@@ -141,6 +141,11 @@ int RunExperiment(const ExperimentArgs& a) {
             if (!spread && index++ % job.Size() != job.Rank()) continue;
             experiments::Setup run = s;
             run.ranks = spread ? &job : nullptr;
+            if (spread) {
+                experiments::Setup check = run;
+                check.checkOnly = true;
+                OnEveryRank([&] { Experiments().at(name)(check); });
+            }
             const double te = NowSeconds();
             code = std::max(code, Experiments().at(name)(run));
             if (spread && job.Rank() != 0) continue;

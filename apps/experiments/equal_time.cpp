@@ -71,6 +71,7 @@ int EqualTime(const Setup& s) {
     Setup set = s;
     set.scenesDir = s.sceneSet;
     const std::vector<std::string> files = SceneFiles(set.scenesDir, s.only);
+    if (s.checkOnly) return 0;
     const int W = s.quick ? 80 : 320, H = s.quick ? 45 : 180;
     const int refSpp = s.quick ? 64 : 1024, repeats = s.quick ? 1 : 2;
     const std::vector<int> ladder =

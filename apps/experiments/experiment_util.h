@@ -38,6 +38,10 @@ struct Setup {
     /// The ranks an experiment that spreads its renders shares them with (RenderQueue); null or
     /// of one rank: this process renders everything.
     RankGroup* ranks = nullptr;
+    /// Only check the options an experiment that spreads its renders takes (and throw
+    /// InputError as a run would), rendering and writing nothing: over many ranks every rank
+    /// checks before any of them starts, so that bad input fails as one line, not one a rank.
+    bool checkOnly = false;
 };
 
 /// A scene file loaded and built once for a given integrator family. Not movable: the

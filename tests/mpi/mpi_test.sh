@@ -12,7 +12,7 @@
 #   renders spread over NP ranks (rank 0 given --out A, the others --out B) against one
 #   process: the same rows, every relMSE column within 1e-6 relative (each render is one
 #   process's render on one rank; the references are rendered over the ranks, equal to one
-#   process's), and B stays empty: rank 0 alone writes.
+#   process's), and B stays empty: rank 0 alone writes. A bad --only fails as one line, exit 2.
 # CASE frames: --frames 0:31 with temporal accumulation (--temporal-alpha 0.7) in contiguous
 #   chunks over NP ranks, each after its default warm-up (13 frames), against one process's
 #   sequence, one thread each (so that the grid cache's evictions do not follow a schedule):
@@ -90,6 +90,13 @@ spread_experiment() {
           } }
         END { printf "%d rows; worst relative relMSE difference %g\n", NR / 2 - 1, worst; exit bad }' ||
         fail "the CSVs differ"
+    # Bad input: every rank checks the options before any renders; one line, exit code 2.
+    local code=0
+    run_mpi experiment speed-vs-error --quick --only nope --out "$tmp/bad" >"$tmp/log" 2>&1 ||
+        code=$?
+    [ "$code" -eq 2 ] || { cat "$tmp/log"; fail "bad --only: exit code $code, expected 2"; }
+    [ "$(grep -c '^texcache: error' "$tmp/log")" -eq 1 ] || { cat "$tmp/log"; fail "not one line"; }
+    [ ! -e "$tmp/bad" ] || fail "bad --only left an empty --out behind"
 }
 
 failure() {  # kind first-line-pattern any-line-pattern
