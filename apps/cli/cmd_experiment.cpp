@@ -54,7 +54,8 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
 
 /// Whether an experiment spreads its renders over the ranks of a job (experiments::RenderQueue).
 bool Spreads(const std::string& name) {
-    return name == "speed-vs-error" || name == "equal-time";
+    return name == "speed-vs-error" || name == "equal-time" || name == "cache-size" ||
+           name == "lod-bias";
 }
 
 std::string ExperimentNames() {
@@ -186,8 +187,9 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     cmd->add_option(
            "name", args->name,
            "One of: " + ExperimentNames() +
-               "; or several, comma separated (over MPI ranks, speed-vs-error and equal-time "
-               "spread their renders over all ranks, the others are dealt round-robin)")
+               "; or several, comma separated (over MPI ranks, speed-vs-error, equal-time, "
+               "cache-size and lod-bias spread their renders over all ranks, the others are "
+               "dealt round-robin)")
         ->required();
     cmd->add_option("--out", args->out, "Output directory (created if missing)")->required();
     cmd->add_flag("--quick", args->quick,
