@@ -49,6 +49,26 @@ private:
     Table& table_;
 };
 
+/// A visible-texel set's words as accumulators: a key is a word's index, its one "sum" the
+/// word's marks, combined by a bitwise or, which like a sum does not depend on the order.
+class VisibleWords final : public ReducibleAccumulators {
+public:
+    explicit VisibleWords(VisibleTexels& visible) : visible_(visible) {}
+    size_t WordsPerKey() const override { return 1; }
+    void Export(std::vector<uint64_t>* out) const override {
+        for (size_t i = 0; i < visible_.NumWords(); ++i)
+            if (const uint64_t marks = visible_.WordAt(i)) out->push_back(i), out->push_back(marks);
+    }
+    uint64_t Import(const uint64_t* records, size_t n) override {
+        for (size_t i = 0; i < n; ++i)
+            visible_.MarkWord(size_t(records[2 * i]), records[2 * i + 1]);
+        return 0;
+    }
+
+private:
+    VisibleTexels& visible_;
+};
+
 /// Renders passes of whole sample indices from opt.firstSample until opt.spp samples are done
 /// or, with a time budget (counted from `start`), until the next pass would not fit in it;
 /// returns the sample index reached. A pixel's result depends only on its sample indices and the
@@ -274,10 +294,17 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     [&](const tbb::blocked_range2d<int>& r, const HitBins& bins) {
                         AoHitsResolve(c, r, s0, s1, records, bins, sums.rgb.data());
                     });
-        } else if (VisibleTexels* visible = fc.Visible())
+        } else if (VisibleTexels* visible = fc.Visible()) {
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 MarkVisibleTexels(c, *visible, r, s0, s1, fromPrepass ? &passTexels : nullptr, rc);
             });
+            // Over many ranks every rank's footprints keep the texels any rank's rows see, as
+            // one process's do: the ranks or their marks together before anything shades.
+            if (group) {
+                VisibleWords words(*visible);
+                AllReduce(*group, words);
+            }
+        }
         if (!hits)
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                 if (opt.visibilityPrepass == VisibilityPrepass::Only) return;  // marks only
@@ -399,13 +426,17 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         result.stats.shadowRays += rc.shadow;
         result.stats.bounceRays += rc.bounce;
     }
+    // The other ranks' CPU time (microseconds), added to this rank's at the end: the job's work.
+    uint64_t othersCpu = 0;
     if (opt.ranks && opt.ranks->Size() > 1) {
-        uint64_t rays[5] = {result.stats.cameraRays, result.stats.cameraRaysCulled,
-                            result.stats.shadowRays, result.stats.bounceRays, sums.hitBinsDropped};
-        opt.ranks->SumU64(rays, 5);
+        const uint64_t cpu = uint64_t(1e6 * double(std::clock() - cpuStart) / CLOCKS_PER_SEC);
+        uint64_t rays[6] = {result.stats.cameraRays, result.stats.cameraRaysCulled,
+                            result.stats.shadowRays, result.stats.bounceRays,
+                            sums.hitBinsDropped,     cpu};
+        opt.ranks->SumU64(rays, 6);
         result.stats.cameraRays = rays[0], result.stats.cameraRaysCulled = rays[1];
         result.stats.shadowRays = rays[2], result.stats.bounceRays = rays[3];
-        sums.hitBinsDropped = rays[4];
+        sums.hitBinsDropped = rays[4], othersCpu = rays[5] - cpu;
     }
     for (const CacheStats& cs : frameCache.Stats()) result.stats.cache.Merge(cs);
     for (const RecordStats& ps : psrStats) result.stats.psr.Merge(ps);
@@ -420,7 +451,7 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         result.stats.passBytes = passBytes;
     }
     result.stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-    result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
+    result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC + 1e-6 * othersCpu;
     return result;
 }
 

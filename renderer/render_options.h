@@ -222,8 +222,10 @@ struct RenderOptions {
 };
 
 struct RenderStats {
-    double seconds = 0.0;     ///< wall clock
-    double cpuSeconds = 0.0;  ///< process CPU time, all threads: the work, however busy the machine
+    double seconds = 0.0;  ///< wall clock
+    /// Process CPU time, all threads (over many ranks: of all ranks): the work, however busy
+    /// the machine.
+    double cpuSeconds = 0.0;
     int sppDone = 0;
     uint64_t cameraRays = 0, shadowRays = 0, bounceRays = 0;
     uint64_t cameraRaysCulled = 0;  ///< camera samples known to miss, not traced (not in TotalRays)

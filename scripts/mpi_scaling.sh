@@ -3,8 +3,9 @@
 #   scripts/mpi_scaling.sh bytes BUILD OUT   bytes exchanged a pass and a frame (car, texture-
 #                                            space path at the hits) by resolution and ranks
 #   scripts/mpi_scaling.sh pingpong BUILD    latency and bandwidth between two ranks
-#   scripts/mpi_scaling.sh ab BUILD N        2 ranks x 1 thread against 1 rank x 2 threads,
-#                                            alternating, N runs each: render seconds, medians
+#   scripts/mpi_scaling.sh ab BUILD N        2 ranks x 1 thread (texcache's wait, and MPI's
+#                                            polling) against 1 rank x 2 threads, alternating,
+#                                            N runs each: medians of render, CPU, job seconds
 #   scripts/mpi_scaling.sh model OUT_PREFIX CORE_SECONDS U F
 #                                            the scaling model of a pass (results/mpi_scaling.md):
 #                                            CORE_SECONDS of compute a pass, U bytes of bins in
@@ -36,18 +37,45 @@ bytes)
     ;;
 pingpong) "${mpi[@]}" -np 2 "$build/bin/mpi_pingpong" ;;
 ab)
-    n="$3" a=() b=()
+    # Three ways alternating, so that the other load on the machine falls on all alike: 2 ranks
+    # x 1 thread waiting as texcache does (a sleeping barrier before each collective), the same
+    # waiting as MPI does (TEXCACHE_MPI_WAIT=poll), and 1 rank x 2 threads. Each run's render
+    # seconds (rank 0's wall clock), render CPU seconds (all ranks) and the whole job's wall
+    # seconds (start-up, scene load and BVH build included, done by every rank).
+    n="$3"
+    run() {  # name env... -- command...
+        local name="$1" t0 t1 line
+        shift
+        t0="$(date +%s.%N)"
+        line="$(env "$@" --stats "$tmp/s.json" | sed -n 's/^time: \([0-9.]*\) s render.*/\1/p')"
+        t1="$(date +%s.%N)"
+        local cpu
+        cpu="$(sed -n 's/.*"cpu_seconds": \([0-9.e+-]*\).*/\1/p' "$tmp/s.json")"
+        echo "$name $line $cpu $(awk -v a="$t0" -v b="$t1" 'BEGIN{printf "%.3f", b-a}')" >>"$tmp/ab"
+        printf '%s: render %s s, CPU %s s, job %s s; ' "$name" "$line" "$cpu" \
+            "$(awk -v a="$t0" -v b="$t1" 'BEGIN{printf "%.3f", b-a}')"
+    }
+    r=(render "$scene" --resolution 480x270 "${opts[@]}")
     for i in $(seq "$n"); do
-        # Alternating, so that the other load on the machine falls on both alike.
-        a+=("$("${mpi[@]}" -np 2 "$build/bin/texcache" render "$scene" --resolution 480x270 \
-            "${opts[@]}" --threads 1 -o "$tmp/a.exr" | sed -n 's/^time: \([0-9.]*\) s render.*/\1/p')")
-        b+=("$("$build/bin/texcache" render "$scene" --resolution 480x270 "${opts[@]}" \
-            --threads 2 -o "$tmp/b.exr" | sed -n 's/^time: \([0-9.]*\) s render.*/\1/p')")
-        echo "run $i: 2 ranks x 1 thread ${a[-1]} s, 1 rank x 2 threads ${b[-1]} s"
+        printf 'run %s: ' "$i"
+        run ranks TEXCACHE_MPI_WAIT=sleep "${mpi[@]}" -np 2 "$build/bin/texcache" "${r[@]}" \
+            --threads 1 -o "$tmp/a.exr"
+        run ranks-poll TEXCACHE_MPI_WAIT=poll "${mpi[@]}" -x TEXCACHE_MPI_WAIT -np 2 \
+            "$build/bin/texcache" "${r[@]}" --threads 1 -o "$tmp/a.exr"
+        run threads TEXCACHE_MPI_WAIT=sleep "$build/bin/texcache" "${r[@]}" --threads 2 \
+            -o "$tmp/b.exr"
+        echo
     done
-    median() { printf '%s\n' "$@" | sort -g | awk '{v[NR]=$1} END {print (NR%2 ? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2)}'; }
-    ma="$(median "${a[@]}")" mb="$(median "${b[@]}")"
-    echo "median: 2 ranks x 1 thread $ma s, 1 rank x 2 threads $mb s, ratio $(awk -v a="$ma" -v b="$mb" 'BEGIN{printf "%.3f", a/b}')"
+    median() {  # name column
+        awk -v n="$1" -v c="$2" '$1 == n { print $c }' "$tmp/ab" | sort -g |
+            awk '{v[NR]=$1} END {print (NR%2 ? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2)}'
+    }
+    for col in 2:render 3:cpu 4:job; do
+        c="${col%%:*}" what="${col#*:}"
+        a="$(median ranks "$c")" p="$(median ranks-poll "$c")" b="$(median threads "$c")"
+        echo "median $what seconds: 2 ranks x 1 thread $a (MPI's polling: $p), 1 rank x 2 threads $b; ratio $(awk -v a="$a" -v b="$b" 'BEGIN{printf "%.3f", a/b}') (polling: $(awk -v a="$p" -v b="$b" 'BEGIN{printf "%.3f", a/b}'))"
+    done
+    echo "load average: $(cut -d' ' -f1-3 /proc/loadavg)"
     ;;
 model)
     # A rank is a node of 32 cores as fast as this machine's; two interconnects (latency alpha,

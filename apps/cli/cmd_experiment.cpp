@@ -52,6 +52,12 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
     return m;
 }
 
+/// Whether an experiment spreads its renders over the ranks of a job (experiments::RenderQueue).
+bool Spreads(const std::string& name) {
+    return name == "speed-vs-error" || name == "equal-time" || name == "cache-size" ||
+           name == "lod-bias";
+}
+
 std::string ExperimentNames() {
     std::string s;
     for (const auto& [name, fn] : Experiments()) s += (s.empty() ? "" : ", ") + name;
@@ -120,19 +126,35 @@ int RunExperiment(const ExperimentArgs& a) {
                          a.methods, a.cameraSpp, a.ablation, a.set};
     const double t0 = NowSeconds();
     int code = 0;
-    // Over many ranks the experiments are dealt round-robin: each writes its own files in
-    // --out, and each rank times its own renders, so an experiment's timings compare renders
-    // made under one rank's load (ranks sharing a machine's cores slow each other alike).
+    // Over many ranks the experiments whose renders spread over the ranks (RenderQueue) run one
+    // after another on every rank, rank 0 writing their files; the others are dealt
+    // round-robin, each writing its own files in --out and timing its renders under one
+    // rank's load (ranks sharing a machine's cores slow each other alike).
     RankGroup& job = Job();
     int index = 0;
     std::string mine;
+    // The spreading ones first: a rank does not wait in one for another rank's dealt experiment.
+    std::vector<std::string> names = Names(a.name);
+    std::stable_partition(names.begin(), names.end(), Spreads);
     try {
-        for (const std::string& name : Names(a.name)) {
-            if (index++ % job.Size() != job.Rank()) continue;
+        for (const std::string& name : names) {
+            const bool spread = job.Size() > 1 && Spreads(name);
+            if (!spread && index++ % job.Size() != job.Rank()) continue;
+            experiments::Setup run = s;
+            run.ranks = spread ? &job : nullptr;
+            if (spread) {
+                experiments::Setup check = run;
+                check.checkOnly = true;
+                OnEveryRank([&] { Experiments().at(name)(check); });
+            }
             const double te = NowSeconds();
-            code = std::max(code, Experiments().at(name)(s));
-            mine += experiments::Format("experiment %s on rank %d of %d: %.1f s\n", name.c_str(),
-                                        job.Rank(), job.Size(), NowSeconds() - te);
+            code = std::max(code, Experiments().at(name)(run));
+            if (spread && job.Rank() != 0) continue;
+            mine += spread ? experiments::Format("experiment %s on %d ranks: %.1f s\n",
+                                                 name.c_str(), job.Size(), NowSeconds() - te)
+                           : experiments::Format("experiment %s on rank %d of %d: %.1f s\n",
+                                                 name.c_str(), job.Rank(), job.Size(),
+                                                 NowSeconds() - te);
         }
     } catch (...) {
         // A refused option (an unknown --methods name, say) leaves no empty --out behind.
@@ -148,7 +170,9 @@ int RunExperiment(const ExperimentArgs& a) {
         for (const uint64_t c : codes) code = std::max(code, int(c));
         if (job.Rank() != 0) return code;
         for (const std::vector<char>& l : lines) std::fwrite(l.data(), 1, l.size(), stdout);
-        std::printf("(each rank timed its own renders)\n");
+        std::printf(
+            "(each rank timed its own renders; an experiment on all ranks names the rank "
+            "of each render in its markdown)\n");
     }
     std::printf("experiment %s finished in %.1f s\n", a.name.c_str(), NowSeconds() - t0);
     return code;
@@ -160,9 +184,12 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
     auto args = std::make_shared<ExperimentArgs>();
     CLI::App* cmd = app.add_subcommand(
         "experiment", "Run one of the paper's experiments: CSV + PNG plots + markdown summary");
-    cmd->add_option("name", args->name,
-                    "One of: " + ExperimentNames() +
-                        "; or several, comma separated (over MPI ranks: dealt round-robin)")
+    cmd->add_option(
+           "name", args->name,
+           "One of: " + ExperimentNames() +
+               "; or several, comma separated (over MPI ranks, speed-vs-error, equal-time, "
+               "cache-size and lod-bias spread their renders over all ranks, the others are "
+               "dealt round-robin)")
         ->required();
     cmd->add_option("--out", args->out, "Output directory (created if missing)")->required();
     cmd->add_flag("--quick", args->quick,

@@ -71,6 +71,7 @@ int EqualTime(const Setup& s) {
     Setup set = s;
     set.scenesDir = s.sceneSet;
     const std::vector<std::string> files = SceneFiles(set.scenesDir, s.only);
+    if (s.checkOnly) return 0;
     const int W = s.quick ? 80 : 320, H = s.quick ? 45 : 180;
     const int refSpp = s.quick ? 64 : 1024, repeats = s.quick ? 1 : 2;
     const std::vector<int> ladder =
@@ -92,6 +93,7 @@ int EqualTime(const Setup& s) {
         ladder.back(), repeats, refSpp,
         s.quick ? "Quick mode: test size, tiny images and few samples; not for conclusions.\n\n"
                 : "");
+    RenderQueue queue(s);
     std::string verdicts;
     int below = 0, points = 0;
     double worstGain = 1e30;
@@ -101,7 +103,7 @@ int EqualTime(const Setup& s) {
         const RenderOptions scene = RenderOptionsFrom(ls->scene.settings);
         const IntegratorKind integrator = scene.integrator;
         const char* integratorName = IntegratorName(integrator);
-        Say("%s (%s)", ls->name.c_str(), integratorName);
+        if (queue.Root()) Say("%s (%s)", ls->name.c_str(), integratorName);
         RenderOptions perHit = BaseOptions(ls->scene, integrator, W, H);
         perHit.texture.enabled = false;
         RenderOptions ref = perHit;
@@ -117,12 +119,19 @@ int EqualTime(const Setup& s) {
                   {"texture", &texture}}) {
                 RenderOptions o = *base;
                 o.spp = spp;
-                Run r = TimedRender(*ls, o, repeats, warm);
+                queue.Add(
+                    Format("%s %s %d spp", ls->name.c_str(), name, spp), *ls, o, repeats, warm,
+                    [&, name = name, spp](Run& r) {
+                        const Point p{spp, r.cpuSeconds, r.seconds, RelMSE(r.image, reference)};
+                        curves[name].push_back(p);
+                        Say("  %-8s %3d spp: %.3f CPU s%s, relMSE %.5f", name, spp, p.cpu,
+                            queue.RankOf(r).c_str(), p.relmse);
+                    });
                 warm = false;
-                const Point p{spp, r.cpuSeconds, r.seconds, RelMSE(r.image, reference)};
-                curves[name].push_back(p);
-                Say("  %-8s %3d spp: %.3f CPU s, relMSE %.5f", name, spp, p.cpu, p.relmse);
             }
+        // Over many ranks the scene's renders run here, spread; rank 0 goes on with them.
+        queue.Flush();
+        if (!queue.Root()) continue;
         // A method's rows together: gnuplot joins the points of consecutive rows only.
         for (const auto& [name, points] : curves)
             for (const Point& p : points)
@@ -179,13 +188,14 @@ int EqualTime(const Setup& s) {
         Draw(plot);
         md += Format("\n![%s](%s)\n\n", plot.title.c_str(), fs::path(plot.png).filename().c_str());
     }
+    if (!queue.Root()) return 0;  // rank 0 writes the files
     md = md.substr(0, md.find("## ")) +
          Format(
              "## Summary\n\nTexture space at or below per hit at %d of %d points; the worst "
              "gain is %.2fx (%s).\n\n| scene | integrator | worst gain | gain at the "
              "smallest budget | error, smallest / largest budget |\n|---|---|---|---|---|\n",
              below, points, worstGain, worstWhere.c_str()) +
-         verdicts + "\n" + md.substr(md.find("## "));
+         verdicts + "\n" + md.substr(md.find("## ")) + queue.RanksSection();
     WriteText((fs::path(s.outDir) / "equal_time.md").string(), md);
     Say("wrote %s, plots and equal_time.md in %s", csv.c_str(), s.outDir.c_str());
     return 0;

@@ -6,9 +6,12 @@
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
+#include <type_traits>
 
 #include "renderer/render_policy.h"
 #include "renderer/scene/scene_loader.h"
@@ -60,6 +63,7 @@ Run TimedRender(LoadedScene& ls, const RenderOptions& o, int repeats, bool warmU
     // render, a new cache is built untimed.
     auto cache = [&] { return FreshCache(ls, o); };
     if (warmUp) Render(rs, o, cache());
+    ls.warmed = true;
     Run best;
     for (int i = 0; i < std::max(repeats, 1); ++i) {
         TextureSpaceCache* c = cache();
@@ -79,22 +83,136 @@ Run TimedRender(LoadedScene& ls, const RenderOptions& o, int repeats, bool warmU
 Image Reference(const Setup& s, const std::string& tag, const RenderScene& rs,
                 const RenderOptions& o) {
     const std::string path = (fs::path(s.outDir) / ("ref_" + tag + ".exr")).string();
-    if (fs::exists(path)) {
+    RankGroup* const ranks = s.ranks && s.ranks->Size() > 1 ? s.ranks : nullptr;
+    const bool root = !ranks || ranks->Rank() == 0;
+    // Rank 0 alone looks for the file, and tells the others whether to render it with it.
+    Image cached;
+    if (root && fs::exists(path)) {
         try {
             Image img = ReadImageRGB(path);
-            if (img.width == o.width && img.height == o.height) return img;
+            if (img.width == o.width && img.height == o.height) cached = std::move(img);
         } catch (const InputError&) {
             // unreadable: render it again
         }
     }
-    Say("  reference %s: %dx%d, %d spp ...", tag.c_str(), o.width, o.height, o.spp);
+    uint64_t found = cached.width > 0;
+    if (ranks) ranks->Broadcast(&found, sizeof found, 0);
+    if (found) return cached;
+    if (root)
+        Say("  reference %s: %dx%d, %d spp%s ...", tag.c_str(), o.width, o.height, o.spp,
+            ranks ? Format(" over %d ranks", ranks->Size()).c_str() : "");
     RenderOptions r = o;
-    r.progress = !s.quick;
-    const RenderResult res = Render(rs, r);
+    r.progress = !s.quick && root;
+    r.ranks = ranks;
+    RenderResult res = Render(rs, r);
+    if (!root) return Image();
     WriteImage(path, res.beauty);
     WriteImage(fs::path(path).replace_extension(".png").string(), res.beauty);
     Say("  reference %s done in %.1f s", tag.c_str(), res.stats.seconds);
-    return res.beauty;
+    return std::move(res.beauty);
+}
+
+namespace {
+
+// A Run as bytes, rank to rank: its statistics as they lie in memory (the ranks run one build),
+// then the image's size and floats.
+static_assert(std::is_trivially_copyable_v<RenderStats>);
+template <typename T>
+void Put(std::vector<char>* out, const T& v) {
+    const char* p = reinterpret_cast<const char*>(&v);
+    out->insert(out->end(), p, p + sizeof v);
+}
+template <typename T>
+T Take(const std::vector<char>& in, size_t* at) {
+    if (*at + sizeof(T) > in.size()) throw std::runtime_error("a rank sent a truncated render");
+    T v;
+    std::memcpy(&v, in.data() + *at, sizeof v);
+    *at += sizeof v;
+    return v;
+}
+
+void PutRun(std::vector<char>* out, const Run& r) {
+    Put(out, r.seconds), Put(out, r.cpuSeconds), Put(out, r.stats);
+    Put(out, r.image.width), Put(out, r.image.height), Put(out, r.image.channels);
+    const char* p = reinterpret_cast<const char*>(r.image.data.data());
+    out->insert(out->end(), p, p + r.image.data.size() * sizeof(float));
+}
+
+Run TakeRun(const std::vector<char>& in, size_t* at) {
+    Run r;
+    r.seconds = Take<double>(in, at), r.cpuSeconds = Take<double>(in, at);
+    r.stats = Take<RenderStats>(in, at);
+    const int w = Take<int>(in, at), h = Take<int>(in, at), c = Take<int>(in, at);
+    r.image = Image(w, h, c);
+    const size_t bytes = r.image.data.size() * sizeof(float);
+    if (*at + bytes > in.size()) throw std::runtime_error("a rank sent a truncated image");
+    std::memcpy(r.image.data.data(), in.data() + *at, bytes);
+    *at += bytes;
+    return r;
+}
+
+}  // namespace
+
+RenderQueue::RenderQueue(const Setup& s)
+    : ranks_(s.ranks && s.ranks->Size() > 1 ? s.ranks : nullptr) {}
+
+void RenderQueue::Add(const std::string& label, LoadedScene& ls, const RenderOptions& o,
+                      int repeats, bool warmUp, std::function<void(Run&)> done) {
+    if (!ranks_) {
+        Run r = TimedRender(ls, o, repeats, warmUp);
+        done(r);
+        return;
+    }
+    pending_.push_back({label, &ls, o, repeats, warmUp, std::move(done)});
+}
+
+void RenderQueue::Flush() {
+    if (!ranks_) return;
+    const int rank = ranks_->Rank(), size = ranks_->Size();
+    // Dealt back and forth (ranks 0, 1, ..., N-1, then N-1, ..., 0, ...): renders added in
+    // turns (per hit, texture space, per hit, ...) and in rising cost (budgets) then fall on
+    // every rank alike, rather than one method's on one rank, the costliest on the last.
+    auto dealtTo = [size](size_t i) {
+        const int at = int(i % size_t(size));
+        return (i / size_t(size)) % 2 == 0 ? at : size - 1 - at;
+    };
+    std::vector<char> mine;
+    for (size_t i = 0; i < pending_.size(); ++i) {
+        if (dealtTo(i) != rank) continue;
+        Pending& p = pending_[i];
+        // A rank's first render of a scene pays Embree's lazy tessellation unless warmed up:
+        // the render a rank is dealt first is not the one the experiment warms up for.
+        PutRun(&mine, TimedRender(*p.scene, p.options, p.repeats, p.warmUp || !p.scene->warmed));
+        p.scene->warmed = true;
+    }
+    const std::vector<std::vector<char>> all = ranks_->Gather(mine);
+    std::vector<Pending> pending = std::move(pending_);
+    pending_.clear();
+    if (rank != 0) return;
+    std::vector<size_t> at(size_t(size), 0);
+    for (size_t i = 0; i < pending.size(); ++i) {
+        const int from = dealtTo(i);
+        Run r = TakeRun(all[size_t(from)], &at[size_t(from)]);
+        r.rank = from;
+        timed_ += Format("| %s | %d | %.3f |\n", pending[i].label.c_str(), from, r.cpuSeconds);
+        pending[i].done(r);
+    }
+}
+
+std::string RenderQueue::RankOf(const Run& r) const {
+    return ranks_ ? Format(" on rank %d", r.rank) : std::string();
+}
+
+std::string RenderQueue::RanksSection() const {
+    if (!ranks_) return "";
+    return Format(
+               "\n## Ranks\n\nThe renders were spread over %d ranks (MPI): each reference over "
+               "all of them as one image, each timed render whole on one rank, which measured "
+               "its CPU seconds in its own process (ranks sharing a machine's cores slow each "
+               "other). Rank 0 gathered the results and wrote these files.\n\n| render | rank "
+               "| CPU seconds |\n|---|---|---|\n",
+               ranks_->Size()) +
+           timed_;
 }
 
 Table& Table::Row() {

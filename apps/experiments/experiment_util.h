@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "renderer/distributed/rank_group.h"
 #include "renderer/image/image.h"
 #include "renderer/render.h"
 #include "renderer/scene/render_scene.h"
@@ -34,6 +35,13 @@ struct Setup {
     bool ablation = false;
     /// equal-time: the directory of scenes it renders (validation/ beside scenes/ by default).
     std::string sceneSet;
+    /// The ranks an experiment that spreads its renders shares them with (RenderQueue); null or
+    /// of one rank: this process renders everything.
+    RankGroup* ranks = nullptr;
+    /// Only check the options an experiment that spreads its renders takes (and throw
+    /// InputError as a run would), rendering and writing nothing: over many ranks every rank
+    /// checks before any of them starts, so that bad input fails as one line, not one a rank.
+    bool checkOnly = false;
 };
 
 /// A scene file loaded and built once for a given integrator family. Not movable: the
@@ -44,6 +52,8 @@ struct LoadedScene {
     std::unique_ptr<RenderScene> rs;
     /// The texture-space cache its timed renders share (see TimedRender).
     std::unique_ptr<TextureSpaceCache> cache;
+    /// This process rendered it once already (Embree tessellated the patches its rays reached).
+    bool warmed = false;
     LoadedScene() = default;
     LoadedScene(const LoadedScene&) = delete;
     LoadedScene& operator=(const LoadedScene&) = delete;
@@ -66,6 +76,7 @@ struct Run {
     double seconds = 0.0;     ///< wall clock of the render with the least CPU time
     double cpuSeconds = 0.0;  ///< its CPU time (all threads): the cost measure of the experiments
     RenderStats stats;
+    int rank = 0;  ///< the rank that rendered and timed it (RenderQueue)
 };
 /// With `warmUp`, one untimed render first: Embree tessellates subdivision patches lazily on
 /// first hit, and the first render of a scene would pay for it. Texture-space renders start
@@ -74,8 +85,48 @@ struct Run {
 /// process, like building the BVH, and is not counted.
 Run TimedRender(LoadedScene& ls, const RenderOptions& o, int repeats = 1, bool warmUp = false);
 
+/// The timed renders of an experiment spread over the ranks of a job (Setup::ranks): each render
+/// runs whole on one rank, which times it (CPU seconds of its own process), and its result
+/// reaches rank 0, which alone goes on to write the experiment's files. Alone (no ranks, or
+/// one), a render runs as it is added, exactly as TimedRender. Every rank adds the same renders
+/// in the same order and calls Flush at the same points.
+class RenderQueue {
+public:
+    explicit RenderQueue(const Setup& s);
+    /// Whether this process goes on with the results and writes the files (rank 0, or alone).
+    bool Root() const { return !ranks_ || ranks_->Rank() == 0; }
+    /// TimedRender(ls, o, repeats, warmUp) named `label`; `done` receives it on rank 0 (alone:
+    /// at once). Over many ranks a rank also warms up before its first render of a scene.
+    void Add(const std::string& label, LoadedScene& ls, const RenderOptions& o, int repeats,
+             bool warmUp, std::function<void(Run&)> done);
+    /// Over many ranks: renders the ones added since the last Flush, dealt over the ranks back
+    /// and forth (0, 1, ..., N-1, N-1, ..., 0, 0, 1, ...), then calls their `done` on rank 0 in
+    /// the order they were added. Every rank calls it; the scenes and whatever `done` refers to
+    /// must live until then.
+    void Flush();
+    /// " on rank R" for a progress line about `r` (empty alone).
+    std::string RankOf(const Run& r) const;
+    /// Markdown naming the rank that timed each render (empty alone).
+    std::string RanksSection() const;
+
+private:
+    struct Pending {
+        std::string label;
+        LoadedScene* scene;
+        RenderOptions options;
+        int repeats;
+        bool warmUp;
+        std::function<void(Run&)> done;
+    };
+    RankGroup* ranks_ = nullptr;
+    std::vector<Pending> pending_;
+    std::string timed_;  ///< RanksSection's rows, as the results arrive
+};
+
 /// A high-sample reference, cached as OUT/ref_<tag>.exr and reused when it exists at this size
-/// (references cost minutes; re-running an experiment should not).
+/// (references cost minutes; re-running an experiment should not). Over many ranks
+/// (Setup::ranks) it is one render over all of them, written by rank 0; the other ranks get an
+/// empty image.
 Image Reference(const Setup& s, const std::string& tag, const RenderScene& rs,
                 const RenderOptions& o);
 

@@ -50,6 +50,7 @@ Image CarAoReference(const Setup& s, const LoadedScene& car, int W, int H) {
 }  // namespace
 
 int CacheSize(const Setup& s) {
+    if (s.checkOnly) return 0;  // no options of its own
     const auto carp = LoadForExperiment(s, "car.json", false);
     LoadedScene& car = *carp;
     // Quick mode scales pixels and caches down by the same factor (64), so the curves keep their
@@ -61,6 +62,8 @@ int CacheSize(const Setup& s) {
     Table t({"width", "height", "sample_cache_mb", "samples_shaded", "unbounded_samples",
              "overshading_percent", "seconds"});
     std::vector<std::vector<double>> over(widths.size());
+    std::vector<double> unbounded(widths.size());  // samples shaded with an unbounded cache
+    RenderQueue queue(s);
     for (size_t wi = 0; wi < widths.size(); ++wi) {
         const int W = widths[wi], H = W * 9 / 16;
         // The paper's full footprints: the largest working set the sample cache must hold.
@@ -68,21 +71,28 @@ int CacheSize(const Setup& s) {
         o.texture.cache.texelCacheBytes = size_t(64.0 * scale * (1 << 20));
         RenderOptions ref = o;
         ref.texture.cache.referenceMode = true;
-        const Run unbounded = TimedRender(car, ref);
-        const double n0 = double(unbounded.stats.cache.samplesShaded);
-        Say("[cache-size] %dx%d: unbounded cache shades %.0f samples (%.1f s)", W, H, n0,
-            unbounded.seconds);
+        queue.Add(Format("%dx%d unbounded", W, H), car, ref, 1, false, [&, wi, W, H](Run& u) {
+            unbounded[wi] = double(u.stats.cache.samplesShaded);
+            Say("[cache-size] %dx%d: unbounded cache shades %.0f samples (%.1f s%s)", W, H,
+                unbounded[wi], u.seconds, queue.RankOf(u).c_str());
+        });
         for (double mb : sizesMb) {
             o.texture.cache.sampleCacheBytes = size_t(mb * scale * (1 << 20));
-            const Run r = TimedRender(car, o);
-            const double n = double(r.stats.cache.samplesShaded);
-            const double pct = 100.0 * (n / n0 - 1.0);
-            over[wi].push_back(pct);
-            t.Row().Add(W).Add(H).Add(mb * scale).Add(n).Add(n0).Add(pct).Add(r.seconds);
-            Say("  %7.3f MB sample cache: %.0f samples, overshading %.2f%% (%.1f s)", mb * scale, n,
-                pct, r.seconds);
+            queue.Add(
+                Format("%dx%d, %.3f MB", W, H, mb * scale), car, o, 1, false,
+                [&, wi, W, H, mb](Run& r) {
+                    const double n = double(r.stats.cache.samplesShaded), n0 = unbounded[wi];
+                    const double pct = 100.0 * (n / n0 - 1.0);
+                    over[wi].push_back(pct);
+                    t.Row().Add(W).Add(H).Add(mb * scale).Add(n).Add(n0).Add(pct).Add(r.seconds);
+                    Say("  %7.3f MB sample cache: %.0f samples, overshading %.2f%% (%.1f "
+                        "s%s)",
+                        mb * scale, n, pct, r.seconds, queue.RankOf(r).c_str());
+                });
         }
     }
+    queue.Flush();
+    if (!queue.Root()) return 0;  // rank 0 writes the files
     const std::string csv = Out(s, "cache_size.csv");
     t.Write(csv);
     Plot p;
@@ -148,6 +158,7 @@ int CacheSize(const Setup& s) {
         "\nPaper (Fig. 13, Toad at 4Kx4K): 2% to 27% extra shading going from 256 MB to 16 MB; a "
         "4x resolution increase is offset by less than 2x "
         "cache.\n\n![overshading](cache_size.png)\n";
+    md += queue.RanksSection();
     WriteText(Out(s, "cache_size.md"), md);
     Say("wrote %s, cache_size.png, cache_size.md", csv.c_str());
     return 0;
@@ -320,6 +331,7 @@ int Threads(const Setup& s) {
 }
 
 int LodBias(const Setup& s) {
+    if (s.checkOnly) return 0;  // no options of its own
     const auto carp = LoadForExperiment(s, "car.json", false);
     LoadedScene& car = *carp;
     const int W = s.quick ? 128 : 640, H = W * 9 / 16;
@@ -336,21 +348,25 @@ int LodBias(const Setup& s) {
         "image |\n|---|---|---|---|---|---|\n",
         W, H, repeats);
     double t0 = 0.0;
+    RenderQueue queue(s);
     for (int bias = 0; bias <= 3; ++bias) {
         RenderOptions o = CachedAo(car, W, H, 4, 8, 6);
         o.texture.cache.lodBias = float(bias);
-        const Run r = TimedRender(car, o, repeats, bias == 0);
-        if (bias == 0) t0 = r.cpuSeconds;
-        const double e = RelMSE(r.image, ref);
-        const double n = double(r.stats.cache.samplesShaded);
-        t.Row().Add(bias).Add(r.cpuSeconds).Add(r.cpuSeconds / t0).Add(n).Add(e);
-        const std::string png = Format("lod_bias_%d.png", bias);
-        WriteImage(Out(s, png), r.image);
-        md += Format("| %d | %.3f | %.2fx | %.0f | %.5f | ![](%s) |\n", bias, r.cpuSeconds,
-                     r.cpuSeconds / t0, n, e, png.c_str());
-        Say("[lod-bias] bias %d: %.3f s (%.2fx), %.0f samples, relMSE %.5f", bias, r.cpuSeconds,
-            r.cpuSeconds / t0, n, e);
+        queue.Add(Format("bias %d", bias), car, o, repeats, bias == 0, [&, bias](Run& r) {
+            if (bias == 0) t0 = r.cpuSeconds;
+            const double e = RelMSE(r.image, ref);
+            const double n = double(r.stats.cache.samplesShaded);
+            t.Row().Add(bias).Add(r.cpuSeconds).Add(r.cpuSeconds / t0).Add(n).Add(e);
+            const std::string png = Format("lod_bias_%d.png", bias);
+            WriteImage(Out(s, png), r.image);
+            md += Format("| %d | %.3f | %.2fx | %.0f | %.5f | ![](%s) |\n", bias, r.cpuSeconds,
+                         r.cpuSeconds / t0, n, e, png.c_str());
+            Say("[lod-bias] bias %d: %.3f s (%.2fx%s), %.0f samples, relMSE %.5f", bias,
+                r.cpuSeconds, r.cpuSeconds / t0, queue.RankOf(r).c_str(), n, e);
+        });
     }
+    queue.Flush();
+    if (!queue.Root()) return 0;  // rank 0 writes the files
     const std::string csv = Out(s, "lod_bias.csv");
     t.Write(csv);
     Plot p;
@@ -372,6 +388,7 @@ int LodBias(const Setup& s) {
     md +=
         "\nPaper (Fig. 15, car): LOD bias 1-3 gives generous speedups; shading and shadowing "
         "quality degrade with higher LOD.\n\n![time](lod_bias.png) ![error](lod_bias_error.png)\n";
+    md += queue.RanksSection();
     WriteText(Out(s, "lod_bias.md"), md);
     Say("wrote %s, lod_bias.png, lod_bias_error.png, lod_bias.md", csv.c_str());
     return 0;

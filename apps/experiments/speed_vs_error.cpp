@@ -297,10 +297,12 @@ int SpeedVsError(const Setup& s) {
                                                   "' in these cases (valid: " + list + ")");
             }
     }
+    if (s.checkOnly) return 0;
     // A run of some cases or methods keeps the other rows of an earlier run in the same
     // directory: the CSV and summary then cover everything measured so far. The per-hit terms'
     // bound (kUncachedOnly) is measured again only with every method.
     const std::string csv = (fs::path(s.outDir) / "speed_vs_error.csv").string();
+    RenderQueue queue(s);
     if ((!s.only.empty() || !s.methods.empty()) && fs::exists(csv)) {
         const Table old = Table::Read(csv, columns);
         size_t kept = 0;
@@ -317,7 +319,8 @@ int SpeedVsError(const Setup& s) {
                          {std::stod(r[10]), std::stod(r[6]), std::stod(r[7]), std::stod(r[9])});
             ++kept;
         }
-        if (kept) Say("[speed-vs-error] keeping %zu rows not rerun from %s", kept, csv.c_str());
+        if (kept && queue.Root())
+            Say("[speed-vs-error] keeping %zu rows not rerun from %s", kept, csv.c_str());
     }
 
     std::map<std::string, std::unique_ptr<LoadedScene>> scenes;
@@ -347,7 +350,7 @@ int SpeedVsError(const Setup& s) {
             imageOpt.spp = s.quick ? 64 : 1024;
             shadingOpt.hitSamples = std::max(1, (s.quick ? 128 : 2048) / CameraSpp(s));
         }
-        Say("[speed-vs-error] %s (%dx%d)", c.label.c_str(), W, H);
+        if (queue.Root()) Say("[speed-vs-error] %s (%dx%d)", c.label.c_str(), W, H);
         // One pair of references per scene and integrator (car-diffuse shares car-indirect's).
         const std::string kind = c.integrator == IntegratorKind::AO     ? "ao"
                                  : c.integrator == IntegratorKind::Path ? "indirect"
@@ -367,29 +370,35 @@ int SpeedVsError(const Setup& s) {
                 RenderOptions o = base;
                 ApplyBudget(&o, m, b, CameraSpp(s));
                 o.texture.cacheDirect = c.cacheDirect;
-                const Run r = TimedRender(ls, o, repeats, b == budgets.front());
-                const double e = RelMSE(r.image, ref), eImage = RelMSE(r.image, refImage);
-                const double rays = double(r.stats.TotalRays());
-                addPoint(c.label, m.name, {r.cpuSeconds, rays, e, eImage});
-                table.Row()
-                    .Add(c.label)
-                    .Add(m.name)
-                    .Add(b)
-                    .Add(o.spp)
-                    .Add(b)
-                    .Add(r.seconds)
-                    .Add(rays)
-                    .Add(e)
-                    .Add(double(r.stats.cache.samplesShaded))
-                    .Add(eImage)
-                    .Add(r.cpuSeconds);
-                Say("  %-14s budget %3d: %7.3f s CPU, %6.1f Mrays, relMSE %.5f (image %.5f)",
-                    m.name.c_str(), b, r.cpuSeconds, rays * 1e-6, e, eImage);
-                if (b == budgets.back())
-                    WriteImage((fs::path(s.outDir) /
-                                Format("sve_%s_%s.png", c.label.c_str(), m.name.c_str()))
-                                   .string(),
-                               r.image);
+                const bool last = b == budgets.back();
+                queue.Add(
+                    Format("%s %s budget %d", c.label.c_str(), m.name.c_str(), b), ls, o, repeats,
+                    b == budgets.front(), [&, label = c.label, m, b, o, last](Run& r) {
+                        const double e = RelMSE(r.image, ref), eImage = RelMSE(r.image, refImage);
+                        const double rays = double(r.stats.TotalRays());
+                        addPoint(label, m.name, {r.cpuSeconds, rays, e, eImage});
+                        table.Row()
+                            .Add(label)
+                            .Add(m.name)
+                            .Add(b)
+                            .Add(o.spp)
+                            .Add(b)
+                            .Add(r.seconds)
+                            .Add(rays)
+                            .Add(e)
+                            .Add(double(r.stats.cache.samplesShaded))
+                            .Add(eImage)
+                            .Add(r.cpuSeconds);
+                        Say("  %-14s budget %3d: %7.3f s CPU%s, %6.1f Mrays, relMSE %.5f (image "
+                            "%.5f)",
+                            m.name.c_str(), b, r.cpuSeconds, queue.RankOf(r).c_str(), rays * 1e-6,
+                            e, eImage);
+                        if (last)
+                            WriteImage((fs::path(s.outDir) /
+                                        Format("sve_%s_%s.png", label.c_str(), m.name.c_str()))
+                                           .string(),
+                                       r.image);
+                    });
             }
         }
         if (c.integrator == IntegratorKind::Path && s.methods.empty()) {
@@ -397,24 +406,31 @@ int SpeedVsError(const Setup& s) {
             ApplyBudget(&o, kNormal, 1, CameraSpp(s));
             o.texture.cacheDirect = c.cacheDirect;
             o.texture.indirectSamples = o.texture.shadowSamples = kConvergedPaths;
-            const Run r = TimedRender(ls, o, 1);
-            const double e = RelMSE(r.image, ref);
-            uncachedFloor[c.label] = e;
-            table.Row()
-                .Add(c.label)
-                .Add(kUncachedOnly)
-                .Add(1)
-                .Add(o.spp)
-                .Add(kConvergedPaths)
-                .Add(r.seconds)
-                .Add(double(r.stats.TotalRays()))
-                .Add(e)
-                .Add(double(r.stats.cache.samplesShaded))
-                .Add(RelMSE(r.image, refImage))
-                .Add(r.cpuSeconds);
-            Say("  %-14s budget   1: relMSE %.5f (the per-hit terms alone)", kUncachedOnly, e);
+            queue.Add(Format("%s %s", c.label.c_str(), kUncachedOnly), ls, o, 1, false,
+                      [&, label = c.label, o](Run& r) {
+                          const double e = RelMSE(r.image, ref);
+                          uncachedFloor[label] = e;
+                          table.Row()
+                              .Add(label)
+                              .Add(kUncachedOnly)
+                              .Add(1)
+                              .Add(o.spp)
+                              .Add(kConvergedPaths)
+                              .Add(r.seconds)
+                              .Add(double(r.stats.TotalRays()))
+                              .Add(e)
+                              .Add(double(r.stats.cache.samplesShaded))
+                              .Add(RelMSE(r.image, refImage))
+                              .Add(r.cpuSeconds);
+                          Say("  %-14s budget   1: relMSE %.5f (the per-hit terms alone)",
+                              kUncachedOnly, e);
+                      });
         }
+        // Over many ranks the case's renders run here, spread; alone they already ran.
+        queue.Flush();
     }
+    // Rank 0 writes the files: the other ranks' results are in its table.
+    if (!queue.Root()) return 0;
     table.Write(csv);
 
     std::string md = "# Speed vs error\n\n";
@@ -452,6 +468,7 @@ int SpeedVsError(const Setup& s) {
         }
     }
     md += GoalSection(labels, curves, methodOrder, uncachedFloor);
+    md += queue.RanksSection();
     md +=
         "\nPaper (Munkberg et al. 2016): Fig. 5, the trivial 13x13 normal filter beats ARLP and "
         "adaptive manifolds at equal time on motion-blurred AO; Fig. 7, texture-space linear "

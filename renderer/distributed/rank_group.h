@@ -23,9 +23,9 @@
 
 namespace texcache {
 
-/// Accumulators keyed by 64-bit keys, each a fixed number of 64-bit words of integer sums whose
-/// total does not depend on the order they are added in (what another process's copy adds to
-/// this one's to combine them).
+/// Accumulators keyed by 64-bit keys, each a fixed number of 64-bit words of integer sums (or
+/// another combination, such as a bitwise or) whose total does not depend on the order they are
+/// added in (what another process's copy adds to this one's to combine them).
 class ReducibleAccumulators {
 public:
     virtual ~ReducibleAccumulators() = default;

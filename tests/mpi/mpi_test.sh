@@ -5,6 +5,14 @@
 #   (same seed and samples): RMSE at most 1e-6 (the ranks split the rows, so every pixel is
 #   summed by one rank as one process sums it, and the texture-space bins are integer sums:
 #   the images are expected to be equal; the tolerance only absorbs the EXR's half floats).
+# CASE still-ao-grid: texture-space AO on the grid with visible footprints (AO's default), 2
+#   passes: the ranks or their visible-texel marks before shading, so every footprint keeps
+#   what one process's keeps: RMSE at most 1e-6 likewise.
+# CASE experiment: `experiment speed-vs-error --quick` (car-ao, 3 methods, 2 budgets) with its
+#   renders spread over NP ranks (rank 0 given --out A, the others --out B) against one
+#   process: the same rows, every relMSE column within 1e-6 relative (each render is one
+#   process's render on one rank; the references are rendered over the ranks, equal to one
+#   process's), and B stays empty: rank 0 alone writes. A bad --only fails as one line, exit 2.
 # CASE frames: --frames 0:31 with temporal accumulation (--temporal-alpha 0.7) in contiguous
 #   chunks over NP ranks, each after its default warm-up (13 frames), against one process's
 #   sequence, one thread each (so that the grid cache's evictions do not follow a schedule):
@@ -54,6 +62,43 @@ chunked_frames() {  # last-frame bound options...
     done
 }
 
+spread_experiment() {
+    local opts=(experiment speed-vs-error --quick --only car-ao --methods per-hit,ts-hits,ts-normal)
+    "$bin/texcache" "${opts[@]}" --out "$tmp/one" >"$tmp/log_one" 2>&1 ||
+        { cat "$tmp/log_one"; fail "one process exited $?"; }
+    mkdir "$tmp/others"
+    "$mpirun" --oversubscribe -np 1 "$bin/texcache" "${opts[@]}" --out "$tmp/many" : \
+        -np "$((np - 1))" "$bin/texcache" "${opts[@]}" --out "$tmp/others" >"$tmp/log" 2>&1 ||
+        { cat "$tmp/log"; fail "mpirun exited $?"; }
+    grep "on rank" "$tmp/log" | head -4
+    [ -z "$(ls -A "$tmp/others")" ] || fail "ranks other than 0 wrote: $(ls -A "$tmp/others")"
+    [ "$(ls "$tmp/one")" = "$(ls "$tmp/many")" ] ||
+        fail "files differ: $(ls "$tmp/one" | tr '\n' ' ') against $(ls "$tmp/many" | tr '\n' ' ')"
+    grep -q "^## Ranks" "$tmp/many/speed_vs_error.md" || fail "the markdown names no ranks"
+    # Columns: case, method, budget, spp, rays_per_point, (seconds), rays, relmse,
+    # samples_shaded, relmse_image, (cpu_seconds).
+    paste -d '\n' "$tmp/one/speed_vs_error.csv" "$tmp/many/speed_vs_error.csv" | awk -F, '
+        NR % 2 == 1 { for (i = 1; i <= NF; ++i) a[i] = $i; n = NF; next }
+        NF != n { print "row " NR / 2 ": " NF " values against " n; bad = 1; next }
+        { for (i = 1; i <= NF; ++i) {
+              if (i == 6 || i == 11) continue
+              if (i == 8 || i == 10) {
+                  d = a[i] - $i; d = d < 0 ? -d : d; m = a[i] < 0 ? -a[i] : a[i]
+                  r = m > 0 ? d / m : d > 0; worst = r > worst ? r : worst
+                  if (r > 1e-6) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
+              } else if (a[i] != $i) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
+          } }
+        END { printf "%d rows; worst relative relMSE difference %g\n", NR / 2 - 1, worst; exit bad }' ||
+        fail "the CSVs differ"
+    # Bad input: every rank checks the options before any renders; one line, exit code 2.
+    local code=0
+    run_mpi experiment speed-vs-error --quick --only nope --out "$tmp/bad" >"$tmp/log" 2>&1 ||
+        code=$?
+    [ "$code" -eq 2 ] || { cat "$tmp/log"; fail "bad --only: exit code $code, expected 2"; }
+    [ "$(grep -c '^texcache: error' "$tmp/log")" -eq 1 ] || { cat "$tmp/log"; fail "not one line"; }
+    [ ! -e "$tmp/bad" ] || fail "bad --only left an empty --out behind"
+}
+
 failure() {  # kind first-line-pattern any-line-pattern
     printf 'good' >"$tmp/out.exr"
     local code=0
@@ -71,6 +116,9 @@ case "$case" in
     still-hit) equal_images --integrator path --shading hit --spp 4 ;;
     still-texture) equal_images --integrator path --shading texture --spp 8 --pass-spp 4 ;;
     still-ao) equal_images --integrator ao --shading texture --spp 8 --pass-spp 4 ;;
+    still-ao-grid) equal_images --integrator ao --shading texture --ts-samples grid --spp 8 \
+        --pass-spp 4 ;;
+    experiment) spread_experiment ;;
     frames) chunked_frames 31 2e-3 --spp 2 --shading texture --integrator path --temporal-alpha 0.7 ;;
     denoise) chunked_frames 63 1e-3 --denoise baseline ;;
     fail-read) failure 1 "^texcache: error: rank 1 (1 of $np ranks failed): .*cannot read" ;;

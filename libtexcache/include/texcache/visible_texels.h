@@ -63,6 +63,13 @@ public:
     static uint64_t Bit(const TexelKey& k) { return uint64_t(1) << ((k.iv & 7) * 8 + (k.iu & 7)); }
     size_t Bytes() const { return words_ * sizeof(uint64_t); }
 
+    /// The table's words, for combining the marks of tables of one size (other processes'
+    /// marks of one frame): a word's marks and the marks to add to it (not concurrently with
+    /// Contains).
+    size_t NumWords() const { return words_; }
+    uint64_t WordAt(size_t i) const { return bits_[i].load(std::memory_order_relaxed); }
+    void MarkWord(size_t i, uint64_t marks) { bits_[i].fetch_or(marks, std::memory_order_relaxed); }
+
     /// Where texel k's mark lives, independent of the table's size: a caller that tests the same
     /// texels often (the footprint pads of footprint.cpp) keeps it instead of hashing again.
     static uint32_t Probe(const TexelKey& k) {
