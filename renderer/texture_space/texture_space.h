@@ -151,6 +151,23 @@ constexpr double kAoCoarseWeightK = 0.75;
 /// best near 4 (2-8 all beat the fixed blend; note at the top).
 constexpr double kLightCoarseWeightK = 4.0;
 
+/// k of CoarseWeight for the step from the bins to the pixels' own samples
+/// (CombineWithOwnSamples): the MSE-optimal weight is Var(mean difference) / E[d^2], k = 1 for
+/// exact estimates; 2 leans to the bins where the window's estimates are noisy.
+constexpr double kOwnWeightK = 2.0;
+/// The window over which CombineWithOwnSamples sums its estimates: (2R + 1)^2 pixels, so that a
+/// dark or few-sample pixel does not trust an own mean that happens to agree with itself.
+constexpr int kOwnWindowRadius = 2;
+/// Hit binning's finest level, each pixel's own samples (the note at the top): for rows [y0, y1)
+/// of a frame `width` pixels wide, each pixel's mean of its `n` reconstructed samples (`rgb`, 3
+/// sums a pixel) moved towards the mean of their own per-hit estimates (`own`, 4 a pixel: 3
+/// sums, and the sum of the squared luminance of own minus reconstruction, sample by sample) by
+/// 1 - CoarseWeight of their difference and of the variance of its mean, both summed over a
+/// window; written to `out` (3 a pixel). Writes nothing for n < 2 (no spread to weigh: `out`
+/// keeps the reconstruction) and the reconstruction where the result is not finite.
+void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
+                           float* out);
+
 /// What the visibility prepass keeps of a pass for its shading pass (the renderer's PassTexels).
 struct PassScratch {
     std::vector<PassTexel> texels;  ///< per camera sample of the pass
