@@ -288,6 +288,7 @@ void CombineWithOwnSamples(const double* rgb, const double* own, int width, int 
     // Per pixel: the variance of its mean difference (own - reconstruction, luminance) and the
     // squared mean difference, then each summed over the window (a box, rows then columns).
     std::vector<double> var(pixels), d2(pixels), tmp(pixels);
+    std::vector<uint8_t> odd(pixels);  // sums not finite: the pixel keeps its reconstruction
     for (size_t p = 0; p < pixels; ++p) {
         const size_t q = size_t(y0) * W + p;
         const double* o = &own[4 * q];
@@ -295,9 +296,10 @@ void CombineWithOwnSamples(const double* rgb, const double* own, int width, int 
             glm::dvec3(o[0] - rgb[3 * q], o[1] - rgb[3 * q + 1], o[2] - rgb[3 * q + 2]) * invN);
         const double v = (o[3] - double(n) * d * d) / (double(n - 1) * double(n));
         const bool ok = std::isfinite(d) && std::isfinite(v);
-        var[p] = ok ? std::max(v, 0.0) : 0.0, d2[p] = ok ? d * d : 0.0;
+        var[p] = ok ? std::max(v, 0.0) : 0.0, d2[p] = ok ? d * d : 0.0, odd[p] = !ok;
     }
     const int R = kOwnWindowRadius;
+    const double k = OwnWeightK(n);
     for (std::vector<double>* a : {&var, &d2}) {
         for (size_t y = 0; y < rows; ++y)
             for (int x = 0; x < width; ++x) {
@@ -317,12 +319,12 @@ void CombineWithOwnSamples(const double* rgb, const double* own, int width, int 
     }
     for (size_t p = 0; p < pixels; ++p) {
         const size_t q = size_t(y0) * W + p;
-        const double alpha = CoarseWeight(std::sqrt(d2[p]), var[p], kOwnWeightK);
+        const double alpha = CoarseWeight(std::sqrt(d2[p]), var[p], k);
         for (int ch = 0; ch < 3; ++ch) {
             const double recon = rgb[3 * q + size_t(ch)] * invN;
             const double mine = own[4 * q + size_t(ch)] * invN;
             const double v = mine + alpha * (recon - mine);
-            out[3 * q + size_t(ch)] = float(std::isfinite(v) ? v : recon);
+            out[3 * q + size_t(ch)] = float(std::isfinite(v) && !odd[p] ? v : recon);
         }
     }
 }
