@@ -117,11 +117,16 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                                                   b.cols().begin(), b.cols().end(), 8));
             });
     };
+    const bool hits = c.tsc && ShadesAtHits(opt);
     // Progressive texture space: passes of opt.texture.passSpp camera samples, each after the
     // first starting a new pass of the cache (fresh shading, jittered sample positions, smaller
-    // footprints: see texture_space.h), whether the budget is samples or seconds.
-    const bool progressive =
-        c.tsc && c.tsc->Progressive() && opt.texture.passSpp > 0 && opt.texture.constantTerm < 0.0f;
+    // footprints: see texture_space.h), whether the budget is samples or seconds. Hit binning
+    // shades nothing on the grids and runs as per hit does instead: all the samples in one pass
+    // (the first bounces of a pixel's samples then form one net, PixelSequence, and the bins
+    // start at the level of all of them), or with a time budget passes from one sample up sized
+    // to what is left.
+    const bool progressive = !hits && c.tsc && c.tsc->Progressive() && opt.texture.passSpp > 0 &&
+                             opt.texture.constantTerm < 0.0f;
     int done = opt.firstSample;
     int passSpp = progressive ? opt.texture.passSpp : opt.seconds > 0.0f ? 1 : sppCap;
     int passesRun = 0;
@@ -133,7 +138,6 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const bool prepassAo = twoPhaseAo && fc.Visible() != nullptr;
     constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
-    const bool hits = c.tsc && ShadesAtHits(opt);
     // Light binned at the hits: the path integrator's, or the direct one's (PathHitsTrace).
     const bool pathHits = hits && opt.integrator != IntegratorKind::AO;
     // Hit bins: no table grows past 256 MiB (a frame's bins take a few MiB at most sizes).
@@ -141,10 +145,10 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     constexpr size_t kMaxHitRecordBytes = size_t(256) << 20;
     size_t binBlocksUsed = 0;
     // Hit binning keeps a record per camera sample of a pass (and for diffuse light its
-    // albedo): a pass holds at most 256 MiB of them (1920x1080, AO: 10 samples a pixel), and a
-    // longer one runs as several.
+    // albedo, for AO its own estimate): a pass holds at most 256 MiB of them (1920x1080, AO: 8
+    // samples a pixel), and a longer one runs as several.
     const size_t framePixels = std::max<size_t>(1, size_t(W) * size_t(opt.height));
-    const size_t recordBytes = sizeof(HitRecord) + (pathHits ? sizeof(BinnedHit) : 0);
+    const size_t recordBytes = sizeof(HitRecord) + (pathHits ? sizeof(BinnedHit) : sizeof(float));
     const int hitSpp = int(
         std::clamp<size_t>(kMaxHitRecordBytes / (recordBytes * framePixels), 1, size_t(INT_MAX)));
     // Hit-binned diffuse light: each pixel's per-hit part of a pass (misses, lights, glossy
@@ -152,6 +156,10 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     std::vector<glm::dvec3> perHit(pathHits ? framePixels : 0);
     std::vector<glm::dvec2> pixelNoise(pathHits ? framePixels : 0);  // see PathHitsTrace
     std::vector<double> rowNoise(pathHits ? 2 * size_t(y1 - y0) : 0);
+    // Hit-binned AO: each camera sample's own estimate, written by the binning phase, added to
+    // sums.own by the resolve (a pass binned again writes it again).
+    std::vector<float> ownAo;
+    if (hits) sums.own.assign(4 * framePixels, 0.0);
     while (done < sppCap) {
         const int s0 = done,
                   s1 = std::min(sppCap, done + (hits ? std::min(passSpp, hitSpp) : passSpp));
@@ -189,6 +197,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             // room) is doubled and the pass binned again, so no hit is ever lost; the bins, and
             // so the image, do not depend on the table's size.
             HitRecord* const records = c.tsc->HitRecords(passSamples);
+            if (!pathHits && ownAo.size() < passSamples) ownAo.resize(passSamples);
             BinnedHit* const binnedHits = pathHits ? c.tsc->BinnedHits(passSamples) : nullptr;
             // Diffuse light: every hit shaded first, its bins' level then picked from the pass's
             // noise (the variance of the binned light among each pixel's samples, summed over
@@ -215,13 +224,13 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             // The direct integrator's light at AO's levels: its noise is AO's kind (a shadow
             // ray per sample), and bins one level finer than paths' keep its soft shadows'
             // detail at a lower error than paths' levels give it.
-            const float levels =
-                opt.integrator == IntegratorKind::Path
-                    ? TextureSpaceCache::HitLightLevels(
-                          noiseVar, noiseMean2, std::max(opt.hitSamples, 1), s1 - s0, c.tsc->Pass())
-                    : TextureSpaceCache::HitBinLevels(
-                          pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples, s1 - s0,
-                          c.tsc->Pass());
+            const float levels = opt.integrator == IntegratorKind::Path
+                                     ? TextureSpaceCache::HitLightLevels(
+                                           noiseVar, noiseMean2, std::max(opt.hitSamples, 1),
+                                           s1 - opt.firstSample, 0)
+                                     : TextureSpaceCache::HitBinLevels(
+                                           pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples,
+                                           s1 - opt.firstSample, 0);
             // The bins lie floor(levels) and one more levels up. Each sample reads the finer
             // and moves towards the coarser by their difference and its noise (Reconstruct),
             // AO's noise from its counts, the light's from the pass's V; light whose noise was
@@ -283,16 +292,17 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     },
                     [&](const tbb::blocked_range2d<int>& r, const RadianceBins& bins) {
                         PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), bins,
-                                        relativeVariance, sums.rgb.data());
+                                        relativeVariance, sums.rgb.data(), sums.own.data());
                     });
             else
                 binAndResolve(
                     [&](size_t blocks) -> HitBins& { return c.tsc->Bins(blocks); },
                     [&](const tbb::blocked_range2d<int>& r, HitBins& bins, RayCounts& rc) {
-                        AoHitsBin(c, r, s0, s1, bias, records, bins, rc);
+                        AoHitsBin(c, r, s0, s1, bias, records, ownAo.data(), bins, rc);
                     },
                     [&](const tbb::blocked_range2d<int>& r, const HitBins& bins) {
-                        AoHitsResolve(c, r, s0, s1, records, bins, sums.rgb.data());
+                        AoHitsResolve(c, r, s0, s1, records, ownAo.data(), bins, sums.rgb.data(),
+                                      sums.own.data());
                     });
         } else if (VisibleTexels* visible = fc.Visible()) {
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
@@ -398,7 +408,8 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         if (ctx.tsc) ctx.pixelCache = opt.pixelCache->data();
     }
     FrameSums sums{std::vector<double>(numPixels * 3, 0.0),
-                   std::vector<PixelAovs>(opt.aovs.Any() ? numPixels : 0)};
+                   std::vector<PixelAovs>(opt.aovs.Any() ? numPixels : 0),
+                   {}};
     tbb::enumerable_thread_specific<RayCounts> counts;
     const uint64_t sent0 = opt.ranks ? opt.ranks->BytesSent() : 0;
     const uint64_t received0 = opt.ranks ? opt.ranks->BytesReceived() : 0;
@@ -412,6 +423,8 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
         const RowSplit split{opt.rowBegin, rowEnd, g.Rank(), g.Size()};
         GatherRows(g, split, sums.rgb.data(), size_t(W) * 3 * sizeof(double));
         if (!sums.aovs.empty()) GatherRows(g, split, sums.aovs.data(), W * sizeof(PixelAovs));
+        if (!sums.own.empty())
+            GatherRows(g, split, sums.own.data(), size_t(W) * 4 * sizeof(double));
         if (opt.pixelCache)
             GatherRows(g, split, opt.pixelCache->data(), W * sizeof(PixelCacheCounts));
     }
@@ -419,6 +432,10 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     RenderResult result;
     result.beauty = Image(W, H, 3);
     for (size_t p = 0; p < numPixels * 3; ++p) result.beauty.data[p] = float(sums.rgb[p] / done);
+    // Hit binning: the pixels' own samples as the finest level (texture_space.h).
+    if (!sums.own.empty())
+        CombineWithOwnSamples(sums.rgb.data(), sums.own.data(), W, opt.rowBegin, rowEnd, done,
+                              result.beauty.data.data());
     result.aovs = AovLayers(sums.aovs, opt.aovs, W, H, done);
     for (const RayCounts& rc : counts) {
         result.stats.cameraRays += rc.camera;

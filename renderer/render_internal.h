@@ -204,6 +204,10 @@ struct PassTexels {
 struct FrameSums {
     std::vector<double> rgb;      // 3 per pixel
     std::vector<PixelAovs> aovs;  // empty unless AOVs were asked for
+    // Hit binning: 4 per pixel, the sum of its samples' own per-hit estimates (RGB) and of the
+    // squared luminance of each one's own estimate minus its reconstruction (see
+    // CombineWithOwnSamples); empty unless shading at the hits.
+    std::vector<double> own;
     uint64_t hitBinsDropped = 0;  // see RenderStats
     size_t hitBinBytes = 0;
     int passes = 0;
@@ -232,9 +236,9 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
                        RayCounts& rays);
 
 /// Hit-binned AO, phase 1: AO at each camera hit, added to its bins `bias` and `bias` + 1 levels
-/// above its texel; `records` keep where each camera sample hit.
+/// above its texel; `records` keep where each camera sample hit, `ownAo` its own AO estimate.
 void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
-               HitRecord* records, HitBins& bins, RayCounts& rays);
+               HitRecord* records, float* ownAo, HitBins& bins, RayCounts& rays);
 
 /// Hit-binned diffuse light, phase 1: each camera sample path traced, the light of its diffuse
 /// hit kept in `binnedHits` for binning, the rest summed per pixel into `perHit`, and each
@@ -264,16 +268,21 @@ inline int HitFilterLevels(TextureFilterKind kind, int radius) {
 void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
                  float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins);
 
-/// Hit-binned AO, phase 2: each camera sample's reconstruction from the bins, added to `sum`.
+/// Hit-binned AO, phase 2: each camera sample's reconstruction from the bins, added to `sum`,
+/// and its own estimate (`ownAo`) with its difference to the reconstruction added to `own`
+/// (FrameSums::own).
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
-                   const HitRecord* records, const HitBins& bins, double* sum);
+                   const HitRecord* records, const float* ownAo, const HitBins& bins, double* sum,
+                   double* own);
 
 /// Hit-binned diffuse light, phase 2: each pixel's per-hit part plus albedo x the bins'
-/// reconstruction at each binned camera sample, added to `sum`.
+/// reconstruction at each binned camera sample, added to `sum`; the per-hit part plus albedo x
+/// each sample's own light, with its difference to the reconstruction, added to `own`
+/// (FrameSums::own).
 void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                      const HitRecord* records, const BinnedHit* binnedHits,
                      const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
-                     double* sum);
+                     double* sum, double* own);
 
 /// The requested AOV layers of a frame of W x H pixels: means over the `spp` samples of each.
 std::vector<ImageLayer> AovLayers(const std::vector<PixelAovs>& aovs, const AovFlags& flags, int W,

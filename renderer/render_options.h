@@ -51,8 +51,10 @@ std::string FootprintModeNames();
 ///         albedo when it reads the bins; a glossy hit bins its diffuse base's light and keeps
 ///         its specular lobe per hit; the direct integrator bins its light when cacheDirect.
 ///         The bins lie HitBinLevels above the hit's texel (HitLightLevels for diffuse light:
-///         from the pass's measured noise; fewer as rays per pixel grow; texture_space.h argues
-///         why the result converges).
+///         from the pass's measured noise; fewer as rays per pixel grow), and each pixel's
+///         result moves towards its own samples' mean where the bins' bias shows
+///         (texture_space.h argues why the result converges at per hit's rate). One pass per
+///         render: passSpp does not apply.
 /// The command line's `--ts-samples auto` (its default) takes Hits for AO, path and cached direct
 /// light unless a filter, a filter radius or temporal accumulation is asked for (those belong to
 /// the grid); the API's default is the paper's Grid. At one ray per hit or sample the grid
@@ -120,7 +122,8 @@ struct TextureSpaceOptions {
     /// this runs passes of this many, each re-shading the cache with fresh random numbers,
     /// sample positions jittered inside their texels and a filter radius shrinking with the pass
     /// count, so that error keeps falling with the budget. 0 = one pass (the paper's cache,
-    /// shaded once). Off with temporal accumulation, which accumulates over frames instead.
+    /// shaded once). Off with temporal accumulation, which accumulates over frames instead,
+    /// and with samples at the hits (TextureSamples::Hits), which bin a render in one pass.
     int passSpp = 4;
     CacheSettings cache;
     /// Mip-0 texel size as a fraction of each object's bounding-box diagonal; eq. 1 then picks

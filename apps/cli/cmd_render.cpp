@@ -241,7 +241,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Progressive texture space: camera samples per pass; each further pass "
                     "re-shades the cache (fresh random numbers, jittered sample positions, "
                     "smaller footprints) so error keeps falling with --spp/--seconds (0: one pass, "
-                    "the cache shaded once)")
+                    "the cache shaded once; samples at the hits, --ts-samples hits, bin a "
+                    "render in one pass)")
         ->capture_default_str();
     cmd->add_option("--temporal-alpha", args->temporalAlpha,
                     "Temporal accumulation of texels across --frames: c = (1-A) c + A c_prev "

@@ -14,6 +14,9 @@ namespace texcache {
 inline float Luminance(glm::vec3 c) {
     return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z;
 }
+inline double Luminance(glm::dvec3 c) {
+    return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+}
 
 class Bsdf {
 public:

@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <memory>
+#include <vector>
 
 #include "renderer/render_internal.h"
 
@@ -384,19 +385,31 @@ glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const RadianceBins& 
                        });
 }
 
+/// A camera sample's reconstruction and its own per-hit estimate.
+struct ResolvedSample {
+    glm::dvec3 recon, own;
+};
 /// Phase 2 of hit binning for one tile: each pixel's sum, from `start(pixel)` on, of
-/// `shade(i)` for the records i of its spp camera samples of the pass, in sample order, added to
-/// the frame's sums once.
+/// `shade(i).recon` for the records i of its spp camera samples of the pass, in sample order,
+/// added to the frame's sums `sum` once; and of `shade(i).own` with the squared luminance of own
+/// minus recon added to `own` (FrameSums::own).
 template <typename Start, typename Shade>
 void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, double* sum,
-                 Start&& start, Shade&& shade) {
+                 double* own, Start&& start, Shade&& shade) {
     for (int y = r.rows().begin(); y < r.rows().end(); ++y)
         for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
             const size_t pixel = size_t(y) * size_t(c.opt.width) + size_t(x);
-            glm::dvec3 acc = start(pixel);
-            for (int s = 0; s < spp; ++s) acc += shade(pixel * size_t(spp) + size_t(s));
+            glm::dvec3 acc = start(pixel), accOwn = acc;
+            double diff2 = 0.0;
+            for (int s = 0; s < spp; ++s) {
+                const ResolvedSample v = shade(pixel * size_t(spp) + size_t(s));
+                const double d = Luminance(v.own - v.recon);
+                acc += v.recon, accOwn += v.own, diff2 += d * d;
+            }
             double* px = &sum[3 * pixel];
             px[0] += acc.x, px[1] += acc.y, px[2] += acc.z;
+            double* o = &own[4 * pixel];
+            o[0] += accOwn.x, o[1] += accOwn.y, o[2] += accOwn.z, o[3] += diff2;
         }
 }
 
@@ -405,16 +418,19 @@ void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, 
 /// Hit-binned AO, phase 2 of a pass, for one tile: each camera sample's reconstruction, added to
 /// its pixel in sample order.
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
-                   const HitRecord* records, const HitBins& bins, double* sum) {
+                   const HitRecord* records, const float* ownAo, const HitBins& bins, double* sum,
+                   double* own) {
     LevelCells<CountBin>& cells = ThreadCells(bins);
     ResolveTile(
-        c, r, s1 - s0, sum, [](size_t) { return glm::dvec3(0.0); },
+        c, r, s1 - s0, sum, own, [](size_t) { return glm::dvec3(0.0); },
         [&](size_t i) {
             const HitRecord& h = records[i];
-            return glm::dvec3(h.mesh == PassTexels::kMiss ? 0.0
-                              : h.mesh == PassTexels::kLight
-                                  ? 1.0
-                                  : double(ReconstructAo(*c.tsc, bins, h, cells)));
+            if (h.mesh < 0) {
+                const glm::dvec3 v(h.mesh == PassTexels::kMiss ? 0.0 : 1.0);
+                return ResolvedSample{v, v};
+            }
+            return ResolvedSample{glm::dvec3(double(ReconstructAo(*c.tsc, bins, h, cells))),
+                                  glm::dvec3(double(ownAo[i]))};
         });
 }
 
@@ -424,15 +440,67 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
 void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                      const HitRecord* records, const BinnedHit* binnedHits,
                      const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
-                     double* sum) {
+                     double* sum, double* own) {
     LevelCells<RadianceBin>& cells = ThreadCells(bins);
     ResolveTile(
-        c, r, s1 - s0, sum, [&](size_t pixel) { return perHit[pixel]; },
+        c, r, s1 - s0, sum, own, [&](size_t pixel) { return perHit[pixel]; },
         [&](size_t i) {
-            if (records[i].mesh < 0) return glm::dvec3(0.0);
-            return glm::dvec3(binnedHits[i].albedo * ReconstructRadiance(*c.tsc, bins, records[i],
-                                                                         cells, relativeVariance));
+            if (records[i].mesh < 0) return ResolvedSample{glm::dvec3(0.0), glm::dvec3(0.0)};
+            const BinnedHit& b = binnedHits[i];
+            return ResolvedSample{
+                glm::dvec3(b.albedo *
+                           ReconstructRadiance(*c.tsc, bins, records[i], cells, relativeVariance)),
+                glm::dvec3(b.albedo * b.light)};
         });
+}
+
+void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
+                           float* out) {
+    if (n < 2 || y1 <= y0 || width <= 0) return;  // no spread to weigh: the reconstruction
+    const size_t W = size_t(width), rows = size_t(y1 - y0), pixels = W * rows;
+    const double invN = 1.0 / double(n);
+    // Per pixel: the variance of its mean difference (own - reconstruction, luminance) and the
+    // squared mean difference, then each summed over the window (a box, rows then columns).
+    std::vector<double> var(pixels), d2(pixels), tmp(pixels);
+    std::vector<uint8_t> odd(pixels);  // sums not finite: the pixel keeps its reconstruction
+    for (size_t p = 0; p < pixels; ++p) {
+        const size_t q = size_t(y0) * W + p;
+        const double* o = &own[4 * q];
+        const double d = Luminance(
+            glm::dvec3(o[0] - rgb[3 * q], o[1] - rgb[3 * q + 1], o[2] - rgb[3 * q + 2]) * invN);
+        const double v = (o[3] - double(n) * d * d) / (double(n - 1) * double(n));
+        const bool ok = std::isfinite(d) && std::isfinite(v);
+        var[p] = ok ? std::max(v, 0.0) : 0.0, d2[p] = ok ? d * d : 0.0, odd[p] = !ok;
+    }
+    const int R = kOwnWindowRadius;
+    const double k = OwnWeightK(n);
+    for (std::vector<double>* a : {&var, &d2}) {
+        for (size_t y = 0; y < rows; ++y)
+            for (int x = 0; x < width; ++x) {
+                double s = 0.0;
+                for (int k = std::max(0, x - R); k <= std::min(width - 1, x + R); ++k)
+                    s += (*a)[y * W + size_t(k)];
+                tmp[y * W + size_t(x)] = s;
+            }
+        for (size_t y = 0; y < rows; ++y)
+            for (size_t x = 0; x < W; ++x) {
+                double s = 0.0;
+                const size_t lo = y > size_t(R) ? y - size_t(R) : 0;
+                for (size_t k = lo; k <= std::min(rows - 1, y + size_t(R)); ++k)
+                    s += tmp[k * W + x];
+                (*a)[y * W + x] = s;
+            }
+    }
+    for (size_t p = 0; p < pixels; ++p) {
+        const size_t q = size_t(y0) * W + p;
+        const double alpha = CoarseWeight(std::sqrt(d2[p]), var[p], k);
+        for (int ch = 0; ch < 3; ++ch) {
+            const double recon = rgb[3 * q + size_t(ch)] * invN;
+            const double mine = own[4 * q + size_t(ch)] * invN;
+            const double v = mine + alpha * (recon - mine);
+            out[3 * q + size_t(ch)] = float(std::isfinite(v) && !odd[p] ? v : recon);
+        }
+    }
 }
 
 }  // namespace texcache::internal

@@ -89,7 +89,7 @@ void BinHit(const Context& c, const SurfaceInteraction& si, float t, int bias, T
 /// `bias` and `bias` + 1 above its texel's. Records where each camera sample hit, for phase 2
 /// (AoHitsResolve).
 void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
-               HitRecord* records, HitBins& bins, RayCounts& rays) {
+               HitRecord* records, float* ownAo, HitBins& bins, RayCounts& rays) {
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     thread_local std::vector<CameraSample> cs;
     thread_local std::vector<TexelKey> keys;
@@ -117,9 +117,13 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     }
     aoRays.Trace(c, open.data(), rays);
     HitBins::Batch batch(bins);
-    for (size_t i = 0; i < total; ++i) {
+    Cursor own(r, s0);
+    const float perRay = 1.0f / float(std::max(c.opt.aoSamples, 1));
+    for (size_t i = 0; i < total; ++i, own.Next(r, s0, s1)) {
         const CameraSample& p = cs[i];
         if (!p.found || p.hit.object < 0) continue;
+        ownAo[(size_t(own.y) * size_t(c.opt.width) + size_t(own.x)) * size_t(spp) +
+              size_t(own.s - s0)] = float(open[i]) * perRay;
         const CountBin::Value v{open[i], uint32_t(c.opt.aoSamples)};
         batch.Add(keys[2 * i], v);
         if (!(keys[2 * i + 1] == keys[2 * i])) batch.Add(keys[2 * i + 1], v);  // not clamped

@@ -18,15 +18,15 @@
 //     K passes bias^2 ~ r^4 ~ K^(-2/3) and variance ~ 1 / (K r^2) ~ K^(-2/3): both vanish, at
 //     the rate that balances them (progressive photon mapping's radius reduction, alpha = 2/3).
 //
-// Hit binning (TextureSamples::Hits) takes the same route with bins for footprints: a pass
-// shades every camera hit as per-hit shading would (AO rays; or, for the path integrator, the
-// light a diffuse hit receives, its albedo applied after) and adds the result to the bins of
-// its point at two levels above its texel's (HitBinLevels); each camera sample then reads the
-// 2x2 bins around it at each level, bilinearly, and combines the two (below). Bins of side h
-// average a smooth signal with a bias of O(h^2) and hold O(h^2 n) rays for n rays per pixel, so
-// with h ~ n^(-k): bias^2 ~ n^(-4k) and variance ~ n^(2k-1), and both vanish for any 0 < k < 1/2 (k
-// = 1/6 balances them asymptotically). We take k = 1/3 from 2.5 levels at 4 rays per pixel: at the
-// budgets speed-vs-error measures the bias of the coarser bins dominates sooner than the
+// Hit binning (TextureSamples::Hits) takes the same route with bins for footprints, in one pass
+// (below): it shades every camera hit as per-hit shading would (AO rays; or, for the path
+// integrator, the light a diffuse hit receives, its albedo applied after) and adds the result to
+// the bins of its point at two levels above its texel's (HitBinLevels); each camera sample then
+// reads the 2x2 bins around it at each level, bilinearly, and combines the two (below). Bins of
+// side h average a smooth signal with a bias of O(h^2) and hold O(h^2 n) rays for n rays per pixel,
+// so with h ~ n^(-k): bias^2 ~ n^(-4k) and variance ~ n^(2k-1), and both vanish for any 0 < k < 1/2
+// (k = 1/6 balances them asymptotically). We take k = 1/3 from 2.5 levels at 4 rays per pixel: at
+// the budgets speed-vs-error measures the bias of the coarser bins dominates sooner than the
 // asymptotic rate assumes (docs/texture-space.md, "Hit bins", has the figures). AO's noise is
 // about the same on any scene (a ray escapes or not); a path's estimate of diffuse light is not:
 // its variance for its mean ranges over 100x from a clay object under a white sky to a glossy
@@ -59,11 +59,34 @@
 // lies between two consistent ones and stays consistent. Picking one level per sample from six
 // (the intersection of confidence intervals, variances from the bins' second moments) loses to
 // the schedule on the torus tests: a hard choice among many noisy levels, where this one
-// shrinks between two neighbours. The bias
-// vanishes until the bins reach level 0 (texels of texelFraction of the object's size), below
-// which it stays that of level 0's bins. The bins hold integer counts, whose sums do not depend
-// on the order of the adds (see texcache/hit_bins.h), so the image is the same for any thread
-// count.
+// shrinks between two neighbours.
+//
+// The pixels' own samples, the finest level. The bins' bias vanishes only until they reach
+// level 0 (texels of texelFraction of the object's size), where it stays, and per hit, unbiased,
+// would overtake them at a large budget. So the hierarchy goes on below level 0 with each
+// pixel's own per-hit estimates, which the binning phase computes anyway: every pixel sums its
+// samples' own estimates O beside their reconstructions R, and the squared luminance of each
+// sample's O - R. At the end (CombineWithOwnSamples) it takes O + alpha (R - O) with alpha =
+// min(1, k Var / d^2) (CoarseWeight again): d the mean difference, Var its variance. With R
+// biased by B and O unbiased, the MSE is least at alpha = Var / (Var + B^2) = Var / E[d^2].
+// Var comes from the per-sample differences rather than the own samples' spread, because the
+// camera's noise (antialiasing, the lens) is in both and cancels in d. Var and d^2 are summed
+// over a 5x5 window, so that a dark or few-sample pixel does not trust an own mean that happens
+// to lie close, and k = 16 / n (within [1, 8]) leans to the bins while those sums are noisy and
+// the own mean's variance, what a wrong weight costs, is large (OwnWeightK). One sample a pixel
+// measures no Var: the image is the bins'. alpha in [0, 1]
+// keeps the estimate between a consistent and an unbiased one, and as the budget grows alpha
+// falls wherever the bias shows, so the error falls at per hit's rate.
+//
+// One pass. Binning shades nothing on the grids, so passes would buy it nothing and cost its
+// stratification: a pass's first bounces are a net of its own (PixelSequence), and passes of 4
+// samples would leave a pixel 16 nets of 4 instead of one of 64. A render without a time budget
+// bins all its samples in one pass (split only where their records would pass 256 MiB); with a
+// budget, passes start at one sample and grow to what is left, as per hit's do. The bins' level
+// follows all the samples so far. The bins hold integer counts, whose sums do not depend on the
+// order of the adds (see texcache/hit_bins.h), and each pixel sums its own samples in order, so
+// the image is the same for any thread count.
+//
 // A material's filter on the bins. The schedule and the two-level combination above are the
 // normal filter's, which every object without a "filter" key gets. An object whose material
 // sets another filter bins its hits at a level of its own and reads them through that filter
@@ -74,6 +97,7 @@
 // a count-weighted plane fit), which the sample reads bilinearly. The radius shrinks with the
 // passes as the grid's footprints do. Softshadow needs occluder distances the bins do not hold:
 // the command line refuses it here (CheckMaterialFilters).
+//
 // The passes are deterministic (streams of key and pass, whatever thread shades a sample), so
 // the same seed still gives the same image for any thread count. Temporal accumulation
 // (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
@@ -160,6 +184,27 @@ constexpr double kAoCoarseWeightK = 0.75;
 /// pass's mean relative variance V:
 /// best near 4 (2-8 all beat the fixed blend; note at the top).
 constexpr double kLightCoarseWeightK = 4.0;
+
+/// k of CoarseWeight for the step from the bins to the pixels' own samples at `n` samples a
+/// pixel (CombineWithOwnSamples): 16 / n within [1, 8]. The MSE-optimal weight is
+/// Var(mean difference) / E[d^2], k = 1 for exact estimates; at few samples the window's
+/// estimates are noisy and a weight wrongly given to the own mean costs its variance, ~1/n: k
+/// leans to the bins in proportion.
+inline double OwnWeightK(int n) {
+    return std::clamp(16.0 / double(std::max(n, 1)), 1.0, 8.0);
+}
+/// The window over which CombineWithOwnSamples sums its estimates: (2R + 1)^2 pixels, so that a
+/// dark or few-sample pixel does not trust an own mean that happens to agree with itself.
+constexpr int kOwnWindowRadius = 2;
+/// Hit binning's finest level, each pixel's own samples (the note at the top): for rows [y0, y1)
+/// of a frame `width` pixels wide, each pixel's mean of its `n` reconstructed samples (`rgb`, 3
+/// sums a pixel) moved towards the mean of their own per-hit estimates (`own`, 4 a pixel: 3
+/// sums, and the sum of the squared luminance of own minus reconstruction, sample by sample) by
+/// 1 - CoarseWeight of their difference and of the variance of its mean, both summed over a
+/// window; written to `out` (3 a pixel). Writes nothing for n < 2 (no spread to weigh: `out`
+/// keeps the reconstruction) and the reconstruction where the result is not finite.
+void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
+                           float* out);
 
 /// What the visibility prepass keeps of a pass for its shading pass (the renderer's PassTexels).
 struct PassScratch {
