@@ -111,6 +111,14 @@ struct TextureSpaceOptions {
     /// frame 0, below 1x1, 13x13 and the stage's own spatial filter, at less than the 13x13's
     /// cost (`texcache experiment disocclusion --out DIR`; results/disocclusion.md).
     int visibilityRadius = 2;
+    /// Screen-space frame buffers under soft light only (no distant, point or spot light): the
+    /// diffuse lobe (of GGX materials too) takes all of its light, direct and indirect, from
+    /// the cache (diffuseLayerPaths cosine paths, each with one light sample, per cached sample),
+    /// and `shading` is the specular lobe's alone, from specularLightSamples light samples a
+    /// pixel (frame_buffers_render.h). Off: the diffuse lobe's direct light stays per pixel.
+    bool cacheDiffuseLayer = true;
+    int diffuseLayerPaths = 2;
+    int specularLightSamples = 8;
     /// Where AO shades: see TextureSamples. --ts-samples auto|grid|hits.
     TextureSamples samples = TextureSamples::Grid;
     /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.

@@ -41,6 +41,9 @@ inline RenderOptions CachedFrameOptions(int w, int h, TextureFilterKind filter, 
     o.texture.filter = filter;
     o.texture.radius = radius;
     o.texture.indirectSamples = 4;
+    // Indirect light only in the cache (the scene is soft-lit: with the diffuse lobe's direct
+    // light cached too, `indirect` would hold it; TextureSpaceCacheHoldsTheDiffuseLight).
+    o.texture.cacheDiffuseLayer = false;
     return o;
 }
 

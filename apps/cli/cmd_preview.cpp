@@ -49,6 +49,8 @@ struct PreviewCliArgs {
     std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
+    bool benchStill = false;
+    int specularSamples = 0;
     int referenceSpp = 0;  // 0: 32 (AO, x 16 rays) or 128 (--denoise: path traced)
     std::string benchOut = "out/preview_bench";
     bool stereo = false;
@@ -175,6 +177,14 @@ int RunPreview(const PreviewCliArgs& a) {
                              ? (s.denoise ? 128 : 32)
                              : CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
         b.out = a.benchOut;
+        b.still = a.benchStill;
+        if (b.still && b.frames < 2)
+            throw InputError("--bench-frames", "--bench-still needs at least 2 frames, got " +
+                                                   std::to_string(b.frames));
+        if (b.still && !s.denoise)
+            throw InputError("--bench-still", "measures the stage's frames: give --denoise");
+        if (a.specularSamples != 0)
+            b.specularSamples = CheckRange("--specular-samples", a.specularSamples, 1, 32);
         return preview::RunPreviewBench(scene, s, p, b);
     }
     return preview::RunPreviewWindow(std::move(scene), s, p);
@@ -280,6 +290,12 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
                   "texture-space AO vs per-hit AO at equal relMSE");
     cmd->add_option("--bench-frames", a->benchFrames, "Bench: timed orbit frames")
         ->capture_default_str();
+    cmd->add_flag("--bench-still", a->benchStill,
+                  "Bench with the stage: a still view for --bench-frames frames instead of the "
+                  "orbit, its denoised relMSE frame by frame (texture space against per hit)");
+    cmd->add_option("--specular-samples", a->specularSamples,
+                    "Bench with the stage: light samples a pixel of the specular lobe where the "
+                    "cache lights the diffuse base (1-32; default 8)");
     cmd->add_option("--reference-spp", a->referenceSpp,
                     "Bench: spp of the reference (default 32 per-hit AO x 16 rays; with --denoise "
                     "128 path traced)");

@@ -29,6 +29,12 @@ struct BenchArgs {
     int referenceSpp = 32;  ///< per-hit AO reference: spp x aoSamples rays per pixel
     int referenceAoSamples = 16;
     std::string out = "out/preview_bench";  ///< prefix of the images written
+    /// With the stage: a still view instead of the orbit, its denoised relMSE frame by frame
+    /// (texture space refreshed as a running mean, against per hit).
+    bool still = false;
+    /// With the stage: the light samples a pixel of the specular lobe on objects whose diffuse
+    /// base the cache lights (TextureSpaceOptions::specularLightSamples); 0: the default.
+    int specularSamples = 0;
 };
 
 /// Texture-space AO with a warm cache against per-hit AO at equal relMSE, while orbiting; prints

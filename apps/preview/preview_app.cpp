@@ -537,6 +537,8 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
                 if (NameCombo("filter", choices, &c))
                     s.materialFilter[m] = c == 0 ? "" : choices[c];
                 ImGui::SliderInt("radius (-1 default)", &s.materialRadius[m], -1, 32);
+                // Editing the colour forgets the cache of the objects that use the material.
+                ImGui::ColorEdit3("albedo", &s.materialAlbedo[m].x, ImGuiColorEditFlags_Float);
                 ImGui::PopID();
             }
             ImGui::TreePop();
@@ -622,6 +624,8 @@ int RunPreviewWindow(Scene scene, const PreviewSettings& settings, const Preview
         ui.settings.materialFilter[m] = scene.materials[m].cacheFilter;
         ui.settings.materialRadius[m] = scene.materials[m].cacheRadius;
     }
+    ui.settings.materialAlbedo.clear();
+    for (const Material& m : scene.materials) ui.settings.materialAlbedo.push_back(m.albedo.value);
     ui.tessellationEdit = settings.tessellationRate;
     ui.integrators = SplitNames(IntegratorNames());
     ui.filters = SplitNames(TextureFilterNames());

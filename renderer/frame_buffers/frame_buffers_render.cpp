@@ -232,16 +232,20 @@ struct PendingShadow {
 /// which records the blocker and light point when blocked (see frame_buffers_render.h). With
 /// `exact` (ClosedFormShading, luminance > 0) the shading is that and kRatioCandidates light
 /// samples give the visibility as the ratio lum(mean of the candidates) * V / lum(exact), whose
-/// expectation is the shadowed over the unshadowed light.
+/// expectation is the shadowed over the unshadowed light. With `specularOnly` (an object whose
+/// diffuse lobe the cache lights, CachedDiffuseLight) the shading is the specular lobe's alone,
+/// from opt.texture.specularLightSamples light samples.
 void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
                        glm::vec3 wo, const glm::vec3* exact, const LightWeights& weights, Rng& rng,
                        FramePixel& px, PixelShadow& sh, int pixel,
-                       std::vector<PendingShadow>& shadows) {
+                       std::vector<PendingShadow>& shadows, bool specularOnly = false) {
     // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
     // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
     // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
     constexpr int kMax = kShadingCandidates;
-    const int kN = exact ? kRatioCandidates : kShadingCandidates;
+    const int kN = specularOnly ? std::clamp(c.opt.texture.specularLightSamples, 1, kMax)
+                   : exact      ? kRatioCandidates
+                                : kShadingCandidates;
     constexpr float kG1 = 0.75487766f, kG2 = 0.56984029f;  // 1/phi_2, 1/phi_2^2
     const float pickShift = rng.Next1D();
     const glm::vec2 shift = rng.Next2D();
@@ -317,6 +321,7 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
             continue;
         glm::vec3 fd, fs;
         bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
+        if (specularOnly) fd = glm::vec3(0.0f);  // the cache's (indirect)
         // The specular ray may find this light too (in `glossy`): MIS between the two for that
         // lobe.
         const float wSpec = ls.delta || !bsdf.HasSpecular()
@@ -478,7 +483,7 @@ void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& s
 /// Every buffer of pixel (x, y) from its camera ray and hit but the shadow rays' (see
 /// WriteShadowBuffers): the samples' shadow rays are appended to `shadows`, for pixel `pixel` of
 /// the tile, and `px` keeps what they need.
-void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int pixel,
+void ShadePixel(const Context& c, const FrameMotion& motion, bool layered, int x, int y, int pixel,
                 const Ray& ray, const RayDifferentials* diff, bool found, const Hit& hit,
                 screen::FrameBuffers& fb, PixelShadow& sh, std::vector<PendingShadow>& shadows,
                 RayCounts& rays) {
@@ -521,12 +526,16 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
     // BSDF is 0 there, and there is no diffuse ray (nor cone sample).
     const bool diffuse = bsdf.DiffuseReflectance() != glm::vec3(0.0f) && c.opt.maxDepth >= 2 &&
                          glm::dot(wo, si.N) > 0.0f;
-    // Diffuse materials take indirect light from the texture-space cache, as Render() does.
-    const bool cachedIndirect = diffuse && c.tsc && m.type == Material::Type::Diffuse;
+    // The diffuse lobe takes indirect light from the texture-space cache, as Render() does for
+    // diffuse materials (the cached irradiance does not depend on the material: a GGX base's
+    // is the same); `layered` (CachedDiffuseLight), its direct light too.
+    const bool cachedIndirect = diffuse && c.tsc;
     if (cachedIndirect) {
+        const int paths = layered ? c.opt.texture.diffuseLayerPaths : c.opt.texture.indirectSamples;
         const glm::vec3 E = CachedLookup(
-            c, si, [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, false, rays); },
-            c.opt.texture.indirectSamples);
+            c, si,
+            [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, layered, rays, paths); },
+            paths);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
         // The cache knows irradiance, not its direction: the same radiance in every cone, so
         // that indirect = albedo * ShadeCones(cones) holds here too and the stage's cone
@@ -536,7 +545,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
     }
     // The diffuse lobe's visibility from the cache (view-independent, so diffuse materials
     // only; GGX ones keep NaN: none).
-    if (!fb.cachedVisibility.empty() && m.type == Material::Type::Diffuse &&
+    if (!fb.cachedVisibility.empty() && m.type == Material::Type::Diffuse && !layered &&
         glm::dot(wo, si.N) > 0.0f) {
         const SampleRequest texel = c.tsc->VisibilityTexelOf(si);
         const glm::vec3 V = CachedLookup(
@@ -549,14 +558,18 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
     if (diffuseRay) axes = screen::ConeAxes(si.N);
     glm::vec3 exactShading;
     LightWeights weights;
-    const bool closedForm = ClosedFormShading(c, si, bsdf, wo, &exactShading, &weights) &&
+    const bool closedForm = !layered &&
+                            ClosedFormShading(c, si, bsdf, wo, &exactShading, &weights) &&
                             Luminance(glm::abs(exactShading)) > 0.0f;
     FramePixel px;
     const int spp = std::max(c.opt.spp, 1);
     for (int s = 0; s < spp; ++s) {
         Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
-        FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng, px,
-                          sh, pixel, shadows);
+        // With the diffuse lobe's light all cached, only a specular lobe samples lights here
+        // (none on diffuse materials: shading 0, visible).
+        if (!layered || bsdf.HasSpecular())
+            FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng,
+                              px, sh, pixel, shadows, layered);
         if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
         if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
     }
@@ -568,6 +581,21 @@ void ShadePixel(const Context& c, const FrameMotion& motion, int x, int y, int p
     if (px.hasCones)
         for (int k = 0; k < screen::kNumCones; ++k)
             fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
+}
+
+/// Whether the cache holds all of the diffuse lobe's light, direct included
+/// (opt.texture.cacheDiffuseLayer): with texture space on, under soft light only.
+/// The diffuse lobe's direct light is view-independent and, under an environment or area lights,
+/// soft: the cache shades it once per texel and keeps it from frame to frame, where per pixel it
+/// took most of the 32 light samples of a GGX material's `shading` and the 6 of a diffuse one's
+/// with a shadow ray (results/frame_buffers_profile.md). Delta and distant lights' shadows are
+/// sharp: the cache's filter and texels would blur them, so with any of them direct light stays
+/// per pixel.
+bool CachedDiffuseLight(const Context& c, const RenderOptions& opt) {
+    // The cached light includes a bounce: with max_depth 1 (direct light only) the diffuse
+    // lobe has no cached term.
+    return c.tsc && opt.texture.cacheDiffuseLayer && opt.maxDepth >= 2 && c.distantDir.empty() &&
+           c.spheres.empty();
 }
 
 // Frames are rendered in tiles of kTile x kTile pixels, fixed whatever the thread count (the
@@ -589,7 +617,7 @@ struct TileScratch {
 /// at a time (RenderScene::Intersect16): neighbouring pixels' camera rays share most of their
 /// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
 /// cheaper per ray for such rays than single rays.
-void RenderTile(const Context& c, const FrameMotion& motion, int x0, int y0,
+void RenderTile(const Context& c, const FrameMotion& motion, bool layered, int x0, int y0,
                 screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
     int n = 0;
@@ -613,8 +641,8 @@ void RenderTile(const Context& c, const FrameMotion& motion, int x0, int y0,
     for (int i = 0, y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++i) {
             ts.shadow[i].Reset();
-            ShadePixel(c, motion, x, y, i, ts.ray[i], c.tsc ? &ts.diff[i] : nullptr, ts.found[i],
-                       ts.hit[i], fb, ts.shadow[i], ts.shadows, rays);
+            ShadePixel(c, motion, layered, x, y, i, ts.ray[i], c.tsc ? &ts.diff[i] : nullptr,
+                       ts.found[i], ts.hit[i], fb, ts.shadow[i], ts.shadows, rays);
         }
 
     // In queue order: a pixel's samples finish in their order, as if traced one by one.
@@ -707,18 +735,21 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                          "visibility grids");
     fb.cachedVisibility.resize(ctx.tsc && opt.texture.cachedVisibility ? n : 0);
 
+    const bool layered = CachedDiffuseLight(ctx, opt);
+
     const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;
     tbb::enumerable_thread_specific<RayCounts> counts;
     tbb::enumerable_thread_specific<TileScratch> scratch;
-    tbb::parallel_for(
-        tbb::blocked_range<int>(0, tilesX * tilesY), [&](const tbb::blocked_range<int>& r) {
-            _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-            _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-            RayCounts& rc = counts.local();
-            TileScratch& ts = scratch.local();
-            for (int t = r.begin(); t < r.end(); ++t)
-                RenderTile(ctx, motion, (t % tilesX) * kTile, (t / tilesX) * kTile, fb, ts, rc);
-        });
+    tbb::parallel_for(tbb::blocked_range<int>(0, tilesX * tilesY),
+                      [&](const tbb::blocked_range<int>& r) {
+                          _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                          _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                          RayCounts& rc = counts.local();
+                          TileScratch& ts = scratch.local();
+                          for (int t = r.begin(); t < r.end(); ++t)
+                              RenderTile(ctx, motion, layered, (t % tilesX) * kTile,
+                                         (t / tilesX) * kTile, fb, ts, rc);
+                      });
 
     RenderStats stats;
     for (const RayCounts& rc : counts) {

@@ -86,13 +86,19 @@
 //   (not an object). The environment (and suns' discs) seen directly: `emitted` only, every guide
 //   NaN / INF / -1. An emissive object: its emission in `emitted`, and every buffer as for any
 //   object (its own light adds to what it reflects).
-// * Texture-space shading (options.texture.enabled): diffuse materials take `indirect` from the
-//   cache, as the path integrator does (albedo * cached indirect irradiance / pi; no diffuse ray;
-//   the six cones all hold the cached irradiance / pi, so indirect = albedo * ShadeCones(cones)
-//   still holds and the stage's cone history keeps the cached light: NaN cones would send
-//   Reliable's indirect to 0 there); direct light always stays per hit here (the split needs its
-//   visibility), so options.texture.cacheDirect is ignored. GGX materials are shaded per hit as
-//   above.
+// * Texture-space shading (options.texture.enabled): the diffuse lobe of every material takes
+//   `indirect` from the cache, as the path integrator does (albedo * cached indirect irradiance
+//   / pi, a GGX base's albedo too; no diffuse ray; the six cones all hold the cached irradiance
+//   / pi, so indirect = albedo * ShadeCones(cones) still holds and the stage's cone history keeps
+//   the cached light: NaN cones would send Reliable's indirect to 0 there);
+//   options.texture.cacheDirect is ignored. Under soft light only (no distant, point or spot
+//   light) and with options.texture.cacheDiffuseLayer, the diffuse lobe takes all of its light
+//   from the cache, direct included (its soft visibility with it): `indirect` is albedo * the
+//   cached direct + indirect irradiance / pi (the cones hold it too), and `shading` is the
+//   specular lobe's alone (0 on diffuse materials, visibility 1), from
+//   options.texture.specularLightSamples light samples, `visibility` that lobe's. The sum keeps
+//   the path tracer's expectation. Otherwise direct light stays per pixel (the split needs its
+//   visibility).
 // * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty
 //   otherwise): for diffuse materials facing the camera, the texel-cache lookup of the pixel's
 //   texel in the object's visibility grids (TextureSpaceCache::VisibilityTexelOf; a cache

@@ -33,7 +33,25 @@ bool SameCacheContents(const PreviewSettings& a, const PreviewSettings& b) {
            a.sampleCacheMb == b.sampleCacheMb && a.texelCacheMb == b.texelCacheMb &&
            a.lodBias == b.lodBias && a.aoSamples == b.aoSamples && a.aoDistance == b.aoDistance &&
            a.maxDepth == b.maxDepth && a.tessellationRate == b.tessellationRate &&
-           a.cachedVisibility == b.cachedVisibility;
+           a.cachedVisibility == b.cachedVisibility && a.denoise == b.denoise;
+}
+
+/// Whether anything of the scene at time `a` is elsewhere at time `b`: per object, and whether a
+/// light moved.
+std::vector<char> MovedObjects(const Scene& scene, float a, float b, bool* lightMoved) {
+    std::vector<char> moved(scene.objects.size(), 0);
+    for (size_t o = 0; o < moved.size(); ++o) {
+        const TransformTrack& t = scene.objects[o].transform;
+        moved[o] = t.IsAnimated() && t.Eval(a) != t.Eval(b);
+    }
+    *lightMoved = false;
+    auto check = [&](const TransformTrack& t) {
+        *lightMoved |= t.IsAnimated() && t.Eval(a) != t.Eval(b);
+    };
+    for (const QuadLight& l : scene.quadLights) check(l.transform);
+    for (const DistantLight& l : scene.distantLights) check(l.transform);
+    for (const PointLight& l : scene.pointLights) check(l.transform);
+    return moved;
 }
 
 /// Settings that change the picture (exposure and the accumulation cap do not).
@@ -56,6 +74,7 @@ TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s) {
     t.cache.texelCacheBytes = size_t(double(s.texelCacheMb) * (1 << 20));
     t.cache.lodBias = s.lodBias;
     t.cachedVisibility = s.cachedVisibility;
+    if (s.denoise) t.temporalAlpha = kStageTemporalAlpha;
     t.cache.Validate();
     return t;
 }
@@ -364,6 +383,9 @@ void ProgressiveRenderer::Run() {
     std::vector<PixelCacheCounts> pixelCounts;  // heat views: the frame's per-pixel lookups
     // Before the orbit camera replaces the scene camera's keys below.
     const bool posesAnimated = AnimationOf(scene_).posesAnimated;
+    std::vector<glm::vec3> sceneAlbedo;  // before the panel's edits
+    for (const Material& m : scene_.materials) sceneAlbedo.push_back(m.albedo.value);
+    uint32_t refreshFrame = 0;  // the stage's frames through the cache (Refresh)
     float shownExposure = 0.0f;
     // Worker-side buffers, swapped with the published ones (no allocation per frame once sized).
     std::vector<uint8_t> display;
@@ -430,6 +452,7 @@ void ProgressiveRenderer::Run() {
             // Only moving objects and lights change the RenderScene and the shading; the camera
             // is the orbit camera's (an animated one is followed by the UI).
             const bool timeChanged = rs && frameTime != builtTime && posesAnimated;
+            const float oldTime = builtTime;
             builtTime = frameTime;
             if (retessellate || timeChanged) {
                 // A new time only re-poses objects and lights: the cache (object-space grids)
@@ -445,11 +468,39 @@ void ProgressiveRenderer::Run() {
                 rs = std::make_unique<RenderScene>(scene_, ro);
                 if (retessellate) ++sceneBuilds;
                 built.tessellationRate = cur.tessellationRate;
-                if (timeChanged && cache) cache->BeginFrame(++cacheFrame);
+                if (timeChanged && cache) {
+                    bool lightMoved = false;
+                    const std::vector<char> moved =
+                        MovedObjects(scene_, oldTime, frameTime, &lightMoved);
+                    ++cacheFrame;
+                    if (!built.denoise) {
+                        cache->BeginFrame(cacheFrame);
+                    } else if (lightMoved || std::count(moved.begin(), moved.end(), 1) > 0) {
+                        // The stage's cache holds direct light under soft lights, and a moved
+                        // object's shadows and bounce light fall on the others: every object's
+                        // texels and history go, not only the moved ones' (a cache frame that
+                        // kept the history would blend the old shadows in by eq. 6).
+                        for (size_t o = 0; o < moved.size(); ++o) cache->InvalidateObject(int(o));
+                    }
+                }
                 std::lock_guard<std::mutex> lock(mutex_);
                 ready_ = true;
             }
             cam.ToCamera(&scene_.camera);
+            // The panel's material edits: the scene's own albedo where it sets none.
+            for (size_t m = 0; m < scene_.materials.size(); ++m) {
+                const glm::vec3 want =
+                    m < cur.materialAlbedo.size() ? cur.materialAlbedo[m] : sceneAlbedo[m];
+                if (scene_.materials[m].albedo.value == want) continue;
+                scene_.materials[m].albedo.value = want;
+                // What the cache holds for the objects with it was shaded with the old one
+                // (their own interreflections); the others take the change of their bounce
+                // light in over the next refreshes.
+                if (cache)
+                    for (size_t o = 0; o < scene_.objects.size(); ++o)
+                        for (const int used : scene_.objects[o].Materials())
+                            if (size_t(used) == m) cache->InvalidateObject(int(o));
+            }
 
             if (pickX >= 0) {
                 const CameraModel model(scene_.camera, frameTime, cur.width, cur.height);
@@ -486,7 +537,7 @@ void ProgressiveRenderer::Run() {
                     scene_.materials[m].cacheRadius =
                         m < cur.materialRadius.size() ? cur.materialRadius[m] : -1;
                 }
-                cache = MakeTextureSpaceCache(*rs, TextureOptionsOf(cur), "sample/texel cache MiB");
+                cache = MakeTextureSpaceCache(*rs, TextureOptionsOf(eff), "sample/texel cache MiB");
                 built = eff;
             }
 
@@ -530,6 +581,11 @@ void ProgressiveRenderer::Run() {
                 opt.progress = false;
                 opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
+                // The cache from frame to frame: a part of it re-shaded, a still view's averaged.
+                if (opt.texture.enabled) {
+                    const bool still = accumulated > 0;
+                    cache->Refresh(++refreshFrame, RefreshParts(still), still);
+                }
                 // "prev" points go to the previous frame's time: the stage's history was
                 // rendered there (the same time while only the camera moves).
                 const RenderStats st =

@@ -15,6 +15,11 @@
 // scene time (animation) re-poses the RenderScene and starts a cache frame (BeginFrame: every
 // sample and texel re-shaded), as `texcache render --frames` does between frames; when only the
 // camera is animated, shading does not change and the cache is kept, as for any camera move.
+// With the stage, the cache is kept from frame to frame and refreshed progressively instead
+// (TextureSpaceCache::Refresh: a part of it re-shaded each frame and blended into the texels'
+// history, a running mean while the view is still); a new time at which something moved
+// forgets every object's texels and history (InvalidateObject: the moved object's shadows and
+// bounce light fall on the others), and a material edit in the panel the objects that use it.
 //
 // The screen-space stage (denoise on, or the motion-vector view): each frame renders the path
 // tracer's split (RenderFrameBuffers, diffuse indirect light from the cache where texture-space
@@ -63,6 +68,10 @@ struct PreviewSettings {
     FootprintMode footprint = FootprintMode::Auto;  ///< see texture_space.h
     std::vector<std::string> materialFilter;        ///< per material; "" = the default filter
     std::vector<int> materialRadius;                ///< per material; -1 = the default radius
+    /// Per material, the albedo the panel set (a missing entry: the scene's own). An edit
+    /// forgets the cache of the objects with that material (TextureSpaceCache::
+    /// InvalidateObject) and resets the stage.
+    std::vector<glm::vec3> materialAlbedo;
     float sampleCacheMb = 64.0f, texelCacheMb = 64.0f;
     float lodBias = 1.0f;
     int sppPerFrame = 1;
@@ -102,8 +111,19 @@ struct PreviewSettings {
     bool operator==(const PreviewSettings&) const = default;
 };
 
+/// The parts of the cache that the stage's frames refresh one of each (TextureSpaceCache::
+/// Refresh): while the view moves each texel is re-shaded every 16 frames, so a moving view pays
+/// a sixteenth of a cold frame's shading for what it already saw; while it is still, every 4,
+/// so its texels have averaged about 16 estimates after 64 frames (results/preview.md).
+inline uint32_t RefreshParts(bool still) {
+    return still ? 4u : 16u;
+}
+/// Eq. 6's weight of a texel's history while the view moves (the paper's 0.7).
+inline constexpr float kStageTemporalAlpha = 0.7f;
+
 /// The texture-space cache options of the settings (filter, radius, footprint, cache sizes,
-/// LOD bias); `enabled` is settings.textureSpace.
+/// LOD bias, and with the stage on (denoise) a temporal history of kStageTemporalAlpha);
+/// `enabled` is settings.textureSpace.
 TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s);
 
 /// The screen-space stage's settings for preview frames `height` rows tall: the library's

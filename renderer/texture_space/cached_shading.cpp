@@ -280,9 +280,10 @@ ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& 
 /// (light sampling, shadow ray): (1/pi) Le V cos / pdf; otherwise direct light stays NEE's job
 /// at the hit.
 ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool direct,
-                                RayCounts& rays) {
+                                RayCounts& rays, int paths) {
     return ShadeCosineRays(
-        c, r, c.opt.texture.indirectSamples, rays, [&](Ray& ray, Rng& rng, glm::vec3 N) {
+        c, r, paths > 0 ? paths : c.opt.texture.indirectSamples, rays,
+        [&](Ray& ray, Rng& rng, glm::vec3 N) {
             glm::vec3 Ld(0.0f);
             LightSample ls;
             if (direct && c.SampleLight(ray.org, N, rng.Next1D(), rng.Next2D(), &ls)) {

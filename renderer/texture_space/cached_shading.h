@@ -38,9 +38,9 @@ ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& 
 /// albedo). Indirect: cosine-sampled paths, whose first ray does not count emission (light
 /// seen directly is NEE's). With `direct`, each of the n iterations also takes one NEE sample
 /// (light sampling, shadow ray): (1/pi) Le V cos / pdf; otherwise direct light stays NEE's job
-/// at the hit.
+/// at the hit. `paths`: n, or opt.texture.indirectSamples when < 1.
 ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool direct,
-                                RayCounts& rays);
+                                RayCounts& rays, int paths = 0);
 
 /// Visibility of the scene's area lights from a cache sample (Mehta et al.'s soft-shadow input):
 /// the fraction of shadow rays towards uniform points on the quad lights that reach them, and the

@@ -107,6 +107,29 @@ void TextureSpaceCache::BeginFrame(uint32_t frame) {
     passRadiusOf_ = radiusOf_;
 }
 
+void TextureSpaceCache::Refresh(uint32_t frame, uint32_t parts, bool still) {
+    frame_ = frame;
+    pass_ = frame;  // fresh random streams and jittered sample points for what is re-shaded
+    passRadiusOf_ = radiusOf_;
+    if (history_) history_->SetRunningMean(still);
+    if (parts == 0) return;
+    const uint64_t part = frame % parts;
+    cache_.InvalidateKeys([parts, part](uint64_t k) {
+        k ^= k >> 33, k *= 0xff51afd7ed558ccdull, k ^= k >> 33;  // neighbours in different parts
+        return k % parts == part;
+    });
+}
+
+void TextureSpaceCache::InvalidateObject(int object) {
+    const size_t o = size_t(object);
+    for (const std::vector<int>* meshes : {&meshOf_, &backMeshOf_, &visMeshOf_, &visBackMeshOf_}) {
+        if (o >= meshes->size() || (*meshes)[o] < 0) continue;
+        const int mesh = (*meshes)[o];
+        cache_.InvalidateMesh(mesh);
+        if (history_) history_->InvalidateIf(cache_.MeshKeys(mesh));
+    }
+}
+
 int TextureSpaceCache::PassRadius(int radius, uint32_t pass) {
     if (pass == 0) return radius;
     return int(std::lround(float(radius) * std::pow(float(pass) + 1.0f, -1.0f / 6.0f)));

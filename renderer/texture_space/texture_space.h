@@ -399,6 +399,17 @@ public:
     /// are re-shaded, while the temporal history (if any) carries over.
     void BeginFrame(uint32_t frame);
     uint32_t Frame() const { return frame_; }
+    /// Frame-to-frame reuse (the preview; docs/texture-space.md, "The cache from frame to
+    /// frame"): starts frame `frame` keeping what is cached, and evicts one part in `parts` of the
+    /// samples and texels (by key hash, the part refreshed longest ago), which the next lookups
+    /// shade anew from streams of (key, frame) and blend into their temporal history: eq. 6 while
+    /// the view moves, a running mean while it is `still` (so a still view converges). Texels
+    /// never shaded are shaded on their first lookup, before any refresh. Between frames.
+    void Refresh(uint32_t frame, uint32_t parts, bool still);
+    /// Forgets everything cached for scene object `object`, on each of its grids: samples,
+    /// texels and temporal history (the object moved, or its material changed what its cached
+    /// term holds). Between frames.
+    void InvalidateObject(int object);
     /// This frame's filtered value of a texel blended into its history (eq. 6); `value` as is
     /// when temporal accumulation is off.
     glm::vec3 Accumulate(const TexelKey& key, glm::vec3 value) {

@@ -4,6 +4,7 @@
 // scripts/test.sh).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <thread>
@@ -26,6 +27,30 @@ TEST(TemporalHistory, FollowsEquationSix) {
     EXPECT_NEAR(h.Blend(k, 2, 0.0f), 0.49f, 1e-6f);
     EXPECT_THROW(TemporalHistory<float>(1 << 16, 1.0f), InputError);
     EXPECT_THROW(TemporalHistory<float>(1 << 16, NAN), InputError);
+}
+
+// A still view (SetRunningMean): the history's weight is n / (n + 1) for n estimates, never
+// below alpha, so over many frames the texel is their mean and converges; going back to eq. 6
+// weights the history by alpha again. InvalidateIf forgets the texels it names only.
+TEST(TemporalHistory, RunningMeanWhileStillAndForgetsWhatItIsTold) {
+    TemporalHistory<float> h(1 << 16, 0.7f);
+    h.SetRunningMean(true);
+    const TexelKey k{5, 1, 3, 4}, other{9, 1, 3, 4};
+    float v = 0.0f, expected = 0.0f;
+    for (uint32_t f = 0; f < 100; ++f) {
+        v = h.Blend(k, f, float(f % 10));
+        const float a = f == 0 ? 0.0f : std::max(0.7f, float(f) / float(f + 1));
+        expected = (1.0f - a) * float(f % 10) + a * expected;
+    }
+    EXPECT_NEAR(v, expected, 1e-4f);
+    EXPECT_NEAR(v, 4.5f, 0.1f);                   // near the mean of the estimates
+    EXPECT_NEAR(h.Blend(k, 99, 9.0f), v, 1e-5f);  // the same frame again: no double count
+    h.SetRunningMean(false);
+    EXPECT_NEAR(h.Blend(k, 100, 0.0f), 0.7f * v, 1e-5f);
+    h.Blend(other, 10, 2.0f);
+    h.InvalidateIf([&](uint64_t key) { return key == k.Pack(); });
+    EXPECT_EQ(h.Blend(k, 11, 1.0f), 1.0f);               // forgotten: starts anew
+    EXPECT_NEAR(h.Blend(other, 11, 0.0f), 1.4f, 1e-5f);  // kept
 }
 
 // Threads blending colliding keys into a tiny table: every result is a blend of that key's own

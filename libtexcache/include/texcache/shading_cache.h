@@ -422,14 +422,21 @@ public:
         }
     }
     /// Evicts one mesh's samples and texels (that object was edited).
-    void InvalidateMesh(int mesh) {
-        epoch_.fetch_add(1, std::memory_order_relaxed);
+    void InvalidateMesh(int mesh) { InvalidateKeys(MeshKeys(mesh)); }
+    /// Whether a packed sample or texel key lies on cache mesh `mesh`, as a predicate.
+    auto MeshKeys(int mesh) const {
         const uint32_t lo = meshes_[mesh]->FaceOffset(),
                        hi = lo + uint32_t(meshes_[mesh]->NumFaces());
-        auto pred = [lo, hi](uint64_t k) {
+        return [lo, hi](uint64_t k) {
             const uint32_t f = TexelKey::Unpack(k).face;
             return f >= lo && f < hi;
         };
+    }
+    /// Evicts the samples and texels whose packed key satisfies `pred(key)` (one mesh; a part
+    /// of the cache re-shaded progressively). Between frames.
+    template <typename Pred>
+    void InvalidateKeys(Pred pred) {
+        epoch_.fetch_add(1, std::memory_order_relaxed);
         if (refSamples_) {
             refSamples_->InvalidateIf(pred);
             refTexels_->InvalidateIf(pred);
