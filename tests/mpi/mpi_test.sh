@@ -10,7 +10,8 @@
 #   what one process's keeps: RMSE at most 1e-6 likewise.
 # CASE experiment: `experiment speed-vs-error --quick` (car-ao, 3 methods, 2 budgets) with its
 #   renders spread over NP ranks (rank 0 given --out A, the others --out B) against one
-#   process: the same rows, every relMSE column within 1e-6 relative (each render is one
+#   process: the same rows, every relMSE column within 1e-6 relative, the grid's counts of rays
+#   and shaded samples within 1e-3 (they follow the thread schedule) (each render is one
 #   process's render on one rank; the references are rendered over the ranks, equal to one
 #   process's), and B stays empty: rank 0 alone writes. A bad --only fails as one line, exit 2.
 # CASE frames: --frames 0:31 with temporal accumulation (--temporal-alpha 0.7) in contiguous
@@ -86,6 +87,11 @@ spread_experiment() {
                   d = a[i] - $i; d = d < 0 ? -d : d; m = a[i] < 0 ? -a[i] : a[i]
                   r = m > 0 ? d / m : d > 0; worst = r > worst ? r : worst
                   if (r > 1e-6) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
+              } else if (i == 7 || i == 9) {
+                  # Rays and samples shaded on the grid: two threads that miss one sample at
+                  # once may both shade it, so the counts follow the schedule by a few.
+                  d = a[i] - $i; d = d < 0 ? -d : d
+                  if (d > 1e-3 * a[i]) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
               } else if (a[i] != $i) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
           } }
         END { printf "%d rows; worst relative relMSE difference %g\n", NR / 2 - 1, worst; exit bad }' ||
