@@ -478,16 +478,16 @@ void CombineWithOwnSamples(const double* rgb, const double* own, int width, int 
         for (size_t y = 0; y < rows; ++y)
             for (int x = 0; x < width; ++x) {
                 double s = 0.0;
-                for (int k = std::max(0, x - R); k <= std::min(width - 1, x + R); ++k)
-                    s += (*a)[y * W + size_t(k)];
+                for (int i = std::max(0, x - R); i <= std::min(width - 1, x + R); ++i)
+                    s += (*a)[y * W + size_t(i)];
                 tmp[y * W + size_t(x)] = s;
             }
         for (size_t y = 0; y < rows; ++y)
             for (size_t x = 0; x < W; ++x) {
                 double s = 0.0;
                 const size_t lo = y > size_t(R) ? y - size_t(R) : 0;
-                for (size_t k = lo; k <= std::min(rows - 1, y + size_t(R)); ++k)
-                    s += tmp[k * W + x];
+                for (size_t j = lo; j <= std::min(rows - 1, y + size_t(R)); ++j)
+                    s += tmp[j * W + x];
                 (*a)[y * W + x] = s;
             }
     }
