@@ -55,7 +55,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
 /// Whether an experiment spreads its renders over the ranks of a job (experiments::RenderQueue).
 bool Spreads(const std::string& name) {
     return name == "speed-vs-error" || name == "equal-time" || name == "cache-size" ||
-           name == "lod-bias";
+           name == "lod-bias" || name == "cpis" || name == "filter-size";
 }
 
 std::string ExperimentNames() {
@@ -188,8 +188,9 @@ void AddExperimentCommand(CLI::App& app, int& exitCode) {
            "name", args->name,
            "One of: " + ExperimentNames() +
                "; or several, comma separated (over MPI ranks, speed-vs-error, equal-time, "
-               "cache-size and lod-bias spread their renders over all ranks, the others are "
-               "dealt round-robin)")
+               "cache-size, lod-bias, filter-size and cpis spread their renders over all ranks, "
+               "the others are dealt round-robin; threads always runs whole on one rank, since "
+               "it measures how one process scales with its threads)")
         ->required();
     cmd->add_option("--out", args->out, "Output directory (created if missing)")->required();
     cmd->add_flag("--quick", args->quick,

@@ -67,6 +67,7 @@ struct Method {
 }  // namespace
 
 int Cpis(const Setup& s) {
+    if (s.checkOnly) return 0;  // no options of its own
     const auto lsp = LoadForExperiment(s, "brushed.json", true);
     LoadedScene& ls = *lsp;
     const int W = s.quick ? 64 : 256, H = s.quick ? 48 : 192;
@@ -92,6 +93,7 @@ int Cpis(const Setup& s) {
     // The methods take turns at each sample count, so a change of the machine's load falls on
     // all three alike.
     std::vector<Curve> curves(std::size(methods));
+    RenderQueue queue(s);
     for (int spp = 1; spp <= methods[0].maxSpp; spp *= 2)
         for (size_t k = 0; k < std::size(methods); ++k) {
             const Method& m = methods[k];
@@ -99,18 +101,23 @@ int Cpis(const Setup& s) {
             RenderOptions o = base;
             o.lightSampling = m.sampling;
             o.spp = spp;
-            const Run r = TimedRender(ls, o, 1, spp == 1);
-            const double e = RelMSE(r.image, ref);
-            const double rays = double(r.stats.TotalRays());
-            Curve& c = curves[k];
-            c.rows.push_back({double(spp), r.seconds, rays, e, r.cpuSeconds,
-                              double(r.stats.psr.built), double(r.stats.psr.hits)});
-            c.seconds.push_back(r.cpuSeconds), c.rays.push_back(rays), c.relmse.push_back(e);
-            Say("[cpis] %s %4d spp: %.3f s CPU, %.3g rays, relMSE %.5f", m.name, spp, r.cpuSeconds,
-                rays, e);
-            if (spp == m.maxSpp)
-                WriteImage((fs::path(s.outDir) / Format("cpis_%s.png", m.name)).string(), r.image);
+            queue.Add(Format("%s %d spp", m.name, spp), ls, o, 1, spp == 1, [&, k, spp](Run& r) {
+                const Method& m = methods[k];
+                const double e = RelMSE(r.image, ref);
+                const double rays = double(r.stats.TotalRays());
+                Curve& c = curves[k];
+                c.rows.push_back({double(spp), r.seconds, rays, e, r.cpuSeconds,
+                                  double(r.stats.psr.built), double(r.stats.psr.hits)});
+                c.seconds.push_back(r.cpuSeconds), c.rays.push_back(rays), c.relmse.push_back(e);
+                Say("[cpis] %s %4d spp: %.3f s CPU%s, %.3g rays, relMSE %.5f", m.name, spp,
+                    r.cpuSeconds, queue.RankOf(r).c_str(), rays, e);
+                if (spp == m.maxSpp)
+                    WriteImage((fs::path(s.outDir) / Format("cpis_%s.png", m.name)).string(),
+                               r.image);
+            });
         }
+    queue.Flush();
+    if (!queue.Root()) return 0;  // rank 0 writes the files
     // One method's rows together: gnuplot draws a series' line through consecutive rows only.
     for (size_t k = 0; k < curves.size(); ++k)
         for (const std::vector<double>& row : curves[k].rows) {
@@ -176,6 +183,7 @@ int Cpis(const Setup& s) {
         "equal number of rays.\n\n![relMSE vs time](cpis_seconds.png) ![relMSE vs "
         "rays](cpis_rays.png)\n\n| MIS | PIS | CPIS |\n|---|---|---|\n| ![](cpis_mis.png) | "
         "![](cpis_pis.png) | ![](cpis_cpis.png) |\n\n(last render of each sweep)\n";
+    md += queue.RanksSection();
     WriteText((fs::path(s.outDir) / "cpis.md").string(), md);
     Say("[cpis] CPIS %.2fx faster than PIS, %.2fx faster than MIS at relMSE %.2g; wrote %s, "
         "cpis.md, cpis_seconds.png, cpis_rays.png",

@@ -165,6 +165,7 @@ int CacheSize(const Setup& s) {
 }
 
 int FilterSize(const Setup& s) {
+    if (s.checkOnly) return 0;  // no options of its own
     const auto carp = LoadForExperiment(s, "car.json", false);
     LoadedScene& car = *carp;
     const int W = s.quick ? 128 : 640, H = W * 9 / 16;
@@ -180,36 +181,53 @@ int FilterSize(const Setup& s) {
         std::vector<double> time, shaded, relmse;
     };
     Curve curves[2] = {{"all", false, {}, {}, {}}, {"visible", true, {}, {}, {}}};
-    for (Curve& c : curves)
+    // Every render is independent: the ratios and the reused 1x1 render are filled in once all
+    // have arrived (the 1x1 render arrives first, being added first).
+    struct Result {
+        double sec = 0.0, n = 0.0, e = 0.0;
+    };
+    Result results[2][11];
+    RenderQueue queue(s);
+    for (int ci = 0; ci < 2; ++ci)
+        for (int radius = ci == 0 ? 0 : 1; radius <= 10; ++radius) {
+            const Curve& c = curves[ci];
+            const RenderOptions o = CachedAo(car, W, H, 4, 4, radius, c.visible);
+            queue.Add(
+                Format("%s %dx%d", c.name, 2 * radius + 1, 2 * radius + 1), car, o, repeats,
+                radius == 0, [&, ci, radius](Run& r) {
+                    const Curve& c = curves[ci];
+                    const bool baseline = radius == 0;
+                    Result& res = results[ci][radius];
+                    res = {r.cpuSeconds, double(r.stats.cache.samplesShaded), RelMSE(r.image, ref)};
+                    if (baseline) t0 = res.sec, n0 = res.n;
+                    if (radius == 0 || radius == 6 || radius == 10)
+                        WriteImage(Out(s, Format("filter_size_%s%d.png", baseline ? "" : c.name,
+                                                 2 * radius + 1)),
+                                   r.image);
+                    Say("[filter-size] %-7s %2dx%-2d: %.3f s CPU%s (%.2fx), %.0f samples "
+                        "shaded (%.2fx), relMSE %.5f",
+                        c.name, 2 * radius + 1, 2 * radius + 1, res.sec, queue.RankOf(r).c_str(),
+                        res.sec / t0, res.n, res.n / n0, res.e);
+                });
+        }
+    queue.Flush();
+    if (!queue.Root()) return 0;  // rank 0 writes the files
+    results[1][0] = results[0][0];
+    for (int ci = 0; ci < 2; ++ci)
         for (int radius = 0; radius <= 10; ++radius) {
-            const bool baseline = radius == 0;
-            double sec = t0, n = n0, e = 0.0;
-            if (!baseline || t0 == 0.0) {
-                const RenderOptions o = CachedAo(car, W, H, 4, 4, radius, c.visible);
-                const Run r = TimedRender(car, o, repeats, radius == 0);
-                sec = r.cpuSeconds, n = double(r.stats.cache.samplesShaded);
-                e = RelMSE(r.image, ref);
-                if (baseline) t0 = sec, n0 = n;
-                if (radius == 0 || radius == 6 || radius == 10)
-                    WriteImage(Out(s, Format("filter_size_%s%d.png", baseline ? "" : c.name,
-                                             2 * radius + 1)),
-                               r.image);
-            } else {
-                e = curves[0].relmse[0];
-            }
-            c.time.push_back(sec / t0), c.shaded.push_back(n / n0), c.relmse.push_back(e);
+            Curve& c = curves[ci];
+            const Result& res = results[ci][radius];
+            c.time.push_back(res.sec / t0), c.shaded.push_back(res.n / n0);
+            c.relmse.push_back(res.e);
             t.Row()
                 .Add(c.name)
                 .Add(2 * radius + 1)
                 .Add(radius)
-                .Add(sec)
-                .Add(n)
-                .Add(sec / t0)
-                .Add(n / n0)
-                .Add(e);
-            Say("[filter-size] %-7s %2dx%-2d: %.3f s CPU (%.2fx), %.0f samples shaded (%.2fx), "
-                "relMSE %.5f",
-                c.name, 2 * radius + 1, 2 * radius + 1, sec, sec / t0, n, n / n0, e);
+                .Add(res.sec)
+                .Add(res.n)
+                .Add(res.sec / t0)
+                .Add(res.n / n0)
+                .Add(res.e);
         }
     const std::string csv = Out(s, "filter_size.csv");
     t.Write(csv);
@@ -258,6 +276,7 @@ int FilterSize(const Setup& s) {
         "| 1x1 | 13x13 all | 21x21 all | 13x13 visible | 21x21 visible |\n|---|---|---|---|---|\n"
         "| ![](filter_size_1.png) | ![](filter_size_all13.png) | ![](filter_size_all21.png) | "
         "![](filter_size_visible13.png) | ![](filter_size_visible21.png) |\n";
+    md += queue.RanksSection();
     WriteText(Out(s, "filter_size.md"), md);
     Say("wrote %s, filter_size.png, filter_size.md", csv.c_str());
     return 0;

@@ -14,6 +14,12 @@
 #   and shaded samples within 1e-3 (they follow the thread schedule) (each render is one
 #   process's render on one rank; the references are rendered over the ranks, equal to one
 #   process's), and B stays empty: rank 0 alone writes. A bad --only fails as one line, exit 2.
+# CASE experiment-cpis: `experiment cpis --quick` (3 methods, 1..64 spp) the same way: the same
+#   rows and rays, relMSE within 1e-6 relative, the same number of record lookups (how they
+#   split into records built and hit follows the thread schedule, in one process too).
+# CASE experiment-filter-size: `experiment filter-size --quick` (21 renders) the same way:
+#   relMSE within 1e-6 relative, samples shaded and their ratios within 1e-3 (measured: 21 of
+#   153301 on 2 ranks; one process's runs differ by a few too).
 # CASE frames: --frames 0:31 with temporal accumulation (--temporal-alpha 0.7) in contiguous
 #   chunks over NP ranks, each after its default warm-up (13 frames), against one process's
 #   sequence, one thread each (so that the grid cache's evictions do not follow a schedule):
@@ -63,39 +69,51 @@ chunked_frames() {  # last-frame bound options...
     done
 }
 
-spread_experiment() {
-    local opts=(experiment speed-vs-error --quick --only car-ao --methods per-hit,ts-hits,ts-normal)
-    "$bin/texcache" "${opts[@]}" --out "$tmp/one" >"$tmp/log_one" 2>&1 ||
+spread_run() {  # markdown experiment-options...: one process in one/, NP ranks in many/
+    local md="$1"
+    shift
+    "$bin/texcache" experiment "$@" --out "$tmp/one" >"$tmp/log_one" 2>&1 ||
         { cat "$tmp/log_one"; fail "one process exited $?"; }
     mkdir "$tmp/others"
-    "$mpirun" --oversubscribe -np 1 "$bin/texcache" "${opts[@]}" --out "$tmp/many" : \
-        -np "$((np - 1))" "$bin/texcache" "${opts[@]}" --out "$tmp/others" >"$tmp/log" 2>&1 ||
+    "$mpirun" --oversubscribe -np 1 "$bin/texcache" experiment "$@" --out "$tmp/many" : \
+        -np "$((np - 1))" "$bin/texcache" experiment "$@" --out "$tmp/others" >"$tmp/log" 2>&1 ||
         { cat "$tmp/log"; fail "mpirun exited $?"; }
     grep "on rank" "$tmp/log" | head -4
     [ -z "$(ls -A "$tmp/others")" ] || fail "ranks other than 0 wrote: $(ls -A "$tmp/others")"
     [ "$(ls "$tmp/one")" = "$(ls "$tmp/many")" ] ||
         fail "files differ: $(ls "$tmp/one" | tr '\n' ' ') against $(ls "$tmp/many" | tr '\n' ' ')"
-    grep -q "^## Ranks" "$tmp/many/speed_vs_error.md" || fail "the markdown names no ranks"
-    # Columns: case, method, budget, spp, rays_per_point, (seconds), rays, relmse,
-    # samples_shaded, relmse_image, (cpu_seconds).
-    paste -d '\n' "$tmp/one/speed_vs_error.csv" "$tmp/many/speed_vs_error.csv" | awk -F, '
+    grep -q "^## Ranks" "$tmp/many/$md" || fail "the markdown names no ranks"
+}
+
+same_rows() {  # csv skipped-columns relmse-columns count-columns count-bound
+    # one/CSV against many/CSV: the same rows; relMSE columns within 1e-6 relative, counts
+    # within the bound relative, the others equal (timings skipped).
+    paste -d '\n' "$tmp/one/$1" "$tmp/many/$1" | awk -F, -v skip=",$2," -v rel=",$3," \
+        -v counts=",$4," -v bound="$5" '
         NR % 2 == 1 { for (i = 1; i <= NF; ++i) a[i] = $i; n = NF; next }
         NF != n { print "row " NR / 2 ": " NF " values against " n; bad = 1; next }
         { for (i = 1; i <= NF; ++i) {
-              if (i == 6 || i == 11) continue
-              if (i == 8 || i == 10) {
-                  d = a[i] - $i; d = d < 0 ? -d : d; m = a[i] < 0 ? -a[i] : a[i]
+              if (index(skip, "," i ",")) continue
+              d = a[i] - $i; d = d < 0 ? -d : d; m = a[i] < 0 ? -a[i] : a[i]
+              if (index(rel, "," i ",")) {
                   r = m > 0 ? d / m : d > 0; worst = r > worst ? r : worst
                   if (r > 1e-6) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
-              } else if (i == 7 || i == 9) {
-                  # Rays and samples shaded on the grid: two threads that miss one sample at
-                  # once may both shade it, so the counts follow the schedule by a few.
-                  d = a[i] - $i; d = d < 0 ? -d : d
-                  if (d > 1e-3 * a[i]) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
+              } else if (index(counts, "," i ",")) {
+                  if (d > bound * m) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
               } else if (a[i] != $i) { print "row " NR / 2 " column " i ": " a[i] " against " $i; bad = 1 }
           } }
         END { printf "%d rows; worst relative relMSE difference %g\n", NR / 2 - 1, worst; exit bad }' ||
         fail "the CSVs differ"
+}
+
+spread_experiment() {
+    spread_run speed_vs_error.md speed-vs-error --quick --only car-ao \
+        --methods per-hit,ts-hits,ts-normal
+    # Columns: case, method, budget, spp, rays_per_point, (seconds), rays, relmse,
+    # samples_shaded, relmse_image, (cpu_seconds). Rays and samples shaded on the grid: two
+    # threads that miss one sample at once may both shade it, so the counts follow the schedule
+    # by a few.
+    same_rows speed_vs_error.csv 6,11 8,10 7,9 1e-3
     # Bad input: every rank checks the options before any renders; one line, exit code 2.
     local code=0
     run_mpi experiment speed-vs-error --quick --only nope --out "$tmp/bad" >"$tmp/log" 2>&1 ||
@@ -103,6 +121,26 @@ spread_experiment() {
     [ "$code" -eq 2 ] || { cat "$tmp/log"; fail "bad --only: exit code $code, expected 2"; }
     [ "$(grep -c '^texcache: error' "$tmp/log")" -eq 1 ] || { cat "$tmp/log"; fail "not one line"; }
     [ ! -e "$tmp/bad" ] || fail "bad --only left an empty --out behind"
+}
+
+spread_cpis() {
+    spread_run cpis.md cpis --quick
+    # Columns: method, spp, (seconds), rays, relmse, (cpu_seconds), (psr_built), (psr_hits).
+    # Threads that miss one record at once may each build it, so how the lookups split into
+    # records built and hit follows the schedule (one process's 64-spp render: 384 to 422
+    # built); their sum, the lookups, does not.
+    same_rows cpis.csv 3,6,7,8 5 "" 0
+    local lookups=(awk -F, 'NR > 1 { print $1, $2, $7 + $8 }')
+    [ "$("${lookups[@]}" "$tmp/one/cpis.csv")" = "$("${lookups[@]}" "$tmp/many/cpis.csv")" ] ||
+        fail "record lookups differ"
+}
+
+spread_filter_size() {
+    spread_run filter_size.md filter-size --quick
+    # Columns: footprint, width, radius, (cpu_seconds), samples_shaded, (relative_time),
+    # relative_invocations, relmse. Two threads that miss one sample at once may both shade
+    # it, so the counts follow the schedule by a few.
+    same_rows filter_size.csv 4,6 8 5,7 1e-3
 }
 
 failure() {  # kind first-line-pattern any-line-pattern
@@ -125,6 +163,8 @@ case "$case" in
     still-ao-grid) equal_images --integrator ao --shading texture --ts-samples grid --spp 8 \
         --pass-spp 4 ;;
     experiment) spread_experiment ;;
+    experiment-cpis) spread_cpis ;;
+    experiment-filter-size) spread_filter_size ;;
     frames) chunked_frames 31 2e-3 --spp 2 --shading texture --integrator path --temporal-alpha 0.7 ;;
     denoise) chunked_frames 63 1e-3 --denoise baseline ;;
     fail-read) failure 1 "^texcache: error: rank 1 (1 of $np ranks failed): .*cannot read" ;;
