@@ -226,6 +226,13 @@ void ScreenSpaceDenoiser::Reset() {
         for (History& hh : hc) hh.valid = false;
 }
 
+void ScreenSpaceDenoiser::SetStillView(bool still) {
+    if (!still)
+        s_->stillFrames = -1;
+    else if (s_->stillFrames < 0)
+        s_->stillFrames = 0;
+}
+
 const StageTimings& ScreenSpaceDenoiser::Timings() const {
     return s_->timings;
 }
@@ -762,6 +769,17 @@ void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<g
     });
 }
 
+// The weight of the current frame in the temporal blends. Moving: alpha, an exponential average
+// worth about 1 / alpha frames. Still for `stillFrames` frames: a running mean that takes the
+// history as those 1 / alpha frames, so the weight starts at alpha (no jump when the view stops)
+// and falls as 1 / (1 / alpha + frames) down to 1 / kStillMaxFrames, the history's longest
+// length. Pixels whose history is shorter still take 1 / length (the temporal passes).
+constexpr float kStillMaxFrames = 255.0f;
+float BlendAlpha(float alpha, int stillFrames) {
+    if (stillFrames < 0) return alpha;
+    return std::max(1.0f / kStillMaxFrames, 1.0f / (1.0f / alpha + float(stillFrames)));
+}
+
 }  // namespace
 
 // ---- Denoise -------------------------------------------------------------------------------
@@ -804,6 +822,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     Prepare(s, frame, brdf, demod);
     clock.Lap(&StageTimings::prepare);
 
+    s.blendAlpha = BlendAlpha(s.set.alpha, s.stillFrames);
     const bool temporal = method != Method::SpatialOnly && s.hasPrev;
     std::fill(std::begin(s.motionValid), std::end(s.motionValid), false);
     if (temporal) {
@@ -906,6 +925,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     s.cur ^= 1;
     s.hasPrev = true;
     ++s.frameIndex;
+    if (s.stillFrames >= 0) ++s.stillFrames;
     clock.Lap(&StageTimings::compose);
     clock.Finish();
 }

@@ -173,6 +173,11 @@ public:
                  std::vector<glm::vec3>* image);
     /// Forgets the history: the next frame is treated as the first.
     void Reset();
+    /// Whether the next frames show a still view (camera and scene unchanged since the previous
+    /// frame). While still, the temporal blends turn from alpha into a running mean of the
+    /// frames since the view stopped, so the noise keeps falling instead of stopping at alpha's
+    /// floor; false (the default) restores alpha at once.
+    void SetStillView(bool still);
 
     /// Pass timings of the last Denoise(), wall clock.
     const StageTimings& Timings() const;

@@ -194,6 +194,7 @@ struct SvgfArgs {
     const float* hm2;
     const float* hlen;
     float alpha, clampK;
+    float varPerAlpha;       // variance scale per unit of blend weight (large: unscaled)
     const float* clampKRow;  // per-pixel k of the row (Clamp == kClampPerPixel)
     float* out[3];
     float* outVar;
@@ -273,7 +274,11 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
             for (int c = 0; c < NC; ++c) o[c][i] = hv[c] + al * (v[c] - hv[c]);
             const float m1 = hm1 + al * (l - hm1), m2 = hm2 + al * (l * l - hm2);
             om1[i] = m1, om2[i] = m2, olen[i] = len;
-            const float tv = len >= 4.0f ? std::max(0.0f, m2 - m1 * m1) : spVar;
+            // The moments give a sample's variance; a still view's running mean is worth more
+            // samples than the moving blend, so its variance (the a-trous' edge stop) falls
+            // with the blend's weight and the filter blurs less as the view converges.
+            const float vs = std::min(1.0f, std::max(al, 1.0f / kMaxLen) * a.varPerAlpha);
+            const float tv = len >= 4.0f ? vs * std::max(0.0f, m2 - m1 * m1) : spVar;
             ovar[i] = std::max(cv, hf) > 0.0f ? tv : -1.0f;
         }
         for (int c = 0; c < NC; ++c) StoreRow(o[c], n, a.out[c] + x0, stream);
@@ -420,7 +425,8 @@ void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, 
                 for (int c = 0; c < nc; ++c) a.hc[c] = hp->c[c].Base();
                 a.hm1 = hp->m1.Base(), a.hm2 = hp->m2.Base(), a.hlen = hp->len.Base();
             }
-            a.alpha = s.set.alpha, a.clampK = clampK;
+            a.alpha = s.blendAlpha, a.clampK = clampK;
+            a.varPerAlpha = s.stillFrames >= 0 ? 1.0f / s.set.alpha : 1e6f;
             a.clampKRow = clampKPerPixel ? clampKPerPixel->Row(y) : nullptr;
             for (int c = 0; c < nc; ++c) a.out[c] = sc.t[c].Row(y);
             a.outVar = sc.tVar.Row(y);
@@ -771,7 +777,7 @@ void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const M
             a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
             a.table = &s.coneTable;
             a.same = &same;
-            a.alpha = s.set.alpha, a.clampK = s.set.reliableIndirectClampK;
+            a.alpha = s.blendAlpha, a.clampK = s.set.reliableIndirectClampK;
             for (int c = 0; c < 3; ++c) a.out[c] = sc.t[c].Row(y);
             a.outVar = sc.tVar.Row(y);
             a.m1 = hc.m1.Row(y), a.m2 = hc.m2.Row(y), a.len = hc.len.Row(y);

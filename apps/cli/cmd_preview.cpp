@@ -50,6 +50,7 @@ struct PreviewCliArgs {
     bool bench = false;
     int benchFrames = 36;
     bool benchStill = false;
+    bool benchFixedAlpha = false;
     int specularSamples = 0;
     int referenceSpp = 0;  // 0: 32 (AO, x 16 rays) or 128 (--denoise: path traced)
     std::string benchOut = "out/preview_bench";
@@ -178,6 +179,9 @@ int RunPreview(const PreviewCliArgs& a) {
                              : CheckRange("--reference-spp", a.referenceSpp, 1, 1 << 16);
         b.out = a.benchOut;
         b.still = a.benchStill;
+        b.stageRunningMean = !a.benchFixedAlpha;
+        if (a.benchFixedAlpha && !b.still)
+            throw InputError("--bench-fixed-alpha", "applies to --bench-still only");
         if (b.still && b.frames < 2)
             throw InputError("--bench-frames", "--bench-still needs at least 2 frames, got " +
                                                    std::to_string(b.frames));
@@ -293,6 +297,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--bench-still", a->benchStill,
                   "Bench with the stage: a still view for --bench-frames frames instead of the "
                   "orbit, its denoised relMSE frame by frame (texture space against per hit)");
+    cmd->add_flag("--bench-fixed-alpha", a->benchFixedAlpha,
+                  "With --bench-still: the stage keeps a moving view's temporal blend (alpha) "
+                  "instead of a still view's running mean, to compare the two");
     cmd->add_option("--specular-samples", a->specularSamples,
                     "Bench with the stage: light samples a pixel of the specular lobe where the "
                     "cache lights the diffuse base (1-32; default 8)");

@@ -32,6 +32,9 @@ struct BenchArgs {
     /// With the stage: a still view instead of the orbit, its denoised relMSE frame by frame
     /// (texture space refreshed as a running mean, against per hit).
     bool still = false;
+    /// With `still`: the stage told the view is still (its running mean); false keeps the
+    /// moving view's blend, for comparison.
+    bool stageRunningMean = true;
     /// With the stage: the light samples a pixel of the specular lobe on objects whose diffuse
     /// base the cache lights (TextureSpaceOptions::specularLightSamples); 0: the default.
     int specularSamples = 0;

@@ -119,7 +119,10 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
         "preview bench: %s, %dx%d, path tracer's split + %s stage%s, %s %.1f degrees in %d "
         "frames\n",
         scene.path.c_str(), s.width, s.height, screen::MethodName(method),
-        s.demodulate ? " (demodulated)" : "", b.still ? "still view at" : "orbit of",
+        s.demodulate ? " (demodulated)" : "",
+        !b.still             ? "orbit of"
+        : b.stageRunningMean ? "still view (running mean) at"
+                             : "still view (fixed alpha) at",
         args.orbitDegrees, n);
 
     RenderOptions base;
@@ -160,6 +163,7 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             const double c0 = CpuSeconds();
             const RenderStats st = RenderFrameBuffers(rs, o, time, &r.fb, r.cache.get());
             const double c1 = CpuSeconds();
+            r.denoiser.SetStillView(b.still && b.stageRunningMean && i > 0);
             r.denoiser.Denoise(r.fb, method, demod, &r.image);
             const int frames = i + 1;
             if (b.still && (frames & (frames - 1)) == 0)

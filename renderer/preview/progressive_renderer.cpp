@@ -593,6 +593,7 @@ void ProgressiveRenderer::Run() {
                                        opt.texture.enabled ? cache.get() : nullptr);
                 const screen::Method method =
                     cur.denoise ? cur.denoiseMethod : screen::Method::Reliable;
+                denoiser->SetStillView(accumulated > 0);
                 denoiser->Denoise(
                     frameBuffers, method,
                     cur.demodulate ? screen::Demodulation::On : screen::Demodulation::Off,
