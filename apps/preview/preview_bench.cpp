@@ -163,7 +163,8 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             const double c0 = CpuSeconds();
             const RenderStats st = RenderFrameBuffers(rs, o, time, &r.fb, r.cache.get());
             const double c1 = CpuSeconds();
-            r.denoiser.SetStillView(b.still && b.stageRunningMean && i > 0);
+            // As the preview does: texture-space frames only (progressive_renderer.cpp).
+            r.denoiser.SetStillView(b.still && b.stageRunningMean && r.textureSpace && i > 0);
             r.denoiser.Denoise(r.fb, method, demod, &r.image);
             const int frames = i + 1;
             if (b.still && (frames & (frames - 1)) == 0)

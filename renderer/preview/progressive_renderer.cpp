@@ -593,7 +593,9 @@ void ProgressiveRenderer::Run() {
                                        opt.texture.enabled ? cache.get() : nullptr);
                 const screen::Method method =
                     cur.denoise ? cur.denoiseMethod : screen::Method::Reliable;
-                denoiser->SetStillView(accumulated > 0);
+                // Only texture-space frames: a per-hit frame's rare bright samples would stay in
+                // a running mean far longer than in the fixed blend, and its error rises.
+                denoiser->SetStillView(accumulated > 0 && opt.texture.enabled);
                 denoiser->Denoise(
                     frameBuffers, method,
                     cur.demodulate ? screen::Demodulation::On : screen::Demodulation::Off,
