@@ -42,6 +42,7 @@ struct PreviewCliArgs {
     bool play = false;
     float fps = 24.0f;
     bool fpsGiven = false;  ///< --fps on the command line
+    std::string benchOnly;  ///< a bench option given on the command line (empty: none)
     bool saveCamera = false;
     std::string denoise = "auto";
     bool demodulate = false;
@@ -171,6 +172,8 @@ int RunPreview(const PreviewCliArgs& a) {
         throw InputError("--frames",
                          "sets the window's timeline, which --bench has not: drop it "
                          "(--bench-frames sets the timed frames)");
+    // The window would ignore them: say so rather than open it.
+    if (!a.bench && !a.benchOnly.empty()) throw InputError(a.benchOnly, "applies to --bench");
     if (a.bench) {
         preview::BenchArgs b;
         b.frames = CheckRange("--bench-frames", a.benchFrames, 1, 10000);
@@ -310,6 +313,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->callback([a, cmd, &exitCode] {
         a->fpsGiven = cmd->count("--fps") > 0;
+        for (const char* o : {"--bench-frames", "--bench-still", "--bench-fixed-alpha",
+                              "--specular-samples", "--reference-spp", "--bench-out"})
+            if (cmd->count(o) > 0) a->benchOnly = o;
         exitCode = RunPreview(*a);
     });
 }
