@@ -135,7 +135,7 @@ TEXCACHE_SCREEN_CLONES void Gaussian3(const PassArgs& a, int y0, int y1) {
 constexpr float kH[9] = {1.0f / 16, 2.0f / 16, 1.0f / 16, 2.0f / 16, 4.0f / 16,
                          2.0f / 16, 1.0f / 16, 2.0f / 16, 1.0f / 16};
 
-template <int NC, bool Lum>
+template <int NC, bool Lum, bool Var>
 inline __attribute__((always_inline)) void AtrousComponentChunk(const AtrousArgs& a,
                                                                 const AtrousComponent& c,
                                                                 const int* rows, int x0, int n,
@@ -176,43 +176,107 @@ inline __attribute__((always_inline)) void AtrousComponentChunk(const AtrousArgs
             const float v0 = in0[t][i];
             const float v1 = NC == 3 ? in1[t][i] : 0.0f;
             const float v2 = NC == 3 ? in2[t][i] : 0.0f;
+            // The centre's own luminance weight is exp(0) = 1.
             if constexpr (Lum) {
-                const float lq = NC == 3 ? Luma(v0, v1, v2) : v0;
-                w *= ExpNeg8(std::fabs(lq - lc) * il);
+                if (t != 4) {
+                    const float lq = NC == 3 ? Luma(v0, v1, v2) : v0;
+                    w *= ExpNeg8(std::fabs(lq - lc) * il);
+                }
             }
             wsum += w;
             a0 += w * v0;
             if constexpr (NC == 3) a1 += w * v1, a2 += w * v2;
-            av += w * w * (vq > 0.0f ? vq : 0.0f);
+            // An unusable tap (vq < 0) has w = 0 and adds -0.
+            if constexpr (Var) av += w * w * vq;
         }
         const float inv = wsum > 0.0f ? 1.0f / wsum : 0.0f;
         o0[i] = a0 * inv;
         if constexpr (NC == 3) o1[i] = a1 * inv, o2[i] = a2 * inv;
-        ov[i] = wsum > 0.0f ? av * inv * inv : -1.0f;
+        if constexpr (Var) ov[i] = wsum > 0.0f ? av * inv * inv : -1.0f;
     }
     StoreRow(o0, n, c.out[0]->Row(y) + x0, stream);
     if constexpr (NC == 3) {
         StoreRow(o1, n, c.out[1]->Row(y) + x0, stream);
         StoreRow(o2, n, c.out[2]->Row(y) + x0, stream);
     }
-    StoreRow(ov, n, c.outVar->Row(y) + x0, stream);
+    if constexpr (Var) StoreRow(ov, n, c.outVar->Row(y) + x0, stream);
+}
+
+// Whether any tap of the chunk's pixels has a usable sample (variance >= 0) in rows `rows`,
+// columns x0 - step .. x0 + n - 1 + step. Where none has, every weight is 0 and the level's
+// output is known (AtrousEmptyChunk).
+inline __attribute__((always_inline)) bool AnyUsableTap(const AtrousComponent& c, const int* rows,
+                                                        int x0, int n, int step) {
+    int any = 0;
+    for (int r = 0; r < 3; ++r) {
+        if (r > 0 && rows[r] == rows[r - 1]) continue;
+        const float* v = c.var->Row(rows[r]) + x0 - step;
+        for (int i = 0; i < n + 2 * step; ++i) any |= v[i] >= 0.0f;
+    }
+    return any != 0;
+}
+
+// The output of a chunk without usable taps: 0, variance -1 (unusable).
+inline void AtrousEmptyChunk(const AtrousComponent& c, int x0, int n, int y) {
+    for (int k = 0; k < c.nc; ++k) std::fill_n(c.out[k]->Row(y) + x0, n, 0.0f);
+    if (c.outVar) std::fill_n(c.outVar->Row(y) + x0, n, -1.0f);
+}
+
+template <int NC, bool Lum>
+inline __attribute__((always_inline)) void AtrousComponentChunkVar(const AtrousArgs& a,
+                                                                   const AtrousComponent& c,
+                                                                   const int* rows, int x0, int n,
+                                                                   const float (*wg)[kChunk], int y,
+                                                                   bool stream) {
+    if (c.outVar)
+        AtrousComponentChunk<NC, Lum, true>(a, c, rows, x0, n, wg, y, stream);
+    else
+        AtrousComponentChunk<NC, Lum, false>(a, c, rows, x0, n, wg, y, stream);
 }
 
 inline __attribute__((always_inline)) void AtrousRowImpl(const AtrousArgs& a, int y) {
     const Guides& g = *a.g;
     const int w = g.depth.Width(), h = g.depth.Height();
     int planes = 0;  // written by the level
-    for (const AtrousComponent& c : a.comp) planes += c.nc + (c.outVar ? 1 : 0);
+    for (const AtrousComponent& c : a.comp) planes += c.nc + (c.nc && c.outVar ? 1 : 0);
     const bool stream = StreamPlanes(w, h, planes);
     const int s = a.step;
     const int rows[3] = {y - s >= 0 ? y - s : y, y, y + s < h ? y + s : y};
     const bool rowOk[3] = {y - s >= 0, true, y + s < h};
     alignas(64) float wg[9][kChunk];
-    alignas(64) float zc[kChunk], nxc[kChunk], nyc[kChunk], nzc[kChunk], tol[kChunk];
     const float kn = a.normalPower;
     for (int x0 = 0; x0 < w; x0 += kChunk) {
         const int n = std::min(kChunk, w - x0);
+        // Components whose taps are all unusable here (background, pixels without a glossy
+        // lobe) get their known output without the arithmetic.
+        bool active[3] = {false, false, false};
+        bool anyActive = false;
+        for (int k = 0; k < 3; ++k) {
+            const AtrousComponent& c = a.comp[k];
+            if (!c.nc) continue;
+            active[k] = AnyUsableTap(c, rows, x0, n, s);
+            if (!active[k]) AtrousEmptyChunk(c, x0, n, y);
+            anyActive = anyActive || active[k];
+        }
+        if (!anyActive) continue;
+        // Phase 1: depth + normal weight of each tap (SVGF: exp(-|dz| / (sigma_z |grad z . o|))
+        // * max(0, n.n')^sigma_n), times the B-spline weight. All taps of a pixel in one
+        // iteration, so the centre's guides are loaded once, not once per tap.
         {
+            const float* zq[9];
+            const float* nxq[9];
+            const float* nyq[9];
+            const float* nzq[9];
+            float ht[9], dist[9];
+            for (int t = 0; t < 9; ++t) {
+                const int r = rows[t / 3], dx = (t % 3 - 1) * s;
+                zq[t] = g.depth.Row(r) + x0 + dx;
+                nxq[t] = g.nx.Row(r) + x0 + dx;
+                nyq[t] = g.ny.Row(r) + x0 + dx;
+                nzq[t] = g.nz.Row(r) + x0 + dx;
+                ht[t] = rowOk[t / 3] ? kH[t] : 0.0f;
+                dist[t] = (t == 0 || t == 2 || t == 6 || t == 8) ? 0.70710678f : 1.0f;
+            }
             const float* z = g.depth.Row(y) + x0;
             const float* nx = g.nx.Row(y) + x0;
             const float* ny = g.ny.Row(y) + x0;
@@ -220,43 +284,30 @@ inline __attribute__((always_inline)) void AtrousRowImpl(const AtrousArgs& a, in
             const float* iz = g.invDz.Row(y) + x0;
             const float k = 1.0f / (a.depthSigma * float(s));
             for (int i = 0; i < n; ++i) {
-                zc[i] = z[i], nxc[i] = nx[i], nyc[i] = ny[i], nzc[i] = nz[i];
-                tol[i] = iz[i] * k;
-            }
-        }
-        // Phase 1: depth + normal weight of each tap (SVGF: exp(-|dz| / (sigma_z |grad z . o|))
-        // * max(0, n.n')^sigma_n), times the B-spline weight.
-        for (int t = 0; t < 9; ++t) {
-            float* wt = wg[t];
-            if (!rowOk[t / 3]) {
-                std::fill_n(wt, n, 0.0f);
-                continue;
-            }
-            const int r = rows[t / 3], dx = (t % 3 - 1) * s;
-            const float dist = (t == 0 || t == 2 || t == 6 || t == 8) ? 0.70710678f : 1.0f;
-            const float ht = kH[t];
-            const float* zq = g.depth.Row(r) + x0 + dx;
-            const float* nxq = g.nx.Row(r) + x0 + dx;
-            const float* nyq = g.ny.Row(r) + x0 + dx;
-            const float* nzq = g.nz.Row(r) + x0 + dx;
-            for (int i = 0; i < n; ++i) {
-                const float dot = nxc[i] * nxq[i] + nyc[i] * nyq[i] + nzc[i] * nzq[i];
-                const float e = std::fabs(zq[i] - zc[i]) * tol[i] * dist + kn * (1.0f - dot);
-                wt[i] = ht * ExpNeg16(e);
+                const float zc = z[i], nxc = nx[i], nyc = ny[i], nzc = nz[i];
+                const float tol = iz[i] * k;
+#pragma GCC unroll 9
+                for (int t = 0; t < 9; ++t) {
+                    const float dot = nxc * nxq[t][i] + nyc * nyq[t][i] + nzc * nzq[t][i];
+                    const float e = std::fabs(zq[t][i] - zc) * tol * dist[t] + kn * (1.0f - dot);
+                    wg[t][i] = ht[t] * ExpNeg16(e);
+                }
             }
         }
         // Phase 2: each component.
-        for (const AtrousComponent& c : a.comp) {
+        for (int k = 0; k < 3; ++k) {
+            const AtrousComponent& c = a.comp[k];
+            if (!active[k]) continue;
             if (c.nc == 3) {
                 if (c.luminance)
-                    AtrousComponentChunk<3, true>(a, c, rows, x0, n, wg, y, stream);
+                    AtrousComponentChunkVar<3, true>(a, c, rows, x0, n, wg, y, stream);
                 else
-                    AtrousComponentChunk<3, false>(a, c, rows, x0, n, wg, y, stream);
-            } else if (c.nc == 1) {
+                    AtrousComponentChunkVar<3, false>(a, c, rows, x0, n, wg, y, stream);
+            } else {
                 if (c.luminance)
-                    AtrousComponentChunk<1, true>(a, c, rows, x0, n, wg, y, stream);
+                    AtrousComponentChunkVar<1, true>(a, c, rows, x0, n, wg, y, stream);
                 else
-                    AtrousComponentChunk<1, false>(a, c, rows, x0, n, wg, y, stream);
+                    AtrousComponentChunkVar<1, false>(a, c, rows, x0, n, wg, y, stream);
             }
         }
     }

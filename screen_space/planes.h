@@ -175,8 +175,8 @@ struct AtrousComponent {
     const Plane* in[3] = {nullptr, nullptr, nullptr};
     const Plane* var = nullptr;
     Plane* out[3] = {nullptr, nullptr, nullptr};
-    Plane* outVar = nullptr;
-    bool luminance = true;  ///< SVGF's luminance stopping; false: geometry only (joint bilateral)
+    Plane* outVar = nullptr;  ///< null: the variance is not computed
+    bool luminance = true;    ///< SVGF's luminance stopping; false: geometry only (joint bilateral)
 };
 
 /// One a-trous level (Dammertz et al.; SVGF's edge-stopping functions) over up to 3 components

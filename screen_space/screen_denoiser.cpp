@@ -590,10 +590,12 @@ struct AtrousJob {
     int ci = -1;
     bool luminance = true;
     Plane* feedback[3] = {nullptr, nullptr, nullptr};  // SVGF: the first level's output
+    bool resultVar = false;  // the last level writes its variance (scratch[ci].outVar)
 };
 
 // The a-trous iterations of up to 3 components together: inputs in scratch[ci].t / tVar,
-// results in scratch[ci].out / outVar; levels ping-pong through scratch[ci].a / b.
+// results in scratch[ci].out (and outVar for a job with resultVar: nothing else reads the last
+// level's variance, so it is not computed); levels ping-pong through scratch[ci].a / b.
 void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) {
     const int levels = s.set.atrousLevels;
     for (int level = 0; level < levels; ++level) {
@@ -624,7 +626,7 @@ void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) 
                 c.out[k] = last ? &sc.out[k] : src(level, k);
             }
             c.var = srcVar(level - 1);
-            c.outVar = last ? &sc.outVar : srcVar(level);
+            c.outVar = !last ? srcVar(level) : jobs[j].resultVar ? &sc.outVar : nullptr;
         }
         AtrousLevel(a);
         if (last) break;
@@ -903,6 +905,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         } else {
             // Visibility: c~_i is the a-trous of this frame alone (spatial variance).
             SvgfTemporal(s, kVis, nullptr, 0.0f);
+            jobs[njobs].resultVar = true;  // ReliableTemporal's validity
             jobs[njobs++].ci = kVis;
             clock.Lap(&StageTimings::temporal);
             RunAtrous(s, jobs, njobs);

@@ -181,6 +181,17 @@ inline __attribute__((always_inline)) void FetchHistory(const ChunkTaps& t, int 
     }
 }
 
+// Whether any of n pixels has a usable sample (valid > 0) or, with `taps`, a history tap.
+inline __attribute__((always_inline)) bool AnySampleOrHistory(const float* valid,
+                                                              const uint8_t* taps, int n) {
+    float v = 0.0f;
+    for (int i = 0; i < n; ++i) v = std::max(v, valid[i]);
+    int t = 0;
+    if (taps)
+        for (int i = 0; i < n; ++i) t |= taps[i];
+    return v > 0.0f || t != 0;
+}
+
 struct SvgfArgs {
     int w, h, stride;
     const float* cur[3][3];  // [channel][row] at x = 0
@@ -219,6 +230,13 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     ChunkTaps taps;
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
+        if (!AnySampleOrHistory(a.valid[1] + x0, Hist ? a.mt + x0 : nullptr, n)) {
+            // Neither a sample nor a history tap (background): no history, length 0, unusable.
+            for (int c = 0; c < NC; ++c) std::fill_n(a.out[c] + x0, n, 0.0f);
+            std::fill_n(a.outVar + x0, n, -1.0f);
+            for (float* p : {a.m1, a.m2, a.len}) std::fill_n(p + x0, n, 0.0f);
+            continue;
+        }
         if constexpr (Hist) {
             MakeChunkTaps(a.mx, a.my, a.mt, x0, n, a.w, a.h, a.stride, &taps);
             const float* planes[NC + 3];
