@@ -214,6 +214,60 @@ bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsd
     return true;
 }
 
+/// The environment map's light samples of one frame, drawn once and shared by the pixels'
+/// candidates (FrameDirectSample), as ReSTIR's light tiles are (Wyman and Panteleev 2021,
+/// "Rearchitecting spatiotemporal resampling for production"): a map's sample does not depend on
+/// the shading point, and drawn per candidate each one was two dependent searches of the
+/// inversion tables and a texel lookup, all out of the caches (most of a GGX pixel's time:
+/// results/frame_buffers_profile.md). Here a candidate reads one entry of a table that stays in
+/// the L2 cache, and a pixel's candidates are consecutive entries.
+///
+/// Entry i is the map's sample at the R2 point i shifted by the frame's random shift, so each
+/// entry is distributed as a sample of the map and any run of entries is the shifted R2 run the
+/// candidates took before: a pixel's estimate keeps its distribution and expectation. Pixels
+/// that start their runs within kN entries of each other share samples (correlated noise within
+/// a frame); a new frame draws a new shift.
+class EnvironmentSamples {
+public:
+    static constexpr uint32_t kCount = 1u << 14;
+    struct Entry {
+        glm::vec3 wi;
+        float pdf;  // solid angle, light selection included; 0: no sample
+        glm::vec3 Li;
+    };
+
+    /// Empty unless the scene's environment is a map (a constant one samples about the normal).
+    EnvironmentSamples(const Context& c, uint64_t seed) {
+        if (!c.env || c.env->IsConstant()) return;
+        entries_.resize(kCount);
+        Rng rng(seed, 0x9E3779B97F4A7C15ull);
+        const glm::vec2 shift = rng.Next2D();
+        constexpr double kG1 = 0.7548776662466927, kG2 = 0.5698402909980532;  // R2
+        const float pick = c.PickPdf();
+        tbb::parallel_for(
+            tbb::blocked_range<uint32_t>(0, kCount, 1024),
+            [&](const tbb::blocked_range<uint32_t>& r) {
+                for (uint32_t i = r.begin(); i < r.end(); ++i) {
+                    // In double: kG * i has no fractional bits left in float
+                    // for the large i.
+                    const double rx = shift.x + kG1 * double(i), ry = shift.y + kG2 * double(i);
+                    const glm::vec2 u(float(rx - std::floor(rx)), float(ry - std::floor(ry)));
+                    Entry& e = entries_[i];
+                    float pdf;
+                    e.Li = c.env->Sample(glm::vec3(0.0f, 1.0f, 0.0f),
+                                         glm::min(u, glm::vec2(kOneMinusEpsilon)), &e.wi, &pdf);
+                    e.pdf = pdf * pick;
+                }
+            });
+    }
+    bool Empty() const { return entries_.empty(); }
+    /// Entry i modulo kCount.
+    const Entry& operator[](uint32_t i) const { return entries_[i & (kCount - 1u)]; }
+
+private:
+    std::vector<Entry> entries_;
+};
+
 /// A shadow ray of FrameDirectSample waiting for its packet (FinishShadow takes it from there):
 /// the ray, the light sample it goes to and the weight of its frame-buffer sample.
 struct PendingShadow {
@@ -237,8 +291,8 @@ struct PendingShadow {
 /// from opt.texture.specularLightSamples light samples.
 void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
                        glm::vec3 wo, const glm::vec3* exact, const LightWeights& weights, Rng& rng,
-                       FramePixel& px, PixelShadow& sh, int pixel,
-                       std::vector<PendingShadow>& shadows, bool specularOnly = false) {
+                       const EnvironmentSamples& envSamples, FramePixel& px, PixelShadow& sh,
+                       int pixel, std::vector<PendingShadow>& shadows, bool specularOnly = false) {
     // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
     // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
     // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
@@ -250,6 +304,10 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
     const float pickShift = rng.Next1D();
     const glm::vec2 shift = rng.Next2D();
     const float uResample = rng.Next1D();
+    // The first of the pixel's run of the frame's environment samples (drawn only with a map, so
+    // that other scenes' samples stay as they were).
+    const uint32_t envStart =
+        envSamples.Empty() ? 0u : uint32_t(rng.Next1D() * float(EnvironmentSamples::kCount));
     LightSample cand[kMax];
     glm::vec3 S[kMax];
     float lum[kMax];
@@ -316,9 +374,18 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
             sum += S[k], lumSum += lum[k];
             continue;
         }
-        if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
-                           glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
+        if (!envSamples.Empty() &&
+            std::min(int(uPick * float(c.numLights)), c.numLights - 1) == c.numLights - 1) {
+            // The environment (the last light SampleLight picks): the frame's sample.
+            const EnvironmentSamples::Entry& e = envSamples[envStart + uint32_t(k)];
+            if (!(e.pdf > 0.0f)) continue;
+            ls.wi = e.wi, ls.Li = e.Li, ls.pdf = e.pdf;
+            ls.dist = INFINITY;
+            ls.delta = false;
+        } else if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
+                                  glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls)) {
             continue;
+        }
         glm::vec3 fd, fs;
         bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
         if (specularOnly) fd = glm::vec3(0.0f);  // the cache's (indirect)
@@ -483,10 +550,10 @@ void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& s
 /// Every buffer of pixel (x, y) from its camera ray and hit but the shadow rays' (see
 /// WriteShadowBuffers): the samples' shadow rays are appended to `shadows`, for pixel `pixel` of
 /// the tile, and `px` keeps what they need.
-void ShadePixel(const Context& c, const FrameMotion& motion, bool layered, int x, int y, int pixel,
-                const Ray& ray, const RayDifferentials* diff, bool found, const Hit& hit,
-                screen::FrameBuffers& fb, PixelShadow& sh, std::vector<PendingShadow>& shadows,
-                RayCounts& rays) {
+void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
+                bool layered, int x, int y, int pixel, const Ray& ray, const RayDifferentials* diff,
+                bool found, const Hit& hit, screen::FrameBuffers& fb, PixelShadow& sh,
+                std::vector<PendingShadow>& shadows, RayCounts& rays) {
     const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
     ClearPixel(fb, p);
     if (!found) {
@@ -569,7 +636,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, bool layered, int x
         // (none on diffuse materials: shading 0, visible).
         if (!layered || bsdf.HasSpecular())
             FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng,
-                              px, sh, pixel, shadows, layered);
+                              envSamples, px, sh, pixel, shadows, layered);
         if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
         if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
     }
@@ -617,8 +684,9 @@ struct TileScratch {
 /// at a time (RenderScene::Intersect16): neighbouring pixels' camera rays share most of their
 /// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
 /// cheaper per ray for such rays than single rays.
-void RenderTile(const Context& c, const FrameMotion& motion, bool layered, int x0, int y0,
-                screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
+void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
+                bool layered, int x0, int y0, screen::FrameBuffers& fb, TileScratch& ts,
+                RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
     int n = 0;
     for (int y = y0; y < y1; ++y)
@@ -641,8 +709,9 @@ void RenderTile(const Context& c, const FrameMotion& motion, bool layered, int x
     for (int i = 0, y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++i) {
             ts.shadow[i].Reset();
-            ShadePixel(c, motion, layered, x, y, i, ts.ray[i], c.tsc ? &ts.diff[i] : nullptr,
-                       ts.found[i], ts.hit[i], fb, ts.shadow[i], ts.shadows, rays);
+            ShadePixel(c, motion, envSamples, layered, x, y, i, ts.ray[i],
+                       c.tsc ? &ts.diff[i] : nullptr, ts.found[i], ts.hit[i], fb, ts.shadow[i],
+                       ts.shadows, rays);
         }
 
     // In queue order: a pixel's samples finish in their order, as if traced one by one.
@@ -701,6 +770,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     Context ctx(rs, opt);
     FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::None);
     const FrameMotion motion(rs, opt, prevTime);
+    const EnvironmentSamples envSamples(ctx, opt.seed);
 
     screen::FrameBuffers& fb = *out;
     const int W = opt.width, H = opt.height;
@@ -747,7 +817,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                           RayCounts& rc = counts.local();
                           TileScratch& ts = scratch.local();
                           for (int t = r.begin(); t < r.end(); ++t)
-                              RenderTile(ctx, motion, layered, (t % tilesX) * kTile,
+                              RenderTile(ctx, motion, envSamples, layered, (t % tilesX) * kTile,
                                          (t / tilesX) * kTile, fb, ts, rc);
                       });
 

@@ -30,7 +30,10 @@
 //   noise-free factor. Elsewhere (a GGX lobe under an area light or an environment) estimated
 //   per sample from 32 light samples without shadow rays (BSDF and light evaluations only): the
 //   light pick stratified (a distant light's term is exact) and the point on an area light or
-//   the environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
+//   the environment from a randomly shifted R2 sequence (an environment map's from a table of
+//   its samples drawn once per frame from options.seed and shared by the pixels, each reading a
+//   run of it from a random start: every sample is distributed as before, but the pixels' samples
+//   correlate within a frame); mean over spp. The stage takes it as
 //   noise-free; the light samples' relative per-pixel error at 1 spp is ~5% RMS
 //   (FrameBuffers.ShadingIsLowNoise; one light sample would be about sqrt(32) times noisier).
 //   0 where no light was sampled (no lights, one-sided quad seen from behind) or every sample
