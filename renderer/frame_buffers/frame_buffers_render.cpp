@@ -459,9 +459,28 @@ void FinishShadow(const FrameMotion& motion, const PendingShadow& s, bool blocke
     }
 }
 
-/// The specular lobe's path of one sample into px.glossySum (and its first hit).
+/// The texture-space cache's diffuse light at `si` (irradiance / pi): indirect, or with `layered`
+/// (CachedDiffuseLight) direct and indirect; misses shaded as ShadeDiffuseSample does.
+glm::vec3 CachedDiffuse(const Context& c, const SurfaceInteraction& si, bool layered,
+                        RayCounts& rays) {
+    const int paths = layered ? c.opt.texture.diffuseLayerPaths : c.opt.texture.indirectSamples;
+    return CachedLookup(
+        c, si,
+        [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, layered, rays, paths); },
+        paths);
+}
+
+/// The specular lobe's path of one sample into px.glossySum (and its first hit). With the
+/// texture-space cache, the diffuse lobe of the surface the ray hits takes its light from the
+/// cache, as a camera hit's does (CachedTerm; with `layered` direct light included), and only
+/// its specular lobe's path goes on: the hit's light samples, shadow ray and bounces were most
+/// of this path's time, and the cache's texels are averaged over frames and neighbours where
+/// one path is not. The texel is chosen for a footprint of the lobe's width (alpha radians
+/// either side of the ray): what a glossy reflection blurs over anyway, and coarse texels that
+/// the camera's lookups share.
 void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
-                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+                       const Bsdf& bsdf, glm::vec3 wo, bool layered, Rng& rng, FramePixel& px,
+                       RayCounts& rays) {
     glm::vec3 wi, weight;
     float pdf;
     if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
@@ -479,8 +498,26 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
         L = c.EmittedMis(ray, hit, pdf);
     } else {
         // Light found at the hit (NEE) and beyond, after an emissive surface's own.
-        L = c.EmittedMis(ray, hit, pdf) +
-            LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+        L = c.EmittedMis(ray, hit, pdf);
+        if (c.tsc) {
+            RayDifferentials lobe;
+            const Frame f = Frame::FromZ(wi);
+            lobe.dDdx = bsdf.Alpha() * f.s, lobe.dDdy = bsdf.Alpha() * f.t;
+            auto cached = [&](const SurfaceInteraction& h, const Ray& r, glm::vec3* term) {
+                const Bsdf hb = MakeBsdf(c, h);
+                // The diffuse lobe is 0 where the shading normal faces away from the ray.
+                *term =
+                    glm::dot(r.dir, h.N) < 0.0f
+                        ? FiniteOrZero(hb.DiffuseReflectance() * CachedDiffuse(c, h, layered, rays))
+                        : glm::vec3(0.0f);
+                if (hb.HasSpecular())
+                    return layered ? CachedTerm::DiffuseBase : CachedTerm::BaseIndirect;
+                return layered ? CachedTerm::All : CachedTerm::Indirect;
+            };
+            L += LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false, cached, &lobe);
+        } else {
+            L += LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+        }
     }
     px.glossySum += FiniteOrZero(weight * L);
     if (found && !std::isfinite(px.glossyHit.x)) {
@@ -598,11 +635,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
     // is the same); `layered` (CachedDiffuseLight), its direct light too.
     const bool cachedIndirect = diffuse && c.tsc;
     if (cachedIndirect) {
-        const int paths = layered ? c.opt.texture.diffuseLayerPaths : c.opt.texture.indirectSamples;
-        const glm::vec3 E = CachedLookup(
-            c, si,
-            [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, layered, rays, paths); },
-            paths);
+        const glm::vec3 E = CachedDiffuse(c, si, layered, rays);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
         // The cache knows irradiance, not its direction: the same radiance in every cone, so
         // that indirect = albedo * ShadeCones(cones) holds here too and the stage's cone
@@ -637,7 +670,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
         if (!layered || bsdf.HasSpecular())
             FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng,
                               envSamples, px, sh, pixel, shadows, layered);
-        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
+        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, layered, rng, px, rays);
         if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
     }
     const float inv = 1.0f / float(spp);

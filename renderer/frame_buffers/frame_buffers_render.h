@@ -102,6 +102,9 @@
 //   options.texture.specularLightSamples light samples, `visibility` that lobe's. The sum keeps
 //   the path tracer's expectation. Otherwise direct light stays per pixel (the split needs its
 //   visibility).
+//   The specular lobe's ray takes the diffuse lobe's light at its hit from the cache too (that
+//   lobe's indirect light, or with cacheDiffuseLayer all of it), as a camera hit's would, its
+//   texel chosen for a footprint of the lobe's width; only the hit's specular lobe goes on.
 // * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty
 //   otherwise): for diffuse materials facing the camera, the texel-cache lookup of the pixel's
 //   texel in the object's visibility grids (TextureSpaceCache::VisibilityTexelOf; a cache
