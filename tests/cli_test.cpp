@@ -559,6 +559,25 @@ TEST(Cli, CompareRefusesHeadersClaimingHugeSizes) {
     ExpectOneLineError(Texcache(args), args, "46340x46340");
 }
 
+// `preview --bench --bench-equal-error`: per hit runs the orbit again with 2, 4 and 8 spp while
+// its denoised relMSE is above texture space's, each pass timing both, and the last line says
+// where per hit got to. A 32x18 cube in 2 frames: the wiring, not the figures.
+TEST(Cli, PreviewBenchLooksForPerHitsCostAtTextureSpacesError) {
+    const fs::path out = Dir() / "equal_error" / "bench";
+    const CliRun r = Texcache("preview " + test::MeshPath("catmark_cube") +
+                              " --bench --denoise reliable --resolution 32x18 --bench-frames 2 "
+                              "--reference-spp 2 --bench-equal-error --bench-out " +
+                              out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("equal error: per hit"), std::string::npos) << r.out;
+    // None when per hit is below texture space's error at once, else a pass per doubling until
+    // it gets there (at most 8 spp).
+    const bool done = r.out.find("already") != std::string::npos ||
+                      r.out.find("per hit reaches") != std::string::npos;
+    EXPECT_TRUE(done || r.out.find("per hit at  8 spp:") != std::string::npos) << r.out;
+    EXPECT_TRUE(fs::exists(out.string() + "_stage_texture.png"));
+}
+
 // `bench peer` without Embree's pathtracer: one line saying so, exit 2, nothing rendered. The
 // cage check comes first: a cage the peer cannot take is named whether or not it is installed.
 TEST(Cli, BenchPeerSaysWhatItCannotRun) {

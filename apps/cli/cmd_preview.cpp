@@ -52,6 +52,7 @@ struct PreviewCliArgs {
     int benchFrames = 36;
     bool benchStill = false;
     bool benchFixedAlpha = false;
+    bool benchEqualError = false;
     int specularSamples = 0;
     int referenceSpp = 0;  // 0: 32 (AO, x 16 rays) or 128 (--denoise: path traced)
     std::string benchOut = "out/preview_bench";
@@ -190,6 +191,11 @@ int RunPreview(const PreviewCliArgs& a) {
                                                    std::to_string(b.frames));
         if (b.still && !s.denoise)
             throw InputError("--bench-still", "measures the stage's frames: give --denoise");
+        b.equalError = a.benchEqualError;
+        if (b.equalError && (!s.denoise || b.still))
+            throw InputError("--bench-equal-error",
+                             "measures the stage's frames while orbiting: give --denoise and "
+                             "drop --bench-still");
         if (a.specularSamples != 0)
             b.specularSamples = CheckRange("--specular-samples", a.specularSamples, 1, 32);
         return preview::RunPreviewBench(scene, s, p, b);
@@ -303,6 +309,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--bench-fixed-alpha", a->benchFixedAlpha,
                   "With --bench-still: the stage keeps a moving view's temporal blend (alpha) "
                   "instead of a still view's running mean, to compare the two");
+    cmd->add_flag("--bench-equal-error", a->benchEqualError,
+                  "Bench with the stage, orbiting: per hit again with 2, 4, 8 spp until its "
+                  "denoised relMSE reaches texture space's, and the CPU ratio there");
     cmd->add_option("--specular-samples", a->specularSamples,
                     "Bench with the stage: light samples a pixel of the specular lobe where the "
                     "cache lights the diffuse base (1-32; default 8)");
@@ -313,8 +322,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->callback([a, cmd, &exitCode] {
         a->fpsGiven = cmd->count("--fps") > 0;
-        for (const char* o : {"--bench-frames", "--bench-still", "--bench-fixed-alpha",
-                              "--specular-samples", "--reference-spp", "--bench-out"})
+        for (const char* o :
+             {"--bench-frames", "--bench-still", "--bench-fixed-alpha", "--bench-equal-error",
+              "--specular-samples", "--reference-spp", "--bench-out"})
             if (cmd->count(o) > 0) a->benchOnly = o;
         exitCode = RunPreview(*a);
     });

@@ -38,6 +38,9 @@ struct BenchArgs {
     /// With the stage: the light samples a pixel of the specular lobe on objects whose diffuse
     /// base the cache lights (TextureSpaceOptions::specularLightSamples); 0: the default.
     int specularSamples = 0;
+    /// With the stage, moving: per hit again with 2, 4, 8 samples a pixel until its denoised
+    /// relMSE reaches texture space's, for the cost ratio at equal error.
+    bool equalError = false;
 };
 
 /// Texture-space AO with a warm cache against per-hit AO at equal relMSE, while orbiting; prints

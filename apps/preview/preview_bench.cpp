@@ -64,6 +64,10 @@ struct BenchOrbit {
     }
 };
 
+// Per hit's most samples a pixel when it looks for texture space's error (--bench-equal-error),
+// doubling them from the preview's.
+constexpr int kMaxEqualErrorSpp = 8;
+
 double CpuSeconds() {
     timespec t;
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
@@ -97,6 +101,8 @@ struct StageRun {
     StageRun(const char* n, bool tex, int height)
         : name(n), textureSpace(tex), denoiser(StageSettingsFor(height)) {}
     double Fps(int frames) const { return double(frames) / (renderWall + 1e-3 * stageWall); }
+    /// CPU seconds of the timed frames, render and stage.
+    double CpuSeconds() const { return renderCpu + 1e-3 * stageCpu; }
 };
 
 /// `--bench --denoise METHOD`: the preview's stage frames while orbiting, texture-space shading
@@ -141,45 +147,53 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     const RenderResult ref = Render(rs, refOpt);
     std::printf("reference       : path traced, %d spp, %.1f s\n", refOpt.spp, ref.stats.seconds);
 
-    StageRun runs[2] = {StageRun("texture space", true, s.height),
-                        StageRun("per hit", false, s.height)};
     TextureSpaceOptions tex = TextureOptionsOf(s);
     tex.enabled = true;
     if (b.specularSamples > 0) tex.specularLightSamples = b.specularSamples;
-    runs[0].cache = std::make_unique<TextureSpaceCache>(rs, tex);
     // Orbit: view 0 untimed (cold cache, lazy tessellation, the BRDF table), then views 1..n in
     // turn. Still: the last view for frames 0..n-1, frame 0 untimed.
     const int last = b.still ? n - 1 : n;
-    for (int i = 0; i <= last; ++i) {
-        setView(b.still ? n : i);
-        for (StageRun& r : runs) {
-            RenderOptions o = base;
-            o.seed = uint64_t(i);
-            if (r.textureSpace) {
-                o.texture = tex;
-                const bool still = b.still && i > 0;
-                r.cache->Refresh(uint32_t(i + 1), RefreshParts(still), still);
+    // One pass: texture space and per hit (at `hitSpp` samples a pixel) frame by frame in turn,
+    // so that load from other processes on a shared machine slows both alike.
+    auto runPass = [&](StageRun* runs, int hitSpp) {
+        runs[0].cache = std::make_unique<TextureSpaceCache>(rs, tex);
+        for (int i = 0; i <= last; ++i) {
+            setView(b.still ? n : i);
+            for (int k = 0; k < 2; ++k) {
+                StageRun& r = runs[k];
+                RenderOptions o = base;
+                o.seed = uint64_t(i);
+                if (r.textureSpace) {
+                    o.texture = tex;
+                    const bool still = b.still && i > 0;
+                    r.cache->Refresh(uint32_t(i + 1), RefreshParts(still), still);
+                } else {
+                    o.spp = hitSpp;
+                }
+                const double c0 = CpuSeconds();
+                const RenderStats st = RenderFrameBuffers(rs, o, time, &r.fb, r.cache.get());
+                const double c1 = CpuSeconds();
+                // As the preview does: texture-space frames only (progressive_renderer.cpp).
+                r.denoiser.SetStillView(b.still && b.stageRunningMean && r.textureSpace && i > 0);
+                r.denoiser.Denoise(r.fb, method, demod, &r.image);
+                const int frames = i + 1;
+                if (b.still && (frames & (frames - 1)) == 0)
+                    r.stillErrors.emplace_back(
+                        frames, RelMSE(ToImage(r.image, s.width, s.height), ref.beauty));
+                if (i == 0) continue;
+                r.renderWall += st.seconds, r.renderCpu += c1 - c0;
+                const screen::StageTimings& t = r.denoiser.Timings();
+                const screen::StageTimings& tc = r.denoiser.CpuTimings();
+                r.stageWall += t.total, r.stageCpu += tc.total;
+                for (double screen::StageTimings::*pass : kPasses) r.passCpu.*pass += tc.*pass;
+                r.maxStageWall = std::max(r.maxStageWall, t.total);
+                r.cacheStats.Merge(st.cache);
             }
-            const double c0 = CpuSeconds();
-            const RenderStats st = RenderFrameBuffers(rs, o, time, &r.fb, r.cache.get());
-            const double c1 = CpuSeconds();
-            // As the preview does: texture-space frames only (progressive_renderer.cpp).
-            r.denoiser.SetStillView(b.still && b.stageRunningMean && r.textureSpace && i > 0);
-            r.denoiser.Denoise(r.fb, method, demod, &r.image);
-            const int frames = i + 1;
-            if (b.still && (frames & (frames - 1)) == 0)
-                r.stillErrors.emplace_back(frames,
-                                           RelMSE(ToImage(r.image, s.width, s.height), ref.beauty));
-            if (i == 0) continue;
-            r.renderWall += st.seconds, r.renderCpu += c1 - c0;
-            const screen::StageTimings& t = r.denoiser.Timings();
-            const screen::StageTimings& tc = r.denoiser.CpuTimings();
-            r.stageWall += t.total, r.stageCpu += tc.total;
-            for (double screen::StageTimings::*pass : kPasses) r.passCpu.*pass += tc.*pass;
-            r.maxStageWall = std::max(r.maxStageWall, t.total);
-            r.cacheStats.Merge(st.cache);
         }
-    }
+    };
+    StageRun runs[2] = {StageRun("texture space", true, s.height),
+                        StageRun("per hit", false, s.height)};
+    runPass(runs, base.spp);
     const int timed = last;  // frames 1..last
     for (const StageRun& r : runs) {
         const Image noisy = ToImage(r.fb.Compose(), s.width, s.height);
@@ -223,12 +237,62 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
                 lastErr <= first / 8.0 ? "ok" : "MISSED");
         }
     }
-    const double frameCpu = t.renderCpu + 1e-3 * t.stageCpu,
-                 hitCpu = h.renderCpu + 1e-3 * h.stageCpu;
+    const double frameCpu = t.CpuSeconds(), hitCpu = h.CpuSeconds();
     std::printf(
         "CPU a frame, render + stage: texture space %.1f ms, per hit %.1f ms: %.2f of per "
         "hit (goal <= 0.33 at equal denoised relMSE)\n",
         1e3 * frameCpu / timed, 1e3 * hitCpu / timed, frameCpu / hitCpu);
+    if (b.equalError) {
+        const double eTex = RelMSE(ToImage(t.image, s.width, s.height), ref.beauty);
+        double eHit = RelMSE(ToImage(h.image, s.width, s.height), ref.beauty);
+        double ratio = frameCpu / hitCpu;
+        if (eHit <= eTex) {
+            std::printf(
+                "equal error: per hit at %d spp is at or below texture space's denoised relMSE "
+                "already (%.5f against %.5f): texture space costs %.2f of per hit at a higher "
+                "error\n",
+                base.spp, eHit, eTex, ratio);
+        } else {
+            // Per hit with twice the samples a pixel until its denoised error reaches texture
+            // space's; each pass times both again, and its ratio is the one to compare (the
+            // passes may run under different load).
+            int spp = base.spp;
+            double prevErr = eHit, prevRatio = ratio;
+            while (eHit > eTex && spp < kMaxEqualErrorSpp) {
+                spp *= 2;
+                StageRun pass[2] = {StageRun("texture space", true, s.height),
+                                    StageRun("per hit", false, s.height)};
+                runPass(pass, spp);
+                prevErr = eHit, prevRatio = ratio;
+                eHit = RelMSE(ToImage(pass[1].image, s.width, s.height), ref.beauty);
+                ratio = pass[0].CpuSeconds() / pass[1].CpuSeconds();
+                std::printf(
+                    "  per hit at %2d spp: %.1f ms cpu a frame (render + stage), denoised relMSE "
+                    "%.5f; texture space in the same pass %.1f ms cpu, %.5f: %.2f of per hit\n",
+                    spp, 1e3 * pass[1].CpuSeconds() / timed, eHit,
+                    1e3 * pass[0].CpuSeconds() / timed,
+                    RelMSE(ToImage(pass[0].image, s.width, s.height), ref.beauty), ratio);
+                std::fflush(stdout);
+            }
+            if (eHit > eTex) {
+                std::printf(
+                    "equal error: per hit at %d spp is still above texture space's denoised "
+                    "relMSE (%.5f against %.5f): texture space costs %.2f of per hit at %d spp, "
+                    "at a lower error (goal <= 0.33 at equal error) %s\n",
+                    spp, eHit, eTex, ratio, spp, ratio <= 0.33 ? "ok" : "MISSED");
+            } else {
+                // Between the last two passes, the ratio at texture space's error exactly: the
+                // error taken as a power of the cost (log-log), as noise falls with samples.
+                const double f = std::log(eTex / prevErr) / std::log(eHit / prevErr);
+                const double atEqual = prevRatio * std::pow(ratio / prevRatio, f);
+                std::printf(
+                    "equal error: per hit reaches texture space's denoised relMSE %.5f between "
+                    "%d and %d spp; texture space costs %.2f of per hit there (%.2f at %d spp) "
+                    "(goal <= 0.33) %s\n",
+                    eTex, spp / 2, spp, atEqual, ratio, spp, atEqual <= 0.33 ? "ok" : "MISSED");
+            }
+        }
+    }
     std::printf("warm texture-space frame + %s stage: %.1f fps (goal >= 10) %s\n",
                 screen::MethodName(method), t.Fps(timed), t.Fps(timed) >= 10.0 ? "ok" : "MISSED");
     std::printf("stage passes: %.1f ms a frame (goal < 25) %s\n", t.stageWall / timed,

@@ -214,6 +214,60 @@ bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsd
     return true;
 }
 
+/// The environment map's light samples of one frame, drawn once and shared by the pixels'
+/// candidates (FrameDirectSample), as ReSTIR's light tiles are (Wyman and Panteleev 2021,
+/// "Rearchitecting spatiotemporal resampling for production"): a map's sample does not depend on
+/// the shading point, and drawn per candidate each one was two dependent searches of the
+/// inversion tables and a texel lookup, all out of the caches (most of a GGX pixel's time:
+/// results/frame_buffers_profile.md). Here a candidate reads one entry of a table that stays in
+/// the L2 cache, and a pixel's candidates are consecutive entries.
+///
+/// Entry i is the map's sample at the R2 point i shifted by the frame's random shift, so each
+/// entry is distributed as a sample of the map and any run of entries is the shifted R2 run the
+/// candidates took before: a pixel's estimate keeps its distribution and expectation. Pixels
+/// that start their runs within kN entries of each other share samples (correlated noise within
+/// a frame); a new frame draws a new shift.
+class EnvironmentSamples {
+public:
+    static constexpr uint32_t kCount = 1u << 14;
+    struct Entry {
+        glm::vec3 wi;
+        float pdf;  // solid angle, light selection included; 0: no sample
+        glm::vec3 Li;
+    };
+
+    /// Empty unless the scene's environment is a map (a constant one samples about the normal).
+    EnvironmentSamples(const Context& c, uint64_t seed) {
+        if (!c.env || c.env->IsConstant()) return;
+        entries_.resize(kCount);
+        Rng rng(seed, 0x9E3779B97F4A7C15ull);
+        const glm::vec2 shift = rng.Next2D();
+        constexpr double kG1 = 0.7548776662466927, kG2 = 0.5698402909980532;  // R2
+        const float pick = c.PickPdf();
+        tbb::parallel_for(
+            tbb::blocked_range<uint32_t>(0, kCount, 1024),
+            [&](const tbb::blocked_range<uint32_t>& r) {
+                for (uint32_t i = r.begin(); i < r.end(); ++i) {
+                    // In double: kG * i has no fractional bits left in float
+                    // for the large i.
+                    const double rx = shift.x + kG1 * double(i), ry = shift.y + kG2 * double(i);
+                    const glm::vec2 u(float(rx - std::floor(rx)), float(ry - std::floor(ry)));
+                    Entry& e = entries_[i];
+                    float pdf;
+                    e.Li = c.env->Sample(glm::vec3(0.0f, 1.0f, 0.0f),
+                                         glm::min(u, glm::vec2(kOneMinusEpsilon)), &e.wi, &pdf);
+                    e.pdf = pdf * pick;
+                }
+            });
+    }
+    bool Empty() const { return entries_.empty(); }
+    /// Entry i modulo kCount.
+    const Entry& operator[](uint32_t i) const { return entries_[i & (kCount - 1u)]; }
+
+private:
+    std::vector<Entry> entries_;
+};
+
 /// A shadow ray of FrameDirectSample waiting for its packet (FinishShadow takes it from there):
 /// the ray, the light sample it goes to and the weight of its frame-buffer sample.
 struct PendingShadow {
@@ -237,8 +291,8 @@ struct PendingShadow {
 /// from opt.texture.specularLightSamples light samples.
 void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
                        glm::vec3 wo, const glm::vec3* exact, const LightWeights& weights, Rng& rng,
-                       FramePixel& px, PixelShadow& sh, int pixel,
-                       std::vector<PendingShadow>& shadows, bool specularOnly = false) {
+                       const EnvironmentSamples& envSamples, FramePixel& px, PixelShadow& sh,
+                       int pixel, std::vector<PendingShadow>& shadows, bool specularOnly = false) {
     // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
     // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
     // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
@@ -250,6 +304,10 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
     const float pickShift = rng.Next1D();
     const glm::vec2 shift = rng.Next2D();
     const float uResample = rng.Next1D();
+    // The first of the pixel's run of the frame's environment samples (drawn only with a map, so
+    // that other scenes' samples stay as they were).
+    const uint32_t envStart =
+        envSamples.Empty() ? 0u : uint32_t(rng.Next1D() * float(EnvironmentSamples::kCount));
     LightSample cand[kMax];
     glm::vec3 S[kMax];
     float lum[kMax];
@@ -316,9 +374,18 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
             sum += S[k], lumSum += lum[k];
             continue;
         }
-        if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
-                           glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls))
+        if (!envSamples.Empty() &&
+            std::min(int(uPick * float(c.numLights)), c.numLights - 1) == c.numLights - 1) {
+            // The environment (the last light SampleLight picks): the frame's sample.
+            const EnvironmentSamples::Entry& e = envSamples[envStart + uint32_t(k)];
+            if (!(e.pdf > 0.0f)) continue;
+            ls.wi = e.wi, ls.Li = e.Li, ls.pdf = e.pdf;
+            ls.dist = INFINITY;
+            ls.delta = false;
+        } else if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
+                                  glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls)) {
             continue;
+        }
         glm::vec3 fd, fs;
         bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
         if (specularOnly) fd = glm::vec3(0.0f);  // the cache's (indirect)
@@ -392,9 +459,28 @@ void FinishShadow(const FrameMotion& motion, const PendingShadow& s, bool blocke
     }
 }
 
-/// The specular lobe's path of one sample into px.glossySum (and its first hit).
+/// The texture-space cache's diffuse light at `si` (irradiance / pi): indirect, or with `layered`
+/// (CachedDiffuseLight) direct and indirect; misses shaded as ShadeDiffuseSample does.
+glm::vec3 CachedDiffuse(const Context& c, const SurfaceInteraction& si, bool layered,
+                        RayCounts& rays) {
+    const int paths = layered ? c.opt.texture.diffuseLayerPaths : c.opt.texture.indirectSamples;
+    return CachedLookup(
+        c, si,
+        [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, layered, rays, paths); },
+        paths);
+}
+
+/// The specular lobe's path of one sample into px.glossySum (and its first hit). With the
+/// texture-space cache, the diffuse lobe of the surface the ray hits takes its light from the
+/// cache, as a camera hit's does (CachedTerm; with `layered` direct light included), and only
+/// its specular lobe's path goes on: the hit's light samples, shadow ray and bounces were most
+/// of this path's time, and the cache's texels are averaged over frames and neighbours where
+/// one path is not. The texel is chosen for a footprint of the lobe's width (alpha radians
+/// either side of the ray): what a glossy reflection blurs over anyway, and coarse texels that
+/// the camera's lookups share.
 void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
-                       const Bsdf& bsdf, glm::vec3 wo, Rng& rng, FramePixel& px, RayCounts& rays) {
+                       const Bsdf& bsdf, glm::vec3 wo, bool layered, Rng& rng, FramePixel& px,
+                       RayCounts& rays) {
     glm::vec3 wi, weight;
     float pdf;
     if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
@@ -412,8 +498,26 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
         L = c.EmittedMis(ray, hit, pdf);
     } else {
         // Light found at the hit (NEE) and beyond, after an emissive surface's own.
-        L = c.EmittedMis(ray, hit, pdf) +
-            LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+        L = c.EmittedMis(ray, hit, pdf);
+        if (c.tsc) {
+            RayDifferentials lobe;
+            const Frame f = Frame::FromZ(wi);
+            lobe.dDdx = bsdf.Alpha() * f.s, lobe.dDdy = bsdf.Alpha() * f.t;
+            auto cached = [&](const SurfaceInteraction& h, const Ray& r, glm::vec3* term) {
+                const Bsdf hb = MakeBsdf(c, h);
+                // The diffuse lobe is 0 where the shading normal faces away from the ray.
+                *term =
+                    glm::dot(r.dir, h.N) < 0.0f
+                        ? FiniteOrZero(hb.DiffuseReflectance() * CachedDiffuse(c, h, layered, rays))
+                        : glm::vec3(0.0f);
+                if (hb.HasSpecular())
+                    return layered ? CachedTerm::DiffuseBase : CachedTerm::BaseIndirect;
+                return layered ? CachedTerm::All : CachedTerm::Indirect;
+            };
+            L += LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false, cached, &lobe);
+        } else {
+            L += LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false);
+        }
     }
     px.glossySum += FiniteOrZero(weight * L);
     if (found && !std::isfinite(px.glossyHit.x)) {
@@ -483,10 +587,10 @@ void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& s
 /// Every buffer of pixel (x, y) from its camera ray and hit but the shadow rays' (see
 /// WriteShadowBuffers): the samples' shadow rays are appended to `shadows`, for pixel `pixel` of
 /// the tile, and `px` keeps what they need.
-void ShadePixel(const Context& c, const FrameMotion& motion, bool layered, int x, int y, int pixel,
-                const Ray& ray, const RayDifferentials* diff, bool found, const Hit& hit,
-                screen::FrameBuffers& fb, PixelShadow& sh, std::vector<PendingShadow>& shadows,
-                RayCounts& rays) {
+void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
+                bool layered, int x, int y, int pixel, const Ray& ray, const RayDifferentials* diff,
+                bool found, const Hit& hit, screen::FrameBuffers& fb, PixelShadow& sh,
+                std::vector<PendingShadow>& shadows, RayCounts& rays) {
     const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
     ClearPixel(fb, p);
     if (!found) {
@@ -531,11 +635,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, bool layered, int x
     // is the same); `layered` (CachedDiffuseLight), its direct light too.
     const bool cachedIndirect = diffuse && c.tsc;
     if (cachedIndirect) {
-        const int paths = layered ? c.opt.texture.diffuseLayerPaths : c.opt.texture.indirectSamples;
-        const glm::vec3 E = CachedLookup(
-            c, si,
-            [&](const SampleRequest& r) { return ShadeDiffuseSample(c, r, layered, rays, paths); },
-            paths);
+        const glm::vec3 E = CachedDiffuse(c, si, layered, rays);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
         // The cache knows irradiance, not its direction: the same radiance in every cone, so
         // that indirect = albedo * ShadeCones(cones) holds here too and the stage's cone
@@ -569,8 +669,8 @@ void ShadePixel(const Context& c, const FrameMotion& motion, bool layered, int x
         // (none on diffuse materials: shading 0, visible).
         if (!layered || bsdf.HasSpecular())
             FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng,
-                              px, sh, pixel, shadows, layered);
-        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, rng, px, rays);
+                              envSamples, px, sh, pixel, shadows, layered);
+        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, layered, rng, px, rays);
         if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
     }
     const float inv = 1.0f / float(spp);
@@ -617,8 +717,9 @@ struct TileScratch {
 /// at a time (RenderScene::Intersect16): neighbouring pixels' camera rays share most of their
 /// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
 /// cheaper per ray for such rays than single rays.
-void RenderTile(const Context& c, const FrameMotion& motion, bool layered, int x0, int y0,
-                screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
+void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
+                bool layered, int x0, int y0, screen::FrameBuffers& fb, TileScratch& ts,
+                RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
     int n = 0;
     for (int y = y0; y < y1; ++y)
@@ -641,8 +742,9 @@ void RenderTile(const Context& c, const FrameMotion& motion, bool layered, int x
     for (int i = 0, y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++i) {
             ts.shadow[i].Reset();
-            ShadePixel(c, motion, layered, x, y, i, ts.ray[i], c.tsc ? &ts.diff[i] : nullptr,
-                       ts.found[i], ts.hit[i], fb, ts.shadow[i], ts.shadows, rays);
+            ShadePixel(c, motion, envSamples, layered, x, y, i, ts.ray[i],
+                       c.tsc ? &ts.diff[i] : nullptr, ts.found[i], ts.hit[i], fb, ts.shadow[i],
+                       ts.shadows, rays);
         }
 
     // In queue order: a pixel's samples finish in their order, as if traced one by one.
@@ -701,6 +803,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     Context ctx(rs, opt);
     FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::None);
     const FrameMotion motion(rs, opt, prevTime);
+    const EnvironmentSamples envSamples(ctx, opt.seed);
 
     screen::FrameBuffers& fb = *out;
     const int W = opt.width, H = opt.height;
@@ -747,7 +850,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                           RayCounts& rc = counts.local();
                           TileScratch& ts = scratch.local();
                           for (int t = r.begin(); t < r.end(); ++t)
-                              RenderTile(ctx, motion, layered, (t % tilesX) * kTile,
+                              RenderTile(ctx, motion, envSamples, layered, (t % tilesX) * kTile,
                                          (t / tilesX) * kTile, fb, ts, rc);
                       });
 

@@ -30,7 +30,10 @@
 //   noise-free factor. Elsewhere (a GGX lobe under an area light or an environment) estimated
 //   per sample from 32 light samples without shadow rays (BSDF and light evaluations only): the
 //   light pick stratified (a distant light's term is exact) and the point on an area light or
-//   the environment from a randomly shifted R2 sequence; mean over spp. The stage takes it as
+//   the environment from a randomly shifted R2 sequence (an environment map's from a table of
+//   its samples drawn once per frame from options.seed and shared by the pixels, each reading a
+//   run of it from a random start: every sample is distributed as before, but the pixels' samples
+//   correlate within a frame); mean over spp. The stage takes it as
 //   noise-free; the light samples' relative per-pixel error at 1 spp is ~5% RMS
 //   (FrameBuffers.ShadingIsLowNoise; one light sample would be about sqrt(32) times noisier).
 //   0 where no light was sampled (no lights, one-sided quad seen from behind) or every sample
@@ -99,6 +102,9 @@
 //   options.texture.specularLightSamples light samples, `visibility` that lobe's. The sum keeps
 //   the path tracer's expectation. Otherwise direct light stays per pixel (the split needs its
 //   visibility).
+//   The specular lobe's ray takes the diffuse lobe's light at its hit from the cache too (that
+//   lobe's indirect light, or with cacheDiffuseLayer all of it), as a camera hit's would, its
+//   texel chosen for a footprint of the lobe's width; only the hit's specular lobe goes on.
 // * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty
 //   otherwise): for diffuse materials facing the camera, the texel-cache lookup of the pixel's
 //   texel in the object's visibility grids (TextureSpaceCache::VisibilityTexelOf; a cache
