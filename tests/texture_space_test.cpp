@@ -337,6 +337,31 @@ TEST(TextureSpace, WarmCacheHitsEveryTexelOnTheSecondFrame) {
               o.texture.cache.sampleCacheBytes + o.texture.cache.texelCacheBytes);
 }
 
+// A pixel's samples mostly land on one texel, and the prepass of a warm frame gives a sample on
+// the texel of the sample before it that sample's mark and lookup. Every sample still reads its
+// own texel (the cold frame's image, bit-exact) and counts as one lookup, also with a texel cache
+// so small that the frame's texels evict each other, where a texel found for one sample may be
+// missing for the next on another texel: never another key's value.
+TEST(TextureSpace, WarmPrepassReadsEachSamplesOwnTexel) {
+    const RenderScene& rs = TorusAo();
+    for (const size_t texelBytes : {size_t(64) << 20, size_t(16) << 10}) {
+        SCOPED_TRACE(texelBytes);
+        RenderOptions o = CachedAo(4, 2, TextureFilterKind::Normal);
+        o.texture.cache.texelCacheBytes = texelBytes;
+        TextureSpaceCache cache(rs, o.texture);
+        const RenderResult first = Render(rs, o, &cache);
+        const RenderResult warm = Render(rs, o, &cache);
+        EXPECT_EQ(first.beauty.data, warm.beauty.data);
+        const CacheStats& c = warm.stats.cache;
+        EXPECT_EQ(c.lookups, first.stats.cache.lookups);
+        EXPECT_GT(c.texelHits, 0u);
+        if (texelBytes < first.stats.cache.lookups * 32)
+            EXPECT_LT(double(c.texelHits), 0.9 * double(c.lookups));  // a cache that thrashes
+        else
+            EXPECT_GE(double(c.texelHits), 0.99 * double(c.lookups));
+    }
+}
+
 // The visibility prepass asks the texel cache for its texels only when the cache may hold some
 // (MayHoldTexels; skipping the probes of an empty table saved 7% of a 21x21 AO render). A render
 // into an emptied cache behaves as the first render, one into a warm cache finds nearly all,

@@ -238,6 +238,14 @@ public:
         return cache_.TexelAt(
             {mesh, si.ptex.face, si.ptex.u, si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy});
     }
+    /// TexelOf's key alone (no texel centre), and its cache mesh in `mesh`.
+    TexelKey TexelKeyOf(const SurfaceInteraction& si, int* mesh) const {
+        *mesh = MeshOf(si.object, si.backFacing);
+        return cache_.TexelKeyAt(
+            {*mesh, si.ptex.face, si.ptex.u, si.ptex.v, si.dudx, si.dvdx, si.dudy, si.dvdy});
+    }
+    /// A texel's packed key and slot hash, for Prefetch and FindTexel.
+    TexelAddress AddressOf(const TexelKey& key) const { return cache_.AddressOf(key); }
     /// TexelOf's result for a texel key of cache mesh `mesh` (see ShadingCache::RequestOf).
     SampleRequest RequestOf(int mesh, const TexelKey& key) const {
         return cache_.RequestOf(mesh, key);
@@ -245,9 +253,13 @@ public:
     /// Starts fetching a texel's slot into the CPU cache (see ShadingCache::Prefetch): for a
     /// batch of texels before their lookups.
     void Prefetch(const SampleRequest& texel) const { cache_.Prefetch(texel); }
+    void Prefetch(const TexelAddress& texel) const { cache_.Prefetch(texel); }
     /// The texel's value when the texel cache holds it right now: read-only (never shades,
     /// claims or counts), and the value a Lookup hit would return.
     bool FindTexel(const SampleRequest& texel, glm::vec3* value) const {
+        return cache_.FindTexel(texel, value);
+    }
+    bool FindTexel(const TexelAddress& texel, glm::vec3* value) const {
         return cache_.FindTexel(texel, value);
     }
 

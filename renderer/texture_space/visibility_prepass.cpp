@@ -26,7 +26,14 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
                        int s0, int s1, PassTexels* out, RayCounts& rays) {
     const size_t total = r.rows().size() * r.cols().size() * size_t(s1 - s0);
     CameraSample block[kCameraBlock];
-    SampleRequest texels[kCameraBlock];
+    // Each hit's texel, hashed once for its mark and its lookup.
+    struct Texel {
+        TexelAddress at;  // at.key is kEmpty for a sample without a texel (sky, light)
+        int32_t mesh;
+        uint32_t probe;  // VisibleTexels::Probe
+        uint64_t bit;    // VisibleTexels::Bit
+    };
+    Texel texels[kCameraBlock];
     CacheStats* stats = out ? &c.cacheStats->local() : nullptr;
     const bool find = out && !out->cacheEmptied;
     Cursor gen(r, s0), mark = gen;
@@ -35,31 +42,44 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
             CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray, &block[i].diff);
         IntersectCameraRays(c, block, n, rays);
-        // The block's texels first, their slots prefetched, then the marks and lookups.
+        // The block's texels first, their marks and slots prefetched, then the marks and
+        // lookups. A sample on the texel of the sample before it (a pixel's samples mostly share
+        // one) takes that one's mark and lookup: nothing writes the texel cache during the
+        // prepass, so a lookup again would find the same.
         for (size_t i = 0; i < n; ++i) {
             const CameraSample& cs = block[i];
+            Texel& t = texels[i];
+            t.at = TexelAddress{};
             if (!cs.found || cs.hit.object < 0) continue;
-            texels[i] = c.tsc->TexelOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff));
-            if (find) c.tsc->Prefetch(texels[i]);
+            const TexelKey k = c.tsc->TexelKeyOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff), &t.mesh);
+            t.at = c.tsc->AddressOf(k);
+            t.probe = VisibleTexels::Probe(k), t.bit = VisibleTexels::Bit(k);
+            if (i > 0 && t.at.key == texels[i - 1].at.key) continue;
+            visible.PrefetchAt(t.probe);
+            if (find) c.tsc->Prefetch(t.at);
         }
+        bool foundLast = false;
+        glm::vec3 found(0.0f);
         for (size_t i = 0; i < n; ++i, mark.Next(r, s0, s1)) {
-            const CameraSample& cs = block[i];
-            int32_t mesh = !cs.found ? PassTexels::kMiss : PassTexels::kLight;
-            uint64_t key = TexelKey::kEmpty;
-            if (cs.found && cs.hit.object >= 0) {
-                visible.Mark(texels[i].key);
-                mesh = texels[i].mesh, key = texels[i].key.Pack();
-            }
+            const Texel& t = texels[i];
+            const bool hasTexel = t.at.key != TexelKey::kEmpty;
+            const bool repeat = hasTexel && i > 0 && t.at.key == texels[i - 1].at.key;
+            int32_t mesh = !block[i].found ? PassTexels::kMiss
+                           : hasTexel      ? t.mesh
+                                           : PassTexels::kLight;
+            if (hasTexel && !repeat) visible.MarkAt(t.probe, t.bit);
             if (!out) continue;
             const size_t pixel = size_t(mark.y) * size_t(out->width) + size_t(mark.x);
             if (mark.s == s0) out->added[pixel] = 0;
-            glm::vec3 found(0.0f);
-            if (find && mesh >= 0 && c.tsc->FindTexel(texels[i], &found)) {
-                mesh = PassTexels::kFound;
-                ++stats->lookups, ++stats->texelHits;
-                if (c.pixelCache) {
-                    PixelCacheCounts& px = c.pixelCache[pixel];
-                    ++px.lookups, ++px.texelHits;
+            if (find && hasTexel) {
+                if (!repeat) foundLast = c.tsc->FindTexel(t.at, &found);
+                if (foundLast) {
+                    mesh = PassTexels::kFound;
+                    ++stats->lookups, ++stats->texelHits;
+                    if (c.pixelCache) {
+                        PixelCacheCounts& px = c.pixelCache[pixel];
+                        ++px.lookups, ++px.texelHits;
+                    }
                 }
             }
             if (mesh < 0 && out->added[pixel] == uint32_t(mark.s - s0)) {
@@ -72,8 +92,9 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
                 ++out->added[pixel];
                 continue;
             }
-            PassTexel& t = (*out)[out->Index(mark.x, mark.y, mark.s)];
-            t.key = key, t.mesh = mesh, t.found = found;
+            PassTexel& p = (*out)[out->Index(mark.x, mark.y, mark.s)];
+            p.key = t.at.key, p.mesh = mesh,
+            p.found = mesh == PassTexels::kFound ? found : glm::vec3(0.0f);
         }
     }
 }

@@ -518,5 +518,42 @@ TEST(ShadingCache, TinyBoundedCacheStaysCorrect) {
     EXPECT_LE(cache.BytesUsed(), 4096u + 1024u);
 }
 
+// TexelKeyAt is TexelAt's key, and a lookup through a texel's address (its key and slot hash,
+// computed once for its prefetches and the lookup) finds what FindTexel of its request finds:
+// its own texel's value or nothing, also in a cache so small that texels evict each other.
+TEST(ShadingCache, AddressedLookupsFindTheirOwnTexel) {
+    CacheSettings s;
+    s.texelCacheBytes = 1024;
+    ShadingCache<AoSample, float> cache(s);
+    const int mesh = cache.AddMesh(test::GridCage(4), 0.1f);
+    auto valueOf = [](const TexelKey& k) { return float(k.Pack() % 1000003); };
+    auto shade = [&](const SampleRequest& r) { return AoSample{valueOf(r.key), {0, 1, 0}}; };
+    auto centreOnly = [](const FilterInput<AoSample>& in) { return in.samples[in.centre].value; };
+    std::vector<CacheHit> hits;
+    for (int face = 0; face < 16; ++face)
+        for (float u : {0.05f, 0.3f, 0.5f, 0.95f})
+            for (float d : {0.001f, 0.02f, 0.3f}) hits.push_back({mesh, face, u, 0.6f, d, 0, 0, d});
+    CacheStats st;
+    for (const CacheHit& h : hits) {
+        EXPECT_EQ(cache.TexelKeyAt(h), cache.TexelAt(h).key);
+        cache.Lookup(h, 1, shade, centreOnly, st);
+    }
+    size_t found = 0;
+    for (const CacheHit& h : hits) {
+        const SampleRequest req = cache.TexelAt(h);
+        const TexelAddress a = cache.AddressOf(cache.TexelKeyAt(h));
+        cache.Prefetch(a);
+        float byAddress = -1.0f, byRequest = -1.0f;
+        const bool hit = cache.FindTexel(a, &byAddress);
+        ASSERT_EQ(hit, cache.FindTexel(req, &byRequest));
+        if (!hit) continue;
+        EXPECT_EQ(byAddress, valueOf(req.key));
+        EXPECT_EQ(byRequest, byAddress);
+        ++found;
+    }
+    EXPECT_GT(found, 0u);
+    EXPECT_LT(found, hits.size());  // some were evicted
+}
+
 }  // namespace
 }  // namespace texcache

@@ -109,6 +109,13 @@ struct SampleRequest {
     TexelKey key;
 };
 
+/// A texel's packed key and slot hash (ShadingCache::AddressOf), computed once for the
+/// prefetches and the lookup of one texel.
+struct TexelAddress {
+    uint64_t key = TexelKey::kEmpty;  ///< TexelKey::Pack()
+    uint64_t hash = 0;
+};
+
 /// A ray hit as the cache sees it.
 struct CacheHit {
     int mesh;
@@ -286,14 +293,20 @@ inline uint64_t TexelSlotHash(const TexelKey& k) {
 
 }  // namespace internal
 
-/// The texel of mesh grids `g` a hit maps to: eq. 1 (floored, plus `lodBias`) and eq. 2.
-inline SampleRequest TexelOfHit(const MeshGrids& g, const CacheHit& h, float lodBias) {
+/// The key of the texel of mesh grids `g` a hit maps to: eq. 1 (floored, plus `lodBias`) and
+/// eq. 2.
+inline TexelKey TexelKeyOfHit(const MeshGrids& g, const CacheHit& h, float lodBias) {
     const int mip = ComputeMip(g.Log2Res(h.face), h.dudx, h.dvdx, h.dudy, h.dvdy, lodBias);
     const int res = g.Res(h.face, mip);
-    const int iu = QuantizeCoord(h.u, res), iv = QuantizeCoord(h.v, res);
-    SampleRequest r{h.mesh, h.face, mip, TexelCenter(iu, res), TexelCenter(iv, res), {}};
-    r.key = {g.FaceOffset() + uint32_t(h.face), uint8_t(mip), uint16_t(iu), uint16_t(iv)};
-    return r;
+    return {g.FaceOffset() + uint32_t(h.face), uint8_t(mip), uint16_t(QuantizeCoord(h.u, res)),
+            uint16_t(QuantizeCoord(h.v, res))};
+}
+
+/// The texel of mesh grids `g` a hit maps to, with its centre (TexelKeyOfHit).
+inline SampleRequest TexelOfHit(const MeshGrids& g, const CacheHit& h, float lodBias) {
+    const TexelKey k = TexelKeyOfHit(g, h, lodBias);
+    const int res = g.Res(h.face, k.mip);
+    return {h.mesh, h.face, k.mip, TexelCenter(k.iu, res), TexelCenter(k.iv, res), k};
 }
 
 template <typename Sample, typename Texel>
@@ -333,6 +346,13 @@ public:
     SampleRequest TexelAt(const CacheHit& h) const {
         return TexelOfHit(*meshes_[h.mesh], h, settings_.lodBias);
     }
+    /// TexelAt's key alone, without the texel's centre: for a caller that only marks or finds
+    /// texels.
+    TexelKey TexelKeyAt(const CacheHit& h) const {
+        return TexelKeyOfHit(*meshes_[h.mesh], h, settings_.lodBias);
+    }
+    /// A texel's packed key and slot hash, for callers that prefetch and find it.
+    TexelAddress AddressOf(const TexelKey& k) const { return {k.Pack(), Hash(k)}; }
 
     /// What TexelAt returned for `key` on mesh `mesh`, rebuilt from the key alone: for
     /// renderers that keep a pass's texel keys (8 bytes) instead of its requests.
@@ -351,7 +371,10 @@ public:
     }
     /// The texel's value when it is in the texel cache right now (read-only, like ContainsTexel).
     bool FindTexel(const SampleRequest& texel, Texel* out) const {
-        return texels_ && texels_->Find(texel.key.Pack(), Hash(texel.key), out);
+        return FindTexel(AddressOf(texel.key), out);
+    }
+    bool FindTexel(const TexelAddress& a, Texel* out) const {
+        return texels_ && texels_->Find(a.key, a.hash, out);
     }
     /// Whether a sample is in the sample cache right now (read-only, like ContainsTexel).
     bool ContainsSample(const TexelKey& key) const {
@@ -361,8 +384,9 @@ public:
 
     /// Starts fetching a texel's slot into the CPU cache: call it for a batch of texels before
     /// their lookups to overlap the memory latency of a large texel table.
-    void Prefetch(const SampleRequest& texel) const {
-        if (texels_) texels_->Prefetch(Hash(texel.key));
+    void Prefetch(const SampleRequest& texel) const { Prefetch(AddressOf(texel.key)); }
+    void Prefetch(const TexelAddress& a) const {
+        if (texels_) texels_->Prefetch(a.hash);
     }
 
     /// The filtered value at a hit: texel cache hit, or gather + shade missing samples + filter.

@@ -27,6 +27,7 @@
 #include <cstdint>
 #include <memory>
 
+#include "texcache/prefetch.h"
 #include "texcache/texel_key.h"
 
 namespace texcache {
@@ -46,13 +47,16 @@ public:
         for (size_t i = 0; i < words_; ++i) bits_[i].store(0, std::memory_order_relaxed);
     }
     /// Marks a texel as seen (thread-safe).
-    void Mark(const TexelKey& k) {
+    void Mark(const TexelKey& k) { MarkAt(Probe(k), Bit(k)); }
+    /// Mark() for a texel given by its Probe and Bit.
+    void MarkAt(uint32_t probe, uint64_t bit) {
         // Read first: a pixel's camera samples mostly land on one texel, and a locked RMW on a
         // line the other threads read too costs far more than a load.
-        std::atomic<uint64_t>& w = bits_[Word(k)];
-        const uint64_t bit = Bit(k);
+        std::atomic<uint64_t>& w = bits_[probe & (words_ - 1)];
         if (!(w.load(std::memory_order_relaxed) & bit)) w.fetch_or(bit, std::memory_order_relaxed);
     }
+    /// Starts loading the word of a texel given by its Probe, ahead of a MarkAt or ContainsAt.
+    void PrefetchAt(uint32_t probe) const { PrefetchLine(&bits_[probe & (words_ - 1)]); }
     /// Whether a texel was marked (or shares its word with a marked texel of another block).
     bool Contains(const TexelKey& k) const { return (BlockBits(k) & Bit(k)) != 0; }
     /// The marks of the 8x8 block holding texel k (bit Bit(k) is k's): a caller testing the
