@@ -247,10 +247,11 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             const size_t pixels = size_t(W) * size_t(y1 - y0);
             const size_t guess =
                 4 * c.tsc->NumFaces() + 2 * pixels / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
-            // Bins one phase, reads them back in the next; `table(blocks)` is the cache's table
+            // Bins one phase, reads them back in the next; `table(blocks)` is the cache's store
             // of the pass's kind.
             auto binAndResolve = [&](auto&& table, auto&& bin, auto&& resolve) {
-                using Table = std::remove_reference_t<decltype(table(size_t(0)))>;
+                using Table =
+                    typename std::remove_reference_t<decltype(table(size_t(0)))>::SampleLevel;
                 const size_t maxBlocks = kMaxBinBytes / Table::BytesFor(1);
                 size_t blocks =
                     std::clamp(2 * std::max(guess, binBlocksUsed), size_t(1024), maxBlocks);
@@ -259,8 +260,9 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     // agree on its size and on whether to bin again.
                     uint64_t agreed[2] = {blocks, 0};
                     if (group) group->MaxU64(agreed, 1);
-                    Table& bins = table(size_t(agreed[0]));
-                    bins.Clear();
+                    auto& store = table(size_t(agreed[0]));
+                    store.Clear();
+                    Table& bins = store.Samples();
                     forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                         bin(r, bins, rc);
                     });
@@ -274,34 +276,35 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     if (agreed[0] == 0 || agreed[1]) break;
                     blocks = 2 * bins.NumBlocks();
                 }
-                const Table& bins = table(blocks);
+                const auto& store = table(blocks);
+                const Table& bins = store.Samples();
                 binBlocksUsed = bins.BlocksUsed();
                 sums.hitBinsDropped += bins.Dropped();
                 sums.hitBinBytes = bins.BytesUsed();
                 forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts&) {
-                    resolve(r, bins);
+                    resolve(r, store);
                     pixelSamplesDone +=
                         uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
                 });
             };
             if (pathHits)
                 binAndResolve(
-                    [&](size_t blocks) -> RadianceBins& { return c.tsc->LightBins(blocks); },
+                    [&](size_t blocks) -> LightHitStore& { return c.tsc->LightStore(blocks); },
                     [&](const tbb::blocked_range2d<int>& r, RadianceBins& bins, RayCounts&) {
                         PathHitsAdd(c, r, s0, s1, bias, blend, records, binnedHits, bins);
                     },
-                    [&](const tbb::blocked_range2d<int>& r, const RadianceBins& bins) {
-                        PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), bins,
+                    [&](const tbb::blocked_range2d<int>& r, const LightHitStore& store) {
+                        PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), store,
                                         relativeVariance, sums.rgb.data(), sums.own.data());
                     });
             else
                 binAndResolve(
-                    [&](size_t blocks) -> HitBins& { return c.tsc->Bins(blocks); },
+                    [&](size_t blocks) -> AoHitStore& { return c.tsc->AoStore(blocks); },
                     [&](const tbb::blocked_range2d<int>& r, HitBins& bins, RayCounts& rc) {
                         AoHitsBin(c, r, s0, s1, bias, records, ownAo.data(), bins, rc);
                     },
-                    [&](const tbb::blocked_range2d<int>& r, const HitBins& bins) {
-                        AoHitsResolve(c, r, s0, s1, records, ownAo.data(), bins, sums.rgb.data(),
+                    [&](const tbb::blocked_range2d<int>& r, const AoHitStore& store) {
+                        AoHitsResolve(c, r, s0, s1, records, ownAo.data(), store, sums.rgb.data(),
                                       sums.own.data());
                     });
         } else if (VisibleTexels* visible = fc.Visible()) {
