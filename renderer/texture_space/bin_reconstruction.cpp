@@ -370,11 +370,13 @@ glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const TextureStore<Bin, Filt
 float ReconstructAo(const TextureSpaceCache& tsc, const AoHitStore& store, const HitRecord& h,
                     LevelCells<CountBin>& cells) {
     return Reconstruct(tsc, store, h, cells, kAoCoarseWeightK,
-                       [](const CellEstimate& fine, const CellEstimate& coarse) {
+                       [unit = double(tsc.HitUnit())](const CellEstimate& fine,
+                                                      const CellEstimate& coarse) {
                            // Binomial, with the coarse level's steadier mean (kept off 0 and 1,
                            // where one bin's count would claim no noise at all).
+                           // Counts in HitUnit() units: the variance of a count's worth.
                            const double p = std::clamp(double(coarse.mean.x), 0.02, 0.98);
-                           return p * (1.0 - p) * double(fine.count2) /
+                           return p * (1.0 - p) * double(fine.count2) * unit /
                                   (double(fine.count) * double(fine.count));
                        })
         .x;
@@ -387,8 +389,8 @@ glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const LightHitStore&
     return Reconstruct(tsc, store, h, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
                        [&](const CellEstimate& fine, const CellEstimate& coarse) {
                            const double y = Luminance(coarse.mean);
-                           return relativeVariance * y * y * double(fine.count2) /
-                                  (double(fine.count) * double(fine.count));
+                           return relativeVariance * y * y * double(fine.count2) *
+                                  double(tsc.HitUnit()) / (double(fine.count) * double(fine.count));
                        });
 }
 

@@ -239,6 +239,7 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
     AssignFilters(rs.scene());
     frame_ = 0;
     pass_ = 0;
+    hitStoreFrame_ = -1, temporalHitBias_ = INT_MIN;
     Invalidate();
     return true;
 }

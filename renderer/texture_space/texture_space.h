@@ -103,6 +103,15 @@
 // The passes are deterministic (streams of key and pass, whatever thread shades a sample), so
 // the same seed still gives the same image for any thread count. Temporal accumulation
 // (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
+//
+// Temporal accumulation at the hits. The store is not emptied between frames: its sums and
+// counts are scaled by alpha (eq. 6's weight of the history, in 1/65536) and the frame's hits
+// added, an exponential moving average of the bins kept in the objects' own texture space, so
+// that it follows rigidly moving objects as the grid's history does. The scaling is integer
+// (texcache/hit_bins.h, Scale), so the image stays the same for any thread count; each hit adds
+// HitUnit() = 256 units of count so that rounding a decayed count costs a fraction of a percent
+// instead of half a count. The bins' level is chosen once, at the first frame, for the
+// 1 / (1 - alpha) frames of samples the bins hold (a level that moved would orphan the history).
 #pragma once
 #include <algorithm>
 #include <climits>
@@ -369,6 +378,17 @@ public:
     AoHitStore& AoStore(size_t minBlocks) { return StoreOf(aoStore_, minBlocks); }
     /// Hit-binned diffuse light's store (the path and direct integrators), kept as AoStore's.
     LightHitStore& LightStore(size_t minBlocks) { return StoreOf(lightStore_, minBlocks); }
+    /// Temporal accumulation at the hits (--temporal-alpha with TextureSamples::Hits; the note
+    /// at the top): each hit adds HitUnit() units of count, so that the decay of the stores'
+    /// sums between frames (alpha in fixed point) rounds a few counts by a fraction of a percent
+    /// rather than by half a count; 1 without temporal accumulation.
+    uint32_t HitUnit() const { return options_.temporalAlpha > 0.0f ? 256u : 1u; }
+    /// The frame whose hits the stores hold, for temporal accumulation (-1: none, or stale).
+    int64_t HitStoreFrame() const { return hitStoreFrame_; }
+    void SetHitStoreFrame(int64_t frame) { hitStoreFrame_ = frame; }
+    /// The bins' level offset temporal accumulation keeps from its first frame (INT_MIN: not
+    /// chosen): a level that moved between frames would leave the history at the old one.
+    int& TemporalHitBias() { return temporalHitBias_; }
     /// At least `n` records on huge pages (uninitialised; kept from render to render).
     internal::HitRecord* HitRecords(size_t n) {
         if (n > hitRecordCount_) {
@@ -481,6 +501,8 @@ private:
     size_t hitAlbedoCount_ = 0;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
+    int64_t hitStoreFrame_ = -1;
+    int temporalHitBias_ = INT_MIN;
     bool mayHoldTexels_ = false;  ///< see MayHoldTexels
     bool neighbourReuse_ = false;
 };

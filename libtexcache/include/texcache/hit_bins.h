@@ -222,17 +222,28 @@ public:
     void Scale(uint32_t keep) {
         std::vector<uint64_t> records;
         ExportBlocks(&records);
+        ScaleRecords(&records, keep);
         uint64_t dropped = Dropped();
         Clear();
-        for (size_t r = 0; r < records.size(); r += kRecordWords) {
-            bool any = false;
-            for (size_t k = 1; k < kRecordWords; ++k) {
-                records[r + k] = Bin::ScaleWord(records[r + k], keep);
-                any = any || records[r + k] != 0;
-            }
-            if (any) dropped += AddBlocks(&records[r], 1);
-        }
+        dropped += AddBlocks(records.data(), records.size() / kRecordWords);
         dropped_.store(dropped, std::memory_order_relaxed);
+    }
+    /// Scales records of ExportBlocks as Scale scales the bins, and removes those that fall to
+    /// zero.
+    static void ScaleRecords(std::vector<uint64_t>* records, uint32_t keep) {
+        size_t kept = 0;
+        for (size_t r = 0; r < records->size(); r += kRecordWords) {
+            uint64_t* in = records->data() + r;
+            uint64_t* out = records->data() + kept;
+            bool any = false;
+            out[0] = in[0];
+            for (size_t k = 1; k < kRecordWords; ++k) {
+                out[k] = Bin::ScaleWord(in[k], keep);
+                any = any || out[k] != 0;
+            }
+            if (any) kept += kRecordWords;
+        }
+        records->resize(kept);
     }
 
     /// The value of bin `key` (zero when nothing was added to it).
