@@ -140,6 +140,11 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     PassTexels passTexels;
     // Light binned at the hits: the path integrator's, or the direct one's (PathHitsTrace).
     const bool pathHits = hits && opt.integrator != IntegratorKind::AO;
+    // Temporal accumulation at the hits: the stores decay by alpha between frames instead of
+    // being emptied (texture_space.h, the note at the top); alpha in 1/65536.
+    const bool temporalHits = hits && opt.texture.temporalAlpha > 0.0f;
+    const uint32_t temporalKeep =
+        uint32_t(std::lround(double(opt.texture.temporalAlpha) * 65536.0));
     // Hit bins: no table grows past 256 MiB (a frame's bins take a few MiB at most sizes).
     constexpr size_t kMaxBinBytes = size_t(256) << 20;
     constexpr size_t kMaxHitRecordBytes = size_t(256) << 20;
@@ -221,16 +226,20 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                 for (size_t i = 0; i < rowNoise.size(); i += 2)
                     noiseVar += rowNoise[i], noiseMean2 += rowNoise[i + 1];
             }
+            // Temporal accumulation: the bins hold about 1 / (1 - alpha) frames' samples.
+            const int levelSpp = temporalHits
+                                     ? int(std::lround(double(s1 - opt.firstSample) /
+                                                       (1.0 - double(opt.texture.temporalAlpha))))
+                                     : s1 - opt.firstSample;
             // The direct integrator's light at AO's levels: its noise is AO's kind (a shadow
             // ray per sample), and bins one level finer than paths' keep its soft shadows'
             // detail at a lower error than paths' levels give it.
-            const float levels = opt.integrator == IntegratorKind::Path
-                                     ? TextureSpaceCache::HitLightLevels(
-                                           noiseVar, noiseMean2, std::max(opt.hitSamples, 1),
-                                           s1 - opt.firstSample, 0)
-                                     : TextureSpaceCache::HitBinLevels(
-                                           pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples,
-                                           s1 - opt.firstSample, 0);
+            const float levels =
+                opt.integrator == IntegratorKind::Path
+                    ? TextureSpaceCache::HitLightLevels(noiseVar, noiseMean2,
+                                                        std::max(opt.hitSamples, 1), levelSpp, 0)
+                    : TextureSpaceCache::HitBinLevels(
+                          pathHits ? std::max(opt.hitSamples, 1) : opt.aoSamples, levelSpp, 0);
             // The bins lie floor(levels) and one more levels up. Each sample reads the finer
             // and moves towards the coarser by their difference and its noise (Reconstruct),
             // AO's noise from its counts, the light's from the pass's V; light whose noise was
@@ -239,7 +248,13 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             const double relativeVariance = noiseMean2 > 0.0 && std::isfinite(noiseVar / noiseMean2)
                                                 ? noiseVar / noiseMean2
                                                 : 0.0;
-            const int bias = int(std::floor(levels));
+            // Temporal accumulation keeps its first frame's level (TemporalHitBias).
+            int bias = int(std::floor(levels));
+            if (temporalHits) {
+                int& kept = c.tsc->TemporalHitBias();
+                if (kept == INT_MIN) kept = bias;
+                bias = kept;
+            }
             const float blend = relativeVariance > 0.0 ? 0.0f : levels - float(bias);
             // At most half full: twice the blocks the last pass used, or a first guess of four
             // per Ptex face (a face seen at a few levels, two bin levels each) plus the pixels'
@@ -247,20 +262,33 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             const size_t pixels = size_t(W) * size_t(y1 - y0);
             const size_t guess =
                 4 * c.tsc->NumFaces() + 2 * pixels / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
-            // Bins one phase, reads them back in the next; `table(blocks)` is the cache's table
+            // Bins one phase, reads them back in the next; `table(blocks)` is the cache's store
             // of the pass's kind.
             auto binAndResolve = [&](auto&& table, auto&& bin, auto&& resolve) {
-                using Table = std::remove_reference_t<decltype(table(size_t(0)))>;
+                using Table =
+                    typename std::remove_reference_t<decltype(table(size_t(0)))>::SampleLevel;
+                // Temporal accumulation: what the store holds, decayed by alpha at a new frame
+                // (exact fixed point: the same for any thread count), goes into every binning
+                // of the pass, on one rank only (the ranks' tables are summed).
+                std::vector<uint64_t> carried;
+                if (temporalHits && c.tsc->HitStoreFrame() >= 0) {
+                    table(size_t(0)).Samples().ExportBlocks(&carried);
+                    if (c.tsc->HitStoreFrame() != int64_t(c.tsc->Frame()))
+                        Table::ScaleRecords(&carried, temporalKeep);
+                }
+                const size_t carriedBlocks = carried.size() / Table::kRecordWords;
                 const size_t maxBlocks = kMaxBinBytes / Table::BytesFor(1);
-                size_t blocks =
-                    std::clamp(2 * std::max(guess, binBlocksUsed), size_t(1024), maxBlocks);
+                size_t blocks = std::clamp(2 * std::max(guess + carriedBlocks, binBlocksUsed),
+                                           size_t(1024), maxBlocks);
                 for (;;) {
                     // Over many ranks every rank's table holds every rank's hits: the ranks
                     // agree on its size and on whether to bin again.
                     uint64_t agreed[2] = {blocks, 0};
                     if (group) group->MaxU64(agreed, 1);
-                    Table& bins = table(size_t(agreed[0]));
-                    bins.Clear();
+                    auto& store = table(size_t(agreed[0]));
+                    store.Clear();
+                    Table& bins = store.Samples();
+                    if (!group || group->Rank() == 0) bins.AddBlocks(carried.data(), carriedBlocks);
                     forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
                         bin(r, bins, rc);
                     });
@@ -274,34 +302,36 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     if (agreed[0] == 0 || agreed[1]) break;
                     blocks = 2 * bins.NumBlocks();
                 }
-                const Table& bins = table(blocks);
+                const auto& store = table(blocks);
+                const Table& bins = store.Samples();
+                if (temporalHits) c.tsc->SetHitStoreFrame(int64_t(c.tsc->Frame()));
                 binBlocksUsed = bins.BlocksUsed();
                 sums.hitBinsDropped += bins.Dropped();
                 sums.hitBinBytes = bins.BytesUsed();
                 forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts&) {
-                    resolve(r, bins);
+                    resolve(r, store);
                     pixelSamplesDone +=
                         uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
                 });
             };
             if (pathHits)
                 binAndResolve(
-                    [&](size_t blocks) -> RadianceBins& { return c.tsc->LightBins(blocks); },
+                    [&](size_t blocks) -> LightHitStore& { return c.tsc->LightStore(blocks); },
                     [&](const tbb::blocked_range2d<int>& r, RadianceBins& bins, RayCounts&) {
                         PathHitsAdd(c, r, s0, s1, bias, blend, records, binnedHits, bins);
                     },
-                    [&](const tbb::blocked_range2d<int>& r, const RadianceBins& bins) {
-                        PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), bins,
+                    [&](const tbb::blocked_range2d<int>& r, const LightHitStore& store) {
+                        PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), store,
                                         relativeVariance, sums.rgb.data(), sums.own.data());
                     });
             else
                 binAndResolve(
-                    [&](size_t blocks) -> HitBins& { return c.tsc->Bins(blocks); },
+                    [&](size_t blocks) -> AoHitStore& { return c.tsc->AoStore(blocks); },
                     [&](const tbb::blocked_range2d<int>& r, HitBins& bins, RayCounts& rc) {
                         AoHitsBin(c, r, s0, s1, bias, records, ownAo.data(), bins, rc);
                     },
-                    [&](const tbb::blocked_range2d<int>& r, const HitBins& bins) {
-                        AoHitsResolve(c, r, s0, s1, records, ownAo.data(), bins, sums.rgb.data(),
+                    [&](const tbb::blocked_range2d<int>& r, const AoHitStore& store) {
+                        AoHitsResolve(c, r, s0, s1, records, ownAo.data(), store, sums.rgb.data(),
                                       sums.own.data());
                     });
         } else if (VisibleTexels* visible = fc.Visible()) {

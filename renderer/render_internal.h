@@ -268,12 +268,12 @@ inline int HitFilterLevels(TextureFilterKind kind, int radius) {
 void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
                  float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins);
 
-/// Hit-binned AO, phase 2: each camera sample's reconstruction from the bins, added to `sum`,
+/// Hit-binned AO, phase 2: each camera sample's reconstruction from the store, added to `sum`,
 /// and its own estimate (`ownAo`) with its difference to the reconstruction added to `own`
 /// (FrameSums::own).
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
-                   const HitRecord* records, const float* ownAo, const HitBins& bins, double* sum,
-                   double* own);
+                   const HitRecord* records, const float* ownAo, const AoHitStore& store,
+                   double* sum, double* own);
 
 /// Hit-binned diffuse light, phase 2: each pixel's per-hit part plus albedo x the bins'
 /// reconstruction at each binned camera sample, added to `sum`; the per-hit part plus albedo x
@@ -281,7 +281,7 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
 /// (FrameSums::own).
 void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                      const HitRecord* records, const BinnedHit* binnedHits,
-                     const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
+                     const glm::dvec3* perHit, const LightHitStore& store, double relativeVariance,
                      double* sum, double* own);
 
 /// The requested AOV layers of a frame of W x H pixels: means over the `spp` samples of each.

@@ -223,10 +223,6 @@ TEST(Cli, BadInputExitsTwoWithAClearMessage) {
           Case{"render " + cube + " --shading texture --shadow-samples 0", "--shadow-samples"},
           Case{"render " + cube + " --shading texture --ts-samples texels",
                "--ts-samples: unknown texture-space sample source 'texels' (valid: grid, hits)"},
-          Case{"render " + cube +
-                   " --shading texture --ts-samples hits --frames 3 "
-                   "--temporal-alpha 0.7",
-               "--ts-samples: hits has no temporal accumulation"},
           Case{"render " + cube + " --shading texture --cached-light some",
                "--cached-light: unknown value 'some' (valid: auto, all, indirect)"},
           Case{"render " + cube + " --shading texture --frames 3 --temporal-alpha 1.5",

@@ -57,8 +57,9 @@ TEST(MaterialFilter, ChangesTheDefaultTextureSpaceImage) {
     }
 }
 
-// The filtered reconstructions read integer bins in a fixed order (the per-thread memos only keep
-// what they computed): the same image on 1 and 2 threads, bit for bit, over 4 passes, AO and light.
+// The filtered reconstructions read integer bins in a fixed order (the store's texel level keeps
+// what any thread filtered from them, the same value whichever thread it was): the same image on
+// 1 and 2 threads, bit for bit, over 4 passes, AO and light.
 TEST(MaterialFilter, DeterministicAcrossThreadCounts) {
     for (const char* f : {"none", "gaussian", "regression"}) {
         SCOPED_TRACE(f);

@@ -105,17 +105,13 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights) 
     t.radius = a.Given("--filter-radius") ? a.filterRadius : -1;
     t.footprint = ParseFootprintMode(a.footprint, "--footprint");
     // auto: at the hits, unless something only the grid has is asked for.
-    bool gridAsked = a.temporalAlpha != 0.0f;
+    bool gridAsked = false;
     for (const char* o : {"--filter", "--filter-radius", "--footprint", "--stereo", "--overshading",
                           "--reference-cache", "--direct-mapped", "--sample-cache-mb",
                           "--texel-cache-mb", "--indirect-samples"})
         gridAsked = gridAsked || a.Given(o);
     t.samples = a.tsSamples == "auto" ? AutoTextureSamples(gridAsked)
                                       : ParseTextureSamples(a.tsSamples, "--ts-samples");
-    if (t.samples == TextureSamples::Hits && a.temporalAlpha != 0.0f)
-        throw InputError("--ts-samples",
-                         "hits has no temporal accumulation (--temporal-alpha): "
-                         "use grid");
     t.shadowSamples = CheckRange("--shadow-samples", a.shadowSamples, 1, 1 << 16);
     if (a.temporalAlpha != 0.0f) {
         if (!(a.temporalAlpha > 0.0f && a.temporalAlpha < 1.0f))

@@ -3,7 +3,8 @@
 // bins phase 1 (hit_binning.cpp) filled, by a bilinear reconstruction over the 2x2 bins around
 // its hit, across face edges through the Ptex adjacency, blended towards the level above by the
 // two levels' difference and the finer one's noise (the note at the top of texture_space.h).
-// Neighbouring samples read mostly the same bins: each thread keeps the cells it read last.
+// Neighbouring samples read mostly the same bins: each thread keeps the cells it read last; a
+// material filter's values at bin centres are the store's texel level, shared by the threads.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -121,27 +122,18 @@ const BinCell<Bin>& CellAt(const MeshGrids& g, const BinTable<Bin>& bins, int me
 /// What a thread's reconstructions keep between samples: the cells of a record's level and of the
 /// one above it, each level with its own memo (in a shared one, the two levels' bins would evict
 /// each other).
-/// A material filter's value at a bin centre (FilterAt): `weight` is the count behind it, 0 where
-/// its window holds no bin.
-struct FilteredValue {
-    glm::vec3 value{0.0f};
-    float weight = 0.0f;
-};
-/// The filtered values at the bin centres a thread read last (FilteredReconstruct), keyed as
-/// BinMemo: the 2x2 centres around a sample mostly served its neighbours already, and a centre's
-/// window costs up to 81 bins.
-struct FilteredMemo {
-    static constexpr int kLog2 = 10;
-    struct Entry {
-        uint64_t key = TexelKey::kEmpty;
-        FilteredValue f;
-    } at[1 << kLog2];
+/// The filtered values at the 2x2 bin centres around a sample (FilteredReconstruct), kept for
+/// the next sample as CellSet keeps bins: a pixel's samples mostly read the same four, and the
+/// store's texel level costs a shared cache line per centre.
+struct FilteredCell {
+    int32_t mesh = -1, face = -1, level = -1, i0 = 0, j0 = 0;
+    FilteredValue f[4];
 };
 template <typename Bin>
 struct LevelCells {
     BinMemo<Bin> fineMemo, coarseMemo;
     CellSet<Bin> fine, coarse;
-    FilteredMemo filtered;  ///< objects whose material sets a filter (their bins: fineMemo)
+    std::array<FilteredCell, 4> filtered;  ///< objects whose material sets a filter
 };
 /// The calling thread's LevelCells for reading `bins`: kept from tile to tile while the table
 /// holds the same bins (its Generation), so that a tile finds the bins its neighbours, read
@@ -296,12 +288,14 @@ FilteredValue FilterAt(const MeshGrids& g, const BinTable<Bin>& bins, int face, 
 }
 /// The reconstruction at record `h` of an object whose material sets filter `kind` (pass radius
 /// `r`), from its bins at its record's level: none reads the hit's own bin; gaussian and
-/// regression read the filtered values at the 2x2 bin centres around it (FilterAt, through the
-/// thread's memo), bilinearly, skipping centres whose window holds no bin.
+/// regression read the filtered values at the 2x2 bin centres around it (FilterAt), bilinearly,
+/// skipping centres whose window holds no bin. The filtered values are the store's texel level:
+/// computed once, by whichever thread needs one first, for every thread.
 template <typename Bin>
-glm::vec3 FilteredReconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins,
-                              const HitRecord& h, LevelCells<Bin>& cells, TextureFilterKind kind,
-                              int r) {
+glm::vec3 FilteredReconstruct(const TextureSpaceCache& tsc,
+                              const TextureStore<Bin, FilteredValue>& store, const HitRecord& h,
+                              LevelCells<Bin>& cells, TextureFilterKind kind, int r) {
+    const BinTable<Bin>& bins = store.Samples();
     const MeshGrids& g = tsc.Grids(h.mesh);
     const int face = h.Face(), level = h.Level();
     const int res = g.Res(face, level);
@@ -315,21 +309,33 @@ glm::vec3 FilteredReconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>&
     const float x = u * float(res) - 0.5f, y = v * float(res) - 0.5f;
     const int i0 = int(std::floor(x)), j0 = int(std::floor(y));
     const float fx = x - float(i0), fy = y - float(j0);
+    FilteredCell& cell = cells.filtered[size_t((i0 & 1) | ((j0 & 1) << 1))];
+    if (cell.mesh != h.mesh || cell.face != face || cell.level != level || cell.i0 != i0 ||
+        cell.j0 != j0) {
+        const BinWindow window = WindowOf(kind, r);
+        // Centres lie in [-1, res] (a sample's cell reaches half a bin past the face's edge):
+        // keys shifted by one, on a grid of res + 2 a side, which a face at the finest
+        // resolution would overflow (its centres are filtered uncached).
+        const int side = res + 2;
+        for (int k = 0; k < 4; ++k) {
+            const int i = i0 + (k & 1), j = j0 + (k >> 1);
+            auto filter = [&] {
+                return FilterAt(g, bins, face, level, res, i, j, window, cells.fineMemo);
+            };
+            cell.f[k] =
+                side <= TexelKey::kMaxResolution
+                    ? store.Filtered(TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
+                                              uint16_t(i + 1), uint16_t(j + 1)},
+                                     side, filter)
+                    : filter();
+        }
+        cell.mesh = h.mesh, cell.face = face, cell.level = level, cell.i0 = i0, cell.j0 = j0;
+    }
     glm::vec3 sum(0.0f);
     float wsum = 0.0f;
     for (int k = 0; k < 4; ++k) {
-        const int i = i0 + (k & 1), j = j0 + (k >> 1);
         const float w = ((k & 1) ? fx : 1.0f - fx) * ((k >> 1) ? fy : 1.0f - fy);
-        const uint64_t local = TexelKey{g.FaceOffset() + uint32_t(face), uint8_t(level),
-                                        uint16_t(i + kPad), uint16_t(j + kPad)}
-                                   .Pack();
-        FilteredMemo::Entry& m =
-            cells.filtered.at[(local * 0x9E3779B97F4A7C15ull) >> (64 - FilteredMemo::kLog2)];
-        if (m.key != local) {
-            m.key = local;
-            m.f = FilterAt(g, bins, face, level, res, i, j, WindowOf(kind, r), cells.fineMemo);
-        }
-        if (m.f.weight > 0.0f) sum += w * m.f.value, wsum += w;
+        if (cell.f[k].weight > 0.0f) sum += w * cell.f[k].value, wsum += w;
     }
     return wsum > 0.0f ? sum / wsum : glm::vec3(0.0f);
 }
@@ -339,13 +345,14 @@ glm::vec3 FilteredReconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>&
 /// k = 0, h's level alone (its record then names the level of a stochastic blend); the same
 /// where h's level is its face's coarsest (both levels' bins were clamped to it).
 template <typename Bin, typename Variance>
-glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins, const HitRecord& h,
-                      LevelCells<Bin>& cells, double k, Variance&& variance) {
+glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const TextureStore<Bin, FilteredValue>& store,
+                      const HitRecord& h, LevelCells<Bin>& cells, double k, Variance&& variance) {
     // An object whose material sets a filter the bins serve reads them through it.
     const int object = tsc.ObjectOfMesh(h.mesh);
     const TextureFilterKind kind = tsc.FilterOf(object);
     if (HitFilterLevels(kind, 0) >= 0)
-        return FilteredReconstruct(tsc, bins, h, cells, kind, tsc.PassRadiusOf(object));
+        return FilteredReconstruct(tsc, store, h, cells, kind, tsc.PassRadiusOf(object));
+    const BinTable<Bin>& bins = store.Samples();
     const MeshGrids& g = tsc.Grids(h.mesh);
     const int face = h.Face(), level = h.Level();
     const float u = h.U(), v = h.V();
@@ -360,28 +367,30 @@ glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const BinTable<Bin>& bins, c
     const glm::vec3 d = coarse.mean - fine.mean;
     return fine.mean + float(CoarseWeight(Luminance(d), variance(fine, coarse), k)) * d;
 }
-float ReconstructAo(const TextureSpaceCache& tsc, const HitBins& bins, const HitRecord& h,
+float ReconstructAo(const TextureSpaceCache& tsc, const AoHitStore& store, const HitRecord& h,
                     LevelCells<CountBin>& cells) {
-    return Reconstruct(tsc, bins, h, cells, kAoCoarseWeightK,
-                       [](const CellEstimate& fine, const CellEstimate& coarse) {
+    return Reconstruct(tsc, store, h, cells, kAoCoarseWeightK,
+                       [unit = double(tsc.HitUnit())](const CellEstimate& fine,
+                                                      const CellEstimate& coarse) {
                            // Binomial, with the coarse level's steadier mean (kept off 0 and 1,
                            // where one bin's count would claim no noise at all).
+                           // Counts in HitUnit() units: the variance of a count's worth.
                            const double p = std::clamp(double(coarse.mean.x), 0.02, 0.98);
-                           return p * (1.0 - p) * double(fine.count2) /
+                           return p * (1.0 - p) * double(fine.count2) * unit /
                                   (double(fine.count) * double(fine.count));
                        })
         .x;
 }
 /// `relativeVariance`: one binned sample's variance over its mean squared, measured over the
 /// pass (PathHitsTrace); 0 when not measured.
-glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const RadianceBins& bins,
+glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const LightHitStore& store,
                               const HitRecord& h, LevelCells<RadianceBin>& cells,
                               double relativeVariance) {
-    return Reconstruct(tsc, bins, h, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
+    return Reconstruct(tsc, store, h, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
                        [&](const CellEstimate& fine, const CellEstimate& coarse) {
                            const double y = Luminance(coarse.mean);
-                           return relativeVariance * y * y * double(fine.count2) /
-                                  (double(fine.count) * double(fine.count));
+                           return relativeVariance * y * y * double(fine.count2) *
+                                  double(tsc.HitUnit()) / (double(fine.count) * double(fine.count));
                        });
 }
 
@@ -418,9 +427,9 @@ void ResolveTile(const Context& c, const tbb::blocked_range2d<int>& r, int spp, 
 /// Hit-binned AO, phase 2 of a pass, for one tile: each camera sample's reconstruction, added to
 /// its pixel in sample order.
 void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
-                   const HitRecord* records, const float* ownAo, const HitBins& bins, double* sum,
-                   double* own) {
-    LevelCells<CountBin>& cells = ThreadCells(bins);
+                   const HitRecord* records, const float* ownAo, const AoHitStore& store,
+                   double* sum, double* own) {
+    LevelCells<CountBin>& cells = ThreadCells(store.Samples());
     ResolveTile(
         c, r, s1 - s0, sum, own, [](size_t) { return glm::dvec3(0.0); },
         [&](size_t i) {
@@ -429,7 +438,7 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
                 const glm::dvec3 v(h.mesh == PassTexels::kMiss ? 0.0 : 1.0);
                 return ResolvedSample{v, v};
             }
-            return ResolvedSample{glm::dvec3(double(ReconstructAo(*c.tsc, bins, h, cells))),
+            return ResolvedSample{glm::dvec3(double(ReconstructAo(*c.tsc, store, h, cells))),
                                   glm::dvec3(double(ownAo[i]))};
         });
 }
@@ -439,9 +448,9 @@ void AoHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
 /// (`relativeVariance`: see ReconstructRadiance).
 void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                      const HitRecord* records, const BinnedHit* binnedHits,
-                     const glm::dvec3* perHit, const RadianceBins& bins, double relativeVariance,
+                     const glm::dvec3* perHit, const LightHitStore& store, double relativeVariance,
                      double* sum, double* own) {
-    LevelCells<RadianceBin>& cells = ThreadCells(bins);
+    LevelCells<RadianceBin>& cells = ThreadCells(store.Samples());
     ResolveTile(
         c, r, s1 - s0, sum, own, [&](size_t pixel) { return perHit[pixel]; },
         [&](size_t i) {
@@ -449,7 +458,7 @@ void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s
             const BinnedHit& b = binnedHits[i];
             return ResolvedSample{
                 glm::dvec3(b.albedo *
-                           ReconstructRadiance(*c.tsc, bins, records[i], cells, relativeVariance)),
+                           ReconstructRadiance(*c.tsc, store, records[i], cells, relativeVariance)),
                 glm::dvec3(b.albedo * b.light)};
         });
 }

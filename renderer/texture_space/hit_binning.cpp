@@ -119,12 +119,13 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     HitBins::Batch batch(bins);
     Cursor own(r, s0);
     const float perRay = 1.0f / float(std::max(c.opt.aoSamples, 1));
+    const uint32_t unit = c.tsc->HitUnit();
     for (size_t i = 0; i < total; ++i, own.Next(r, s0, s1)) {
         const CameraSample& p = cs[i];
         if (!p.found || p.hit.object < 0) continue;
         ownAo[(size_t(own.y) * size_t(c.opt.width) + size_t(own.x)) * size_t(spp) +
               size_t(own.s - s0)] = float(open[i]) * perRay;
-        const CountBin::Value v{open[i], uint32_t(c.opt.aoSamples)};
+        const CountBin::Value v{open[i] * unit, uint32_t(c.opt.aoSamples) * unit};
         batch.Add(keys[2 * i], v);
         if (!(keys[2 * i + 1] == keys[2 * i])) batch.Add(keys[2 * i + 1], v);  // not clamped
     }
@@ -237,6 +238,7 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
                  float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins) {
     RadianceBins::Batch batch(bins);
     const int spp = s1 - s0;
+    const uint64_t unit = c.tsc->HitUnit();
     for (int y = r.rows().begin(); y < r.rows().end(); ++y)
         for (int x = r.cols().begin(); x < r.cols().end(); ++x)
             for (int s = s0; s < s1; ++s) {
@@ -250,6 +252,8 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
                               h.V(), b.texelLevel, bias, keys);
                 RadianceBin::Value v;
                 RadianceBin::FromRadiance(&b.light.x, &v);  // finite: checked when shaded
+                for (uint64_t& w : v.sum) w *= unit;
+                v.count *= unit;
                 batch.Add(keys[0], v);
                 if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
                 h.faceLevel =

@@ -61,6 +61,11 @@ bool TextureSpaceCache::Uses(TextureFilterKind kind) const {
     return std::find(filterOf_.begin(), filterOf_.end(), kind) != filterOf_.end();
 }
 
+size_t TextureSpaceCache::StoreTexelBytes(size_t blocks) const {
+    const bool filtered = Uses(TextureFilterKind::Gaussian) || Uses(TextureFilterKind::Regression);
+    return filtered ? blocks * 4 * AoHitStore::kTexelBytes : 64 * AoHitStore::kTexelBytes;
+}
+
 bool TextureSpaceCache::AnyFootprint() const {
     for (size_t o = 0; o < filterOf_.size(); ++o)
         if (filterOf_[o] != TextureFilterKind::None && radiusOf_[o] > 0) return true;
@@ -234,6 +239,7 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
     AssignFilters(rs.scene());
     frame_ = 0;
     pass_ = 0;
+    hitStoreFrame_ = -1, temporalHitBias_ = INT_MIN;
     Invalidate();
     return true;
 }

@@ -95,12 +95,23 @@
 // half the radius wide, so that the window of radius r texels is a few bins wide, and filter
 // the bins around each bin centre (Gaussian weights of sigma r / 2 texels times the counts, or
 // a count-weighted plane fit), which the sample reads bilinearly. The radius shrinks with the
-// passes as the grid's footprints do. Softshadow needs occluder distances the bins do not hold:
-// the command line refuses it here (CheckMaterialFilters).
+// passes as the grid's footprints do. The bins and the filtered bin centres are the two levels
+// of one store (texcache/texture_store.h, AoStore and LightStore): the sample level the hits
+// fill, the texel level the filters fill once for every thread. Softshadow needs occluder distances
+// the bins do not hold: the command line refuses it here (CheckMaterialFilters).
 //
 // The passes are deterministic (streams of key and pass, whatever thread shades a sample), so
 // the same seed still gives the same image for any thread count. Temporal accumulation
 // (--temporal-alpha) accumulates over frames instead and keeps one pass per frame.
+//
+// Temporal accumulation at the hits. The store is not emptied between frames: its sums and
+// counts are scaled by alpha (eq. 6's weight of the history, in 1/65536) and the frame's hits
+// added, an exponential moving average of the bins kept in the objects' own texture space, so
+// that it follows rigidly moving objects as the grid's history does. The scaling is integer
+// (texcache/hit_bins.h, Scale), so the image stays the same for any thread count; each hit adds
+// HitUnit() = 256 units of count so that rounding a decayed count costs a fraction of a percent
+// instead of half a count. The bins' level is chosen once, at the first frame, for the
+// 1 / (1 - alpha) frames of samples the bins hold (a level that moved would orphan the history).
 #pragma once
 #include <algorithm>
 #include <climits>
@@ -118,6 +129,7 @@
 #include "texcache/huge_pages.h"
 #include "texcache/shading_cache.h"
 #include "texcache/temporal_history.h"
+#include "texcache/texture_store.h"
 #include "texcache/visible_texels.h"
 
 namespace texcache {
@@ -164,6 +176,12 @@ struct HitRecord {
 struct BinnedHit {
     glm::vec3 light, albedo;
     int32_t texelLevel;
+};
+/// A material filter's value at a bin centre (bin_reconstruction.cpp, FilterAt): `weight` is the
+/// count behind it, 0 where its window holds no bin. The texel level of the hit stores.
+struct FilteredValue {
+    glm::vec3 value{0.0f};
+    float weight = 0.0f;
 };
 /// Hit binning's reconstruction (the note at the top): how far a sample's estimate moves from
 /// its bins' level towards the level above, given the two estimates' (luminance) difference `d`
@@ -215,6 +233,12 @@ struct PassScratch {
     }
 };
 }  // namespace internal
+
+/// The one texture-space store of hit shading (texcache/texture_store.h): AO's counts, or the
+/// path and direct integrators' diffuse light, at the sample level; the material filters' values
+/// at bin centres at the texel level.
+using AoHitStore = TextureStore<CountBin, internal::FilteredValue>;
+using LightHitStore = TextureStore<RadianceBin, internal::FilteredValue>;
 
 class TextureSpaceCache {
 public:
@@ -361,18 +385,22 @@ public:
     /// here from render to render like the visibility set: a warm frame then reuses its pages
     /// instead of faulting in 24 bytes per camera sample again. Empty until a render uses it.
     internal::PassScratch& PassTexelScratch() { return passTexels_; }
-    /// Hit-binned AO's bins: a table of at least `minBlocks` blocks, kept from pass to pass and
-    /// render to render (it only grows), and the records of a pass's camera samples (render.cpp).
-    HitBins& Bins(size_t minBlocks) {
-        if (!bins_ || bins_->NumBlocks() < minBlocks) bins_ = std::make_unique<HitBins>(minBlocks);
-        return *bins_;
-    }
-    /// Hit-binned diffuse light's bins (the path integrator), kept as Bins() keeps its own.
-    RadianceBins& LightBins(size_t minBlocks) {
-        if (!lightBins_ || lightBins_->NumBlocks() < minBlocks)
-            lightBins_ = std::make_unique<RadianceBins>(minBlocks);
-        return *lightBins_;
-    }
+    /// Hit-binned AO's store: a sample level of at least `minBlocks` blocks, kept from pass to
+    /// pass and render to render (it only grows), its texel level sized to it (StoreTexelBytes).
+    AoHitStore& AoStore(size_t minBlocks) { return StoreOf(aoStore_, minBlocks); }
+    /// Hit-binned diffuse light's store (the path and direct integrators), kept as AoStore's.
+    LightHitStore& LightStore(size_t minBlocks) { return StoreOf(lightStore_, minBlocks); }
+    /// Temporal accumulation at the hits (--temporal-alpha with TextureSamples::Hits; the note
+    /// at the top): each hit adds HitUnit() units of count, so that the decay of the stores'
+    /// sums between frames (alpha in fixed point) rounds a few counts by a fraction of a percent
+    /// rather than by half a count; 1 without temporal accumulation.
+    uint32_t HitUnit() const { return options_.temporalAlpha > 0.0f ? 256u : 1u; }
+    /// The frame whose hits the stores hold, for temporal accumulation (-1: none, or stale).
+    int64_t HitStoreFrame() const { return hitStoreFrame_; }
+    void SetHitStoreFrame(int64_t frame) { hitStoreFrame_ = frame; }
+    /// The bins' level offset temporal accumulation keeps from its first frame (INT_MIN: not
+    /// chosen): a level that moved between frames would leave the history at the old one.
+    int& TemporalHitBias() { return temporalHitBias_; }
     /// At least `n` records on huge pages (uninitialised; kept from render to render).
     internal::HitRecord* HitRecords(size_t n) {
         if (n > hitRecordCount_) {
@@ -431,7 +459,8 @@ public:
     size_t BytesUsed() const {
         return cache_.BytesUsed() + (history_ ? history_->BytesUsed() : 0) +
                (visible_ ? visible_->Bytes() : 0) + passTexels_.Bytes() +
-               (bins_ ? bins_->BytesUsed() : 0) + (lightBins_ ? lightBins_->BytesUsed() : 0) +
+               (aoStore_ ? aoStore_->BytesUsed() : 0) +
+               (lightStore_ ? lightStore_->BytesUsed() : 0) +
                hitRecordCount_ * sizeof(internal::HitRecord) +
                hitAlbedoCount_ * sizeof(internal::BinnedHit);
     }
@@ -441,6 +470,19 @@ public:
 
 private:
     void AssignFilters(const Scene& scene);
+    /// A store's texel level for a sample level of `blocks` blocks: a texel for one bin in four
+    /// when an object's material filters its bins (FilterAt's values), else a token one.
+    size_t StoreTexelBytes(size_t blocks) const;
+    template <typename Store>
+    Store& StoreOf(std::unique_ptr<Store>& store, size_t minBlocks) {
+        // A texel level too small for the filters of the current settings (Reconfigure) would
+        // be correct but filter its texels again and again: a new store then too.
+        const size_t texelBytes = StoreTexelBytes(Store::SampleLevel::BlocksFor(minBlocks));
+        if (!store || store->Samples().NumBlocks() < minBlocks ||
+            store->TexelBytes() + Store::kTexelBytes <= texelBytes)
+            store = std::make_unique<Store>(minBlocks, texelBytes);
+        return *store;
+    }
     /// Sets the pass and its filter radii (BeginPass without the eviction).
     void BeginPassRadii(uint32_t pass);
     /// The mean of the cached texels among the 8 around `texel` on its face and level; false
@@ -460,17 +502,19 @@ private:
     std::unique_ptr<TemporalHistory<glm::vec3>> history_;
     std::unique_ptr<VisibleTexels> visible_;
     internal::PassScratch passTexels_;
-    std::unique_ptr<HitBins> bins_;
+    std::unique_ptr<AoHitStore> aoStore_;
     struct Free {
         void operator()(void* p) const { std::free(p); }
     };
     std::unique_ptr<internal::HitRecord[], Free> hitRecords_;
     size_t hitRecordCount_ = 0;
-    std::unique_ptr<RadianceBins> lightBins_;
+    std::unique_ptr<LightHitStore> lightStore_;
     std::unique_ptr<void, Free> hitAlbedos_;
     size_t hitAlbedoCount_ = 0;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
+    int64_t hitStoreFrame_ = -1;
+    int temporalHitBias_ = INT_MIN;
     bool mayHoldTexels_ = false;  ///< see MayHoldTexels
     bool neighbourReuse_ = false;
 };

@@ -29,6 +29,7 @@
 #pragma once
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -62,6 +63,12 @@ struct CountBin {
     static Value Load(const std::atomic<uint64_t>* w) {
         const uint64_t x = w->load(std::memory_order_relaxed);
         return {uint32_t(x), uint32_t(x >> 32)};
+    }
+    /// A word of the bin scaled by keep / 2^16 (keep <= 2^16), each half rounded to nearest.
+    static uint64_t ScaleWord(uint64_t x, uint32_t keep) {
+        const uint64_t s = (uint32_t(x) * uint64_t(keep) + 0x8000u) >> 16;
+        const uint64_t t = ((x >> 32) * uint64_t(keep) + 0x8000u) >> 16;
+        return (t << 32) | s;
     }
     static uint32_t SatAdd(uint32_t a, uint32_t b) {
         const uint32_t s = a + b;
@@ -112,6 +119,11 @@ struct RadianceBin {
         v.count = w[3].load(std::memory_order_relaxed);
         return v;
     }
+    /// A word of the bin scaled by keep / 2^16 (keep <= 2^16), rounded to nearest.
+    static uint64_t ScaleWord(uint64_t x, uint32_t keep) {
+        // x keep / 2^16 = (x >> 16) keep + (x & 0xFFFF) keep / 2^16, each term within 64 bits.
+        return (x >> 16) * keep + (((x & 0xFFFFu) * keep + 0x8000u) >> 16);
+    }
     static uint64_t SatAdd(uint64_t a, uint64_t b) {
         const uint64_t s = a + b;
         return s < a ? UINT64_MAX : s;
@@ -137,14 +149,19 @@ public:
     /// A table of `minBlocks` blocks of 4x4 bins or more (a power of two, at least 8):
     /// BytesFor(NumBlocks()) bytes, allocated once.
     explicit BinTable(size_t minBlocks) {
-        size_t blocks = 8;
-        int log2 = 3;
-        while (blocks < minBlocks) blocks *= 2, ++log2;
+        const size_t blocks = BlocksFor(minBlocks);
         blocks_ = blocks;
-        shift_ = 64 - log2;
+        shift_ = 64 - std::countr_zero(blocks);
         bins_.reset(static_cast<Block*>(AllocateHugePages(blocks * sizeof(Block))));
         for (size_t i = 0; i < blocks; ++i) new (&bins_[i]) Block;
         Clear();
+    }
+
+    /// The blocks of a table of at least `minBlocks`: a power of two, at least 8.
+    static constexpr size_t BlocksFor(size_t minBlocks) {
+        size_t blocks = 8;
+        while (blocks < minBlocks) blocks *= 2;
+        return blocks;
     }
 
     /// Empties every bin (between passes; never while Add or Find run).
@@ -196,6 +213,37 @@ public:
             }
         }
         return lost;
+    }
+
+    /// Scales every bin by keep / 2^16 (keep <= 2^16; Bin::ScaleWord, integer arithmetic, so the
+    /// same on any machine) and releases the blocks that fall to zero: the decay of a moving
+    /// average over frames, whose old blocks would otherwise fill the table. Never while Add or
+    /// Find run. A new Generation.
+    void Scale(uint32_t keep) {
+        std::vector<uint64_t> records;
+        ExportBlocks(&records);
+        ScaleRecords(&records, keep);
+        uint64_t dropped = Dropped();
+        Clear();
+        dropped += AddBlocks(records.data(), records.size() / kRecordWords);
+        dropped_.store(dropped, std::memory_order_relaxed);
+    }
+    /// Scales records of ExportBlocks as Scale scales the bins, and removes those that fall to
+    /// zero.
+    static void ScaleRecords(std::vector<uint64_t>* records, uint32_t keep) {
+        size_t kept = 0;
+        for (size_t r = 0; r < records->size(); r += kRecordWords) {
+            uint64_t* in = records->data() + r;
+            uint64_t* out = records->data() + kept;
+            bool any = false;
+            out[0] = in[0];
+            for (size_t k = 1; k < kRecordWords; ++k) {
+                out[k] = Bin::ScaleWord(in[k], keep);
+                any = any || out[k] != 0;
+            }
+            if (any) kept += kRecordWords;
+        }
+        records->resize(kept);
     }
 
     /// The value of bin `key` (zero when nothing was added to it).
