@@ -42,9 +42,10 @@ sanitizer_build() {
 
 phase "ThreadSanitizer: libtexcache tests (build-tsan/)"
 # The cache library's tests of what render threads share: texel keys, the direct-mapped cache,
-# footprints and visible sets, the shading cache, the record cache and the hit bins.
+# footprints and visible sets, the shading cache, the record cache, the hit bins and the store
+# built on them.
 sanitizer_build "$root/build-tsan" thread --target texel_key_test direct_mapped_cache_test \
-    footprint_test shading_cache_test record_cache_test hit_bins_test
+    footprint_test shading_cache_test record_cache_test hit_bins_test texture_store_test
 took "TSan build"
 t0=$SECONDS
 # halt_on_error: a race fails the test instead of only printing a report.
