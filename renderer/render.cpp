@@ -17,6 +17,7 @@
 #include <cmath>
 #include <ctime>
 #include <memory>
+#include <optional>
 
 #include <tbb/blocked_range2d.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -69,16 +70,25 @@ private:
     VisibleTexels& visible_;
 };
 
+/// The right eye of a stereo render shading at the hits (RenderEyesAtHits): its context, sums
+/// and rays. Its camera samples are binned into the left eye's store beside the left eye's.
+struct SecondEye {
+    const Context* c;
+    FrameSums* sums;
+    tbb::enumerable_thread_specific<RayCounts>* counts;
+};
+
 /// Renders passes of whole sample indices from opt.firstSample until opt.spp samples are done
 /// or, with a time budget (counted from `start`), until the next pass would not fit in it;
 /// returns the sample index reached. A pixel's result depends only on its sample indices and the
 /// passes (first bounces are a net per pass: PixelSequence), so the image is the same for any
 /// thread count. Over many ranks (opt.ranks) each renders its bands of rows (RowSplit) and the
 /// ranks combine the pass's hit bins and noise before reading them back, so that every pixel
-/// gets the value one process gives it.
+/// gets the value one process gives it. With a `second` eye (shading at the hits only), each pass
+/// bins both eyes' camera samples into one store and reads each eye's back from it.
 int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
               tbb::enumerable_thread_specific<RayCounts>& counts,
-              std::chrono::steady_clock::time_point start) {
+              std::chrono::steady_clock::time_point start, const SecondEye* second = nullptr) {
     using Clock = std::chrono::steady_clock;
     const RenderOptions& opt = c.opt;
     const int W = opt.width, y0 = opt.rowBegin, y1 = opt.rowEnd > 0 ? opt.rowEnd : opt.height;
@@ -97,12 +107,18 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             return std::max(elapsed() / opt.seconds, double(pixelSamplesDone) / totalWork);
         return double(pixelSamplesDone.load()) / totalWork;
     });
-    auto forTiles = [&](auto&& tile) {
+    const int eyes = second ? 2 : 1;
+    const Context* const eyeContext[2] = {&c, second ? second->c : nullptr};
+    FrameSums* const eyeSums[2] = {&sums, second ? second->sums : nullptr};
+    tbb::enumerable_thread_specific<RayCounts>* const eyeCounts[2] = {
+        &counts, second ? second->counts : nullptr};
+    // The tiles of eye `eye`, its rays counted as its own.
+    auto forEyeTiles = [&](int eye, auto&& tile) {
         auto run = [&](const tbb::blocked_range2d<int>& r) {
             // Denormals off in every worker: Embree wants it and it saves stalls in shading.
             _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
             _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-            tile(r, counts.local());
+            tile(r, eyeCounts[eye]->local());
         };
         if (!group) {
             tbb::parallel_for(tbb::blocked_range2d<int>(y0, y1, 8, 0, W, 8), run);
@@ -117,6 +133,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                                                   b.cols().begin(), b.cols().end(), 8));
             });
     };
+    auto forTiles = [&](auto&& tile) { forEyeTiles(0, tile); };
     const bool hits = c.tsc && ShadesAtHits(opt);
     // Progressive texture space: passes of opt.texture.passSpp camera samples, each after the
     // first starting a new pass of the cache (fresh shading, jittered sample positions, smaller
@@ -154,17 +171,20 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     // samples a pixel), and a longer one runs as several.
     const size_t framePixels = std::max<size_t>(1, size_t(W) * size_t(opt.height));
     const size_t recordBytes = sizeof(HitRecord) + (pathHits ? sizeof(BinnedHit) : sizeof(float));
-    const int hitSpp = int(
-        std::clamp<size_t>(kMaxHitRecordBytes / (recordBytes * framePixels), 1, size_t(INT_MAX)));
+    const int hitSpp = int(std::clamp<size_t>(
+        kMaxHitRecordBytes / (recordBytes * framePixels * size_t(eyes)), 1, size_t(INT_MAX)));
     // Hit-binned diffuse light: each pixel's per-hit part of a pass (misses, lights, glossy
     // hits, unbinned direct light), written by the binning phase, added by the resolve.
-    std::vector<glm::dvec3> perHit(pathHits ? framePixels : 0);
-    std::vector<glm::dvec2> pixelNoise(pathHits ? framePixels : 0);  // see PathHitsTrace
+    // Each eye's frame after the other's (stereo).
+    std::vector<glm::dvec3> perHit(pathHits ? size_t(eyes) * framePixels : 0);
+    std::vector<glm::dvec2> pixelNoise(pathHits ? size_t(eyes) * framePixels
+                                                : 0);  // see PathHitsTrace
     std::vector<double> rowNoise(pathHits ? 2 * size_t(y1 - y0) : 0);
     // Hit-binned AO: each camera sample's own estimate, written by the binning phase, added to
     // sums.own by the resolve (a pass binned again writes it again).
     std::vector<float> ownAo;
-    if (hits) sums.own.assign(4 * framePixels, 0.0);
+    if (hits)
+        for (int e = 0; e < eyes; ++e) eyeSums[e]->own.assign(4 * framePixels, 0.0);
     while (done < sppCap) {
         const int s0 = done,
                   s1 = std::min(sppCap, done + (hits ? std::min(passSpp, hitSpp) : passSpp));
@@ -201,25 +221,37 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             // back at every camera sample. A table too small for the pass's bins (an add found no
             // room) is doubled and the pass binned again, so no hit is ever lost; the bins, and
             // so the image, do not depend on the table's size.
-            HitRecord* const records = c.tsc->HitRecords(passSamples);
-            if (!pathHits && ownAo.size() < passSamples) ownAo.resize(passSamples);
-            BinnedHit* const binnedHits = pathHits ? c.tsc->BinnedHits(passSamples) : nullptr;
+            // Stereo: each eye's records, own estimates and light after the other's.
+            HitRecord* const records = c.tsc->HitRecords(size_t(eyes) * passSamples);
+            if (!pathHits && ownAo.size() < size_t(eyes) * passSamples)
+                ownAo.resize(size_t(eyes) * passSamples);
+            BinnedHit* const binnedHits =
+                pathHits ? c.tsc->BinnedHits(size_t(eyes) * passSamples) : nullptr;
+            auto eyeRecords = [&](int e) { return records + size_t(e) * passSamples; };
+            auto eyeBinned = [&](int e) {
+                return binnedHits ? binnedHits + size_t(e) * passSamples : nullptr;
+            };
             // Diffuse light: every hit shaded first, its bins' level then picked from the pass's
             // noise (the variance of the binned light among each pixel's samples, summed over
             // the pixels in order, so the same for any thread count, over their means squared).
             double noiseVar = 0.0, noiseMean2 = 0.0;
             if (pathHits) {
-                forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-                    PathHitsTrace(c, r, s0, s1, records, binnedHits, perHit.data(),
-                                  pixelNoise.data(), rc);
-                });
+                for (int e = 0; e < eyes; ++e)
+                    forEyeTiles(e, [&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                        PathHitsTrace(*eyeContext[e], r, s0, s1, eyeRecords(e), eyeBinned(e),
+                                      perHit.data() + size_t(e) * framePixels,
+                                      pixelNoise.data() + size_t(e) * framePixels, rc);
+                    });
                 // Summed row by row, then the rows in order: the same sum whichever rank
                 // rendered each row (a row's sums come from one rank; the others add zeros).
+                // Stereo: the noise of both eyes' samples, which share the bins.
                 for (int y = y0; y < y1; ++y) {
                     double v = 0.0, m = 0.0;
                     if (split.Owns(y))
-                        for (size_t p = size_t(y) * W; p < size_t(y + 1) * W; ++p)
-                            v += pixelNoise[p].x, m += pixelNoise[p].y;
+                        for (int e = 0; e < eyes; ++e)
+                            for (size_t p = size_t(e) * framePixels + size_t(y) * W;
+                                 p < size_t(e) * framePixels + size_t(y + 1) * W; ++p)
+                                v += pixelNoise[p].x, m += pixelNoise[p].y;
                     rowNoise[2 * size_t(y - y0)] = v, rowNoise[2 * size_t(y - y0) + 1] = m;
                 }
                 if (group) group->SumDisjoint(rowNoise.data(), rowNoise.size());
@@ -227,6 +259,9 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     noiseVar += rowNoise[i], noiseMean2 += rowNoise[i + 1];
             }
             // Temporal accumulation: the bins hold about 1 / (1 - alpha) frames' samples.
+            // Stereo keeps one eye's levels: the surfaces both eyes see get both eyes' samples
+            // in bins of the mono render's size (on car AO, levels picked for twice the samples
+            // give finer bins and lose that gain: results/stereo.md).
             const int levelSpp = temporalHits
                                      ? int(std::lround(double(s1 - opt.firstSample) /
                                                        (1.0 - double(opt.texture.temporalAlpha))))
@@ -289,9 +324,10 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                     store.Clear();
                     Table& bins = store.Samples();
                     if (!group || group->Rank() == 0) bins.AddBlocks(carried.data(), carriedBlocks);
-                    forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
-                        bin(r, bins, rc);
-                    });
+                    for (int e = 0; e < eyes; ++e)
+                        forEyeTiles(e, [&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
+                            bin(e, r, bins, rc);
+                        });
                     agreed[0] = bins.Dropped(), agreed[1] = bins.NumBlocks() >= maxBlocks;
                     if (group) {
                         BinAccumulators<Table> acc(bins);
@@ -306,33 +342,41 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
                 const Table& bins = store.Samples();
                 if (temporalHits) c.tsc->SetHitStoreFrame(int64_t(c.tsc->Frame()));
                 binBlocksUsed = bins.BlocksUsed();
-                sums.hitBinsDropped += bins.Dropped();
-                sums.hitBinBytes = bins.BytesUsed();
-                forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts&) {
-                    resolve(r, store);
-                    pixelSamplesDone +=
-                        uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
-                });
+                for (int e = 0; e < eyes; ++e) {
+                    eyeSums[e]->hitBinsDropped += bins.Dropped();
+                    eyeSums[e]->hitBinBytes = bins.BytesUsed();
+                    forEyeTiles(e, [&](const tbb::blocked_range2d<int>& r, RayCounts&) {
+                        resolve(e, r, store);
+                        if (e == 0)
+                            pixelSamplesDone +=
+                                uint64_t(r.rows().size()) * r.cols().size() * uint64_t(s1 - s0);
+                    });
+                }
             };
             if (pathHits)
                 binAndResolve(
                     [&](size_t blocks) -> LightHitStore& { return c.tsc->LightStore(blocks); },
-                    [&](const tbb::blocked_range2d<int>& r, RadianceBins& bins, RayCounts&) {
-                        PathHitsAdd(c, r, s0, s1, bias, blend, records, binnedHits, bins);
+                    [&](int e, const tbb::blocked_range2d<int>& r, RadianceBins& bins, RayCounts&) {
+                        PathHitsAdd(*eyeContext[e], r, s0, s1, bias, blend, eyeRecords(e),
+                                    eyeBinned(e), bins);
                     },
-                    [&](const tbb::blocked_range2d<int>& r, const LightHitStore& store) {
-                        PathHitsResolve(c, r, s0, s1, records, binnedHits, perHit.data(), store,
-                                        relativeVariance, sums.rgb.data(), sums.own.data());
+                    [&](int e, const tbb::blocked_range2d<int>& r, const LightHitStore& store) {
+                        PathHitsResolve(*eyeContext[e], r, s0, s1, eyeRecords(e), eyeBinned(e),
+                                        perHit.data() + size_t(e) * framePixels, store,
+                                        relativeVariance, eyeSums[e]->rgb.data(),
+                                        eyeSums[e]->own.data());
                     });
             else
                 binAndResolve(
                     [&](size_t blocks) -> AoHitStore& { return c.tsc->AoStore(blocks); },
-                    [&](const tbb::blocked_range2d<int>& r, HitBins& bins, RayCounts& rc) {
-                        AoHitsBin(c, r, s0, s1, bias, records, ownAo.data(), bins, rc);
+                    [&](int e, const tbb::blocked_range2d<int>& r, HitBins& bins, RayCounts& rc) {
+                        AoHitsBin(*eyeContext[e], r, s0, s1, bias, eyeRecords(e),
+                                  ownAo.data() + size_t(e) * passSamples, bins, rc);
                     },
-                    [&](const tbb::blocked_range2d<int>& r, const AoHitStore& store) {
-                        AoHitsResolve(c, r, s0, s1, records, ownAo.data(), store, sums.rgb.data(),
-                                      sums.own.data());
+                    [&](int e, const tbb::blocked_range2d<int>& r, const AoHitStore& store) {
+                        AoHitsResolve(*eyeContext[e], r, s0, s1, eyeRecords(e),
+                                      ownAo.data() + size_t(e) * passSamples, store,
+                                      eyeSums[e]->rgb.data(), eyeSums[e]->own.data());
                     });
         } else if (VisibleTexels* visible = fc.Visible()) {
             forTiles([&](const tbb::blocked_range2d<int>& r, RayCounts& rc) {
@@ -363,7 +407,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
         if (c.tsc && opt.visibilityPrepass != VisibilityPrepass::Only) c.tsc->NoteLookups();
         done = s1;
         ++passesRun;
-        sums.passes = passesRun;
+        for (int e = 0; e < eyes; ++e) eyeSums[e]->passes = passesRun;
         if (opt.seconds > 0.0f) {
             // Over many ranks rank 0's clock decides for all: the budget is the job's.
             double clock[2] = {std::chrono::duration<double>(Clock::now() - passStart).count(),
@@ -405,7 +449,12 @@ BudgetStep internal::NextBudgetStep(bool extending, int passesRun, double left, 
     return BudgetStep::Extend;
 }
 
-RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpaceCache* cache) {
+namespace {
+
+/// Render, or with `rightOpt` (shading at the hits) both eyes of a stereo render into one store:
+/// the left eye's result returned, the right eye's in `right`.
+RenderResult RenderFrame(const RenderScene& rs, const RenderOptions& opt, TextureSpaceCache* cache,
+                         const RenderOptions* rightOpt = nullptr, RenderResult* right = nullptr) {
     using Clock = std::chrono::steady_clock;
     const auto start = Clock::now();
     const std::clock_t cpuStart = std::clock();
@@ -443,7 +492,26 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     tbb::enumerable_thread_specific<RayCounts> counts;
     const uint64_t sent0 = opt.ranks ? opt.ranks->BytesSent() : 0;
     const uint64_t received0 = opt.ranks ? opt.ranks->BytesReceived() : 0;
-    const int done = RunPasses(ctx, frameCache, sums, counts, start) - opt.firstSample;
+    // The right eye: its own camera, sums and counts, the left eye's store and product records
+    // (the per-pixel cache counts are the left eye's only).
+    std::optional<Context> rightCtx;
+    std::optional<FrameCache> rightCache;
+    FrameSums rightSums;
+    tbb::enumerable_thread_specific<RayCounts> rightCounts;
+    SecondEye second{};
+    if (rightOpt) {
+        if (!ctx.tsc || !ShadesAtHits(opt) || (opt.ranks && opt.ranks->Size() > 1))
+            throw InputError("render options",
+                             "both eyes into one store need texture-space shading at the hits "
+                             "on one process");
+        rightCtx.emplace(rs, *rightOpt);
+        rightCache.emplace(*rightCtx, *rightOpt, ctx.tsc, FrameCache::Prepass::None);
+        rightCtx->psrCache = ctx.psrCache, rightCtx->psrStats = ctx.psrStats;
+        rightSums.rgb.assign(numPixels * 3, 0.0);
+        second = {&*rightCtx, &rightSums, &rightCounts};
+    }
+    const int done = RunPasses(ctx, frameCache, sums, counts, start, rightOpt ? &second : nullptr) -
+                     opt.firstSample;
     const uint64_t passBytes =
         opt.ranks ? opt.ranks->BytesSent() + opt.ranks->BytesReceived() - sent0 - received0 : 0;
     if (opt.ranks && opt.ranks->Size() > 1) {
@@ -459,20 +527,30 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
             GatherRows(g, split, opt.pixelCache->data(), W * sizeof(PixelCacheCounts));
     }
 
-    RenderResult result;
-    result.beauty = Image(W, H, 3);
-    for (size_t p = 0; p < numPixels * 3; ++p) result.beauty.data[p] = float(sums.rgb[p] / done);
-    // Hit binning: the pixels' own samples as the finest level (texture_space.h).
-    if (!sums.own.empty())
-        CombineWithOwnSamples(sums.rgb.data(), sums.own.data(), W, opt.rowBegin, rowEnd, done,
-                              result.beauty.data.data());
-    result.aovs = AovLayers(sums.aovs, opt.aovs, W, H, done);
-    for (const RayCounts& rc : counts) {
-        result.stats.cameraRays += rc.camera;
-        result.stats.cameraRaysCulled += rc.cameraCulled;
-        result.stats.shadowRays += rc.shadow;
-        result.stats.bounceRays += rc.bounce;
-    }
+    // An eye's image, AOVs, rays and hit-bin statistics from its sums.
+    auto eyeResult = [&](const RenderOptions& o, const FrameSums& fs,
+                         const tbb::enumerable_thread_specific<RayCounts>& rays) {
+        RenderResult er;
+        er.beauty = Image(W, H, 3);
+        for (size_t p = 0; p < numPixels * 3; ++p) er.beauty.data[p] = float(fs.rgb[p] / done);
+        // Hit binning: the pixels' own samples as the finest level (texture_space.h).
+        if (!fs.own.empty())
+            CombineWithOwnSamples(fs.rgb.data(), fs.own.data(), W, o.rowBegin, rowEnd, done,
+                                  er.beauty.data.data());
+        er.aovs = AovLayers(fs.aovs, o.aovs, W, H, done);
+        for (const RayCounts& rc : rays) {
+            er.stats.cameraRays += rc.camera;
+            er.stats.cameraRaysCulled += rc.cameraCulled;
+            er.stats.shadowRays += rc.shadow;
+            er.stats.bounceRays += rc.bounce;
+        }
+        er.stats.sppDone = done;
+        er.stats.hitBinsDropped = fs.hitBinsDropped;
+        er.stats.hitBinBytes = fs.hitBinBytes;
+        er.stats.passes = fs.passes;
+        return er;
+    };
+    RenderResult result = eyeResult(opt, sums, counts);
     // The other ranks' CPU time (microseconds), added to this rank's at the end: the job's work.
     uint64_t othersCpu = 0;
     if (opt.ranks && opt.ranks->Size() > 1) {
@@ -488,10 +566,6 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     for (const CacheStats& cs : frameCache.Stats()) result.stats.cache.Merge(cs);
     for (const RecordStats& ps : psrStats) result.stats.psr.Merge(ps);
     result.stats.psrBytes = psrCache ? psrCache->BytesUsed() : 0;
-    result.stats.sppDone = done;
-    result.stats.hitBinsDropped = sums.hitBinsDropped;
-    result.stats.hitBinBytes = sums.hitBinBytes;
-    result.stats.passes = sums.passes;
     if (opt.ranks) {
         result.stats.bytesSent = opt.ranks->BytesSent() - sent0;
         result.stats.bytesReceived = opt.ranks->BytesReceived() - received0;
@@ -499,7 +573,27 @@ RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpac
     }
     result.stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     result.stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC + 1e-6 * othersCpu;
+    if (rightOpt) {
+        // The eyes' passes interleave (each pass bins both, then reads both back): each eye
+        // gets half of the time, and its own rays and cache traffic.
+        *right = eyeResult(*rightOpt, rightSums, rightCounts);
+        for (const CacheStats& cs : rightCache->Stats()) right->stats.cache.Merge(cs);
+        result.stats.seconds *= 0.5, result.stats.cpuSeconds *= 0.5;
+        right->stats.seconds = result.stats.seconds,
+        right->stats.cpuSeconds = result.stats.cpuSeconds;
+    }
     return result;
+}
+
+}  // namespace
+
+RenderResult Render(const RenderScene& rs, const RenderOptions& opt, TextureSpaceCache* cache) {
+    return RenderFrame(rs, opt, cache);
+}
+
+void RenderEyesAtHits(const RenderScene& rs, const RenderOptions& left, const RenderOptions& right,
+                      TextureSpaceCache* cache, RenderResult* leftOut, RenderResult* rightOut) {
+    *leftOut = RenderFrame(rs, left, cache, &right, rightOut);
 }
 
 }  // namespace texcache

@@ -26,6 +26,13 @@ struct RenderResult {
 RenderResult Render(const RenderScene& scene, const RenderOptions& options,
                     TextureSpaceCache* cache = nullptr);
 
+/// Both eyes of a stereo render shading at the camera's hits (options differing in the eye only)
+/// through one store: each pass bins both eyes' hits together and reads each eye back from the
+/// shared bins (stereo.h). Throws InputError unless texture space shades at the hits.
+void RenderEyesAtHits(const RenderScene& scene, const RenderOptions& left,
+                      const RenderOptions& right, TextureSpaceCache* cache, RenderResult* leftOut,
+                      RenderResult* rightOut);
+
 /// The rays a per-hit AO render with `options` traces (integrator AO, no texture space), in
 /// pixel order, the same rays bit for bit: each camera ray, and after it the AO rays of its hit
 /// (none for a miss or a light). For `texcache bench rays`, whose raw Embree loop must trace what

@@ -94,6 +94,7 @@ INSTANTIATE_TEST_SUITE_P(
                  {"speed_vs_error_car-ao_seconds.png", "speed_vs_error_chess-softshadow_rays.png",
                   "sve_car-ao_ts-regression.png"}},
         Expected{"cache-size", "cache_size", 15, {"cache_size.png"}},
+        Expected{"stereo-store", "stereo_store", 2 * 3, {}},
         Expected{"filter-size",
                  "filter_size",
                  2 * 11,

@@ -46,6 +46,7 @@ const std::map<std::string, std::function<int(const experiments::Setup&)>>& Expe
         {"disocclusion", experiments::Disocclusion},
         {"cpis", experiments::Cpis},
         {"stereo", experiments::Stereo},
+        {"stereo-store", experiments::StereoStore},
         {"blur", experiments::Blur},
         {"equal-time", experiments::EqualTime},
     };

@@ -206,7 +206,7 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
            "coarser level and read back bilinearly), grid (the paper's samples at texel "
            "centres, reconstructed by --filter) or auto (hits unless an option of the grid's "
            "cache is given: --filter, --filter-radius, --footprint, "
-           "--temporal-alpha, --stereo, --overshading, --reference-cache, "
+           "--temporal-alpha, --stereo-reuse, --overshading, --reference-cache, "
            "--direct-mapped, --sample-cache-mb, --texel-cache-mb, --indirect-samples)")
         ->capture_default_str();
     cmd->add_option(
@@ -286,16 +286,19 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     group("Stereo and blur");
     cmd->add_flag("--stereo", args->stereo,
                   "Both eyes of the camera's stereo rig (scene camera 'stereo'), sharing one "
-                  "texture-space cache: writes NAME_left and NAME_right (.exr + .png)");
+                  "texture-space cache (at the hits: both eyes' hits binned into one store; "
+                  "--ts-samples grid: the second eye from the first eye's grid cache): writes "
+                  "NAME_left and NAME_right (.exr + .png)");
     cmd->add_option("--eye-separation", args->eyeSeparation,
                     "--stereo: distance between the eyes (scene units; default: the scene's, "
                     "else 1/30 of the convergence distance)");
     cmd->add_option("--convergence", args->convergence,
                     "--stereo: distance of the zero-parallax plane (default: the scene's, else "
                     "the distance to the look-at point)");
-    cmd->add_option("--stereo-reuse", args->stereoReuse,
-                    "--stereo: what the second eye takes from the first eye's cache: texels "
-                    "(those it looks up) or neighbour (also a cached texel beside a missing one)")
+    cmd->add_option(
+           "--stereo-reuse", args->stereoReuse,
+           "--stereo on the grid: what the second eye takes from the first eye's cache: texels "
+           "(those it looks up) or neighbour (also a cached texel beside a missing one)")
         ->capture_default_str();
     cmd->add_option("--visibility-filter", args->visibilityFilter,
                     "Primary-visibility filter after shading, for the noise of defocus and "

@@ -106,9 +106,9 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights) 
     t.footprint = ParseFootprintMode(a.footprint, "--footprint");
     // auto: at the hits, unless something only the grid has is asked for.
     bool gridAsked = false;
-    for (const char* o : {"--filter", "--filter-radius", "--footprint", "--stereo", "--overshading",
-                          "--reference-cache", "--direct-mapped", "--sample-cache-mb",
-                          "--texel-cache-mb", "--indirect-samples"})
+    for (const char* o : {"--filter", "--filter-radius", "--footprint", "--stereo-reuse",
+                          "--overshading", "--reference-cache", "--direct-mapped",
+                          "--sample-cache-mb", "--texel-cache-mb", "--indirect-samples"})
         gridAsked = gridAsked || a.Given(o);
     t.samples = a.tsSamples == "auto" ? AutoTextureSamples(gridAsked)
                                       : ParseTextureSamples(a.tsSamples, "--ts-samples");

@@ -197,6 +197,20 @@ int Temporal(const Setup& s);
 int Disocclusion(const Setup& s);
 int Cpis(const Setup& s);
 int Stereo(const Setup& s);
+int StereoStore(const Setup& s);
+
+/// A case of the stereo experiments (stereo, stereo-store): its label, scene file and integrator.
+struct StereoCase {
+    const char* label;
+    const char* scene;
+    IntegratorKind integrator;
+};
+/// The stereo experiments' cases: AO on the car, path-traced diffuse light on sunlit.
+std::vector<StereoCase> StereoCases();
+/// A stereo case's scene, loaded for the experiment (its lights unless AO).
+std::unique_ptr<LoadedScene> LoadStereoCase(const Setup& s, const StereoCase& c);
+/// The stereo experiments' options for a case: 4 spp, 16 AO rays, two bounces, texture space.
+RenderOptions StereoOptions(const Scene& scene, IntegratorKind integrator, int width, int height);
 int Blur(const Setup& s);
 int EqualTime(const Setup& s);
 

@@ -21,21 +21,29 @@
 
 namespace texcache::experiments {
 
-namespace {
-
 namespace fs = std::filesystem;
 
-struct Case {
-    const char* label;
-    const char* scene;
-    IntegratorKind integrator;
-};
+std::vector<StereoCase> StereoCases() {
+    return {{"car-ao", "car.json", IntegratorKind::AO},
+            {"sunlit-indirect", "sunlit.json", IntegratorKind::Path}};
+}
 
-}  // namespace
+std::unique_ptr<LoadedScene> LoadStereoCase(const Setup& s, const StereoCase& c) {
+    return LoadForExperiment(s, c.scene, c.integrator != IntegratorKind::AO);
+}
+
+RenderOptions StereoOptions(const Scene& scene, IntegratorKind integrator, int width, int height) {
+    RenderOptions o = BaseOptions(scene, integrator, width, height);
+    o.spp = 4;
+    o.aoSamples = 16;
+    o.maxDepth = 2;
+    o.texture.enabled = true;
+    o.texture.indirectSamples = 4;
+    return o;
+}
 
 int Stereo(const Setup& s) {
-    const std::vector<Case> cases = {{"car-ao", "car.json", IntegratorKind::AO},
-                                     {"sunlit-indirect", "sunlit.json", IntegratorKind::Path}};
+    const std::vector<StereoCase> cases = StereoCases();
     const int W = s.quick ? 64 : 320, H = s.quick ? 36 : 180;
     const int spp = 4, refSpp = s.quick ? 16 : 256, repeats = s.quick ? 1 : 2;
     const std::vector<double> rel =
@@ -98,15 +106,9 @@ int Stereo(const Setup& s) {
         "|---|---|---|---|---|---|---|---|---|---|---|\n",
         s.quick ? " --quick" : "", W, H, spp, repeats, refSpp);
 
-    for (const Case& c : cases) {
-        const bool lights = c.integrator != IntegratorKind::AO;
-        std::unique_ptr<LoadedScene> ls = LoadForExperiment(s, c.scene, lights);
-        RenderOptions o = BaseOptions(ls->scene, c.integrator, W, H);
-        o.spp = spp;
-        o.aoSamples = 16;
-        o.maxDepth = 2;
-        o.texture.enabled = true;
-        o.texture.indirectSamples = 4;
+    for (const StereoCase& c : cases) {
+        std::unique_ptr<LoadedScene> ls = LoadStereoCase(s, c);
+        RenderOptions o = StereoOptions(ls->scene, c.integrator, W, H);
         StereoRig rig = StereoRigOf(ls->scene.camera);
         const float unit = DefaultEyeSeparation(rig.convergence);
         // Reference of the right eye at the default separation (per hit).
@@ -197,7 +199,7 @@ int Stereo(const Setup& s) {
         p.xLabel = "eye separation (x 1/30 of the convergence distance)";
         p.yLabel = texels ? "texels the second eye filters anew, % of the first eye's"
                           : "second eye CPU time, % of the first eye's";
-        for (const Case& c : cases)
+        for (const StereoCase& c : cases)
             for (const Variant& v : variants) {
                 if (v.order == StereoOrder::Frames && c.integrator == IntegratorKind::AO) continue;
                 p.series.push_back(

@@ -117,6 +117,17 @@ StereoResult RenderStereo(const RenderScene& rs, const RenderOptions& opt, const
         cache = own.get();
     }
     if (!opt.texture.enabled) cache = nullptr;
+    if (cache && ShadesAtHits(opt)) {
+        // Shading at the hits: both eyes' hits go into one store, pass by pass (see the note).
+        RenderOptions eye[2] = {opt, opt};
+        for (int e : {0, 1}) {
+            eye[e].eyeOffset = (e == 0 ? -0.5f : 0.5f) * rig.eyeSeparation;
+            eye[e].eyeConvergence = rig.convergence;
+        }
+        StereoResult out;
+        RenderEyesAtHits(rs, eye[0], eye[1], cache, &out.left, &out.right);
+        return out;
+    }
     const int spp = std::max(opt.spp, 1);
     const bool progressive = cache && cache->Progressive() && opt.texture.passSpp > 0 &&
                              opt.texture.constantTerm < 0.0f && spp > opt.texture.passSpp;

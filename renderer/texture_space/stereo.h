@@ -2,7 +2,16 @@
 // Stereo rendering with one texture-space cache for both eyes (Munkberg et al. 2016, Sec. 6.2,
 // "Shading Reuse for Stereo/VR").
 //
-// Design note. Texture space separates primary visibility from shading: what a texel holds is
+// Design note. Shading at the camera's hits (TextureSamples::Hits) has no grid for the second
+// eye to look up: each pass bins both eyes' hits into the one store (texcache/texture_store.h),
+// each eye keeping its own records, and then reads each eye back from the shared bins
+// (RenderEyesAtHits). The view-independent terms (AO, diffuse light) of a surface both eyes see
+// then average both eyes' samples in bins of the mono render's level; each eye keeps its own
+// per-hit terms and its own samples as the finest level. The bins' sums are integers, so the
+// images are the same for any thread count; the time of the interleaved passes is split evenly
+// between the eyes. The rest of this note is the paper's grid cache (TextureSamples::Grid).
+//
+// Texture space separates primary visibility from shading: what a texel holds is
 // view-independent (AO, the diffuse light of diffuse materials, area-light visibility), so the
 // second eye looks up the texels the first eye filled and shades only what it alone reaches;
 // view-dependent light (glossy lobes, per-hit NEE) is computed per hit in each eye anyway.
