@@ -304,7 +304,14 @@ TEST_F(StereoCli, WritesBothEyesAndTheirStatistics) {
     for (const char* f : {"v_left.exr", "v_left.png", "v_right.exr", "v_right.png"})
         EXPECT_TRUE(fs::exists(dir_ / f)) << f;
     EXPECT_FALSE(fs::exists(dir_ / "v.exr"));
-    EXPECT_NE(r.out.find("right eye:"), std::string::npos) << r.out;
+    // At the hits both eyes' passes interleave through one store: one time for both.
+    EXPECT_NE(r.out.find("both eyes, hits in one store:"), std::string::npos) << r.out;
+    // The grid's second eye reuses the first eye's cache: each eye's share is printed.
+    const test::CliRun grid =
+        test::Texcache("render " + scene + " --stereo --shading texture --ts-samples grid -q -o " +
+                       (dir_ / "g.exr").string());
+    ASSERT_EQ(grid.code, 0) << grid.out;
+    EXPECT_NE(grid.out.find("right eye:"), std::string::npos) << grid.out;
     std::ifstream js(dir_ / "v.json");
     const std::string stats((std::istreambuf_iterator<char>(js)), {});
     for (const char* key : {"\"stereo\"", "\"eye_separation\": 0.1", "\"left\"", "\"right\"",

@@ -61,6 +61,27 @@ std::string EyeJson(const char* name, const RenderStats& s, bool last) {
     return buf;
 }
 
+/// Each eye's time and what it shaded, the right eye's relative to the left's (grid stereo:
+/// the second eye reuses the first eye's cache).
+void PrintEyes(const StereoResult& r) {
+    const RenderStats& L = r.left.stats;
+    for (const auto& [name, st] : {std::pair{"left", &r.left.stats}, {"right", &r.right.stats}}) {
+        std::printf("%s eye: %.3f s (%.3f s cpu), %llu rays, %llu samples and %llu texels shaded",
+                    name, st->seconds, st->cpuSeconds, (unsigned long long)st->TotalRays(),
+                    (unsigned long long)st->cache.samplesShaded,
+                    (unsigned long long)st->cache.texelMisses);
+        if (st != &L)
+            std::printf(
+                " (%.1f%% of the left eye's time, %.1f%% of its samples, %.1f%% of its "
+                "texels)",
+                100.0 * st->seconds / std::max(L.seconds, 1e-9),
+                100.0 * double(st->cache.samplesShaded) /
+                    std::max(double(L.cache.samplesShaded), 1.0),
+                100.0 * double(st->cache.texelMisses) / std::max(double(L.cache.texelMisses), 1.0));
+        std::printf("\n");
+    }
+}
+
 }  // namespace
 
 void CheckStereoOptions(const RenderArgs& a) {
@@ -117,20 +138,15 @@ int RunStereo(const RenderArgs& a, const Scene& scene, const RenderOptions& opt)
         scene.path.c_str(), opt.width, opt.height, r.left.stats.sppDone,
         IntegratorName(opt.integrator), rig.eyeSeparation, rig.convergence);
     const RenderStats& L = r.left.stats;
-    for (const auto& [name, st] : {std::pair{"left", &r.left.stats}, {"right", &r.right.stats}}) {
-        std::printf("%s eye: %.3f s (%.3f s cpu), %llu rays, %llu samples and %llu texels shaded",
-                    name, st->seconds, st->cpuSeconds, (unsigned long long)st->TotalRays(),
-                    (unsigned long long)st->cache.samplesShaded,
-                    (unsigned long long)st->cache.texelMisses);
-        if (st != &L)
-            std::printf(
-                " (%.1f%% of the left eye's time, %.1f%% of its samples, %.1f%% of its "
-                "texels)",
-                100.0 * st->seconds / std::max(L.seconds, 1e-9),
-                100.0 * double(st->cache.samplesShaded) /
-                    std::max(double(L.cache.samplesShaded), 1.0),
-                100.0 * double(st->cache.texelMisses) / std::max(double(L.cache.texelMisses), 1.0));
-        std::printf("\n");
+    if (opt.texture.enabled && opt.texture.samples == TextureSamples::Hits) {
+        // The eyes' passes are interleaved through one store: their time is one figure, and no
+        // sample or texel is shaded for a cache (both eyes' hits are the samples).
+        std::printf("both eyes, hits in one store: %.3f s (%.3f s cpu), %llu + %llu rays\n",
+                    L.seconds + r.right.stats.seconds, L.cpuSeconds + r.right.stats.cpuSeconds,
+                    (unsigned long long)L.TotalRays(),
+                    (unsigned long long)r.right.stats.TotalRays());
+    } else {
+        PrintEyes(r);
     }
     std::printf("peak memory: %.1f MiB\n", PeakMemoryMiB());
     for (const OutputPaths& out : outs)
