@@ -70,9 +70,6 @@ void SizeTextureCaches(RenderOptions* opt, int views, GivenCacheSizes given,
     // Cached visibility keeps a second term per texel under keys of its own (texture_space.h).
     const int terms = t.cachedVisibility ? 2 : 1;
     SizeCachesToFrame(&fit, opt->width, opt->height, views * terms, opt->integrator, t.footprint);
-    // Shading at the hits keeps its bins beside the grid caches, which it never fills: they take
-    // a token 64 KiB each instead of tens of MiB zeroed for nothing.
-    if (ShadesAtHits(*opt)) fit.sampleCacheBytes = fit.texelCacheBytes = size_t(64) << 10;
     if (!given.sample) t.cache.sampleCacheBytes = fit.sampleCacheBytes;
     if (!given.texel) t.cache.texelCacheBytes = fit.texelCacheBytes;
     const double mib = 1.0 / double(1 << 20);
@@ -100,9 +97,12 @@ double AvailableMemoryMiB() {
     return PhysicalMemoryMiB();
 }
 
-double CacheMiB(const RenderOptions& opt) {
+double CacheMiB(const RenderOptions& opt, bool frameBuffers) {
     double bytes = 0.0;
-    if (opt.texture.enabled && !opt.texture.cache.referenceMode)
+    // Shading at the hits never allocates the grid caches (TextureSpaceCache::PrepareGrid); the
+    // frame buffers look their diffuse light up there.
+    const bool grid = frameBuffers || !ShadesAtHits(opt);
+    if (opt.texture.enabled && !opt.texture.cache.referenceMode && grid)
         bytes +=
             double(opt.texture.cache.sampleCacheBytes) + double(opt.texture.cache.texelCacheBytes);
     if (opt.lightSampling == LightSampling::Cpis) bytes += double(opt.psrCacheBytes);
@@ -133,7 +133,7 @@ double RenderMemoryMiB(const RenderOptions& opt, int views, bool frameBuffers) {
     const double pixels = double(std::max(opt.width, 1)) * double(std::max(opt.height, 1)) *
                           double(std::max(views, 1));
     constexpr double kBaseMiB = 32.0;  // the program, Embree and a small scene
-    return kBaseMiB + pixels * perPixel / double(1 << 20) + CacheMiB(opt);
+    return kBaseMiB + pixels * perPixel / double(1 << 20) + CacheMiB(opt, frameBuffers);
 }
 
 void CheckMemoryBudget(double needMiB, double budgetMiB, const std::string& what,
@@ -147,7 +147,8 @@ void CheckMemoryBudget(double needMiB, double budgetMiB, const std::string& what
 }
 
 void CheckRenderMemory(const RenderOptions& opt, int views, bool frameBuffers, double budgetMiB) {
-    const double need = RenderMemoryMiB(opt, views, frameBuffers), caches = CacheMiB(opt);
+    const double need = RenderMemoryMiB(opt, views, frameBuffers),
+                 caches = CacheMiB(opt, frameBuffers);
     if (caches > 0.5 * need) {
         const bool psr = opt.lightSampling == LightSampling::Cpis &&
                          double(opt.psrCacheBytes) / (1 << 20) > 0.5 * caches;

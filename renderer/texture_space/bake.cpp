@@ -51,6 +51,7 @@ std::vector<BakedTexture> Bake(const RenderScene& rs, RenderOptions opt, const B
     opt.progress = false;
     Context c(rs, opt);
     TextureSpaceCache cache(rs, opt.texture);
+    cache.PrepareGrid();
     c.tsc = &cache;
 
     const Scene& scene = rs.scene();

@@ -100,6 +100,9 @@ public:
         // the hits has no footprints (hit_binning.cpp: AoHitsBin, PathHitsTrace; a render with AOVs
         // shades on the grid).
         const bool hits = ShadesAtHits(opt);
+        // The grid is looked up by renders that do not shade at the hits, and by the frame
+        // buffers (the ones without a prepass), whose diffuse light it caches.
+        if (!hits || prepass == Prepass::None) cache->PrepareGrid();
         if (prepass == Prepass::Allowed && !hits && VisibleOnly(opt.texture.footprint, k) &&
             opt.texture.constantTerm < 0.0f && cache->AnyFootprint()) {
             visible_ = &cache->Visibility(opt.width, opt.height,

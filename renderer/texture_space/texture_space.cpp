@@ -155,6 +155,13 @@ float TextureSpaceCache::HitLightLevels(double noiseVar, double noiseMean2, int 
     return float(std::clamp(3.6 + 0.25 * std::log2(rel) - std::log2(n / 4.0) / 3.0, 0.0, 12.0));
 }
 
+void TextureSpaceCache::PrepareGrid() {
+    cache_.Allocate();
+    if (options_.temporalAlpha != 0.0f && !history_)
+        history_ = std::make_unique<TemporalHistory<glm::vec3>>(options_.cache.texelCacheBytes,
+                                                                options_.temporalAlpha);
+}
+
 void TextureSpaceCache::BeginPass(uint32_t pass) {
     if (pass != pass_) Invalidate();
     BeginPassRadii(pass);
@@ -167,11 +174,8 @@ void TextureSpaceCache::BeginPassRadii(uint32_t pass) {
 }
 
 TextureSpaceCache::TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options)
-    : options_(options), cache_(options.cache) {
+    : options_(options), cache_(options.cache, /*allocate=*/false) {
     CheckOptions(options);
-    if (options.temporalAlpha != 0.0f)
-        history_ = std::make_unique<TemporalHistory<glm::vec3>>(options.cache.texelCacheBytes,
-                                                                options.temporalAlpha);
     const Scene& scene = rs.scene();
     // The grids of every object (front, and back for open surfaces): the shading's, and with
     // cached visibility a second set (its own face ids, hence its own texel keys and history).

@@ -116,6 +116,7 @@
 #include <algorithm>
 #include <climits>
 #include <memory>
+#include <stdexcept>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -242,8 +243,15 @@ using LightHitStore = TextureStore<RadianceBin, internal::FilteredValue>;
 
 class TextureSpaceCache {
 public:
-    /// Registers every object of the scene; throws InputError on impossible settings.
+    /// Registers every object of the scene; throws InputError on impossible settings. The grid
+    /// cache's storage (and the temporal history of its texels) is allocated by PrepareGrid, so
+    /// that a render shading at its camera hits spends no memory on the grid it never uses.
     TextureSpaceCache(const RenderScene& rs, const TextureSpaceOptions& options);
+    /// Allocates the grid cache's storage and texel history if not yet: every renderer that
+    /// looks up texels on the grid calls it before its threads start (Lookup needs it).
+    void PrepareGrid();
+    /// Whether PrepareGrid ran.
+    bool GridPrepared() const { return cache_.Allocated(); }
 
     const TextureSpaceOptions& options() const { return options_; }
 
@@ -330,7 +338,7 @@ public:
     uint32_t Pass() const { return pass_; }
     /// Whether renders through this cache run progressive passes (options.passSpp > 0, no
     /// temporal accumulation).
-    bool Progressive() const { return options_.passSpp > 0 && !history_; }
+    bool Progressive() const { return options_.passSpp > 0 && options_.temporalAlpha == 0.0f; }
     /// The footprint radius of pass `pass` for a material radius `radius`:
     /// round(radius (pass + 1)^(-1/6)), the schedule the note at the top argues for.
     static int PassRadius(int radius, uint32_t pass);
@@ -552,6 +560,8 @@ glm::vec3 TextureSpaceCache::Lookup(const SampleRequest& texel, int object, Shad
                                     int raysPerSample, CacheStats& stats) {
     // One branch per lookup picks the material's filter; the filters themselves are inlined. The
     // temporal blend runs once per reconstructed texel, not per lookup.
+    if (!cache_.Allocated()) [[unlikely]]
+        throw std::logic_error("texture-space lookup on a grid cache without PrepareGrid()");
     auto lookup = [&]<typename Filter>(int radius, const Filter& filter,
                                        FootprintTaps taps = FootprintTaps::VisibleSymmetric) {
         // Stereo's second eye (ReuseNeighbourTexels) filters a missed texel alone: its misses are

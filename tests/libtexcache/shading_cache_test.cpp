@@ -223,6 +223,37 @@ TEST(ShadingCache, RejectsImpossibleSettings) {
     EXPECT_THROW((ShadingCache<AoSample, float>(s)), InputError);
 }
 
+// A cache made without its storage (a renderer that shades at its camera hits and may never look
+// anything up) holds no bytes and answers read-only queries "absent"; Allocate gives it exactly
+// the configured budget, once.
+TEST(ShadingCache, StorageIsAllocatedOnlyWhenAsked) {
+    CacheSettings s;
+    s.sampleCacheBytes = size_t(1) << 20;
+    s.texelCacheBytes = size_t(1) << 19;
+    ShadingCache<AoSample, float> cache(s, /*allocate=*/false);
+    const int mesh = cache.AddMesh(test::GridCage(2), 1.0f / 8.0f);
+    EXPECT_FALSE(cache.Allocated());
+    EXPECT_EQ(cache.BytesUsed(), 0u);
+    const size_t slots = cache.SampleSlots();  // the budget's, as if allocated
+    const SampleRequest texel = cache.TexelAt({mesh, 0, 0.5f, 0.5f, 0.1f, 0.0f, 0.0f, 0.1f});
+    float v = 0.0f;
+    EXPECT_FALSE(cache.FindTexel(texel, &v));
+    EXPECT_FALSE(cache.ContainsSample(texel.key));
+    cache.InvalidateAll();  // nothing to evict, and no crash
+    cache.InvalidateMesh(mesh);
+    cache.Allocate();
+    cache.Allocate();  // idempotent
+    EXPECT_TRUE(cache.Allocated());
+    EXPECT_EQ(cache.SampleSlots(), slots);
+    EXPECT_LE(cache.BytesUsed(), s.sampleCacheBytes + s.texelCacheBytes);
+    EXPECT_GT(cache.BytesUsed(), (s.sampleCacheBytes + s.texelCacheBytes) / 2);
+    CacheStats st;
+    auto shade = [](const SampleRequest&) { return AoSample{0.25f, {0, 0, 1}}; };
+    auto centre = [](const FilterInput<AoSample>& in) { return in.samples[in.centre].value; };
+    EXPECT_EQ(cache.LookupTexel(texel, 0, shade, centre, st), 0.25f);
+    EXPECT_TRUE(cache.FindTexel(texel, &v));
+}
+
 // Reference mode keeps everything: with overlapping footprints from several threads, no sample
 // is ever shaded twice, and every texel is filtered exactly from its footprint.
 TEST(ShadingCache, ReferenceModeShadesEachSampleOnce) {

@@ -315,21 +315,32 @@ class ShadingCache {
     using Stored = typename Codec::Stored;
 
 public:
-    /// Allocates both caches (or the unbounded reference stores); throws InputError on bad
-    /// settings.
-    explicit ShadingCache(const CacheSettings& settings)
+    /// Allocates both caches (or the unbounded reference stores), or with `allocate` false
+    /// only on Allocate(): a user that may never look anything up (a renderer shading at its
+    /// camera hits) registers its meshes and spends no memory on the caches. Throws InputError
+    /// on bad settings.
+    explicit ShadingCache(const CacheSettings& settings, bool allocate = true)
         : settings_(settings), id_(NextInstanceId()) {
         settings.Validate();
-        if (settings.referenceMode) {
+        if (allocate) Allocate();
+    }
+    /// Allocates both caches if they are not yet (the configured sizes). Not concurrent with
+    /// anything else on this cache: call it before the threads that look up start.
+    void Allocate() {
+        if (Allocated()) return;
+        if (settings_.referenceMode) {
             refSamples_ = std::make_unique<internal::UnboundedCache<Stored>>();
             refTexels_ = std::make_unique<internal::UnboundedCache<Texel>>();
         } else {
-            samples_ = std::make_unique<DirectMappedCache<Stored>>(settings.sampleCacheBytes,
-                                                                   settings.sampleTwoChoices);
-            texels_ = std::make_unique<DirectMappedCache<Texel>>(settings.texelCacheBytes,
-                                                                 settings.texelTwoChoices);
+            samples_ = std::make_unique<DirectMappedCache<Stored>>(settings_.sampleCacheBytes,
+                                                                   settings_.sampleTwoChoices);
+            texels_ = std::make_unique<DirectMappedCache<Texel>>(settings_.texelCacheBytes,
+                                                                 settings_.texelTwoChoices);
         }
     }
+    /// Whether the caches are allocated: lookups need them, the read-only queries below
+    /// (ContainsTexel, FindTexel, ...) answer "absent" without them.
+    bool Allocated() const { return samples_ || refSamples_; }
 
     /// Registers a mesh with texels of about `texelSize` world units at mip 0; returns its id.
     /// With `topology` (the cage's, e.g. the renderer's or another mesh's of the same cage) the
@@ -440,7 +451,7 @@ public:
         if (refSamples_) {
             refSamples_->InvalidateIf([](uint64_t) { return true; });
             refTexels_->InvalidateIf([](uint64_t) { return true; });
-        } else {
+        } else if (samples_) {
             samples_->InvalidateAll();
             texels_->InvalidateAll();
         }
@@ -464,7 +475,7 @@ public:
         if (refSamples_) {
             refSamples_->InvalidateIf(pred);
             refTexels_->InvalidateIf(pred);
-        } else {
+        } else if (samples_) {
             samples_->InvalidateIf(pred);
             texels_->InvalidateIf(pred);
         }
@@ -479,12 +490,19 @@ public:
         if (refSamples_)
             return refSamples_->Size() * (sizeof(Stored) + 32) +
                    refTexels_->Size() * (sizeof(Texel) + 32);
-        return samples_->BytesUsed() + texels_->BytesUsed();
+        return samples_ ? samples_->BytesUsed() + texels_->BytesUsed() : 0;
     }
+    /// Bytes of each cache's storage: 0 until Allocate().
     size_t SampleCacheBytes() const { return samples_ ? samples_->BytesUsed() : 0; }
     size_t TexelCacheBytes() const { return texels_ ? texels_->BytesUsed() : 0; }
     /// Samples the sample cache can hold at once (SIZE_MAX in reference mode: unbounded).
-    size_t SampleSlots() const { return samples_ ? samples_->NumSlots() : SIZE_MAX; }
+    size_t SampleSlots() const {
+        if (settings_.referenceMode) return SIZE_MAX;
+        return samples_ ? samples_->NumSlots()
+                        : std::min<size_t>(
+                              settings_.sampleCacheBytes / DirectMappedCache<Stored>::kSlotBytes,
+                              UINT32_MAX);
+    }
 
 private:
     uint64_t Hash(const TexelKey& k) const { return internal::TexelSlotHash(k); }
