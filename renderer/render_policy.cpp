@@ -108,6 +108,18 @@ double CacheMiB(const RenderOptions& opt, bool frameBuffers) {
     if (opt.lightSampling == LightSampling::Cpis) bytes += double(opt.psrCacheBytes);
     return bytes / double(1 << 20);
 }
+
+/// What shading at the hits holds besides the film: a record per camera sample of a pass (about
+/// 40 bytes for diffuse light, 12 for AO, measured on car.json; at most 256 MiB a pass, then
+/// the pass splits: render.cpp) and the store's bins and texels (16 MiB at most frame sizes).
+double HitStoreMiB(const RenderOptions& opt, int views, bool frameBuffers) {
+    if (!opt.texture.enabled || frameBuffers || !ShadesAtHits(opt)) return 0.0;
+    const double perSample = opt.integrator == IntegratorKind::AO ? 12.0 : 40.0;
+    const double samples = double(std::max(opt.width, 1)) * double(std::max(opt.height, 1)) *
+                           double(std::max(views, 1)) * double(std::max(opt.spp, 1));
+    return std::min(samples * perSample / double(1 << 20), 256.0) + 16.0;
+}
+
 }  // namespace
 
 double MemoryBudgetMiB(double givenMiB) {
@@ -133,7 +145,8 @@ double RenderMemoryMiB(const RenderOptions& opt, int views, bool frameBuffers) {
     const double pixels = double(std::max(opt.width, 1)) * double(std::max(opt.height, 1)) *
                           double(std::max(views, 1));
     constexpr double kBaseMiB = 32.0;  // the program, Embree and a small scene
-    return kBaseMiB + pixels * perPixel / double(1 << 20) + CacheMiB(opt, frameBuffers);
+    return kBaseMiB + pixels * perPixel / double(1 << 20) + CacheMiB(opt, frameBuffers) +
+           HitStoreMiB(opt, views, frameBuffers);
 }
 
 void CheckMemoryBudget(double needMiB, double budgetMiB, const std::string& what,

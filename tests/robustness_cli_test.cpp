@@ -302,6 +302,11 @@ TEST(TooBig, RendersBeyondTheMemoryBudgetAreOneLineNamingTheOption) {
                   "--resolution"},
              Case{"--resolution 16384x16384" + fb, "--resolution"},
              Case{"--resolution 512x512 --max-memory-mb 8" + png, "--resolution"},
+             // Shading at the hits keeps a record per camera sample (about 9 MiB a sample per
+             // pixel here, 3 MiB for AO), which the film alone would not count.
+             Case{"--resolution 640x360 --integrator path --shading texture --max-memory-mb 48" +
+                      png,
+                  "--resolution"},
              Case{"--resolution 48x36 --shading texture --sample-cache-mb 20000" + png,
                   "--sample-cache-mb/--texel-cache-mb"},
              Case{"--resolution 48x36 --shading texture --texel-cache-mb 3000" + png,
