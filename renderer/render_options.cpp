@@ -77,7 +77,7 @@ bool VisibleOnly(FootprintMode mode, IntegratorKind integrator) {
 
 void SizeCachesToFrame(CacheSettings* cache, int width, int height, int views,
                        IntegratorKind integrator, FootprintMode footprint) {
-    // Bytes per pixel: 4 slots of 32 bytes per texel or sample a pixel needs (two choices per
+    // Bytes per pixel: 4 slots of 32 bytes per texel or sample a pixel needs (three choices per
     // key keep evictions rare at a quarter full: on car AO a few percent of the texels are
     // evicted once, and the samples shaded barely change); four times that for whole-window
     // footprints.

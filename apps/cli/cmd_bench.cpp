@@ -189,7 +189,7 @@ int RunCacheBench(const CacheBenchArgs& a) {
         size_t(CheckRange("--texel-cache-mb", a.texelCacheMb, 1.0, 65536.0) * (1 << 20));
     TextureSpaceCache cache(rs, tex.texture);
     RenderResult first = Render(rs, tex, &cache);  // cold: fills the caches
-    Render(rs, tex, &cache);                       // a second frame settles two-choice placements
+    Render(rs, tex, &cache);                       // a second frame settles multi-choice placements
     RenderOptions constant = tex;
     constant.texture.constantTerm = 0.5f;
     // Interleaved, so both see the same machine noise; the ratio is of CPU time (all threads),

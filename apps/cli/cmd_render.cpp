@@ -256,7 +256,7 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "Texel cache size (MiB; default: sized to the frame, 4 to 64)");
     cmd->add_flag(
         "--direct-mapped", args->directMapped,
-        "Strictly direct-mapped texel and sample caches (the paper's; default: two choices per "
+        "Strictly direct-mapped texel and sample caches (the paper's; default: three choices per "
         "entry)");
 
     group("Screen-space stage");

@@ -133,7 +133,7 @@ TextureSpaceOptions ParseTextureOptions(const RenderArgs& a, LightKinds lights) 
     t.cache.texelCacheBytes = bytes("--texel-cache-mb", a.texelCacheMb);
     t.cache.lodBias = CheckRange("--lod-bias", a.lodBias, -16.0f, 16.0f);
     t.cache.referenceMode = a.referenceCache;
-    t.cache.texelTwoChoices = t.cache.sampleTwoChoices = !a.directMapped;
+    t.cache.texelThreeChoices = t.cache.sampleThreeChoices = !a.directMapped;
     t.indirectSamples = CheckRange("--indirect-samples", a.indirectSamples, 1, 1 << 16);
     const CachedDirect direct =
         CachedDirectLight(ParseCachedLight(a.cachedLight, "--cached-light"), lights, t.samples);

@@ -234,7 +234,8 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
     const bool sameStorage =
         a.sampleCacheBytes == b.sampleCacheBytes && a.texelCacheBytes == b.texelCacheBytes &&
         a.lodBias == b.lodBias && a.referenceMode == b.referenceMode &&
-        a.texelTwoChoices == b.texelTwoChoices && a.sampleTwoChoices == b.sampleTwoChoices &&
+        a.texelThreeChoices == b.texelThreeChoices &&
+        a.sampleThreeChoices == b.sampleThreeChoices &&
         options.texelFraction == options_.texelFraction && options.temporalAlpha == 0.0f &&
         options_.temporalAlpha == 0.0f && options.cachedVisibility == options_.cachedVisibility;
     if (!sameStorage) return false;

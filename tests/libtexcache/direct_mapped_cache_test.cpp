@@ -65,10 +65,10 @@ TEST(DirectMappedCache, CollidingKeyEvictsAndNeverAliases) {
 // InvalidateAll moves to a new tag instead of sweeping (direct_mapped_cache.h): over many
 // invalidations, across the tags coming round again (every 15th sweeps), an entry of an earlier
 // epoch is never found, never counted as an eviction, and its key's new entry is the new value;
-// an entry kept past InvalidateIf of other keys stays. Both one and two choices.
+// an entry kept past InvalidateIf of other keys stays. Both one and three choices.
 TEST(DirectMappedCache, InvalidatedEntriesNeverComeBack) {
-    for (bool twoChoices : {false, true}) {
-        DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes * 8, twoChoices);
+    for (bool threeChoices : {false, true}) {
+        DirectMappedCache<Payload> cache(DirectMappedCache<Payload>::kSlotBytes * 8, threeChoices);
         Payload out;
         SlotTicket t;
         for (uint64_t epoch = 0; epoch < 50; ++epoch) {
@@ -89,36 +89,37 @@ TEST(DirectMappedCache, InvalidatedEntriesNeverComeBack) {
     }
 }
 
-// With two choices, two keys whose first slots coincide both stay cached (when their second
+// With three choices, three keys whose first slots coincide all stay cached (when their other
 // slots differ), and lookups still never alias.
-TEST(DirectMappedCache, TwoChoicesKeepCollidingKeys) {
+TEST(DirectMappedCache, ThreeChoicesKeepCollidingKeys) {
     DirectMappedCache<Payload> direct(DirectMappedCache<Payload>::kSlotBytes * 64, false);
-    DirectMappedCache<Payload> two(DirectMappedCache<Payload>::kSlotBytes * 64, true);
+    DirectMappedCache<Payload> three(DirectMappedCache<Payload>::kSlotBytes * 64, true);
     Payload out;
     SlotTicket t;
-    int keptDirect = 0, keptTwo = 0;
+    int keptDirect = 0, keptThree = 0;
     for (uint64_t k = 1; k <= 40; ++k) {
         // Every key hashes to the same first slot (hash 7).
         if (direct.Acquire(k, 7, &out, &t) == AcquireResult::Claimed)
             direct.Publish(t, Payload::Of(k));
-        if (two.Acquire(k, 7, &out, &t) == AcquireResult::Claimed) two.Publish(t, Payload::Of(k));
+        if (three.Acquire(k, 7, &out, &t) == AcquireResult::Claimed)
+            three.Publish(t, Payload::Of(k));
     }
     for (uint64_t k = 1; k <= 40; ++k) {
         if (direct.Find(k, 7, &out)) {
             EXPECT_TRUE(out.Matches(k));
             ++keptDirect;
         }
-        if (two.Find(k, 7, &out)) {
+        if (three.Find(k, 7, &out)) {
             EXPECT_TRUE(out.Matches(k));
-            ++keptTwo;
+            ++keptThree;
         }
     }
     EXPECT_EQ(keptDirect, 1);  // direct mapped: the last key only
-    EXPECT_EQ(keptTwo, 2);     // the last two: one in the shared slot, one in its own second slot
+    EXPECT_EQ(keptThree, 3);   // the last three, one in each of the three slots they share
 }
 
 // An empty first slot is claimed without reading the second (a cold cache's fills). The one case
-// where that differs from reading both: the key sits in its second slot and its first slot was
+// where that differs from reading all: the key sits in its second slot and its first slot was
 // emptied since. It then gets a second copy of its own payload, never another key's, and the
 // other key of the pair still misses.
 TEST(DirectMappedCache, AnEmptiedFirstSlotGivesTheSameKeyASecondCopy) {
@@ -141,8 +142,12 @@ TEST(DirectMappedCache, AnEmptiedFirstSlotGivesTheSameKeyASecondCopy) {
         EXPECT_TRUE(out.Matches(2));
     }
     EXPECT_FALSE(cache.Find(1, 7, &out));
-    // A key that misses both slots, held by live keys, still evicts rather than aliasing.
+    // Key 3 takes the third slot; a key that misses all its slots, held by live keys, still
+    // evicts rather than aliasing.
     ASSERT_EQ(cache.Acquire(3, 7, &out, &t), AcquireResult::Claimed);
+    EXPECT_FALSE(t.evicted);
+    cache.Publish(t, Payload::Of(3));
+    ASSERT_EQ(cache.Acquire(4, 7, &out, &t), AcquireResult::Claimed);
     EXPECT_TRUE(t.evicted);
 }
 
@@ -238,7 +243,7 @@ TEST_P(ConcurrentStress, NeverReturnsAnotherKeysData) {
 }
 INSTANTIATE_TEST_SUITE_P(DirectMappedCache, ConcurrentStress, ::testing::Values(false, true),
                          [](const auto& info) {
-                             return info.param ? "TwoChoices" : "DirectMapped";
+                             return info.param ? "ThreeChoices" : "DirectMapped";
                          });
 
 }  // namespace

@@ -339,11 +339,11 @@ TEST(ShadingCache, ConcurrentOverlappingFootprintsMatchSingleThreaded) {
         for (size_t i = 0; i < hits.size(); ++i)
             expected[i] = ref.Lookup(hits[i], 3, shade, mean, st);
     }
-    for (bool twoChoices : {false, true}) {
+    for (bool threeChoices : {false, true}) {
         CacheSettings s;
         s.sampleCacheBytes = 64 * 1024;
         s.texelCacheBytes = 8 * 1024;
-        s.texelTwoChoices = twoChoices;
+        s.texelThreeChoices = threeChoices;
         ShadingCache<AoSample, float> cache(s);
         cache.AddMesh(test::GridCage(4), 0.02f);
         CacheStats total;

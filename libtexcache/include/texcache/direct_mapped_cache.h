@@ -24,12 +24,14 @@
 // So the hit path is two atomic loads of seq, one of key and the payload words: no lock, no
 // allocation, no virtual call. Synchronisation happens only when a thread claims a slot.
 //
-// Two choices (optional): a key may also live in a second, hashed slot. Acquire reads both slots
-// (each with the seqlock check above) and, on a miss, claims an idle one (an empty one first;
-// an empty first slot is claimed without reading the second). Two threads missing the same key
-// may claim one slot each, and so may a key in its second slot whose first slot was emptied
-// later: both copies then hold the same key's payload, which is harmless. A colliding key still
-// evicts, never aliases. Direct mapping (the paper's) is the one-choice case.
+// Three choices (optional): a key may also live in a second and a third, hashed slot. Acquire
+// reads all three (each with the seqlock check above) and, on a miss, claims an idle one (an
+// empty one first; an empty first slot is claimed without reading the others). Two threads
+// missing the same key may claim one slot each, and so may a key in another slot whose first
+// slot was emptied later: both copies then hold the same key's payload, which is harmless. A
+// colliding key still evicts, never aliases. With two slots a frame's own texels still evicted
+// each other every frame wherever three of them shared both of their slots; a third slot makes
+// that four sharing all three. Direct mapping (the paper's) is the one-choice case.
 //
 // Lifetime: the cache lives as long as its owner (e.g. across frames); Invalidate* evict entries
 // explicitly when the scene changes. Invalidation must not run while the same keys are being
@@ -94,10 +96,11 @@ public:
     static constexpr size_t kSlotBytes = sizeof(Slot);
 
     /// Allocates floor(capacityBytes / kSlotBytes) slots; at least one must fit. With
-    /// `twoChoices`, a key may live in one of two slots (its scanline slot, or a second hashed
-    /// one): two reads per miss instead of one, far fewer conflict misses when the cache is full.
-    explicit DirectMappedCache(size_t capacityBytes, bool twoChoices = false)
-        : twoChoices_(twoChoices),
+    /// `threeChoices`, a key may live in one of three slots (its scanline slot, or two hashed
+    /// ones): three reads per miss instead of one, far fewer conflict misses when the cache is
+    /// full.
+    explicit DirectMappedCache(size_t capacityBytes, bool threeChoices = false)
+        : threeChoices_(threeChoices),
           numSlots_(std::min<size_t>(capacityBytes / kSlotBytes, size_t(UINT32_MAX))),
           fastmod_(~uint64_t(0) / std::max<uint64_t>(numSlots_, 1) + 1),
           slots_(AllocateSlots(std::max<size_t>(numSlots_, 1)),
@@ -122,7 +125,7 @@ public:
         return size_t((static_cast<Uint128>(low) * numSlots_) >> 64);
     }
 
-    /// Looks up `key` in slot SlotOf(hash) (and, with two choices, in its second slot): see the
+    /// Looks up `key` in slot SlotOf(hash) (and, with three choices, in its other two): see the
     /// design note for the four outcomes.
     AcquireResult Acquire(uint64_t untagged, uint64_t hash, T* out, SlotTicket* ticket) {
         const uint64_t tag = tag_.load(std::memory_order_relaxed), key = untagged | tag;
@@ -134,12 +137,12 @@ public:
                 const uint64_t k1 = s1->key.load(std::memory_order_acquire);
                 if (k1 == key && TryRead(*s1, q1, out) == kHit) return AcquireResult::Hit;
                 // An idle first slot that holds nothing live: claim it without loading the
-                // second slot (the claim below would pick it too). Filling a cold cache, that
-                // load is a miss to memory per entry and would be most of Acquire's time.
-                // The key may sit in the second slot only if this one was emptied after it got
+                // other slots (the claim below would pick it too). Filling a cold cache, those
+                // loads are misses to memory per entry and would be most of Acquire's time.
+                // The key may sit in another slot only if this one was emptied after it got
                 // there (Abandon, InvalidateIf): then it gets a second copy, see the note.
                 uint64_t expected = q1;
-                if (twoChoices_ && !Live(k1, tag) &&
+                if (threeChoices_ && !Live(k1, tag) &&
                     s1->seq.compare_exchange_strong(expected, q1 + 1, std::memory_order_acq_rel,
                                                     std::memory_order_relaxed)) {
                     s1->key.store(key, std::memory_order_release);
@@ -150,34 +153,38 @@ public:
                 }
             }
         }
-        Slot* s2 = twoChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1;
+        Slot* const s[3] = {s1, threeChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1,
+                            threeChoices_ ? &slots_[SlotOf(ThirdHash(hash))] : s1};
         for (;;) {
-            const uint64_t q1 = s1->seq.load(std::memory_order_acquire);
-            const uint64_t k1 = s1->key.load(std::memory_order_acquire);
-            const uint64_t q2 = s2->seq.load(std::memory_order_acquire);
-            const uint64_t k2 = s2->key.load(std::memory_order_acquire);
-            int r = k1 == key ? TryRead(*s1, q1, out) : kAbsent;
-            if (r == kAbsent && s2 != s1 && k2 == key) r = TryRead(*s2, q2, out);
+            uint64_t q[3], k[3];
+            for (int i = 0; i < 3; ++i) {
+                q[i] = s[i]->seq.load(std::memory_order_acquire);
+                k[i] = s[i]->key.load(std::memory_order_acquire);
+            }
+            int r = kAbsent;
+            for (int i = 0; i < 3 && r == kAbsent; ++i)
+                if (k[i] == key) r = TryRead(*s[i], q[i], out);
             if (r == kRetry) continue;
             if (r == kHit) return AcquireResult::Hit;
             if (r == kBusy) return AcquireResult::Pending;  // our key, being shaded
-            // Absent: claim an idle slot, preferring an empty one, else the key's own choice.
-            const bool idle1 = !(q1 & 1), idle2 = !(q2 & 1);
-            if (!idle1 && !idle2) return AcquireResult::Conflict;
-            Slot* victim;
-            uint64_t seq, old;
-            if (idle1 && (!idle2 || !Live(k1, tag) || (Live(k2, tag) && !(key & 1)))) {
-                victim = s1, seq = q1, old = k1;
-            } else {
-                victim = s2, seq = q2, old = k2;
+            // Absent: claim an idle slot, an empty one first, else the idle one the key's bits
+            // pick.
+            int victim = -1;
+            for (int i = 0; i < 3 && victim < 0; ++i)
+                if (!(q[i] & 1) && !Live(k[i], tag)) victim = i;
+            for (int n = 0; n < 3 && victim < 0; ++n) {
+                const int i = int((key + uint64_t(n)) % 3);
+                if (!(q[i] & 1)) victim = i;
             }
-            uint64_t expected = seq;
-            if (victim->seq.compare_exchange_weak(expected, seq + 1, std::memory_order_acq_rel,
-                                                  std::memory_order_relaxed)) {
-                victim->key.store(key, std::memory_order_release);
-                ticket->slot = size_t(victim - slots_.get());
-                ticket->seq = seq + 1;
-                ticket->evicted = Live(old, tag);
+            if (victim < 0) return AcquireResult::Conflict;
+            uint64_t expected = q[victim];
+            if (s[victim]->seq.compare_exchange_weak(expected, q[victim] + 1,
+                                                     std::memory_order_acq_rel,
+                                                     std::memory_order_relaxed)) {
+                s[victim]->key.store(key, std::memory_order_release);
+                ticket->slot = size_t(s[victim] - slots_.get());
+                ticket->seq = q[victim] + 1;
+                ticket->evicted = Live(k[victim], tag);
                 return AcquireResult::Claimed;
             }
         }
@@ -187,9 +194,10 @@ public:
     bool Find(uint64_t untagged, uint64_t hash, T* out) const {
         const uint64_t key = untagged | tag_.load(std::memory_order_relaxed);
         const Slot* s1 = &slots_[SlotOf(hash)];
-        const Slot* s2 = twoChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1;
+        const Slot* s2 = threeChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1;
+        const Slot* s3 = threeChoices_ ? &slots_[SlotOf(ThirdHash(hash))] : s1;
         for (int attempt = 0; attempt < 4; ++attempt) {
-            for (const Slot* s : {s1, s2}) {
+            for (const Slot* s : {s1, s2, s3}) {
                 const uint64_t seq = s->seq.load(std::memory_order_acquire);
                 if (s->key.load(std::memory_order_acquire) != key) continue;
                 const int r = TryRead(*s, seq, out);
@@ -215,9 +223,9 @@ public:
     }
 
     /// Starts loading the first slot of `hash` into the CPU cache, ahead of an Acquire or Find.
-    /// Not the second: most lookups end in the first (a warm frame of `texcache bench cache`
+    /// Not the others: most lookups end in the first (a warm frame of `texcache bench cache`
     /// finds most of its texels there, and a cold claim of an empty first slot never reads the
-    /// second), and fetching both lines for every texel costs more than it hides
+    /// others), and fetching a second line for every texel costs more than it hides
     /// (docs/cache.md, "Prefetching").
     void Prefetch(uint64_t hash) const { PrefetchLine(&slots_[SlotOf(hash)]); }
 
@@ -319,8 +327,9 @@ private:
         h ^= h >> 29, h *= 0xbf58476d1ce4e5b9ull, h ^= h >> 32;
         return h;
     }
+    static uint64_t ThirdHash(uint64_t h) { return SecondHash(h ^ 0x9E3779B97F4A7C15ull); }
 
-    bool twoChoices_ = false;
+    bool threeChoices_ = false;
     std::atomic<uint64_t> tag_{0};  ///< the current tag, shifted to the top bits
     size_t numSlots_;
     uint64_t fastmod_;

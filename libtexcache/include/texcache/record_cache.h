@@ -34,9 +34,9 @@ public:
     static constexpr size_t kSlotBytes = DirectMappedCache<Record>::kSlotBytes;
 
     /// Allocates floor(capacityBytes / kSlotBytes) slots (throws InputError when none fits);
-    /// `twoChoices` as in CacheSettings.
-    explicit RecordCache(size_t capacityBytes, bool twoChoices = true)
-        : slots_(capacityBytes, twoChoices) {}
+    /// `threeChoices` as in CacheSettings.
+    explicit RecordCache(size_t capacityBytes, bool threeChoices = true)
+        : slots_(capacityBytes, threeChoices) {}
 
     /// Registers a mesh with texels of about `texelSize` world units at mip 0 (its Ptex
     /// topology shared when given, as ShadingCache::AddMesh); returns its id.

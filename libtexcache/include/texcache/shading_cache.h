@@ -36,18 +36,19 @@ struct CacheSettings {
     float lodBias = 0.0f;  ///< added to eq. 1's level (Sec. 6.2 shader LOD)
     bool referenceMode =
         false;  ///< unbounded caches: every sample and texel kept (overshading baseline)
-    /// Let a texel live in one of two slots (see direct_mapped_cache.h): a warm frame then finds
-    /// nearly all of its texels, where one slot per key loses about one in ten to conflicts
-    /// (docs/cache.md, "Two choices"); false is the paper's strictly direct-mapped texel cache.
-    bool texelTwoChoices = true;
+    /// Let a texel live in one of three slots (see direct_mapped_cache.h): a warm frame then
+    /// finds nearly all of its texels, where one slot per key loses about one in ten to conflicts
+    /// and two lose about one in a thousand (docs/cache.md, "Three choices"); false is the
+    /// paper's strictly direct-mapped texel cache.
+    bool texelThreeChoices = true;
     /// The same for samples. On by default: in the steady state of a still or slowly moving
     /// view (the preview, an animation, the warm frame of `texcache bench cache`), the texels
     /// that miss need samples shaded frames ago, and direct mapping evicts many of them (a warm
-    /// frame of car AO re-shades about twenty times fewer samples with two choices:
-    /// docs/cache.md, "Two choices"). In an overfull cache it is slightly worse (a little more
+    /// frame of car AO re-shades far fewer samples with more choices: docs/cache.md, "Three
+    /// choices"). In an overfull cache it is slightly worse (a little more
     /// overshading at 4096x2304 with 16 MB in `texcache experiment cache-size`). The paper's
     /// cache is direct-mapped.
-    bool sampleTwoChoices = true;
+    bool sampleThreeChoices = true;
 
     /// Throws InputError naming the setting when a value is out of range.
     void Validate() const {
@@ -333,9 +334,9 @@ public:
             refTexels_ = std::make_unique<internal::UnboundedCache<Texel>>();
         } else {
             samples_ = std::make_unique<DirectMappedCache<Stored>>(settings_.sampleCacheBytes,
-                                                                   settings_.sampleTwoChoices);
+                                                                   settings_.sampleThreeChoices);
             texels_ = std::make_unique<DirectMappedCache<Texel>>(settings_.texelCacheBytes,
-                                                                 settings_.texelTwoChoices);
+                                                                 settings_.texelThreeChoices);
         }
     }
     /// Whether the caches are allocated: lookups need them, the read-only queries below
