@@ -810,24 +810,30 @@ TEST(Preview, StageStillViewErrorFallsOverFrames) {
 // and the stage's history (it reprojects); no cache frame begins.
 TEST(Preview, StageCameraMoveKeepsTheCache) {
     using namespace texcache::preview;
-    std::vector<std::string> warnings;
-    texcache::Scene scene = texcache::LoadScene(kScene, &warnings);
-    const PreviewSettings s = StageSettings(1);
-    OrbitCamera cam;
-    cam.FromScene(scene, 0.0f);
-    ProgressiveRenderer r(std::move(scene), s, cam);
-    Converged(r, s, cam);
-    const FrameStats first = r.Stats();
-    EXPECT_TRUE(first.staged && first.textureSpace);
-    cam.Orbit(2.0f, 0.0f);
-    Converged(r, s, cam);
-    const FrameStats moved = r.Stats();
-    std::printf("texel hit rate: first frame %.3f, after the move %.3f\n", first.texelHitRate,
-                moved.texelHitRate);
-    EXPECT_LT(first.texelHitRate, 0.5);
-    EXPECT_GT(moved.texelHitRate, 0.6);
-    EXPECT_EQ(moved.stageHistory, 2);
-    EXPECT_EQ(moved.cacheFrame, first.cacheFrame);
+    // The store's hit rate is its reads served by earlier frames' hits: at most three in four
+    // with one pixel in four traced each frame (fbBudget).
+    for (const auto& [fb, minHitRate] :
+         {std::pair{texcache::TextureSamples::Grid, 0.6}, {texcache::TextureSamples::Hits, 0.5}}) {
+        std::vector<std::string> warnings;
+        texcache::Scene scene = texcache::LoadScene(kScene, &warnings);
+        PreviewSettings s = StageSettings(1);
+        s.fbCache = fb;
+        OrbitCamera cam;
+        cam.FromScene(scene, 0.0f);
+        ProgressiveRenderer r(std::move(scene), s, cam);
+        Converged(r, s, cam);
+        const FrameStats first = r.Stats();
+        EXPECT_TRUE(first.staged && first.textureSpace);
+        cam.Orbit(2.0f, 0.0f);
+        Converged(r, s, cam);
+        const FrameStats moved = r.Stats();
+        std::printf("texel hit rate: first frame %.3f, after the move %.3f\n", first.texelHitRate,
+                    moved.texelHitRate);
+        EXPECT_LT(first.texelHitRate, 0.5);
+        EXPECT_GT(moved.texelHitRate, minHitRate);
+        EXPECT_EQ(moved.stageHistory, 2);
+        EXPECT_EQ(moved.cacheFrame, first.cacheFrame);
+    }
 }
 
 // Scene edits never show stale shading: after a material edit in the panel (the car's paint
