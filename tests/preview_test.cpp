@@ -868,7 +868,8 @@ TEST(Preview, StageEditsShowNoStaleShading) {
     {
         SCOPED_TRACE("object moved");
         texcache::Scene scene = texcache::LoadScene(kAnimated, &warnings);
-        PreviewSettings s = StageSettings(8);
+        // 16 frames: after 8 the store's noise is about the move's difference.
+        PreviewSettings s = StageSettings(16);
         s.time = 0.0f;
         OrbitCamera cam;
         cam.FromScene(scene, 0.0f);
@@ -884,9 +885,10 @@ TEST(Preview, StageEditsShowNoStaleShading) {
         const double stale = BlockMse(before, fresh), now = BlockMse(after, fresh);
         std::printf("object moved: MSE to a fresh render %.6f (before %.6f, two fresh ones %.6f)\n",
                     now, stale, noise);
-        // Within the noise of two fresh previews (0.79 of it measured), where the picture
-        // before the move is 2.5 times that.
+        // Within the noise of two fresh previews (0.88 of it measured from the store, 0.79
+        // from the grid), where the picture before the move is 1.9 times as far (the store's
+        // frames are noisier than the grid's, whose stale picture was 2.5 times the noise).
         EXPECT_LT(now, 1.5 * noise);
-        EXPECT_LT(now, 0.5 * stale);
+        EXPECT_LT(now, 0.66 * stale);
     }
 }
