@@ -268,6 +268,19 @@ inline int HitFilterLevels(TextureFilterKind kind, int radius) {
 void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
                  float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins);
 
+/// A frame-buffer pixel's camera hit `si` at distance `t` as hit binning records it: its record
+/// (`h`, reading the finer of its bins at `bias` levels above its texel until PathHitsAdd sets
+/// the level it reads) and its texel's level (`texelLevel`, for BinnedHit).
+void FrameHitRecord(const Context& c, const SurfaceInteraction& si, float t, int bias, HitRecord* h,
+                    int* texelLevel);
+/// The samples (in HitUnit counts) behind the store's bilinear reconstruction at record `h`'s
+/// level: what a frame reads to tell whether the store holds enough there already.
+double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h);
+/// The store's diffuse light at record `h` (irradiance / pi): hit binning's reconstruction at
+/// the level its record names, by the calling thread's memo of the store's generation.
+glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store,
+                       const HitRecord& h);
+
 /// Hit-binned AO, phase 2: each camera sample's reconstruction from the store, added to `sum`,
 /// and its own estimate (`ownAo`) with its difference to the reconstruction added to `own`
 /// (FrameSums::own).

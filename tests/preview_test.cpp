@@ -810,24 +810,30 @@ TEST(Preview, StageStillViewErrorFallsOverFrames) {
 // and the stage's history (it reprojects); no cache frame begins.
 TEST(Preview, StageCameraMoveKeepsTheCache) {
     using namespace texcache::preview;
-    std::vector<std::string> warnings;
-    texcache::Scene scene = texcache::LoadScene(kScene, &warnings);
-    const PreviewSettings s = StageSettings(1);
-    OrbitCamera cam;
-    cam.FromScene(scene, 0.0f);
-    ProgressiveRenderer r(std::move(scene), s, cam);
-    Converged(r, s, cam);
-    const FrameStats first = r.Stats();
-    EXPECT_TRUE(first.staged && first.textureSpace);
-    cam.Orbit(2.0f, 0.0f);
-    Converged(r, s, cam);
-    const FrameStats moved = r.Stats();
-    std::printf("texel hit rate: first frame %.3f, after the move %.3f\n", first.texelHitRate,
-                moved.texelHitRate);
-    EXPECT_LT(first.texelHitRate, 0.5);
-    EXPECT_GT(moved.texelHitRate, 0.6);
-    EXPECT_EQ(moved.stageHistory, 2);
-    EXPECT_EQ(moved.cacheFrame, first.cacheFrame);
+    // The store's hit rate is its reads served by earlier frames' hits: at most three in four
+    // with one pixel in four traced each frame (fbBudget).
+    for (const auto& [fb, minHitRate] :
+         {std::pair{texcache::TextureSamples::Grid, 0.6}, {texcache::TextureSamples::Hits, 0.5}}) {
+        std::vector<std::string> warnings;
+        texcache::Scene scene = texcache::LoadScene(kScene, &warnings);
+        PreviewSettings s = StageSettings(1);
+        s.fbCache = fb;
+        OrbitCamera cam;
+        cam.FromScene(scene, 0.0f);
+        ProgressiveRenderer r(std::move(scene), s, cam);
+        Converged(r, s, cam);
+        const FrameStats first = r.Stats();
+        EXPECT_TRUE(first.staged && first.textureSpace);
+        cam.Orbit(2.0f, 0.0f);
+        Converged(r, s, cam);
+        const FrameStats moved = r.Stats();
+        std::printf("texel hit rate: first frame %.3f, after the move %.3f\n", first.texelHitRate,
+                    moved.texelHitRate);
+        EXPECT_LT(first.texelHitRate, 0.5);
+        EXPECT_GT(moved.texelHitRate, minHitRate);
+        EXPECT_EQ(moved.stageHistory, 2);
+        EXPECT_EQ(moved.cacheFrame, first.cacheFrame);
+    }
 }
 
 // Scene edits never show stale shading: after a material edit in the panel (the car's paint
@@ -862,7 +868,8 @@ TEST(Preview, StageEditsShowNoStaleShading) {
     {
         SCOPED_TRACE("object moved");
         texcache::Scene scene = texcache::LoadScene(kAnimated, &warnings);
-        PreviewSettings s = StageSettings(8);
+        // 16 frames: after 8 the store's noise is about the move's difference.
+        PreviewSettings s = StageSettings(16);
         s.time = 0.0f;
         OrbitCamera cam;
         cam.FromScene(scene, 0.0f);
@@ -878,9 +885,10 @@ TEST(Preview, StageEditsShowNoStaleShading) {
         const double stale = BlockMse(before, fresh), now = BlockMse(after, fresh);
         std::printf("object moved: MSE to a fresh render %.6f (before %.6f, two fresh ones %.6f)\n",
                     now, stale, noise);
-        // Within the noise of two fresh previews (0.79 of it measured), where the picture
-        // before the move is 2.5 times that.
+        // Within the noise of two fresh previews (0.88 of it measured from the store, 0.79
+        // from the grid), where the picture before the move is 1.9 times as far (the store's
+        // frames are noisier than the grid's, whose stale picture was 2.5 times the noise).
         EXPECT_LT(now, 1.5 * noise);
-        EXPECT_LT(now, 0.5 * stale);
+        EXPECT_LT(now, 0.66 * stale);
     }
 }

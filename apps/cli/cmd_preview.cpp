@@ -47,6 +47,8 @@ struct PreviewCliArgs {
     std::string denoise = "auto";
     bool demodulate = false;
     bool cachedVisibility = false;
+    std::string fbCache;  ///< empty: store (the bench: both)
+    int fbBudget = 4;
     std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
@@ -144,6 +146,19 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.demodulate && !s.denoise)
         throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
     s.cachedVisibility = a.cachedVisibility;
+    const bool bothCaches = a.fbCache == "both";
+    if (bothCaches && !a.bench)
+        throw InputError("--fb-cache", "'both' compares the two in --bench: give grid or store");
+    if (!a.fbCache.empty() && !bothCaches) {
+        if (a.fbCache != "grid" && a.fbCache != "store")
+            throw InputError("--fb-cache",
+                             "unknown cache '" + a.fbCache + "' (valid: store, grid, both)");
+        s.fbCache = a.fbCache == "grid" ? TextureSamples::Grid : TextureSamples::Hits;
+    }
+    s.fbBudget = CheckRange("--fb-budget", a.fbBudget, 1, 16);
+    if ((s.fbBudget & (s.fbBudget - 1)) != 0)
+        throw InputError("--fb-budget", "one pixel in 1, 2, 4, 8 or 16 a frame, got " +
+                                            std::to_string(s.fbBudget));
     CheckPreviewMemory(s, a.maxMemoryMb);
     if (a.cachedVisibility && (!s.denoise || !s.textureSpace))
         throw InputError("--cached-visibility",
@@ -192,6 +207,8 @@ int RunPreview(const PreviewCliArgs& a) {
         if (b.still && !s.denoise)
             throw InputError("--bench-still", "measures the stage's frames: give --denoise");
         b.equalError = a.benchEqualError;
+        // Both by default: the store and the grid against per hit, frame by frame in turn.
+        b.bothCaches = a.fbCache.empty() || bothCaches;
         if (b.equalError && (!s.denoise || b.still))
             throw InputError("--bench-equal-error",
                              "measures the stage's frames while orbiting: give --denoise and "
@@ -271,6 +288,16 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_flag("--cached-visibility", a->cachedVisibility,
                   "With --denoise and --shading texture: cache the direct light's visibility in "
                   "texture space too; the stage takes it where it has no history");
+    cmd->add_option("--fb-cache", a->fbCache,
+                    "With --denoise and texture space: the frame buffers' cached diffuse light "
+                    "from the store the camera hits fill (store, the default) or from the "
+                    "paper's lazily shaded grid samples (grid); the bench compares both "
+                    "unless one is given")
+        ->type_name("CACHE");
+    cmd->add_option("--fb-budget", a->fbBudget,
+                    "With --fb-cache store: one pixel in this many (1, 2, 4, 8, 16) traces its "
+                    "diffuse path into the store each frame, besides those the store lacks")
+        ->capture_default_str();
     cmd->add_option("--motion", a->motion,
                     "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())
         ->capture_default_str();

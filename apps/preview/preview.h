@@ -41,6 +41,9 @@ struct BenchArgs {
     /// With the stage, moving: per hit again with 2, 4, 8 samples a pixel until its denoised
     /// relMSE reaches texture space's, for the cost ratio at equal error.
     bool equalError = false;
+    /// With the stage: the frame buffers' store and grid both (then per hit), frame by frame in
+    /// turn; false: only the settings' fbCache.
+    bool bothCaches = true;
 };
 
 /// Texture-space AO with a warm cache against per-hit AO at equal relMSE, while orbiting; prints

@@ -88,6 +88,7 @@ constexpr const char* kPassNames[] = {"prepare", "motion",  "reliable-motion", "
 struct StageRun {
     const char* name;
     bool textureSpace;
+    TextureSamples fbCache;  ///< texture space: the store (Hits) or the grid
     std::unique_ptr<TextureSpaceCache> cache;
     screen::ScreenSpaceDenoiser denoiser;  // the preview's settings (StageSettingsFor)
     screen::FrameBuffers fb;
@@ -98,8 +99,8 @@ struct StageRun {
     CacheStats cacheStats;
     std::vector<std::pair<int, double>> stillErrors;  ///< --bench-still: (frames, relMSE)
 
-    StageRun(const char* n, bool tex, int height)
-        : name(n), textureSpace(tex), denoiser(StageSettingsFor(height)) {}
+    StageRun(const char* n, bool tex, int height, TextureSamples fb = TextureSamples::Hits)
+        : name(n), textureSpace(tex), fbCache(fb), denoiser(StageSettingsFor(height)) {}
     double Fps(int frames) const { return double(frames) / (renderWall + 1e-3 * stageWall); }
     /// CPU seconds of the timed frames, render and stage.
     double CpuSeconds() const { return renderCpu + 1e-3 * stageCpu; }
@@ -155,16 +156,36 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     const int last = b.still ? n - 1 : n;
     // One pass: texture space and per hit (at `hitSpp` samples a pixel) frame by frame in turn,
     // so that load from other processes on a shared machine slows both alike.
-    auto runPass = [&](StageRun* runs, int hitSpp) {
-        runs[0].cache = std::make_unique<TextureSpaceCache>(rs, tex);
+    // The texture-space runs (the settings' cache first, the other one too with bothCaches),
+    // then per hit.
+    using Runs = std::vector<std::unique_ptr<StageRun>>;
+    auto makeRuns = [&] {
+        Runs runs;
+        const TextureSamples other =
+            s.fbCache == TextureSamples::Hits ? TextureSamples::Grid : TextureSamples::Hits;
+        for (const TextureSamples fb : {s.fbCache, other}) {
+            if (fb == other && !b.bothCaches) continue;
+            runs.push_back(std::make_unique<StageRun>(fb == TextureSamples::Hits ? "store" : "grid",
+                                                      true, s.height, fb));
+        }
+        runs.push_back(std::make_unique<StageRun>("per hit", false, s.height));
+        return runs;
+    };
+    auto runPass = [&](Runs& runs, int hitSpp) {
+        for (auto& r : runs) {
+            if (!r->textureSpace) continue;
+            TextureSpaceOptions t = tex;
+            t.frameBufferSamples = r->fbCache;
+            r->cache = std::make_unique<TextureSpaceCache>(rs, t);
+        }
         for (int i = 0; i <= last; ++i) {
             setView(b.still ? n : i);
-            for (int k = 0; k < 2; ++k) {
-                StageRun& r = runs[k];
+            for (auto& run : runs) {
+                StageRun& r = *run;
                 RenderOptions o = base;
                 o.seed = uint64_t(i);
                 if (r.textureSpace) {
-                    o.texture = tex;
+                    o.texture = r.cache->options();
                     const bool still = b.still && i > 0;
                     r.cache->Refresh(uint32_t(i + 1), RefreshParts(still), still);
                 } else {
@@ -191,11 +212,11 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             }
         }
     };
-    StageRun runs[2] = {StageRun("texture space", true, s.height),
-                        StageRun("per hit", false, s.height)};
+    Runs runs = makeRuns();
     runPass(runs, base.spp);
     const int timed = last;  // frames 1..last
-    for (const StageRun& r : runs) {
+    for (const auto& run : runs) {
+        const StageRun& r = *run;
         const Image noisy = ToImage(r.fb.Compose(), s.width, s.height);
         const Image img = ToImage(r.image, s.width, s.height);
         std::printf(
@@ -220,14 +241,16 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             for (const auto& [frames, e] : r.stillErrors) std::printf(" %d: %.5f", frames, e);
             std::printf("\n");
         }
-        const std::string stem = b.out + (r.textureSpace ? "_stage_texture" : "_stage_hit");
+        const std::string stem = b.out + (!r.textureSpace                     ? "_stage_hit"
+                                          : r.fbCache == TextureSamples::Grid ? "_stage_grid"
+                                                                              : "_stage_texture");
         WriteImage(stem + ".png", img);
     }
     WriteImage(b.out + "_stage_ref.png", ref.beauty);
-    const StageRun& t = runs[0];
-    const StageRun& h = runs[1];
+    const StageRun& t = *runs.front();
+    const StageRun& h = *runs.back();
     if (b.still) {
-        for (const StageRun* r : {&t, &h}) {
+        for (const auto& r : runs) {
             const double first = r->stillErrors.front().second;
             const double lastErr = r->stillErrors.back().second;
             std::printf(
@@ -239,9 +262,9 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     }
     const double frameCpu = t.CpuSeconds(), hitCpu = h.CpuSeconds();
     std::printf(
-        "CPU a frame, render + stage: texture space %.1f ms, per hit %.1f ms: %.2f of per "
+        "CPU a frame, render + stage: %s %.1f ms, per hit %.1f ms: %.2f of per "
         "hit (goal <= 0.33 at equal denoised relMSE)\n",
-        1e3 * frameCpu / timed, 1e3 * hitCpu / timed, frameCpu / hitCpu);
+        t.name, 1e3 * frameCpu / timed, 1e3 * hitCpu / timed, frameCpu / hitCpu);
     if (b.equalError) {
         const double eTex = RelMSE(ToImage(t.image, s.width, s.height), ref.beauty);
         double eHit = RelMSE(ToImage(h.image, s.width, s.height), ref.beauty);
@@ -260,18 +283,18 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             double prevErr = eHit, prevRatio = ratio;
             while (eHit > eTex && spp < kMaxEqualErrorSpp) {
                 spp *= 2;
-                StageRun pass[2] = {StageRun("texture space", true, s.height),
-                                    StageRun("per hit", false, s.height)};
+                Runs pass = makeRuns();
                 runPass(pass, spp);
+                const StageRun& pt = *pass.front();
+                const StageRun& ph = *pass.back();
                 prevErr = eHit, prevRatio = ratio;
-                eHit = RelMSE(ToImage(pass[1].image, s.width, s.height), ref.beauty);
-                ratio = pass[0].CpuSeconds() / pass[1].CpuSeconds();
+                eHit = RelMSE(ToImage(ph.image, s.width, s.height), ref.beauty);
+                ratio = pt.CpuSeconds() / ph.CpuSeconds();
                 std::printf(
                     "  per hit at %2d spp: %.1f ms cpu a frame (render + stage), denoised relMSE "
                     "%.5f; texture space in the same pass %.1f ms cpu, %.5f: %.2f of per hit\n",
-                    spp, 1e3 * pass[1].CpuSeconds() / timed, eHit,
-                    1e3 * pass[0].CpuSeconds() / timed,
-                    RelMSE(ToImage(pass[0].image, s.width, s.height), ref.beauty), ratio);
+                    spp, 1e3 * ph.CpuSeconds() / timed, eHit, 1e3 * pt.CpuSeconds() / timed,
+                    RelMSE(ToImage(pt.image, s.width, s.height), ref.beauty), ratio);
                 std::fflush(stdout);
             }
             if (eHit > eTex) {
@@ -297,7 +320,7 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
                 screen::MethodName(method), t.Fps(timed), t.Fps(timed) >= 10.0 ? "ok" : "MISSED");
     std::printf("stage passes: %.1f ms a frame (goal < 25) %s\n", t.stageWall / timed,
                 t.stageWall / timed < 25.0 ? "ok" : "MISSED");
-    std::printf("wrote %s_stage_{ref,texture,hit}.png\n", b.out.c_str());
+    std::printf("wrote %s_stage_{ref,texture,grid,hit}.png\n", b.out.c_str());
     return 0;
 }
 

@@ -6,8 +6,10 @@
 #include <pmmintrin.h>
 #include <xmmintrin.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -15,6 +17,7 @@
 #include <memory>
 
 #include <tbb/blocked_range.h>
+#include <tbb/blocked_range2d.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <glm/gtc/matrix_transform.hpp>
@@ -22,6 +25,7 @@
 #include "renderer/integrators/path_tracer.h"
 #include "renderer/integrators/polygon_light.h"
 #include "renderer/render.h"
+#include "renderer/render_internal.h"
 #include "renderer/texture_space/cached_shading.h"
 #include "texcache/error.h"
 
@@ -547,6 +551,29 @@ void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bs
     px.hasCones = true;
 }
 
+/// A frame's use of the store (opt.texture.frameBufferSamples Hits; frame_buffers_render.h):
+/// which camera hits trace their diffuse lobe's path into it, and each pixel's record for
+/// reading it back once every hit is added.
+struct FrameStore {
+    const LightHitStore* store;  ///< as the previous frames left it (read only while shading)
+    int bias = 0;                ///< the bins' levels above a hit's texel
+    float blend = 0.0f;          ///< the share of hits that read the level above (PathHitsAdd)
+    int budget = 1;              ///< one pixel in `budget` a frame traces its path
+    uint32_t group = 0;          ///< this frame's pixels: those of this dither group
+    double minCount = 0.0;       ///< a cell with fewer counts needs its hits' paths
+    HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
+    BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
+
+    /// Whether pixel (x, y) traces its path this frame: its place in a 4x4 ordered-dither
+    /// (Bayer) matrix picks its group, and the frame's group rotates, so each pixel traces once
+    /// in `budget` frames and every frame's pixels are spread evenly over the image.
+    bool InBudget(int x, int y) const {
+        static constexpr uint8_t kBayer[4][4] = {
+            {0, 8, 2, 10}, {12, 4, 14, 6}, {3, 11, 1, 9}, {15, 7, 13, 5}};
+        return uint32_t(kBayer[y & 3][x & 3]) * uint32_t(budget) / 16u == group;
+    }
+};
+
 /// The values of a pixel that nothing was found at (background), in every buffer but the
 /// shadow rays' (WriteShadowBuffers): each pixel writes all of its entries, so the buffers need
 /// no clearing pass before a frame (a serial fill of ~40 MB at 640x360).
@@ -588,11 +615,12 @@ void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& s
 /// WriteShadowBuffers): the samples' shadow rays are appended to `shadows`, for pixel `pixel` of
 /// the tile, and `px` keeps what they need.
 void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
-                bool layered, int x, int y, int pixel, const Ray& ray, const RayDifferentials* diff,
-                bool found, const Hit& hit, screen::FrameBuffers& fb, PixelShadow& sh,
-                std::vector<PendingShadow>& shadows, RayCounts& rays) {
+                bool layered, const FrameStore* fs, int x, int y, int pixel, const Ray& ray,
+                const RayDifferentials* diff, bool found, const Hit& hit, screen::FrameBuffers& fb,
+                PixelShadow& sh, std::vector<PendingShadow>& shadows, RayCounts& rays) {
     const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
     ClearPixel(fb, p);
+    if (fs) fs->records[p].mesh = PassTexels::kMiss;
     if (!found) {
         fb.emitted[p] = c.Background(ray.dir);
         return;
@@ -634,7 +662,17 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
     // diffuse materials (the cached irradiance does not depend on the material: a GGX base's
     // is the same); `layered` (CachedDiffuseLight), its direct light too.
     const bool cachedIndirect = diffuse && c.tsc;
-    if (cachedIndirect) {
+    // From the store: the pixel's record, and its path traced (below) when in the frame's
+    // budget or when its bin holds too few samples yet (disocclusions, a first frame); the
+    // light is read back once every hit is added (ResolveStore).
+    bool storePath = false;
+    if (cachedIndirect && fs) {
+        int texelLevel = 0;
+        FrameHitRecord(c, si, hit.t, fs->bias, &fs->records[p], &texelLevel);
+        fs->binned[p] = {glm::vec3(kNaN), bsdf.DiffuseReflectance(), texelLevel};
+        storePath =
+            fs->InBudget(x, y) || StoreCountAt(*c.tsc, *fs->store, fs->records[p]) < fs->minCount;
+    } else if (cachedIndirect) {
         const glm::vec3 E = CachedDiffuse(c, si, layered, rays);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
         // The cache knows irradiance, not its direction: the same radiance in every cone, so
@@ -663,6 +701,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
                             Luminance(glm::abs(exactShading)) > 0.0f;
     FramePixel px;
     const int spp = std::max(c.opt.spp, 1);
+    glm::vec3 storeSum(0.0f);
     for (int s = 0; s < spp; ++s) {
         Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
         // With the diffuse lobe's light all cached, only a specular lobe samples lights here
@@ -672,8 +711,13 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
                               envSamples, px, sh, pixel, shadows, layered);
         if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, layered, rng, px, rays);
         if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
+        glm::vec3 wi;
+        if (storePath && bsdf.SampleDiffuse(rng.Next2D(), &wi))
+            storeSum += DiffuseRayLight(c, SpawnRay(si, wi), si.N, layered, rng, rays);
     }
     const float inv = 1.0f / float(spp);
+    // NaN or infinite stays NaN: the store never takes it (RadianceBin::FromRadiance).
+    if (storePath) fs->binned[p].light = storeSum * inv;
     fb.shading[p] = px.shadingSum * inv;
     if (bsdf.HasSpecular()) fb.glossy[p] = px.glossySum * inv;
     if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
@@ -718,8 +762,8 @@ struct TileScratch {
 /// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
 /// cheaper per ray for such rays than single rays.
 void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
-                bool layered, int x0, int y0, screen::FrameBuffers& fb, TileScratch& ts,
-                RayCounts& rays) {
+                bool layered, const FrameStore* fs, int x0, int y0, screen::FrameBuffers& fb,
+                TileScratch& ts, RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
     int n = 0;
     for (int y = y0; y < y1; ++y)
@@ -742,7 +786,7 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
     for (int i = 0, y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++i) {
             ts.shadow[i].Reset();
-            ShadePixel(c, motion, envSamples, layered, x, y, i, ts.ray[i],
+            ShadePixel(c, motion, envSamples, layered, fs, x, y, i, ts.ray[i],
                        c.tsc ? &ts.diff[i] : nullptr, ts.found[i], ts.hit[i], fb, ts.shadow[i],
                        ts.shadows, rays);
         }
@@ -765,6 +809,62 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
     for (int i = 0, y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++i)
             WriteShadowBuffers(fb, size_t(y) * size_t(c.opt.width) + size_t(x), ts.shadow[i]);
+}
+
+/// The samples a pixel's reconstruction needs behind it in the store (StoreCountAt) for a frame
+/// not to trace the pixel's path outside its budget: fewer, and it is a disocclusion or a first
+/// frame's.
+constexpr double kStoreMinSamples = 0.5;
+
+/// The frame buffers' store's most blocks (520 MiB of radiance bins).
+constexpr size_t kMaxStoreBlocks = size_t(1) << 20;
+
+/// The cache's light store moved into one of at least `blocks` blocks, its sums scaled by
+/// keep / 2^16 on the way and the blocks that fell to zero released.
+LightHitStore& GrowStore(TextureSpaceCache& tsc, size_t blocks, uint32_t keep) {
+    std::vector<uint64_t> records;
+    if (const LightHitStore* old = tsc.LightStoreIfAny()) old->Samples().ExportBlocks(&records);
+    if (keep < (1u << 16)) RadianceBins::ScaleRecords(&records, keep);
+    LightHitStore& store = tsc.LightStore(blocks);
+    store.Clear();
+    store.Samples().AddBlocks(records.data(), records.size() / RadianceBins::kRecordWords);
+    return store;
+}
+
+/// The store as a new frame of the frame buffers takes it: the previous frames' sums decayed by
+/// keep / 2^16 (eq. 6; all kept while the view is still), in place while at most half its
+/// blocks are in use, else moved into a table twice the blocks in use (released the zeros);
+/// `firstBlocks` for a cache that has none yet.
+LightHitStore& DecayStore(TextureSpaceCache& tsc, size_t firstBlocks, uint32_t keep) {
+    LightHitStore* store = tsc.LightStoreIfAny();
+    if (!store) return GrowStore(tsc, std::max(firstBlocks, size_t(1024)), keep);
+    const RadianceBins& bins = store->Samples();
+    if (2 * bins.BlocksUsed() > bins.NumBlocks())
+        return GrowStore(tsc, std::min(4 * bins.BlocksUsed(), kMaxStoreBlocks), keep);
+    if (keep < (1u << 16))
+        store->DecayInPlace(keep);
+    else
+        store->AddsDone();  // a new generation: nothing read before is kept
+    return *store;
+}
+
+/// Each stored pixel's diffuse light read back from the store, now holding the frame's hits:
+/// `indirect` is albedo x the reconstruction, and the six cones all hold it (as the grid's).
+void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& store,
+                  screen::FrameBuffers& fb) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, c.opt.height, 4),
+                      [&](const tbb::blocked_range<int>& r) {
+                          for (int y = r.begin(); y < r.end(); ++y)
+                              for (int x = 0; x < c.opt.width; ++x) {
+                                  const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
+                                  const HitRecord& h = fs.records[p];
+                                  if (h.mesh < 0) continue;
+                                  const glm::vec3 E = FiniteOrZero(StoreLightAt(*c.tsc, store, h));
+                                  fb.indirect[p] = FiniteOrZero(fs.binned[p].albedo * E);
+                                  for (int k = 0; k < screen::kNumCones; ++k)
+                                      fb.cones[p * screen::kNumCones + k] = E;
+                              }
+                      });
 }
 
 }  // namespace
@@ -840,6 +940,40 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
 
     const bool layered = CachedDiffuseLight(ctx, opt);
 
+    // The store (frame_buffers_render.h): the previous frames' bins, decayed.
+    const bool useStore = ctx.tsc && opt.texture.frameBufferSamples == TextureSamples::Hits;
+    std::unique_ptr<FrameStore> fs;
+    if (useStore) {
+        const int k = opt.texture.frameBufferBudget;
+        if (k < 1 || k > 16 || (k & (k - 1)) != 0)
+            throw InputError("frame buffers",
+                             "the store's budget must be one pixel in 1, 2, 4, "
+                             "8 or 16, got " +
+                                 std::to_string(k));
+        TextureSpaceCache& tsc = *ctx.tsc;
+        // The bins' level, chosen once for the cache (a level that moved would orphan the
+        // history): for the camera samples a bin's pixels hold, 1 / (1 - alpha) each
+        // (FrameStoreKeep).
+        int& bias = tsc.TemporalHitBias();
+        const float alpha = std::clamp(opt.texture.temporalAlpha, 0.0f, 0.99f);
+        const float levels = TextureSpaceCache::HitBinLevels(
+            1, std::max(1, int(std::lround(1.0 / (1.0 - double(alpha))))), 0,
+            TextureSpaceCache::HitTerm::Light);
+        if (bias == INT_MIN) bias = int(std::floor(levels));
+        fs = std::make_unique<FrameStore>();
+        fs->bias = bias;
+        fs->blend = std::clamp(levels - float(bias), 0.0f, 1.0f);
+        fs->budget = k;
+        fs->group = tsc.Frame() % uint32_t(k);
+        fs->minCount = kStoreMinSamples * double(tsc.HitUnit());
+        fs->records = tsc.HitRecords(n);
+        fs->binned = tsc.BinnedHits(n);
+        // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.
+        const size_t guess =
+            4 * tsc.NumFaces() + 2 * n / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
+        fs->store = &DecayStore(tsc, std::min(2 * guess, kMaxStoreBlocks), tsc.FrameStoreKeep(k));
+    }
+
     const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;
     tbb::enumerable_thread_specific<RayCounts> counts;
     tbb::enumerable_thread_specific<TileScratch> scratch;
@@ -850,9 +984,34 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                           RayCounts& rc = counts.local();
                           TileScratch& ts = scratch.local();
                           for (int t = r.begin(); t < r.end(); ++t)
-                              RenderTile(ctx, motion, envSamples, layered, (t % tilesX) * kTile,
-                                         (t / tilesX) * kTile, fb, ts, rc);
+                              RenderTile(ctx, motion, envSamples, layered, fs.get(),
+                                         (t % tilesX) * kTile, (t / tilesX) * kTile, fb, ts, rc);
                       });
+    size_t storeReads = 0, storeTraced = 0;
+    if (fs) {
+        // Every traced hit added (integer sums: the same bins for any thread count), then every
+        // stored pixel read back. The table is kept at most half full, counting a new block
+        // for every eighth traced hit (a frame's hits mostly fall in blocks the store has;
+        // an add that finds no room is dropped and counted, and the next frame's table grows).
+        for (size_t p = 0; p < n; ++p)
+            if (fs->records[p].mesh >= 0) {
+                ++storeReads;
+                storeTraced += std::isnan(fs->binned[p].light.x) ? 0 : 1;
+            }
+        const size_t traced = storeTraced;
+        const RadianceBins& before = fs->store->Samples();
+        const size_t need = 2 * (before.BlocksUsed() + traced / 8);
+        LightHitStore& store = need > before.NumBlocks() && before.NumBlocks() < kMaxStoreBlocks
+                                   ? GrowStore(*ctx.tsc, std::min(need, kMaxStoreBlocks), 1u << 16)
+                                   : *ctx.tsc->LightStoreIfAny();
+        tbb::parallel_for(tbb::blocked_range2d<int>(0, H, kTile, 0, W, kTile * 8),
+                          [&](const tbb::blocked_range2d<int>& r) {
+                              PathHitsAdd(ctx, r, 0, 1, fs->bias, fs->blend, fs->records,
+                                          fs->binned, store.Samples());
+                          });
+        store.AddsDone();
+        ResolveStore(ctx, *fs, store, fb);
+    }
 
     RenderStats stats;
     for (const RayCounts& rc : counts) {
@@ -861,6 +1020,10 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         stats.bounceRays += rc.bounce;
     }
     for (const CacheStats& cs : frameCache.Stats()) stats.cache.Merge(cs);
+    // The store's reads as lookups: a hit where the pixel's light came from earlier frames'
+    // hits alone, a miss (a sample shaded) where the pixel traced its path.
+    stats.cache.lookups += storeReads, stats.cache.texelHits += storeReads - storeTraced;
+    stats.cache.texelMisses += storeTraced, stats.cache.samplesShaded += storeTraced;
     stats.sppDone = std::max(opt.spp, 1);
     stats.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     stats.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;

@@ -33,7 +33,8 @@ bool SameCacheContents(const PreviewSettings& a, const PreviewSettings& b) {
            a.sampleCacheMb == b.sampleCacheMb && a.texelCacheMb == b.texelCacheMb &&
            a.lodBias == b.lodBias && a.aoSamples == b.aoSamples && a.aoDistance == b.aoDistance &&
            a.maxDepth == b.maxDepth && a.tessellationRate == b.tessellationRate &&
-           a.cachedVisibility == b.cachedVisibility && a.denoise == b.denoise;
+           a.cachedVisibility == b.cachedVisibility && a.denoise == b.denoise &&
+           a.fbCache == b.fbCache && a.fbBudget == b.fbBudget;
 }
 
 /// Whether anything of the scene at time `a` is elsewhere at time `b`: per object, and whether a
@@ -74,6 +75,8 @@ TextureSpaceOptions TextureOptionsOf(const PreviewSettings& s) {
     t.cache.texelCacheBytes = size_t(double(s.texelCacheMb) * (1 << 20));
     t.cache.lodBias = s.lodBias;
     t.cachedVisibility = s.cachedVisibility;
+    t.frameBufferSamples = s.fbCache;
+    t.frameBufferBudget = s.fbBudget;
     if (s.denoise) t.temporalAlpha = kStageTemporalAlpha;
     t.cache.Validate();
     return t;

@@ -99,6 +99,12 @@ struct PreviewSettings {
     /// With the stage and texture space: the direct light's visibility cached too, taken by the
     /// stage where it has no history (TextureSpaceOptions::cachedVisibility).
     bool cachedVisibility = false;
+    /// With the stage and texture space: where the frame buffers' cached diffuse light comes
+    /// from (TextureSpaceOptions::frameBufferSamples: Hits, the store filled from one camera hit
+    /// in fbBudget a frame and wherever the store holds too few; Grid, the paper's lazily shaded
+    /// grid samples).
+    TextureSamples fbCache = TextureSamples::Hits;
+    int fbBudget = 4;
     /// The motion vectors the Motion view shows (the stage runs Reliable for it when off).
     screen::MotionKind motionKind = screen::MotionKind::Traditional;
     /// Stereo (renderer/texture_space/stereo.h): the beauty and debug-integrator views show both

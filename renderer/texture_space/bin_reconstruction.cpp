@@ -463,6 +463,18 @@ void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s
         });
 }
 
+glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store,
+                       const HitRecord& h) {
+    return ReconstructRadiance(tsc, store, h, ThreadCells(store.Samples()), 0.0);
+}
+
+double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h) {
+    LevelCells<RadianceBin>& cells = ThreadCells(store.Samples());
+    return double(EstimateOf(CellAt(tsc.Grids(h.mesh), store.Samples(), h.mesh, h.Face(), h.Level(),
+                                    h.U(), h.V(), cells.fineMemo, cells.fine))
+                      .count);
+}
+
 void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
                            float* out) {
     if (n < 2 || y1 <= y0 || width <= 0) return;  // no spread to weigh: the reconstruction

@@ -42,6 +42,14 @@ ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& 
 ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool direct,
                                 RayCounts& rays, int paths = 0);
 
+/// One estimate of diffuse light (1/pi integral of L cos) from the cosine-sampled ray `ray`
+/// leaving a point of normal `N`: the light its path brings back, whose first hit's emission
+/// is not counted (NEE's) unless `direct`, which adds one light sample with its shadow ray and
+/// that emission. What a cache sample's rays (ShadeDiffuseSample) and a camera hit's diffuse
+/// ray for the frame buffers' store each estimate. Not checked for NaN or infinity.
+glm::vec3 DiffuseRayLight(const Context& c, const Ray& ray, glm::vec3 N, bool direct, Rng& rng,
+                          RayCounts& rays);
+
 /// Visibility of the scene's area lights from a cache sample (Mehta et al.'s soft-shadow input):
 /// the fraction of shadow rays towards uniform points on the quad lights that reach them, and the
 /// smallest blur std sigma_l * t / (d - t) the blocked rays allow (see soft_shadow_filter.h).

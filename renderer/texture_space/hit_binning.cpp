@@ -250,15 +250,30 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
                 TexelKey keys[2];
                 ObjectBinKeys(c, c.tsc->ObjectOfMesh(h.mesh), c.tsc->Grids(h.mesh), h.Face(), h.U(),
                               h.V(), b.texelLevel, bias, keys);
+                // Nothing to add for a record that only reads (the frame buffers' hits outside
+                // the frame's budget carry NaN light); finite light was checked when shaded.
                 RadianceBin::Value v;
-                RadianceBin::FromRadiance(&b.light.x, &v);  // finite: checked when shaded
-                for (uint64_t& w : v.sum) w *= unit;
-                v.count *= unit;
-                batch.Add(keys[0], v);
-                if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
+                if (RadianceBin::FromRadiance(&b.light.x, &v)) {
+                    for (uint64_t& w : v.sum) w *= unit;
+                    v.count *= unit;
+                    batch.Add(keys[0], v);
+                    if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
+                }
                 h.faceLevel =
                     uint32_t(h.Face()) << 4 | keys[ReadsUpperLevel(c, x, y, s, blend) ? 1 : 0].mip;
             }
+}
+
+void FrameHitRecord(const Context& c, const SurfaceInteraction& si, float t, int bias, HitRecord* h,
+                    int* texelLevel) {
+    const int mesh = c.tsc->MeshOf(si.object, si.backFacing);
+    *texelLevel = HitTexelLevel(c, si, t, mesh);
+    *h = {HitRecord::Quantize(si.ptex.u), HitRecord::Quantize(si.ptex.v), mesh,
+          uint32_t(si.ptex.face) << 4};
+    TexelKey keys[2];
+    ObjectBinKeys(c, si.object, c.tsc->Grids(mesh), si.ptex.face, h->U(), h->V(), *texelLevel, bias,
+                  keys);
+    h->faceLevel |= keys[0].mip;
 }
 
 }  // namespace texcache::internal

@@ -117,6 +117,7 @@ void TextureSpaceCache::Refresh(uint32_t frame, uint32_t parts, bool still) {
     pass_ = frame;  // fresh random streams and jittered sample points for what is re-shaded
     passRadiusOf_ = radiusOf_;
     if (history_) history_->SetRunningMean(still);
+    storeStill_ = still;
     if (parts == 0) return;
     const uint64_t part = frame % parts;
     cache_.InvalidateKeys([parts, part](uint64_t k) {
@@ -132,6 +133,10 @@ void TextureSpaceCache::InvalidateObject(int object) {
         const int mesh = (*meshes)[o];
         cache_.InvalidateMesh(mesh);
         if (history_) history_->InvalidateIf(cache_.MeshKeys(mesh));
+        const MeshGrids& g = cache_.Mesh(mesh);
+        const uint64_t first = g.FaceOffset(), end = first + uint64_t(g.NumFaces());
+        if (aoStore_) aoStore_->ForgetFaces(first, end);
+        if (lightStore_) lightStore_->ForgetFaces(first, end);
     }
 }
 

@@ -115,6 +115,7 @@
 #pragma once
 #include <algorithm>
 #include <climits>
+#include <cmath>
 #include <memory>
 #include <stdexcept>
 #include <vector>
@@ -398,6 +399,8 @@ public:
     AoHitStore& AoStore(size_t minBlocks) { return StoreOf(aoStore_, minBlocks); }
     /// Hit-binned diffuse light's store (the path and direct integrators), kept as AoStore's.
     LightHitStore& LightStore(size_t minBlocks) { return StoreOf(lightStore_, minBlocks); }
+    /// The light store as it is, or null before the first LightStore.
+    LightHitStore* LightStoreIfAny() { return lightStore_.get(); }
     /// Temporal accumulation at the hits (--temporal-alpha with TextureSamples::Hits; the note
     /// at the top): each hit adds HitUnit() units of count, so that the decay of the stores'
     /// sums between frames (alpha in fixed point) rounds a few counts by a fraction of a percent
@@ -455,9 +458,22 @@ public:
     /// never shaded are shaded on their first lookup, before any refresh. Between frames.
     void Refresh(uint32_t frame, uint32_t parts, bool still);
     /// Forgets everything cached for scene object `object`, on each of its grids: samples,
-    /// texels and temporal history (the object moved, or its material changed what its cached
-    /// term holds). Between frames.
+    /// texels and temporal history, and its bins in the hit stores (the object moved, or its
+    /// material changed what its cached term holds). Between frames.
     void InvalidateObject(int object);
+    /// What the frame buffers' store keeps of its sums at the next frame, in 1/65536 (the
+    /// store's Decay), when one pixel in `budget` adds to it a frame: all of them while the last
+    /// Refresh said the view is still (a running mean, which converges); while it moves, eq. 6's
+    /// weight temporalAlpha per pixel's sample, 1 - (1 - alpha) / budget a frame, so that a bin
+    /// holds 1 / (1 - alpha) of its pixels' samples as the grid's texels hold that many frames;
+    /// none without temporal accumulation.
+    uint32_t FrameStoreKeep(int budget) const {
+        if (storeStill_) return 1u << 16;
+        const double alpha = std::clamp(double(options_.temporalAlpha), 0.0, 1.0);
+        if (!(alpha > 0.0)) return 0;
+        return uint32_t(
+            std::lround((1.0 - (1.0 - alpha) / double(std::max(budget, 1))) * double(1u << 16)));
+    }
     /// This frame's filtered value of a texel blended into its history (eq. 6); `value` as is
     /// when temporal accumulation is off.
     glm::vec3 Accumulate(const TexelKey& key, glm::vec3 value) {
@@ -524,6 +540,7 @@ private:
     int64_t hitStoreFrame_ = -1;
     int temporalHitBias_ = INT_MIN;
     bool mayHoldTexels_ = false;  ///< see MayHoldTexels
+    bool storeStill_ = false;     ///< see FrameStoreKeep
     bool neighbourReuse_ = false;
 };
 

@@ -228,6 +228,18 @@ public:
         dropped += AddBlocks(records.data(), records.size() / kRecordWords);
         dropped_.store(dropped, std::memory_order_relaxed);
     }
+    /// Scales every bin by keep / 2^16 as Scale does, in place: the blocks that fall to zero
+    /// stay claimed (no table rebuilt), for a table decayed every frame whose blocks mostly stay
+    /// in use; Scale releases them. Never while Add or Find run. A new Generation.
+    void ScaleInPlace(uint32_t keep) {
+        for (size_t i = 0; i < blocks_; ++i) {
+            if (bins_[i].key.load(std::memory_order_relaxed) == TexelKey::kEmpty) continue;
+            for (auto& w : bins_[i].w)
+                w.store(Bin::ScaleWord(w.load(std::memory_order_relaxed), keep),
+                        std::memory_order_relaxed);
+        }
+        generation_ = internal::NextGeneration();
+    }
     /// Scales records of ExportBlocks as Scale scales the bins, and removes those that fall to
     /// zero.
     static void ScaleRecords(std::vector<uint64_t>* records, uint32_t keep) {
@@ -312,6 +324,10 @@ public:
     /// this one had (a new one at each Clear, process-wide): a reader may keep what it read
     /// from the table while the generation stays (the renderer's per-thread reconstruction memo).
     uint64_t Generation() const { return generation_; }
+    /// A new Generation for the contents adds changed since they were last read, for a user
+    /// that reads, adds and reads again between Clears (the frame buffers' store). Never while
+    /// Add or Find run.
+    void NewGeneration() { generation_ = internal::NextGeneration(); }
     /// Adds that found no room since the last Clear.
     uint64_t Dropped() const { return dropped_.load(std::memory_order_relaxed); }
     size_t NumBlocks() const { return blocks_; }

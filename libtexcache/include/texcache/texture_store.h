@@ -43,6 +43,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <type_traits>
+#include <vector>
 
 #include "texcache/direct_mapped_cache.h"
 #include "texcache/hit_bins.h"
@@ -107,6 +108,40 @@ public:
     /// frames only.
     void Decay(uint32_t keep) {
         samples_.Scale(keep);
+        texels_.InvalidateAll();
+    }
+
+    /// Empties the entries of faces [first, end) of both levels, keeping the others (an object
+    /// moved, or its material changed what its light holds). Between frames only.
+    void ForgetFaces(uint64_t first, uint64_t end) {
+        std::vector<uint64_t> records;
+        samples_.ExportBlocks(&records);
+        size_t kept = 0;
+        for (size_t r = 0; r < records.size(); r += SampleLevel::kRecordWords) {
+            const uint64_t face = TexelKey::Unpack(records[r]).face;
+            if (face >= first && face < end) continue;
+            std::copy_n(records.begin() + ptrdiff_t(r), SampleLevel::kRecordWords,
+                        records.begin() + ptrdiff_t(kept));
+            kept += SampleLevel::kRecordWords;
+        }
+        samples_.Clear();
+        samples_.AddBlocks(records.data(), kept / SampleLevel::kRecordWords);
+        texels_.InvalidateAll();
+    }
+
+    /// After adds to a sample level that was read before them (a frame that reads the store to
+    /// pick which hits to shade, then adds them): a new sample-level Generation and texel epoch,
+    /// so no memo or texel of the earlier contents is read again. Never while adds or lookups
+    /// run.
+    void AddsDone() {
+        samples_.NewGeneration();
+        texels_.InvalidateAll();
+    }
+
+    /// Decay without releasing the blocks that fall to zero (BinTable::ScaleInPlace): no table
+    /// rebuilt, for a store decayed every frame. Between frames only.
+    void DecayInPlace(uint32_t keep) {
+        samples_.ScaleInPlace(keep);
         texels_.InvalidateAll();
     }
 
