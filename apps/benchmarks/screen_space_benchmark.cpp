@@ -116,10 +116,11 @@ void Report(benchmark::State& state, const std::string& prefix, const StageTimin
 }
 
 void BM_Stage(benchmark::State& state, Method method, Demodulation demod, int width,
-              int atrousLevels) {
+              int atrousLevels, int halfResolutionRows) {
     const Frames& fr = Shared(width);
     DenoiserSettings settings;
     settings.atrousLevels = atrousLevels;
+    settings.halfResolutionRows = halfResolutionRows;
     ScreenSpaceDenoiser dn(settings, fr.brdf);
     std::vector<glm::vec3> img;
     // Warm-up: allocates (and first-touches) both sets of guides and histories.
@@ -155,7 +156,7 @@ void Register() {
         for (Demodulation d : {Demodulation::Off, Demodulation::On}) {
             const std::string name = std::string("stage/") + MethodName(m) +
                                      (d == Demodulation::On ? "/demod" : "/no-demod");
-            auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d, 1920, 4)
+            auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d, 1920, 4, 0)
                           ->UseManualTime()
                           ->Unit(benchmark::kMillisecond);
             gSmoke ? b->Iterations(1) : b->MinTime(3.0);
@@ -163,27 +164,21 @@ void Register() {
     // Reliable at 1920x1080 with 3 a-trous levels: the level count's share of the 1080p stage
     // (--quality gives what it costs in error).
     auto* levels3 = benchmark::RegisterBenchmark("stage/reliable/demod/3levels", BM_Stage,
-                                                 Method::Reliable, Demodulation::On, 1920, 3)
+                                                 Method::Reliable, Demodulation::On, 1920, 3, 0)
                         ->UseManualTime()
                         ->Unit(benchmark::kMillisecond);
     gSmoke ? levels3->Iterations(1) : levels3->MinTime(3.0);
+    // Reliable at 1920x1080 on half the pixels (DenoiserSettings::halfResolutionRows).
+    auto* half = benchmark::RegisterBenchmark("stage/reliable/demod/half", BM_Stage,
+                                              Method::Reliable, Demodulation::On, 1920, 4, 1)
+                     ->UseManualTime()
+                     ->Unit(benchmark::kMillisecond);
+    gSmoke ? half->Iterations(1) : half->MinTime(3.0);
     auto* small = benchmark::RegisterBenchmark("stage/reliable/demod/640x360", BM_Stage,
-                                               Method::Reliable, Demodulation::On, 640, 3)
+                                               Method::Reliable, Demodulation::On, 640, 3, 0)
                       ->UseManualTime()
                       ->Unit(benchmark::kMillisecond);
     gSmoke ? small->Iterations(1) : small->MinTime(3.0);
-}
-
-// relMSE as renderer/image/metrics.h defines it (Rousselle et al. 2011): per pixel, the sum over
-// R, G, B of (test - ref)^2 / (gray(ref)^2 + 1e-3), averaged over the pixels.
-double RelMse(const std::vector<glm::vec3>& test, const std::vector<glm::vec3>& ref) {
-    double sum = 0.0;
-    for (size_t i = 0; i < ref.size(); ++i) {
-        const glm::dvec3 r(ref[i]), d = glm::dvec3(test[i]) - r;
-        const double g = (r.x + r.y + r.z) / 3.0;
-        sum += glm::dot(d, d) / (g * g + 1e-3);
-    }
-    return sum / double(ref.size());
 }
 
 struct QualityCase {
@@ -199,6 +194,11 @@ std::vector<QualityCase> QualityCases() {
     cases.push_back({"3 levels", d});
     d.atrousLevels = 2;
     cases.push_back({"2 levels", d});
+    d.atrousLevels = DenoiserSettings{}.atrousLevels;
+    d.halfResolutionRows = 1;
+    cases.push_back({"half resolution (4 levels: 3 at half)", d});
+    d.atrousLevels = 3;
+    cases.push_back({"half resolution, 3 levels (2 at half)", d});
     return cases;
 }
 
@@ -209,23 +209,24 @@ int RunQuality(int width, int frames, int referenceSpp) {
     const std::vector<glm::vec3> ref =
         test::SynthRender(sc, frames - 1, 99, referenceSpp).Compose();
     const auto brdf = std::make_shared<BrdfPreintegration>();
-    const double inputRel = RelMse(in.back().Compose(), ref);
+    const double inputRel = test::RelMse(in.back().Compose(), ref);
     std::printf("%dx%d, %d frames, reference %d spp; input relMSE %.5f\n", sc.width, sc.height,
                 frames, referenceSpp, inputRel);
-    std::printf("| setting | relMSE | RMSE | stage cpu ms | a-trous | temporal |\n");
-    std::printf("|---|---|---|---|---|---|\n");
+    std::printf("| setting | relMSE | RMSE | stage cpu ms | a-trous | temporal | wall ms |\n");
+    std::printf("|---|---|---|---|---|---|---|\n");
     int failed = 0;
     for (const QualityCase& qc : QualityCases()) {
         ScreenSpaceDenoiser dn(qc.settings, brdf);
         std::vector<glm::vec3> img;
-        StageTimings cpu;
+        StageTimings cpu, wall;
         for (int f = 0; f < frames; ++f) {
             dn.Denoise(in[size_t(f)], Method::Reliable, Demodulation::On, &img);
-            if (f > 0) Add(&cpu, dn.CpuTimings());
+            if (f > 0) Add(&cpu, dn.CpuTimings()), Add(&wall, dn.Timings());
         }
-        const double n = std::max(1, frames - 1), rel = RelMse(img, ref);
-        std::printf("| %s | %.5f | %.5f | %.1f | %.1f | %.1f |\n", qc.name, rel,
-                    test::Rmse(img, ref), cpu.total / n, cpu.spatial / n, cpu.temporal / n);
+        const double n = std::max(1, frames - 1), rel = test::RelMse(img, ref);
+        std::printf("| %s | %.5f | %.5f | %.1f | %.1f | %.1f | %.1f |\n", qc.name, rel,
+                    test::Rmse(img, ref), cpu.total / n, cpu.spatial / n, cpu.temporal / n,
+                    wall.total / n);
         std::fflush(stdout);
         if (!(rel <= 0.5 * inputRel)) {
             std::fprintf(stderr,
