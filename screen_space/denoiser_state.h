@@ -84,6 +84,7 @@ struct ScreenSpaceDenoiser::State {
     FrameBuffers halfFrame;
     std::vector<glm::vec3> halfImage;
     std::vector<uint32_t> halfSource;  ///< each block's representative pixel
+    bool lastHalf = false;             ///< the last frame was denoised at half resolution
 
     internal::Guides& G() { return guides[cur]; }
     const internal::Guides& PrevG() const { return guides[cur ^ 1]; }

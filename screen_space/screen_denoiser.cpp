@@ -865,7 +865,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         clock.Lap(&StageTimings::prepare);
         s.half->Denoise(s.halfFrame, method, demodulation, &s.halfImage);
         clock.Charge(s.half->Timings(), s.half->CpuTimings());
-        std::fill(std::begin(s.motionValid), std::end(s.motionValid), false);
+        s.lastHalf = true;
         UpsampleResults(s, *s.half->s_);
         clock.Lap(&StageTimings::spatial);
         Compose(s, frame, image);
@@ -873,6 +873,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         return;
     }
 
+    s.lastHalf = false;
     s.blendAlpha = BlendAlpha(s.set.alpha, s.stillFrames);
     const bool temporal = method != Method::SpatialOnly && s.hasPrev;
     std::fill(std::begin(s.motionValid), std::end(s.motionValid), false);
@@ -1016,6 +1017,16 @@ std::vector<glm::vec3> ScreenSpaceDenoiser::Indirect() const {
 
 std::vector<glm::vec2> ScreenSpaceDenoiser::LastMotion(MotionKind kind) const {
     const State& s = *s_;
+    if (s.lastHalf) {
+        // The block's vector, scaled to full resolution, moved by the pixel's offset from the
+        // block's centre.
+        const std::vector<glm::vec2> hm = s.half->LastMotion(kind);
+        const int hw = s.half->s_->w;
+        return Collect<glm::vec2>(s, [&](int x, int y) {
+            const glm::vec2 from = hm[size_t(y / 2) * size_t(hw) + size_t(x / 2)];
+            return 2.0f * from + glm::vec2(float(x % 2) - 0.5f, float(y % 2) - 0.5f);
+        });
+    }
     const MotionField* m[4] = {&s.trad, &s.shadow, &s.glossy, &s.occl};
     const bool ok = s.motionValid[int(kind)];
     const MotionField& f = *m[int(kind)];

@@ -154,6 +154,7 @@ TEST(ScreenSpaceHalfResolution, ErrorStaysNearTheFullResolutionStage) {
     constexpr int kFrames = 6;
     const std::vector<glm::vec3> ref = SynthRender(sc, kFrames - 1, 99, 64).Compose();
     double rel[2] = {0.0, 0.0};
+    std::vector<glm::vec2> motion[2];
     for (int half = 0; half < 2; ++half) {
         DenoiserSettings s;
         s.halfResolutionRows = half ? sc.height : 0;
@@ -163,7 +164,24 @@ TEST(ScreenSpaceHalfResolution, ErrorStaysNearTheFullResolutionStage) {
             dn.Denoise(SynthRender(sc, fr, 3), Method::Reliable, Demodulation::On, &img);
         for (const glm::vec3& c : img) ASSERT_TRUE(std::isfinite(c.x + c.y + c.z));
         rel[half] = RelMse(img, ref);
+        motion[half] = dn.LastMotion(MotionKind::Traditional);
     }
+    // The block's traditional vectors stand for its pixels: where both stages have one, within
+    // 1 px of the full-resolution vector on 95% of the pixels (the camera pans ~1 px a frame;
+    // a block's representative is up to a pixel away from the others), and at least 90% of the
+    // pixels with one at full resolution have one at half.
+    int both = 0, close = 0, fullOnly = 0;
+    for (size_t i = 0; i < motion[0].size(); ++i) {
+        if (!std::isfinite(motion[0][i].x)) continue;
+        if (!std::isfinite(motion[1][i].x)) {
+            ++fullOnly;
+            continue;
+        }
+        ++both;
+        close += glm::length(motion[1][i] - motion[0][i]) <= 1.0f;
+    }
+    EXPECT_GE(close, 0.95 * both);
+    EXPECT_LE(fullOnly, 0.1 * (both + fullOnly));
     const double input = RelMse(SynthRender(sc, kFrames - 1, 3).Compose(), ref);
     EXPECT_LT(rel[0], 0.1 * input);
     EXPECT_LT(rel[1], 0.1 * input);
