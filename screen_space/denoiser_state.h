@@ -78,6 +78,13 @@ struct ScreenSpaceDenoiser::State {
     internal::Plane splat[8];
     std::vector<uint8_t> zeroRow;  // validity flags of a row outside the image
     StageTimings timings, cpuTimings;
+    /// Half resolution (DenoiserSettings::halfResolutionRows): the denoiser of the reduced
+    /// frames, which keeps the history, and the reduced frame, reused from frame to frame.
+    std::unique_ptr<ScreenSpaceDenoiser> half;
+    FrameBuffers halfFrame;
+    std::vector<glm::vec3> halfImage;
+    std::vector<uint32_t> halfSource;  ///< each block's representative pixel
+    bool lastHalf = false;             ///< the last frame was denoised at half resolution
 
     internal::Guides& G() { return guides[cur]; }
     const internal::Guides& PrevG() const { return guides[cur ^ 1]; }
@@ -115,6 +122,17 @@ void ConesTemporal(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const M
 /// a-trous runs next) its variance is set to 0, which keeps the a-trous from mixing the noisy
 /// neighbours into it, and its moments to those of the cached value.
 void CachedWhereNoHistory(ScreenSpaceDenoiser::State& s, bool svgf);
+
+/// The frame reduced to one sample per 2x2 block (half_resolution.cpp's design note) into `half`,
+/// whose allocations are reused; `source` receives each block's representative pixel. The cones
+/// are copied only `withCones` (the only pass that reads them is Reliable's cone path).
+void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* half,
+                     std::vector<uint32_t>* source);
+
+/// The demodulated results of `half` (a denoiser that has just denoised DownsampleFrame(frame))
+/// brought to s's full-resolution guides (prepared for the same frame): written to
+/// s.scratch[ci].out, and s.comp[ci].res pointed at them.
+void UpsampleResults(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half);
 
 }  // namespace internal
 }  // namespace texcache::screen

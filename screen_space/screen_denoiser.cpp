@@ -128,12 +128,24 @@ public:
         cpu_->*pass += c - lastCpu_;
         last_ = now, lastCpu_ = c;
     }
+    /// Charges a nested stage's passes (timed by itself) to the same passes.
+    void Charge(const StageTimings& wall, const StageTimings& cpu) {
+        AddPasses(wall_, wall), AddPasses(cpu_, cpu);
+        last_ = Clock::now(), lastCpu_ = CpuMs();
+    }
     void Finish() {
         wall_->total = std::chrono::duration<double, std::milli>(last_ - t0_).count();
         cpu_->total = lastCpu_ - c0_;
     }
 
 private:
+    static void AddPasses(StageTimings* to, const StageTimings& t) {
+        for (double StageTimings::*p :
+             {&StageTimings::prepare, &StageTimings::traditionalMotion,
+              &StageTimings::reliableMotion, &StageTimings::temporal, &StageTimings::spatial,
+              &StageTimings::cleanup, &StageTimings::compose})
+            to->*p += t.*p;
+    }
     StageTimings* wall_;
     StageTimings* cpu_;
     Clock::time_point t0_, last_;
@@ -199,6 +211,9 @@ void CheckSettings(const DenoiserSettings& s) {
     if (!(s.glossyLobeScale >= 0.0f) || !(s.maxGlossyJitter >= 0.0f))
         fail("glossyLobeScale and maxGlossyJitter must be non-negative");
     if (s.brdfSamples < 1) fail("brdfSamples must be at least 1");
+    if (s.halfResolutionRows < 0)
+        fail("halfResolutionRows must be non-negative (0: never), got " +
+             std::to_string(s.halfResolutionRows));
 }
 
 }  // namespace
@@ -221,12 +236,14 @@ ScreenSpaceDenoiser::ScreenSpaceDenoiser(const DenoiserSettings& settings,
 ScreenSpaceDenoiser::~ScreenSpaceDenoiser() = default;
 
 void ScreenSpaceDenoiser::Reset() {
+    if (s_->half) s_->half->Reset();
     s_->hasPrev = false;
     for (auto& hc : s_->hist)
         for (History& hh : hc) hh.valid = false;
 }
 
 void ScreenSpaceDenoiser::SetStillView(bool still) {
+    if (s_->half) s_->half->SetStillView(still);
     if (!still)
         s_->stillFrames = -1;
     else if (s_->stillFrames < 0)
@@ -782,6 +799,17 @@ float BlendAlpha(float alpha, int stillFrames) {
     return std::max(1.0f / kStillMaxFrames, 1.0f / (1.0f / alpha + float(stillFrames)));
 }
 
+// What every frame ends with, at either resolution.
+void FinishFrame(ScreenSpaceDenoiser::State& s, const FrameBuffers& frame, PassClock& clock) {
+    s.prevCam = frame.camera;
+    s.cur ^= 1;
+    s.hasPrev = true;
+    ++s.frameIndex;
+    if (s.stillFrames >= 0) ++s.stillFrames;
+    clock.Lap(&StageTimings::compose);
+    clock.Finish();
+}
+
 }  // namespace
 
 // ---- Denoise -------------------------------------------------------------------------------
@@ -823,7 +851,29 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     const BrdfPreintegration* brdf = demod && s.comp[kGlossy].present ? &Brdf() : nullptr;
     Prepare(s, frame, brdf, demod);
     clock.Lap(&StageTimings::prepare);
+    if (s.set.halfResolutionRows > 0 && frame.height >= s.set.halfResolutionRows) {
+        if (!s.half) {
+            DenoiserSettings hs = s.set;
+            hs.halfResolutionRows = 0;
+            // The same footprint in full-resolution pixels: a half-resolution step is two.
+            hs.atrousLevels = std::max(1, s.set.atrousLevels - 1);
+            Brdf();  // one table for both
+            s.half = std::make_unique<ScreenSpaceDenoiser>(hs, s.brdf);
+            if (s.stillFrames >= 0) s.half->SetStillView(true);
+        }
+        DownsampleFrame(frame, s.conesPath, &s.halfFrame, &s.halfSource);
+        clock.Lap(&StageTimings::prepare);
+        s.half->Denoise(s.halfFrame, method, demodulation, &s.halfImage);
+        clock.Charge(s.half->Timings(), s.half->CpuTimings());
+        s.lastHalf = true;
+        UpsampleResults(s, *s.half->s_);
+        clock.Lap(&StageTimings::spatial);
+        Compose(s, frame, image);
+        FinishFrame(s, frame, clock);
+        return;
+    }
 
+    s.lastHalf = false;
     s.blendAlpha = BlendAlpha(s.set.alpha, s.stillFrames);
     const bool temporal = method != Method::SpatialOnly && s.hasPrev;
     std::fill(std::begin(s.motionValid), std::end(s.motionValid), false);
@@ -924,13 +974,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     }
 
     Compose(s, frame, image);
-    s.prevCam = frame.camera;
-    s.cur ^= 1;
-    s.hasPrev = true;
-    ++s.frameIndex;
-    if (s.stillFrames >= 0) ++s.stillFrames;
-    clock.Lap(&StageTimings::compose);
-    clock.Finish();
+    FinishFrame(s, frame, clock);
 }
 
 // ---- Accessors -----------------------------------------------------------------------------
@@ -973,6 +1017,16 @@ std::vector<glm::vec3> ScreenSpaceDenoiser::Indirect() const {
 
 std::vector<glm::vec2> ScreenSpaceDenoiser::LastMotion(MotionKind kind) const {
     const State& s = *s_;
+    if (s.lastHalf) {
+        // The block's vector, scaled to full resolution, moved by the pixel's offset from the
+        // block's centre.
+        const std::vector<glm::vec2> hm = s.half->LastMotion(kind);
+        const int hw = s.half->s_->w;
+        return Collect<glm::vec2>(s, [&](int x, int y) {
+            const glm::vec2 from = hm[size_t(y / 2) * size_t(hw) + size_t(x / 2)];
+            return 2.0f * from + glm::vec2(float(x % 2) - 0.5f, float(y % 2) - 0.5f);
+        });
+    }
     const MotionField* m[4] = {&s.trad, &s.shadow, &s.glossy, &s.occl};
     const bool ok = s.motionValid[int(kind)];
     const MotionField& f = *m[int(kind)];

@@ -133,6 +133,17 @@ struct DenoiserSettings {
     /// plain baseline on a camera flying over a static scene, and no scene gains from it (`texcache
     /// experiment temporal --ablation --out DIR`, results/temporal_ablation.md, "glossy jitter 4").
     float maxGlossyJitter = 0.0f;
+    /// Frames with at least this many rows (0: none) are denoised at half resolution: each 2x2
+    /// block reduced to one sample of its main surface (its noisy components averaged over that
+    /// surface), every temporal and a-trous pass run on that quarter of the pixels, and the
+    /// results brought back with a joint-bilateral upsample over the full-resolution normal,
+    /// depth and objectId, then remodulated and composed with the full-resolution shading,
+    /// albedo and F_beta. The a-trous then runs atrousLevels - 1 levels (at least 1), which
+    /// span the same full-resolution pixels. LastMotion() then returns each block's vector. On from
+    /// 1080 rows: there it is as accurate as the full-resolution stage for a third less work
+    /// (results/screen_space_benchmark.md); below, the full-resolution stage is the more
+    /// accurate and already fast enough.
+    int halfResolutionRows = 1080;
     int brdfSamples = 1024;  ///< samples per BRDF-table entry (Zhuang et al.'s count)
     unsigned seed = 1;       ///< glossy motion-vector sampling
 };

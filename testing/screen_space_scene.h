@@ -197,4 +197,16 @@ inline double Rmse(const std::vector<float>& a, const std::vector<float>& b,
     return n ? std::sqrt(s / double(n)) : 0.0;
 }
 
+/// relMSE as renderer/image/metrics.h defines it (Rousselle et al. 2011): per pixel, the sum
+/// over R, G, B of (test - ref)^2 / (gray(ref)^2 + 1e-3), averaged over the pixels.
+inline double RelMse(const std::vector<glm::vec3>& test, const std::vector<glm::vec3>& ref) {
+    double sum = 0.0;
+    for (size_t i = 0; i < ref.size(); ++i) {
+        const glm::dvec3 r(ref[i]), d = glm::dvec3(test[i]) - r;
+        const double g = (r.x + r.y + r.z) / 3.0;
+        sum += glm::dot(d, d) / (g * g + 1e-3);
+    }
+    return sum / double(ref.size());
+}
+
 }  // namespace texcache::test

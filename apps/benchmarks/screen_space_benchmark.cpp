@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
-// Google Benchmark of the screen-space stage at 1920x1080 (and the Reliable stage at 640x360 with
-// the preview's 3 a-trous levels): a synthetic frame pair (a glossy floor
+// Google Benchmark of the screen-space stage at 1920x1080 at full resolution (and Reliable at half
+// resolution, the default from 1080 rows, and at 640x360 with the preview's 3 a-trous levels): a
+// synthetic frame pair (a glossy floor
 // with a roughness checkerboard, a diffuse back wall, a moving box, a sphere, a moving soft light,
 // a panning camera; every component and motion-vector input filled, cones included) is denoised
 // frame 0 -> frame 1 per method, and the time of the frame-1 step is reported with its per-pass
@@ -12,10 +13,20 @@
 //
 // --smoke runs every benchmark once on frames an eighth of the size (240x135, 80x45): CTest's check
 // that the benchmark still runs (its times then mean nothing).
+//
+//     build/bin/screen_space_benchmark --quality [--width 1920] [--frames 8] [--reference-spp 32]
+//
+// --quality measures what the stage's settings cost in error instead: the synthetic scene's frames
+// 0..frames-1 at 1 spp go through Reliable (demodulation on) once per setting of a fixed list, and
+// each line gives the last frame's relMSE and RMSE against a many-sample render of it and the
+// stage's mean process CPU ms over the frames after the first (a-trous and temporal apart). It
+// exits 1 if a setting leaves more than half the noisy input's relMSE (the stage then does not
+// denoise; CTest runs it small as a check).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -106,10 +117,11 @@ void Report(benchmark::State& state, const std::string& prefix, const StageTimin
 }
 
 void BM_Stage(benchmark::State& state, Method method, Demodulation demod, int width,
-              int atrousLevels) {
+              int atrousLevels, int halfResolutionRows) {
     const Frames& fr = Shared(width);
     DenoiserSettings settings;
     settings.atrousLevels = atrousLevels;
+    settings.halfResolutionRows = halfResolutionRows;
     ScreenSpaceDenoiser dn(settings, fr.brdf);
     std::vector<glm::vec3> img;
     // Warm-up: allocates (and first-touches) both sets of guides and histories.
@@ -145,21 +157,110 @@ void Register() {
         for (Demodulation d : {Demodulation::Off, Demodulation::On}) {
             const std::string name = std::string("stage/") + MethodName(m) +
                                      (d == Demodulation::On ? "/demod" : "/no-demod");
-            auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d, 1920, 4)
+            auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Stage, m, d, 1920, 4, 0)
                           ->UseManualTime()
                           ->Unit(benchmark::kMillisecond);
             gSmoke ? b->Iterations(1) : b->MinTime(3.0);
         }
+    // Reliable at 1920x1080 with 3 a-trous levels: the level count's share of the 1080p stage
+    // (--quality gives what it costs in error).
+    auto* levels3 = benchmark::RegisterBenchmark("stage/reliable/demod/3levels", BM_Stage,
+                                                 Method::Reliable, Demodulation::On, 1920, 3, 0)
+                        ->UseManualTime()
+                        ->Unit(benchmark::kMillisecond);
+    gSmoke ? levels3->Iterations(1) : levels3->MinTime(3.0);
+    // Reliable at 1920x1080 on half the pixels (DenoiserSettings::halfResolutionRows).
+    auto* half = benchmark::RegisterBenchmark("stage/reliable/demod/half", BM_Stage,
+                                              Method::Reliable, Demodulation::On, 1920, 4, 1)
+                     ->UseManualTime()
+                     ->Unit(benchmark::kMillisecond);
+    gSmoke ? half->Iterations(1) : half->MinTime(3.0);
     auto* small = benchmark::RegisterBenchmark("stage/reliable/demod/640x360", BM_Stage,
-                                               Method::Reliable, Demodulation::On, 640, 3)
+                                               Method::Reliable, Demodulation::On, 640, 3, 0)
                       ->UseManualTime()
                       ->Unit(benchmark::kMillisecond);
     gSmoke ? small->Iterations(1) : small->MinTime(3.0);
 }
 
+struct QualityCase {
+    const char* name;
+    DenoiserSettings settings;
+};
+
+std::vector<QualityCase> QualityCases() {
+    std::vector<QualityCase> cases;
+    DenoiserSettings d;
+    d.halfResolutionRows = 0;  // full resolution at every size
+    cases.push_back({"full resolution, 4 levels (the default below 1080 rows)", d});
+    d.atrousLevels = 3;
+    cases.push_back({"3 levels", d});
+    d.atrousLevels = 2;
+    cases.push_back({"2 levels", d});
+    d.atrousLevels = DenoiserSettings{}.atrousLevels;
+    d.halfResolutionRows = 1;
+    cases.push_back({"half resolution (4 levels: 3 at half)", d});
+    d.atrousLevels = 3;
+    cases.push_back({"half resolution, 3 levels (2 at half)", d});
+    return cases;
+}
+
+int RunQuality(int width, int frames, int referenceSpp) {
+    const test::SynthScene sc = Scene(width, width * 9 / 16);
+    std::vector<FrameBuffers> in;
+    for (int f = 0; f < frames; ++f) in.push_back(test::SynthRender(sc, f, 3));
+    const std::vector<glm::vec3> ref =
+        test::SynthRender(sc, frames - 1, 99, referenceSpp).Compose();
+    const auto brdf = std::make_shared<BrdfPreintegration>();
+    const double inputRel = test::RelMse(in.back().Compose(), ref);
+    std::printf("%dx%d, %d frames, reference %d spp; input relMSE %.5f\n", sc.width, sc.height,
+                frames, referenceSpp, inputRel);
+    std::printf("| setting | relMSE | RMSE | stage cpu ms | a-trous | temporal | wall ms |\n");
+    std::printf("|---|---|---|---|---|---|---|\n");
+    int failed = 0;
+    for (const QualityCase& qc : QualityCases()) {
+        ScreenSpaceDenoiser dn(qc.settings, brdf);
+        std::vector<glm::vec3> img;
+        StageTimings cpu, wall;
+        for (int f = 0; f < frames; ++f) {
+            dn.Denoise(in[size_t(f)], Method::Reliable, Demodulation::On, &img);
+            if (f > 0) Add(&cpu, dn.CpuTimings()), Add(&wall, dn.Timings());
+        }
+        const double n = std::max(1, frames - 1), rel = test::RelMse(img, ref);
+        std::printf("| %s | %.5f | %.5f | %.1f | %.1f | %.1f | %.1f |\n", qc.name, rel,
+                    test::Rmse(img, ref), cpu.total / n, cpu.spatial / n, cpu.temporal / n,
+                    wall.total / n);
+        std::fflush(stdout);
+        if (!(rel <= 0.5 * inputRel)) {
+            std::fprintf(stderr,
+                         "screen_space_benchmark: %s leaves relMSE %.5f of the input's %.5f\n",
+                         qc.name, rel, inputRel);
+            ++failed;
+        }
+    }
+    return failed ? 1 : 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+    for (int i = 1; i < argc; ++i)
+        if (std::string_view(argv[i]) == "--quality") {
+            int width = 1920, frames = 8, spp = 32;
+            for (int j = 1; j + 1 < argc; ++j) {
+                const std::string_view k = argv[j];
+                if (k == "--width") width = std::atoi(argv[j + 1]);
+                if (k == "--frames") frames = std::atoi(argv[j + 1]);
+                if (k == "--reference-spp") spp = std::atoi(argv[j + 1]);
+            }
+            if (width < 16 || frames < 1 || spp < 1) {
+                std::fprintf(stderr,
+                             "screen_space_benchmark: --quality needs --width >= 16, --frames >= 1 "
+                             "and --reference-spp >= 1, got %d, %d, %d\n",
+                             width, frames, spp);
+                return 2;
+            }
+            return RunQuality(width, frames, spp);
+        }
     // --smoke (see the top of this file); Google Benchmark parses the other arguments.
     char** end = std::remove_if(argv + 1, argv + argc,
                                 [](const char* a) { return std::string_view(a) == "--smoke"; });
