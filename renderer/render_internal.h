@@ -281,6 +281,12 @@ double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
 glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store,
                        const HitRecord& h);
 
+/// The store's diffuse light over the block of 4x4 bins that holds record `h`'s bin at its level
+/// (the mean of their samples, in `light`; 0 without any) and the samples behind it (in HitUnit
+/// counts): one lookup for light that is smooth across a block (a ray's hit, StoreTerm).
+double StoreBlockAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                    glm::vec3* light);
+
 /// Hit-binned AO, phase 2: each camera sample's reconstruction from the store, added to `sum`,
 /// and its own estimate (`ownAo`) with its difference to the reconstruction added to `own`
 /// (FrameSums::own).

@@ -100,8 +100,11 @@ double AvailableMemoryMiB() {
 double CacheMiB(const RenderOptions& opt, bool frameBuffers) {
     double bytes = 0.0;
     // Shading at the hits never allocates the grid caches (TextureSpaceCache::PrepareGrid); the
-    // frame buffers look their diffuse light up there.
-    const bool grid = frameBuffers || !ShadesAtHits(opt);
+    // frame buffers look their diffuse light up there unless they read the store, and their
+    // lights' visibility when they cache it.
+    const bool frameGrid =
+        opt.texture.frameBufferSamples == TextureSamples::Grid || opt.texture.cachedVisibility;
+    const bool grid = frameBuffers ? frameGrid : !ShadesAtHits(opt);
     if (opt.texture.enabled && !opt.texture.cache.referenceMode && grid)
         bytes +=
             double(opt.texture.cache.sampleCacheBytes) + double(opt.texture.cache.texelCacheBytes);
@@ -113,7 +116,10 @@ double CacheMiB(const RenderOptions& opt, bool frameBuffers) {
 /// 40 bytes for diffuse light, 12 for AO, measured on car.json; at most 256 MiB a pass, then
 /// the pass splits: render.cpp) and the store's bins and texels (16 MiB at most frame sizes).
 double HitStoreMiB(const RenderOptions& opt, int views, bool frameBuffers) {
-    if (!opt.texture.enabled || frameBuffers || !ShadesAtHits(opt)) return 0.0;
+    if (!opt.texture.enabled) return 0.0;
+    // The frame buffers hold a record per pixel and the store's bins when they read the store.
+    if (frameBuffers ? opt.texture.frameBufferSamples != TextureSamples::Hits : !ShadesAtHits(opt))
+        return 0.0;
     const double perSample = opt.integrator == IntegratorKind::AO ? 12.0 : 40.0;
     const double samples = double(std::max(opt.width, 1)) * double(std::max(opt.height, 1)) *
                            double(std::max(views, 1)) * double(std::max(opt.spp, 1));

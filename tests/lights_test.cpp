@@ -7,10 +7,13 @@
 // converge to the same image.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <vector>
 
 #include "renderer/image/metrics.h"
+#include "renderer/integrators/path_tracer.h"
 #include "renderer/integrators/sampling.h"
 #include "renderer/render.h"
 #include "renderer/scene/camera.h"
@@ -461,6 +464,67 @@ TEST(Lights, PerHitAndTextureSpaceConverge) {
         EXPECT_LT(e, 2.0 * ePerHit) << (hits ? "hits" : "grid");
         EXPECT_NEAR(test::MeanRatio(ts.beauty, ref), 1.0, 0.02);
     }
+}
+
+// A table of the map's samples (Context::envTable, the frame buffers') stands in for the map's
+// own sampling in SampleLight: u.x picks an entry, each once for evenly spread u.x, and the
+// sample is the entry's (direction, radiance and a density with the light pick in it). An empty
+// entry (pdf 0) is no sample. The entries' densities are the map's at their directions (within
+// 1e-3 relative), so MIS with the BSDF's rays weighs them as the map's own.
+TEST(Lights, EnvironmentTableStandsInForTheMapsSampling) {
+    Scene s = test::OneObjectScene(test::PlaneCage(1.0f), glm::vec3(kAlbedo));
+    EnvironmentLight env;
+    env.path = std::string(TEXCACHE_SOURCE_DIR) + "/scenes/envmaps/courtyard.exr";
+    s.environments.push_back(env);
+    QuadLight q;  // a second light: the pick probability is 1/2
+    q.corner = glm::vec3(-0.5f, 3.0f, -0.5f);
+    q.edge1 = glm::vec3(1.0f, 0.0f, 0.0f);
+    q.edge2 = glm::vec3(0.0f, 0.0f, 1.0f);
+    s.quadLights.push_back(q);
+    const RenderScene rs(s, {});
+    const RenderOptions o = Options(IntegratorKind::Path, 1);
+    internal::Context c(rs, o);
+    ASSERT_NE(c.env, nullptr);
+    ASSERT_EQ(c.numLights, 2);
+    constexpr uint32_t kN = 64;
+    std::vector<internal::EnvironmentSampleEntry> table(kN);
+    Rng rng(3, 0);
+    for (uint32_t i = 0; i < kN; ++i) {
+        float pdf = 0.0f;
+        table[i].Li = c.env->Sample(glm::vec3(0, 1, 0), rng.Next2D(), &table[i].wi, &pdf);
+        table[i].pdf = pdf * c.PickPdf();
+        ASSERT_NEAR(c.env->Pdf(glm::vec3(0, 1, 0), table[i].wi) * c.PickPdf() / table[i].pdf, 1.0f,
+                    1e-3f)
+            << i;
+    }
+    table[5].pdf = 0.0f;  // an empty entry
+    c.envTable = table.data();
+    c.envTableMask = kN - 1;
+    const glm::vec3 p(0.0f), n(0.0f, 1.0f, 0.0f);
+    std::vector<int> seen(kN, 0);
+    for (uint32_t i = 0; i < kN; ++i) {
+        internal::LightSample ls;
+        // uPick 0.75: the environment, the last light.
+        const bool ok =
+            c.SampleLight(p, n, 0.75f, glm::vec2((float(i) + 0.5f) / float(kN), 0.3f), &ls);
+        ASSERT_EQ(ok, i != 5) << i;
+        if (!ok) continue;
+        const uint32_t e = uint32_t(
+            std::find_if(table.begin(), table.end(),
+                         [&](const internal::EnvironmentSampleEntry& t) { return t.wi == ls.wi; }) -
+            table.begin());
+        ASSERT_LT(e, kN);
+        ++seen[e];
+        EXPECT_EQ(ls.Li, table[e].Li);
+        EXPECT_EQ(ls.pdf, table[e].pdf);
+        EXPECT_FALSE(ls.delta);
+        EXPECT_TRUE(std::isinf(ls.dist));
+    }
+    for (uint32_t i = 0; i < kN; ++i) EXPECT_EQ(seen[i], i == 5 ? 0 : 1) << i;
+    // The end of [0, 1) stays in the table.
+    internal::LightSample last;
+    ASSERT_TRUE(c.SampleLight(p, n, 0.75f, glm::vec2(std::nextafter(1.0f, 0.0f), 0.5f), &last));
+    EXPECT_EQ(last.wi, table[kN - 1].wi);
 }
 
 }  // namespace

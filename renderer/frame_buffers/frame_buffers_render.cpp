@@ -234,11 +234,7 @@ bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsd
 class EnvironmentSamples {
 public:
     static constexpr uint32_t kCount = 1u << 14;
-    struct Entry {
-        glm::vec3 wi;
-        float pdf;  // solid angle, light selection included; 0: no sample
-        glm::vec3 Li;
-    };
+    using Entry = EnvironmentSampleEntry;
 
     /// Empty unless the scene's environment is a map (a constant one samples about the normal).
     EnvironmentSamples(const Context& c, uint64_t seed) {
@@ -474,17 +470,76 @@ glm::vec3 CachedDiffuse(const Context& c, const SurfaceInteraction& si, bool lay
         paths);
 }
 
+/// A frame's use of the store (opt.texture.frameBufferSamples Hits; frame_buffers_render.h):
+/// which camera hits trace their diffuse lobe's path into it, and each pixel's record for
+/// reading it back once every hit is added.
+struct FrameStore {
+    const LightHitStore* store;  ///< as the previous frames left it (read only while shading)
+    int bias = 0;                ///< the bins' levels above a hit's texel
+    float blend = 0.0f;          ///< the share of hits that read the level above (PathHitsAdd)
+    int budget = 1;              ///< one pixel in `budget` a frame traces its path
+    uint32_t group = 0;          ///< this frame's pixels: those of this dither group
+    double minCount = 0.0;       ///< a cell with fewer counts needs its hits' paths
+    double termCount = 0.0;      ///< a cell with fewer counts is not read at a ray's hit
+    HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
+    BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
+
+    /// Whether pixel (x, y) traces its path this frame: its place in a 4x4 ordered-dither
+    /// (Bayer) matrix picks its group, and the frame's group rotates, so each pixel traces once
+    /// in `budget` frames and every frame's pixels are spread evenly over the image.
+    bool InBudget(int x, int y) const {
+        static constexpr uint8_t kBayer[4][4] = {
+            {0, 8, 2, 10}, {12, 4, 14, 6}, {3, 11, 1, 9}, {15, 7, 13, 5}};
+        return uint32_t(kBayer[y & 3][x & 3]) * uint32_t(budget) / 16u == group;
+    }
+};
+
+/// The samples the store needs behind a ray's hit for the ray's path to end there: with none, the
+/// surface is one the camera does not see (or not yet); with fewer, one path's noise would reach
+/// every ray that ends in that block.
+constexpr double kStoreTermSamples = 4.0;
+
+/// The store's diffuse light where a ray from a camera hit (the diffuse path traced into the
+/// store, the glossy ray) first hits a surface that the camera's hits have filled, as LiPath's
+/// cached term: the path ends there for a diffuse surface, or goes on with its specular lobe
+/// only, as it does on the grid's texels. It reads the block of 4x4 bins around the point at
+/// the camera's level for it (its distance from the camera sets the level; StoreBlockAt): the
+/// light a diffuse bounce or a glossy lobe gathers there is smooth across a block, which holds
+/// 16 times a bin's samples. A surface the camera does not see has none there, and the path goes
+/// on past it. What the store holds already includes that surface's own bounces, so a path that
+/// reads it gathers light over more bounces than max_depth, as the grid's cached samples do.
+struct StoreTerm {
+    const Context& c;
+    const FrameStore& fs;
+    bool layered;  ///< the store holds direct light too (CachedDiffuseLight)
+
+    CachedTerm operator()(const SurfaceInteraction& h, const Ray& r, glm::vec3* term) const {
+        HitRecord rec;
+        int texelLevel = 0;
+        FrameHitRecord(c, h, glm::distance(h.P, c.camera.Position()), fs.bias, &rec, &texelLevel);
+        glm::vec3 E;
+        if (StoreBlockAt(*c.tsc, *fs.store, rec, &E) < fs.termCount) return CachedTerm::None;
+        const Bsdf hb = MakeBsdf(c, h);
+        // The diffuse lobe is 0 where the shading normal faces away from the ray.
+        *term = glm::dot(r.dir, h.N) < 0.0f ? FiniteOrZero(hb.DiffuseReflectance() * E)
+                                            : glm::vec3(0.0f);
+        if (hb.HasSpecular()) return layered ? CachedTerm::DiffuseBase : CachedTerm::BaseIndirect;
+        return layered ? CachedTerm::All : CachedTerm::Indirect;
+    }
+};
+
 /// The specular lobe's path of one sample into px.glossySum (and its first hit). With the
 /// texture-space cache, the diffuse lobe of the surface the ray hits takes its light from the
 /// cache, as a camera hit's does (CachedTerm; with `layered` direct light included), and only
 /// its specular lobe's path goes on: the hit's light samples, shadow ray and bounces were most
 /// of this path's time, and the cache's texels are averaged over frames and neighbours where
-/// one path is not. The texel is chosen for a footprint of the lobe's width (alpha radians
-/// either side of the ray): what a glossy reflection blurs over anyway, and coarse texels that
-/// the camera's lookups share.
+/// one path is not. From the store (`fs`), the hit reads StoreTerm where the camera's hits have
+/// filled it. From the grid, the texel is chosen for a footprint of the lobe's width (alpha
+/// radians either side of the ray): what a glossy reflection blurs over anyway, and coarse
+/// texels that the camera's lookups share.
 void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
-                       const Bsdf& bsdf, glm::vec3 wo, bool layered, Rng& rng, FramePixel& px,
-                       RayCounts& rays) {
+                       const Bsdf& bsdf, glm::vec3 wo, bool layered, const FrameStore* fs, Rng& rng,
+                       FramePixel& px, RayCounts& rays) {
     glm::vec3 wi, weight;
     float pdf;
     if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
@@ -503,7 +558,10 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
     } else {
         // Light found at the hit (NEE) and beyond, after an emissive surface's own.
         L = c.EmittedMis(ray, hit, pdf);
-        if (c.tsc) {
+        if (fs) {
+            L += LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false,
+                        StoreTerm{c, *fs, layered});
+        } else if (c.tsc) {
             RayDifferentials lobe;
             const Frame f = Frame::FromZ(wi);
             lobe.dDdx = bsdf.Alpha() * f.s, lobe.dDdy = bsdf.Alpha() * f.t;
@@ -550,29 +608,6 @@ void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bs
     screen::AddConeSample(axes, wi, L, px.coneSum.data());
     px.hasCones = true;
 }
-
-/// A frame's use of the store (opt.texture.frameBufferSamples Hits; frame_buffers_render.h):
-/// which camera hits trace their diffuse lobe's path into it, and each pixel's record for
-/// reading it back once every hit is added.
-struct FrameStore {
-    const LightHitStore* store;  ///< as the previous frames left it (read only while shading)
-    int bias = 0;                ///< the bins' levels above a hit's texel
-    float blend = 0.0f;          ///< the share of hits that read the level above (PathHitsAdd)
-    int budget = 1;              ///< one pixel in `budget` a frame traces its path
-    uint32_t group = 0;          ///< this frame's pixels: those of this dither group
-    double minCount = 0.0;       ///< a cell with fewer counts needs its hits' paths
-    HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
-    BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
-
-    /// Whether pixel (x, y) traces its path this frame: its place in a 4x4 ordered-dither
-    /// (Bayer) matrix picks its group, and the frame's group rotates, so each pixel traces once
-    /// in `budget` frames and every frame's pixels are spread evenly over the image.
-    bool InBudget(int x, int y) const {
-        static constexpr uint8_t kBayer[4][4] = {
-            {0, 8, 2, 10}, {12, 4, 14, 6}, {3, 11, 1, 9}, {15, 7, 13, 5}};
-        return uint32_t(kBayer[y & 3][x & 3]) * uint32_t(budget) / 16u == group;
-    }
-};
 
 /// The values of a pixel that nothing was found at (background), in every buffer but the
 /// shadow rays' (WriteShadowBuffers): each pixel writes all of its entries, so the buffers need
@@ -709,11 +744,13 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
         if (!layered || bsdf.HasSpecular())
             FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng,
                               envSamples, px, sh, pixel, shadows, layered);
-        if (bsdf.HasSpecular()) FrameGlossySample(c, motion, si, bsdf, wo, layered, rng, px, rays);
+        if (bsdf.HasSpecular())
+            FrameGlossySample(c, motion, si, bsdf, wo, layered, fs, rng, px, rays);
         if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
         glm::vec3 wi;
         if (storePath && bsdf.SampleDiffuse(rng.Next2D(), &wi))
-            storeSum += DiffuseRayLight(c, SpawnRay(si, wi), si.N, layered, rng, rays);
+            storeSum += DiffuseRayLight(c, SpawnRay(si, wi), si.N, layered, rng, rays,
+                                        StoreTerm{c, *fs, layered});
     }
     const float inv = 1.0f / float(spp);
     // NaN or infinite stays NaN: the store never takes it (RadianceBin::FromRadiance).
@@ -904,6 +941,11 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::None);
     const FrameMotion motion(rs, opt, prevTime);
     const EnvironmentSamples envSamples(ctx, opt.seed);
+    // The paths' light samples (the store's, the glossy ray's) read the frame's table too.
+    if (!envSamples.Empty()) {
+        ctx.envTable = &envSamples[0];
+        ctx.envTableMask = EnvironmentSamples::kCount - 1u;
+    }
 
     screen::FrameBuffers& fb = *out;
     const int W = opt.width, H = opt.height;
@@ -966,6 +1008,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->budget = k;
         fs->group = tsc.Frame() % uint32_t(k);
         fs->minCount = kStoreMinSamples * double(tsc.HitUnit());
+        fs->termCount = kStoreTermSamples * double(tsc.HitUnit());
         fs->records = tsc.HitRecords(n);
         fs->binned = tsc.BinnedHits(n);
         // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.

@@ -120,10 +120,14 @@
 //   phases: the image is the same for any thread count. With Grid, the paper's grid samples,
 //   each shaded lazily with diffuseLayerPaths (or indirectSamples) paths of its own on a miss.
 //   The specular lobe's ray takes the diffuse lobe's light at its hit from the cache too (that
-//   lobe's indirect light, or with cacheDiffuseLayer all of it), as a camera hit's would, its
-//   texel chosen for a footprint of the lobe's width; only the hit's specular lobe goes on.
-//   That lookup stays on the grid with either source (lazily shaded where the hits' bins would
-//   be at another level than the lobe's footprint asks).
+//   lobe's indirect light, or with cacheDiffuseLayer all of it), as a camera hit's would; only
+//   the hit's specular lobe goes on. From the store, so does the first hit of a path traced into
+//   it: both read the store's block of 4x4 bins for that point at the camera's level where it
+//   holds four samples or more, and go on as paths elsewhere (surfaces the camera does not see), so
+//   the store's frame buffers never allocate the grid (unless cachedVisibility asks for it).
+//   From the grid, the texel is chosen for a footprint of the lobe's width. The paths' light
+//   samples of an environment map come from the frame's table of the map's samples
+//   (Context::envTable), as the pixels' own do.
 // * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty
 //   otherwise): for diffuse materials facing the camera, the texel-cache lookup of the pixel's
 //   texel in the object's visibility grids (TextureSpaceCache::VisibilityTexelOf; a cache

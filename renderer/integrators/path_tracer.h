@@ -53,6 +53,14 @@ struct LightSample {
     int emitter = -1;  // the emissive object sampled (Context::emitters), -1 for others
 };
 
+/// A sample of an environment map drawn ahead of the rays that use it (a frame's table of them:
+/// Context::envTable).
+struct EnvironmentSampleEntry {
+    glm::vec3 wi;
+    float pdf;  // solid angle, light selection included; 0: no sample
+    glm::vec3 Li;
+};
+
 /// Everything the per-sample code reads, resolved once per frame.
 struct Context {
     const RenderScene& rs;
@@ -91,6 +99,12 @@ struct Context {
     LightSampling lightSampling = LightSampling::Mis;
     ProductRecordCache* psrCache = nullptr;  // set by the renderer for Cpis
     tbb::enumerable_thread_specific<RecordStats>* psrStats = nullptr;
+    /// A table of the map's samples, each distributed as EnvironmentMap::Sample's (for a map,
+    /// whatever the normal), that SampleLight reads instead of inverting the map's tables: those
+    /// two dependent searches and a texel lookup run out of the caches, a table entry of a
+    /// frame's table stays in them. `envTableMask` + 1 entries, a power of two; null: none.
+    const EnvironmentSampleEntry* envTable = nullptr;
+    uint32_t envTableMask = 0;
 
     /// Pixels [x0, x1) x [y0, y1) hold every camera sample that can hit something: the
     /// projection of the scene's bounds, plus a margin. Samples of other pixels miss, and are
@@ -233,6 +247,14 @@ struct Context {
             const float uWalk =
                 std::min(uPick * float(numLights) - float(numLights - 1), kOneMinusEpsilon);
             if (!SampleProductLight(*psr, *env, n, u, uWalk, &s->wi, &pdf, &s->Li)) return false;
+        } else if (envTable) {
+            // Entry u.x of the table: a sample of the map, as Sample's would be.
+            const EnvironmentSampleEntry& e =
+                envTable[uint32_t(u.x * float(envTableMask + 1u)) & envTableMask];
+            s->wi = e.wi, s->Li = e.Li, s->pdf = e.pdf;
+            s->dist = INFINITY;
+            s->delta = false;
+            return s->pdf > 0.0f;
         } else {
             s->Li = env->Sample(n, u, &s->wi, &pdf);
         }

@@ -475,6 +475,17 @@ double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
                       .count);
 }
 
+double StoreBlockAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                    glm::vec3* light) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
+    const TexelKey key{g.FaceOffset() + uint32_t(face), uint8_t(level),
+                       uint16_t(QuantizeCoord(h.U(), res)), uint16_t(QuantizeCoord(h.V(), res))};
+    const RadianceBin::Value v = store.Samples().FindBlock(key);
+    *light = v.count > 0 ? glm::vec3(BinSum(v) / double(v.count)) : glm::vec3(0.0f);
+    return double(v.count);
+}
+
 void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
                            float* out) {
     if (n < 2 || y1 <= y0 || width <= 0) return;  // no spread to weigh: the reconstruction

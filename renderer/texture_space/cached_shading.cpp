@@ -274,33 +274,6 @@ ShadedSample ShadeAoSample(const Context& c, const SampleRequest& r, RayCounts& 
     return mean.Sample(ss.N);
 }
 
-// With `direct`, one NEE sample (light sampling, shadow ray): (1/pi) Le V cos / pdf; otherwise
-// direct light stays NEE's job at the hit.
-glm::vec3 DiffuseRayLight(const Context& c, const Ray& ray, glm::vec3 N, bool direct, Rng& rng,
-                          RayCounts& rays) {
-    glm::vec3 Ld(0.0f);
-    LightSample ls;
-    if (direct && c.SampleLight(ray.org, N, rng.Next1D(), rng.Next2D(), &ls)) {
-        const float cosi = glm::dot(ls.wi, N);
-        if (cosi > 0.0f) {
-            Ray shadow;
-            shadow.org = ray.org;
-            shadow.dir = ls.wi;
-            shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
-            ++rays.shadow;
-            if (!c.rs.Occluded(shadow))
-                Ld = ls.Li * (ls.delta ? cosi : cosi / ls.pdf) * (1.0f / kPiF);
-        }
-    }
-    ++rays.bounce;
-    Hit hit;
-    const bool found = c.rs.Intersect(ray, &hit);
-    // Emitting surfaces are not sampled as lights: with the direct part cached, the first ray
-    // is what finds them (a cosine-weighted estimate of their light, 1/pi integral of Le cos).
-    if (direct && found) Ld += c.SurfaceEmission(hit);
-    return Ld + LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false);
-}
-
 /// Diffuse light at a cache sample, as (1/pi) * integral of L cos (the hit multiplies it by its
 /// albedo): DiffuseRayLight's mean over the sample's rays.
 ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool direct,

@@ -3,6 +3,8 @@
 // diffuse light, area-light visibility, each at a point of the limit surface) and the cached term
 // at a camera hit, looked up through TextureSpaceCache. Internal to renderer/.
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 
@@ -46,9 +48,34 @@ ShadedSample ShadeDiffuseSample(const Context& c, const SampleRequest& r, bool d
 /// leaving a point of normal `N`: the light its path brings back, whose first hit's emission
 /// is not counted (NEE's) unless `direct`, which adds one light sample with its shadow ray and
 /// that emission. What a cache sample's rays (ShadeDiffuseSample) and a camera hit's diffuse
-/// ray for the frame buffers' store each estimate. Not checked for NaN or infinity.
+/// ray for the frame buffers' store each estimate; `cached` may end the path at its first hit
+/// with a cached term there (LiPath). Not checked for NaN or infinity.
+template <typename Cached = NoCachedTerm>
 glm::vec3 DiffuseRayLight(const Context& c, const Ray& ray, glm::vec3 N, bool direct, Rng& rng,
-                          RayCounts& rays);
+                          RayCounts& rays, const Cached& cached = Cached()) {
+    glm::vec3 Ld(0.0f);
+    LightSample ls;
+    if (direct && c.SampleLight(ray.org, N, rng.Next1D(), rng.Next2D(), &ls)) {
+        const float cosi = glm::dot(ls.wi, N);
+        if (cosi > 0.0f) {
+            Ray shadow;
+            shadow.org = ray.org;
+            shadow.dir = ls.wi;
+            shadow.tfar = std::isinf(ls.dist) ? INFINITY : ls.dist * (1.0f - 1e-4f);
+            ++rays.shadow;
+            if (!c.rs.Occluded(shadow))
+                Ld = ls.Li * (ls.delta ? cosi : cosi / ls.pdf) * (1.0f / kPiF);
+        }
+    }
+    ++rays.bounce;
+    Hit hit;
+    const bool found = c.rs.Intersect(ray, &hit);
+    // Emitting surfaces are not sampled as lights: with the direct part cached, the first ray
+    // is what finds them (a cosine-weighted estimate of their light, 1/pi integral of Le cos).
+    if (direct && found) Ld += c.SurfaceEmission(hit);
+    return Ld +
+           LiPath(c, ray, hit, found, rng, std::max(c.opt.maxDepth - 1, 0), rays, false, cached);
+}
 
 /// Visibility of the scene's area lights from a cache sample (Mehta et al.'s soft-shadow input):
 /// the fraction of shadow rays towards uniform points on the quad lights that reach them, and the
@@ -109,8 +136,11 @@ public:
         // shades on the grid).
         const bool hits = ShadesAtHits(opt);
         // The grid is looked up by renders that do not shade at the hits, and by the frame
-        // buffers (the ones without a prepass), whose diffuse light it caches.
-        if (!hits || prepass == Prepass::None) cache->PrepareGrid();
+        // buffers (the ones without a prepass) when it caches their diffuse light or their
+        // lights' visibility; with the store (TextureSamples::Hits) they read neither.
+        const bool frameGrid =
+            opt.texture.frameBufferSamples == TextureSamples::Grid || opt.texture.cachedVisibility;
+        if (prepass == Prepass::None ? frameGrid : !hits) cache->PrepareGrid();
         if (prepass == Prepass::Allowed && !hits && VisibleOnly(opt.texture.footprint, k) &&
             opt.texture.constantTerm < 0.0f && cache->AnyFootprint()) {
             visible_ = &cache->Visibility(opt.width, opt.height,
