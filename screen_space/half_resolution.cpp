@@ -34,13 +34,15 @@ bool Usable(const FrameBuffers& f, size_t i) {
            std::isfinite(n.z) && f.objectId[i] >= 0;
 }
 
-// Every per-pixel array of the frame that the half frame takes from the representative as is.
+// Every per-pixel array of the frame that the half frame takes from the representative as is:
+// those the half denoiser reads. Not the shading (it composes no image) nor the blocker and
+// the light sample (the shadow vectors read their previous positions only): the gather is
+// memory-bound, a full-resolution array read for each array copied.
 template <class Fn>
 void ForEachCopied(const FrameBuffers& f, FrameBuffers* h, Fn&& fn) {
-    for (auto m : {&FrameBuffers::shading, &FrameBuffers::position, &FrameBuffers::normal,
-                   &FrameBuffers::albedo, &FrameBuffers::specular, &FrameBuffers::prevPosition,
-                   &FrameBuffers::prevNormal, &FrameBuffers::blocker, &FrameBuffers::prevBlocker,
-                   &FrameBuffers::lightSample, &FrameBuffers::prevLightSample,
+    for (auto m : {&FrameBuffers::position, &FrameBuffers::normal, &FrameBuffers::albedo,
+                   &FrameBuffers::specular, &FrameBuffers::prevPosition, &FrameBuffers::prevNormal,
+                   &FrameBuffers::prevBlocker, &FrameBuffers::prevLightSample,
                    &FrameBuffers::glossyHit, &FrameBuffers::prevGlossyHit})
         fn(f.*m, h->*m);
     fn(f.depth, h->depth);
@@ -50,9 +52,11 @@ void ForEachCopied(const FrameBuffers& f, FrameBuffers* h, Fn&& fn) {
 
 // One output row of the upsample. Output pixel 2b takes half-resolution samples b - 1 and b
 // (bilinear weights 1/4, 3/4: its centre is at b - 1/4), pixel 2b + 1 takes b and b + 1 (3/4,
-// 1/4); the two half rows are weighted `wy`. Written per half-resolution pixel b, so every read
-// is contiguous (b - 1 and b + 1 fall into the planes' zero padding at the ends, where validity
-// 0 drops them) and the loops vectorize.
+// 1/4); the two half rows are weighted `wy`. Written per half-resolution pixel b, both of its
+// output pixels in one iteration, so that the half rows are read contiguously and the full row
+// as pairs (b - 1 and b + 1 fall into the planes' zero padding at the ends, where validity 0
+// drops them): GCC vectorizes both with permutes, where a loop per output parity reads the full
+// row with a stride of 2 and stays scalar.
 struct UpRow {
     int w, hw;
     float wy[2], depthScale;
@@ -65,23 +69,55 @@ struct UpRow {
     int nplanes;
     const float* res[7][2];  // the half rows of each result plane
     const float* own[7];     // this row's input (where no sample of its surface is near)
-    float* out[7];
+    float* out[7];           // written up to 2 hw entries (one past an odd row's end)
 };
 
-TEXCACHE_SCREEN_CLONES void UpsampleRow(const UpRow& args) {
+// out[2i + p] = rows[p][i] where inv[p][i] > 0 (some sample of the pixel's surface is near),
+// own[2i + p] elsewhere, for i < n. With GCC's generic vectors, 8 pixel pairs at a time: the
+// plain loop's stride-2 stores stay scalar and took a third of the upsample.
+inline __attribute__((always_inline)) void Interleave(const float (*rows)[128],
+                                                      const float (*inv)[128], int n,
+                                                      const float* own, float* out) {
+    using V8 = float __attribute__((vector_size(32)));
+    using V8u = float __attribute__((vector_size(32), aligned(4), may_alias));
+    int i = 0;
+    for (; i + 8 <= n; i += 8) {
+        const V8 e = *reinterpret_cast<const V8*>(&rows[0][i]);
+        const V8 o = *reinterpret_cast<const V8*>(&rows[1][i]);
+        const V8 ie = *reinterpret_cast<const V8*>(&inv[0][i]);
+        const V8 io = *reinterpret_cast<const V8*>(&inv[1][i]);
+        const V8 lo = __builtin_shufflevector(e, o, 0, 8, 1, 9, 2, 10, 3, 11);
+        const V8 hi = __builtin_shufflevector(e, o, 4, 12, 5, 13, 6, 14, 7, 15);
+        const V8 ilo = __builtin_shufflevector(ie, io, 0, 8, 1, 9, 2, 10, 3, 11);
+        const V8 ihi = __builtin_shufflevector(ie, io, 4, 12, 5, 13, 6, 14, 7, 15);
+        const V8 zero = {};
+        const V8 olo = *reinterpret_cast<const V8u*>(own + 2 * i);
+        const V8 ohi = *reinterpret_cast<const V8u*>(own + 2 * i + 8);
+        *reinterpret_cast<V8u*>(out + 2 * i) = ilo > zero ? lo : olo;
+        *reinterpret_cast<V8u*>(out + 2 * i + 8) = ihi > zero ? hi : ohi;
+    }
+    for (; i < n; ++i)
+        for (int p = 0; p < 2; ++p) out[2 * i + p] = inv[p][i] > 0.0f ? rows[p][i] : own[2 * i + p];
+}
+
+TEXCACHE_SCREEN_CLONES void UpsampleChunks(const UpRow& args) {
     const UpRow a = args;
     constexpr int kC = 128;
     alignas(64) float wt[2][4][kC], inv[2][kC], rows[2][kC];
     for (int b0 = 0; b0 < a.hw; b0 += kC) {
         const int n = std::min(kC, a.hw - b0);
-        for (int p = 0; p < 2; ++p) {
-            // Taps of pixel 2b + p: half pixels b - 1 + p (weight 3/4 - p/2 ... ) and b + p.
-            const float wl = p ? 0.75f : 0.25f, wr = 1.0f - wl;
-            for (int i = 0; i < n; ++i) {
-                const int b = b0 + i, x = 2 * b + p;
+        for (int i = 0; i < n; ++i) {
+            const int b = b0 + i;
+#pragma GCC unroll 2
+            for (int p = 0; p < 2; ++p) {
+                // Taps of pixel 2b + p: half pixels b - 1 + p (weight 1/4 + p/2) and b + p.
+                const float wl = p ? 0.75f : 0.25f, wr = 1.0f - wl;
+                const int x = 2 * b + p;
                 const float okx = float(a.ok[x]);
                 float sum = 0.0f;
+#pragma GCC unroll 2
                 for (int j = 0; j < 2; ++j)
+#pragma GCC unroll 2
                     for (int t = 0; t < 2; ++t) {
                         const int hx = b - 1 + p + t;
                         // Branch-free (validity flags are 0 / 1) so that the loop vectorizes.
@@ -108,15 +144,12 @@ TEXCACHE_SCREEN_CLONES void UpsampleRow(const UpRow& args) {
             const float* r1 = a.res[c][1];
             for (int p = 0; p < 2; ++p)
                 for (int i = 0; i < n; ++i) {
-                    const int b = b0 + i, hx = b - 1 + p;
-                    const float acc = wt[p][0][i] * r0[hx] + wt[p][1][i] * r0[hx + 1] +
-                                      wt[p][2][i] * r1[hx] + wt[p][3][i] * r1[hx + 1];
-                    const float own = a.own[c][2 * b + p];
-                    rows[p][i] = inv[p][i] > 0.0f ? acc * inv[p][i] : own;
+                    const int hx = b0 + i - 1 + p;
+                    rows[p][i] = (wt[p][0][i] * r0[hx] + wt[p][1][i] * r0[hx + 1] +
+                                  wt[p][2][i] * r1[hx] + wt[p][3][i] * r1[hx + 1]) *
+                                 inv[p][i];
                 }
-            float* o = a.out[c];
-            const int xe = std::min(2 * (b0 + n), a.w);
-            for (int x = 2 * b0; x < xe; ++x) o[x] = rows[x & 1][(x >> 1) - b0];
+            Interleave(rows, inv, n, a.own[c] + 2 * b0, a.out[c] + 2 * b0);
         }
     }
 }
@@ -130,7 +163,9 @@ void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* h,
     h->width = hw, h->height = hh, h->time = f.time;
     h->camera = f.camera;
     h->camera.width = hw, h->camera.height = hh;
-    h->emitted.clear();  // composed at full resolution only
+    // Composed at full resolution only: the shading has the size a frame must have, unread.
+    h->emitted.clear(), h->blocker.clear(), h->lightSample.clear();
+    h->shading.resize(n);
     ForEachCopied(f, h, [&](const auto& src, auto& dst) { dst.resize(src.empty() ? 0 : n); });
     h->visibility.resize(n);
     h->cachedVisibility.resize(f.cachedVisibility.empty() ? 0 : n);
@@ -231,43 +266,44 @@ void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* h,
         });
 }
 
-void UpsampleResults(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half) {
+int UpsampledPlanes(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half) {
+    int n = 0;
+    for (int ci = 0; ci < 3; ++ci)
+        if (s.comp[ci].present && half.comp[ci].res[0]) n += s.comp[ci].nc;
+    return n;
+}
+
+void UpsampleRow(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half, int y,
+                 const float* const* own, float* const* out) {
     // The half denoiser has already swapped its guide sets: its last frame's are PrevG().
     const Guides& hg = half.PrevG();
-    const Guides& g = s.G();
+    const Guides& g = s.guides[s.cur];
     const int hh = half.h;
-    int nc[3] = {0, 0, 0};
-    for (int ci = 0; ci < 3; ++ci) {
-        ComponentPlanes& cp = s.comp[ci];
-        if (!cp.present || !half.comp[ci].res[0]) continue;
-        nc[ci] = cp.nc;
-        for (int c = 0; c < 3; ++c) cp.res[c] = c < cp.nc ? &s.scratch[ci].out[c] : nullptr;
+    // Row y's centre is half-resolution row y / 2 - 1/4 (even) or (y - 1) / 2 + 1/4 (odd).
+    const int y0 = (y - 1) >> 1;
+    const int sy[2] = {std::max(y0, 0), std::min(y0 + 1, hh - 1)};
+    UpRow a;
+    a.w = s.w, a.hw = half.w;
+    a.wy[0] = (y & 1) ? 0.75f : 0.25f, a.wy[1] = 1.0f - a.wy[0];
+    a.depthScale = 1.0f / (2.0f * s.set.sigmaDepth);
+    a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+    a.z = g.depth.Row(y), a.invDz = g.invDz.Row(y), a.id = g.objectId.Row(y);
+    a.ok = g.valid.Row(y);
+    for (int j = 0; j < 2; ++j) {
+        a.hnx[j] = hg.nx.Row(sy[j]), a.hny[j] = hg.ny.Row(sy[j]);
+        a.hnz[j] = hg.nz.Row(sy[j]), a.hz[j] = hg.depth.Row(sy[j]);
+        a.hid[j] = hg.objectId.Row(sy[j]), a.hok[j] = hg.valid.Row(sy[j]);
     }
-    ForRows(s.h, [&](int y) {
-        // Row y's centre is half-resolution row y / 2 - 1/4 (even) or (y - 1) / 2 + 1/4 (odd).
-        const int y0 = (y - 1) >> 1;
-        const int sy[2] = {std::max(y0, 0), std::min(y0 + 1, hh - 1)};
-        UpRow a;
-        a.w = s.w, a.hw = half.w;
-        a.wy[0] = (y & 1) ? 0.75f : 0.25f, a.wy[1] = 1.0f - a.wy[0];
-        a.depthScale = 1.0f / (2.0f * s.set.sigmaDepth);
-        a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
-        a.z = g.depth.Row(y), a.invDz = g.invDz.Row(y), a.id = g.objectId.Row(y);
-        a.ok = g.valid.Row(y);
-        for (int j = 0; j < 2; ++j) {
-            a.hnx[j] = hg.nx.Row(sy[j]), a.hny[j] = hg.ny.Row(sy[j]);
-            a.hnz[j] = hg.nz.Row(sy[j]), a.hz[j] = hg.depth.Row(sy[j]);
-            a.hid[j] = hg.objectId.Row(sy[j]), a.hok[j] = hg.valid.Row(sy[j]);
+    a.nplanes = 0;
+    for (int ci = 0; ci < 3; ++ci) {
+        if (!s.comp[ci].present || !half.comp[ci].res[0]) continue;
+        for (int c = 0; c < s.comp[ci].nc; ++c, ++a.nplanes) {
+            for (int j = 0; j < 2; ++j) a.res[a.nplanes][j] = half.comp[ci].res[c]->Row(sy[j]);
+            a.own[a.nplanes] = own[a.nplanes];
+            a.out[a.nplanes] = out[a.nplanes];
         }
-        a.nplanes = 0;
-        for (int ci = 0; ci < 3; ++ci)
-            for (int c = 0; c < nc[ci]; ++c, ++a.nplanes) {
-                for (int j = 0; j < 2; ++j) a.res[a.nplanes][j] = half.comp[ci].res[c]->Row(sy[j]);
-                a.own[a.nplanes] = s.comp[ci].v[c].Row(y);
-                a.out[a.nplanes] = s.scratch[ci].out[c].Row(y);
-            }
-        UpsampleRow(a);
-    });
+    }
+    UpsampleChunks(a);
 }
 
 }  // namespace texcache::screen::internal
