@@ -16,6 +16,7 @@
 // no sample of its surface reaches (a feature one pixel thin) keeps its own noisy input.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "screen_space/denoiser_state.h"
 #include "screen_space/internal.h"
@@ -27,12 +28,6 @@ namespace {
 // more than acos(kMinNormalDot), are taken to be different surfaces.
 constexpr float kSameDepth = 0.05f;
 constexpr float kMinNormalDot = 0.8f;
-
-bool Usable(const FrameBuffers& f, size_t i) {
-    const glm::vec3 n = f.normal[i];
-    return std::isfinite(f.depth[i]) && std::isfinite(n.x) && std::isfinite(n.y) &&
-           std::isfinite(n.z) && f.objectId[i] >= 0;
-}
 
 // Every per-pixel array of the frame that the half frame takes from the representative as is:
 // those the half denoiser reads. Not the shading (it composes no image) nor the blocker and
@@ -154,6 +149,154 @@ TEXCACHE_SCREEN_CLONES void UpsampleChunks(const UpRow& args) {
     }
 }
 
+// One half row of the reduction, on both full rows of its blocks (row1 = row0 and pres1 = 0
+// where the frame has no second row). Per block, the four samples unrolled with a presence
+// flag each and the choices as selects, not loops over the samples that exist; GCC still does
+// not vectorize it across blocks (the frame's vec3 rows are read at a stride of two pixels),
+// and it remains the reduction's largest cost after the reads themselves.
+struct ReduceRow {
+    int w, hw;
+    float pres1;            // 1 when the blocks' second row exists
+    const float* depth[2];  // the two full rows
+    const int32_t* id[2];
+    const float* nrm[2];  // xyz interleaved
+    const float* vis[2];
+    const float* cvis[2];    // cachedVisibility, or null
+    const float* glossy[2];  // or null
+    const float* ind[2];     // or null
+    const float* alb[2];     // or null
+    size_t rowStart[2];      // index of each full row's first pixel in the frame
+    uint32_t* rep;           // each block's representative pixel
+    float* hvis;
+    float* hcvis;    // or null
+    float* hglossy;  // xyz interleaved, or null
+    float* hind;     // or null
+};
+
+inline bool FiniteF(float v) {
+    return std::fabs(v) <= std::numeric_limits<float>::max();
+}
+
+TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
+    const ReduceRow a = args;
+    constexpr int kC = 128;
+    alignas(64) float same[4][kC];
+    alignas(64) int ra[kC], col[2][kC];
+    for (int b0 = 0; b0 < a.hw; b0 += kC) {
+        const int n = std::min(kC, a.hw - b0);
+        // The representative (the depth medoid among usable samples, samples of other objects
+        // counting as far) and the samples of its surface.
+        for (int i = 0; i < n; ++i) {
+            const int b = b0 + i;
+            const int xl = 2 * b, xr = std::min(2 * b + 1, a.w - 1);
+            const float presR = 2 * b + 1 < a.w ? 1.0f : 0.0f;
+            const float pres[4] = {1.0f, presR, a.pres1, presR * a.pres1};
+            float z[4], nx[4], ny[4], nz[4], use[4];
+            int id[4];
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) {
+                const int r = k >> 1, x = (k & 1) ? xr : xl;
+                z[k] = a.depth[r][x], id[k] = a.id[r][x];
+                nx[k] = a.nrm[r][3 * x], ny[k] = a.nrm[r][3 * x + 1], nz[k] = a.nrm[r][3 * x + 2];
+                use[k] = pres[k] > 0.0f && FiniteF(z[k]) && FiniteF(nx[k]) && FiniteF(ny[k]) &&
+                                 FiniteF(nz[k]) && id[k] >= 0
+                             ? 1.0f
+                             : 0.0f;
+            }
+            float best = INFINITY;
+            int r = 0;
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) {
+                const float inv = 1.0f / z[k];
+                float cost = 0.0f;
+#pragma GCC unroll 4
+                for (int m = 0; m < 4; ++m) {
+                    const bool sm = use[m] > 0.0f && id[m] == id[k];
+                    const float c = sm ? std::fabs(z[m] - z[k]) * inv : 1.0f;
+                    cost += pres[m] > 0.0f ? c : 0.0f;
+                }
+                const bool better = use[k] > 0.0f && cost < best;
+                best = better ? cost : best, r = better ? k : r;
+            }
+            auto pick = [&](const auto* v) {
+                return r == 0 ? v[0] : r == 1 ? v[1] : r == 2 ? v[2] : v[3];
+            };
+            const float zr = pick(z), nxr = pick(nx), nyr = pick(ny), nzr = pick(nz);
+            const int idr = pick(id);
+            const float user = pick(use);
+            float ns = 0.0f;
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) {
+                const float d = nx[k] * nxr + ny[k] * nyr + nz[k] * nzr;
+                const bool sm = user > 0.0f && use[k] > 0.0f && id[k] == idr &&
+                                std::fabs(z[k] - zr) <= kSameDepth * zr && d >= kMinNormalDot;
+                same[k][i] = sm ? 1.0f : 0.0f;
+                ns += same[k][i];
+            }
+            // No usable sample of its own surface: the representative alone.
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) same[k][i] = ns == 0.0f && k == r ? 1.0f : same[k][i];
+            ra[i] = r, col[0][i] = xl, col[1][i] = xr;
+            a.rep[b] = uint32_t(a.rowStart[r >> 1] + size_t((r & 1) ? xr : xl));
+        }
+        // Means over the finite samples of the surface; the representative's own value when
+        // none is.
+        auto mean1 = [&](const float* const* src, float* dst) {
+            for (int i = 0; i < n; ++i) {
+                float sum = 0.0f, cnt = 0.0f, vr = 0.0f;
+#pragma GCC unroll 4
+                for (int k = 0; k < 4; ++k) {
+                    const float v = src[k >> 1][col[k & 1][i]];
+                    const bool m = same[k][i] > 0.0f && FiniteF(v);
+                    sum += m ? v : 0.0f, cnt += m ? 1.0f : 0.0f;
+                    vr = ra[i] == k ? v : vr;
+                }
+                dst[b0 + i] = cnt > 0.0f ? sum / cnt : vr;
+            }
+        };
+        mean1(a.vis, a.hvis);
+        if (a.hcvis) mean1(a.cvis, a.hcvis);
+        // Colour means; with `alb`, demodulated where the albedo can be divided out and
+        // remodulated with the representative's albedo, as the stage does.
+        auto mean3 = [&](const float* const* src, const float* const* alb, float* dst) {
+            for (int i = 0; i < n; ++i) {
+                float sum[3] = {0.0f, 0.0f, 0.0f}, cnt = 0.0f, vr[3] = {0.0f, 0.0f, 0.0f},
+                      ar[3] = {1.0f, 1.0f, 1.0f};
+                if (alb)
+#pragma GCC unroll 4
+                    for (int k = 0; k < 4; ++k)
+#pragma GCC unroll 3
+                        for (int c = 0; c < 3; ++c)
+                            ar[c] = ra[i] == k ? alb[k >> 1][3 * col[k & 1][i] + c] : ar[c];
+#pragma GCC unroll 4
+                for (int k = 0; k < 4; ++k) {
+                    float v[3];
+                    bool fin = same[k][i] > 0.0f;
+#pragma GCC unroll 3
+                    for (int c = 0; c < 3; ++c) {
+                        const float raw = src[k >> 1][3 * col[k & 1][i] + c];
+                        vr[c] = ra[i] == k ? raw : vr[c];
+                        v[c] = raw;
+                        if (alb) {
+                            const float al = alb[k >> 1][3 * col[k & 1][i] + c];
+                            v[c] = al > 1e-3f ? raw / al * ar[c] : kNaN;
+                        }
+                        fin = fin && FiniteF(v[c]);
+                    }
+#pragma GCC unroll 3
+                    for (int c = 0; c < 3; ++c) sum[c] += fin ? v[c] : 0.0f;
+                    cnt += fin ? 1.0f : 0.0f;
+                }
+#pragma GCC unroll 3
+                for (int c = 0; c < 3; ++c)
+                    dst[3 * (b0 + i) + c] = cnt > 0.0f ? sum[c] / cnt : vr[c];
+            }
+        };
+        if (a.hglossy) mean3(a.glossy, nullptr, a.hglossy);
+        if (a.hind) mean3(a.ind, a.alb[0] ? a.alb : nullptr, a.hind);
+    }
+}
+
 }  // namespace
 
 void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* h,
@@ -172,98 +315,41 @@ void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* h,
     h->glossy.resize(f.glossy.empty() ? 0 : n);
     h->indirect.resize(f.indirect.empty() ? 0 : n);
     h->cones.resize(f.cones.empty() || !withCones ? 0 : n * kNumCones);
-    const bool hasAlbedo = !f.albedo.empty();
     std::vector<uint32_t>& reps = *source;
     reps.resize(n);
+    // One pass: a half row's representatives and means, then every array the half frame
+    // copies from them, while the block row's full rows are still in the caches.
     ForRows(hh, [&](int by) {
-        for (int bx = 0; bx < hw; ++bx) {
-            size_t px[4] = {0, 0, 0, 0};
-            int np = 0;
-            for (int j = 0; j < 2; ++j)
-                for (int i = 0; i < 2; ++i) {
-                    const int x = 2 * bx + i, y = 2 * by + j;
-                    if (x < f.width && y < f.height)
-                        px[np++] = size_t(y) * size_t(f.width) + size_t(x);
-                }
-            bool use[4] = {false, false, false, false};
-            for (int a = 0; a < np; ++a) use[a] = Usable(f, px[a]);
-            // The depth medoid among usable samples, samples of other objects counting as far.
-            int ra = 0;
-            float best = INFINITY;
-            for (int a = 0; a < np; ++a) {
-                if (!use[a]) continue;
-                const float za = f.depth[px[a]], inv = 1.0f / za;
-                const int ida = f.objectId[px[a]];
-                float cost = 0.0f;
-                for (int b = 0; b < np; ++b) {
-                    const bool same = use[b] && f.objectId[px[b]] == ida;
-                    cost += same ? std::fabs(f.depth[px[b]] - za) * inv : 1.0f;
-                }
-                if (cost < best) best = cost, ra = a;
-            }
-            const size_t rep = px[ra];
-            const size_t o = size_t(by) * size_t(hw) + size_t(bx);
-            reps[o] = uint32_t(rep);
-            // The samples of the representative's surface (itself included when usable).
-            size_t same[4];
-            int ns = 0;
-            if (use[ra]) {
-                const float zr = f.depth[rep];
-                const glm::vec3 nr = f.normal[rep];
-                for (int a = 0; a < np; ++a) {
-                    const size_t p = px[a];
-                    if (use[a] && f.objectId[p] == f.objectId[rep] &&
-                        std::fabs(f.depth[p] - zr) <= kSameDepth * zr &&
-                        glm::dot(f.normal[p], nr) >= kMinNormalDot)
-                        same[ns++] = p;
-                }
-            }
-            if (ns == 0) same[ns++] = rep;
-            // Means over the finite samples; the representative's own value when none is.
-            auto meanOf = [&](auto get, auto fallback) {
-                decltype(fallback) sum{};
-                int k = 0;
-                for (int a = 0; a < ns; ++a) {
-                    const auto v = get(same[a]);
-                    if (Finite(glm::vec3(v))) sum += v, ++k;
-                }
-                return k ? sum / float(k) : fallback;
-            };
-            h->visibility[o] = meanOf([&](size_t p) { return f.visibility[p]; }, f.visibility[rep]);
-            if (!f.cachedVisibility.empty())
-                h->cachedVisibility[o] = meanOf([&](size_t p) { return f.cachedVisibility[p]; },
-                                                f.cachedVisibility[rep]);
-            if (!f.glossy.empty())
-                h->glossy[o] = meanOf([&](size_t p) { return f.glossy[p]; }, f.glossy[rep]);
-            if (!f.indirect.empty()) {
-                const glm::vec3 ar = hasAlbedo ? f.albedo[rep] : glm::vec3(1.0f);
-                h->indirect[o] = meanOf(
-                    [&](size_t p) {
-                        if (!hasAlbedo) return f.indirect[p];
-                        const glm::vec3 a = f.albedo[p];
-                        // Demodulated where the albedo can be divided out, as the stage does.
-                        return glm::vec3(a.x > 1e-3f ? f.indirect[p].x / a.x * ar.x : kNaN,
-                                         a.y > 1e-3f ? f.indirect[p].y / a.y * ar.y : kNaN,
-                                         a.z > 1e-3f ? f.indirect[p].z / a.z * ar.z : kNaN);
-                    },
-                    f.indirect[rep]);
-            }
+        const int y0 = 2 * by, y1 = std::min(2 * by + 1, f.height - 1);
+        const size_t rows[2] = {size_t(y0) * size_t(f.width), size_t(y1) * size_t(f.width)};
+        const size_t o = size_t(by) * size_t(hw);
+        ReduceRow a;
+        a.w = f.width, a.hw = hw, a.pres1 = 2 * by + 1 < f.height ? 1.0f : 0.0f;
+        for (int r = 0; r < 2; ++r) {
+            const size_t i = rows[r];
+            a.rowStart[r] = i;
+            a.depth[r] = &f.depth[i], a.id[r] = &f.objectId[i], a.nrm[r] = &f.normal[i].x;
+            a.vis[r] = &f.visibility[i];
+            a.cvis[r] = f.cachedVisibility.empty() ? nullptr : &f.cachedVisibility[i];
+            a.glossy[r] = f.glossy.empty() ? nullptr : &f.glossy[i].x;
+            a.ind[r] = f.indirect.empty() ? nullptr : &f.indirect[i].x;
+            a.alb[r] = f.albedo.empty() ? nullptr : &f.albedo[i].x;
         }
-    });
-    // The representative's geometry and factors: one gather per array.
-    ForEachCopied(f, h, [&](const auto& src, auto& dst) {
-        if (src.empty()) return;
-        ForRows(hh, [&](int by) {
-            const size_t o = size_t(by) * size_t(hw);
+        a.rep = &reps[o];
+        a.hvis = &h->visibility[o];
+        a.hcvis = f.cachedVisibility.empty() ? nullptr : &h->cachedVisibility[o];
+        a.hglossy = f.glossy.empty() ? nullptr : &h->glossy[o].x;
+        a.hind = f.indirect.empty() ? nullptr : &h->indirect[o].x;
+        ReduceBlocks(a);
+        ForEachCopied(f, h, [&](const auto& src, auto& dst) {
+            if (src.empty()) return;
             for (int bx = 0; bx < hw; ++bx) dst[o + bx] = src[reps[o + bx]];
         });
+        if (!h->cones.empty())
+            for (size_t k = o; k < o + size_t(hw); ++k)
+                std::copy_n(&f.cones[size_t(reps[k]) * kNumCones], kNumCones,
+                            &h->cones[k * kNumCones]);
     });
-    if (!h->cones.empty())
-        ForRows(hh, [&](int by) {
-            for (size_t o = size_t(by) * size_t(hw); o < size_t(by + 1) * size_t(hw); ++o)
-                std::copy_n(&f.cones[size_t(reps[o]) * kNumCones], kNumCones,
-                            &h->cones[o * kNumCones]);
-        });
 }
 
 int UpsampledPlanes(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half) {
