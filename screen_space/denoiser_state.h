@@ -85,6 +85,8 @@ struct ScreenSpaceDenoiser::State {
     std::vector<glm::vec3> halfImage;
     std::vector<uint32_t> halfSource;  ///< each block's representative pixel
     bool lastHalf = false;             ///< the last frame was denoised at half resolution
+    bool composes = true;              ///< false in the half denoiser: its image is never read
+    std::vector<float> rowScratch;     ///< per-thread rows of UpsampleCompose
 
     internal::Guides& G() { return guides[cur]; }
     const internal::Guides& PrevG() const { return guides[cur ^ 1]; }
@@ -129,10 +131,17 @@ void CachedWhereNoHistory(ScreenSpaceDenoiser::State& s, bool svgf);
 void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* half,
                      std::vector<uint32_t>* source);
 
-/// The demodulated results of `half` (a denoiser that has just denoised DownsampleFrame(frame))
-/// brought to s's full-resolution guides (prepared for the same frame): written to
-/// s.scratch[ci].out, and s.comp[ci].res pointed at them.
-void UpsampleResults(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half);
+/// How many result planes UpsampleRow brings back from `half`: the channels of the components
+/// present in both denoisers, in the order visibility, glossy, indirect.
+int UpsampledPlanes(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half);
+
+/// Row y of the demodulated results of `half` (a denoiser that has just denoised
+/// DownsampleFrame(frame)) brought to s's full-resolution guides (prepared for the same frame),
+/// one row per UpsampledPlanes() plane into out[k]; own[k] is the pixel's own input of plane k
+/// (what a pixel keeps where no half-resolution sample of its surface is near; readable one
+/// entry past the row's end).
+void UpsampleRow(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half, int y,
+                 const float* const* own, float* const* out);
 
 }  // namespace internal
 }  // namespace texcache::screen

@@ -16,6 +16,7 @@
 // no sample of its surface reaches (a feature one pixel thin) keeps its own noisy input.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "screen_space/denoiser_state.h"
 #include "screen_space/internal.h"
@@ -28,19 +29,15 @@ namespace {
 constexpr float kSameDepth = 0.05f;
 constexpr float kMinNormalDot = 0.8f;
 
-bool Usable(const FrameBuffers& f, size_t i) {
-    const glm::vec3 n = f.normal[i];
-    return std::isfinite(f.depth[i]) && std::isfinite(n.x) && std::isfinite(n.y) &&
-           std::isfinite(n.z) && f.objectId[i] >= 0;
-}
-
-// Every per-pixel array of the frame that the half frame takes from the representative as is.
+// Every per-pixel array of the frame that the half frame takes from the representative as is:
+// those the half denoiser reads. Not the shading (it composes no image) nor the blocker and
+// the light sample (the shadow vectors read their previous positions only): the gather is
+// memory-bound, a full-resolution array read for each array copied.
 template <class Fn>
 void ForEachCopied(const FrameBuffers& f, FrameBuffers* h, Fn&& fn) {
-    for (auto m : {&FrameBuffers::shading, &FrameBuffers::position, &FrameBuffers::normal,
-                   &FrameBuffers::albedo, &FrameBuffers::specular, &FrameBuffers::prevPosition,
-                   &FrameBuffers::prevNormal, &FrameBuffers::blocker, &FrameBuffers::prevBlocker,
-                   &FrameBuffers::lightSample, &FrameBuffers::prevLightSample,
+    for (auto m : {&FrameBuffers::position, &FrameBuffers::normal, &FrameBuffers::albedo,
+                   &FrameBuffers::specular, &FrameBuffers::prevPosition, &FrameBuffers::prevNormal,
+                   &FrameBuffers::prevBlocker, &FrameBuffers::prevLightSample,
                    &FrameBuffers::glossyHit, &FrameBuffers::prevGlossyHit})
         fn(f.*m, h->*m);
     fn(f.depth, h->depth);
@@ -50,9 +47,11 @@ void ForEachCopied(const FrameBuffers& f, FrameBuffers* h, Fn&& fn) {
 
 // One output row of the upsample. Output pixel 2b takes half-resolution samples b - 1 and b
 // (bilinear weights 1/4, 3/4: its centre is at b - 1/4), pixel 2b + 1 takes b and b + 1 (3/4,
-// 1/4); the two half rows are weighted `wy`. Written per half-resolution pixel b, so every read
-// is contiguous (b - 1 and b + 1 fall into the planes' zero padding at the ends, where validity
-// 0 drops them) and the loops vectorize.
+// 1/4); the two half rows are weighted `wy`. Written per half-resolution pixel b, both of its
+// output pixels in one iteration, so that the half rows are read contiguously and the full row
+// as pairs (b - 1 and b + 1 fall into the planes' zero padding at the ends, where validity 0
+// drops them): GCC vectorizes both with permutes, where a loop per output parity reads the full
+// row with a stride of 2 and stays scalar.
 struct UpRow {
     int w, hw;
     float wy[2], depthScale;
@@ -65,23 +64,55 @@ struct UpRow {
     int nplanes;
     const float* res[7][2];  // the half rows of each result plane
     const float* own[7];     // this row's input (where no sample of its surface is near)
-    float* out[7];
+    float* out[7];           // written up to 2 hw entries (one past an odd row's end)
 };
 
-TEXCACHE_SCREEN_CLONES void UpsampleRow(const UpRow& args) {
+// out[2i + p] = rows[p][i] where inv[p][i] > 0 (some sample of the pixel's surface is near),
+// own[2i + p] elsewhere, for i < n. With GCC's generic vectors, 8 pixel pairs at a time: the
+// plain loop's stride-2 stores stay scalar and took a third of the upsample.
+inline __attribute__((always_inline)) void Interleave(const float (*rows)[128],
+                                                      const float (*inv)[128], int n,
+                                                      const float* own, float* out) {
+    using V8 = float __attribute__((vector_size(32)));
+    using V8u = float __attribute__((vector_size(32), aligned(4), may_alias));
+    int i = 0;
+    for (; i + 8 <= n; i += 8) {
+        const V8 e = *reinterpret_cast<const V8*>(&rows[0][i]);
+        const V8 o = *reinterpret_cast<const V8*>(&rows[1][i]);
+        const V8 ie = *reinterpret_cast<const V8*>(&inv[0][i]);
+        const V8 io = *reinterpret_cast<const V8*>(&inv[1][i]);
+        const V8 lo = __builtin_shufflevector(e, o, 0, 8, 1, 9, 2, 10, 3, 11);
+        const V8 hi = __builtin_shufflevector(e, o, 4, 12, 5, 13, 6, 14, 7, 15);
+        const V8 ilo = __builtin_shufflevector(ie, io, 0, 8, 1, 9, 2, 10, 3, 11);
+        const V8 ihi = __builtin_shufflevector(ie, io, 4, 12, 5, 13, 6, 14, 7, 15);
+        const V8 zero = {};
+        const V8 olo = *reinterpret_cast<const V8u*>(own + 2 * i);
+        const V8 ohi = *reinterpret_cast<const V8u*>(own + 2 * i + 8);
+        *reinterpret_cast<V8u*>(out + 2 * i) = ilo > zero ? lo : olo;
+        *reinterpret_cast<V8u*>(out + 2 * i + 8) = ihi > zero ? hi : ohi;
+    }
+    for (; i < n; ++i)
+        for (int p = 0; p < 2; ++p) out[2 * i + p] = inv[p][i] > 0.0f ? rows[p][i] : own[2 * i + p];
+}
+
+TEXCACHE_SCREEN_CLONES void UpsampleChunks(const UpRow& args) {
     const UpRow a = args;
     constexpr int kC = 128;
     alignas(64) float wt[2][4][kC], inv[2][kC], rows[2][kC];
     for (int b0 = 0; b0 < a.hw; b0 += kC) {
         const int n = std::min(kC, a.hw - b0);
-        for (int p = 0; p < 2; ++p) {
-            // Taps of pixel 2b + p: half pixels b - 1 + p (weight 3/4 - p/2 ... ) and b + p.
-            const float wl = p ? 0.75f : 0.25f, wr = 1.0f - wl;
-            for (int i = 0; i < n; ++i) {
-                const int b = b0 + i, x = 2 * b + p;
+        for (int i = 0; i < n; ++i) {
+            const int b = b0 + i;
+#pragma GCC unroll 2
+            for (int p = 0; p < 2; ++p) {
+                // Taps of pixel 2b + p: half pixels b - 1 + p (weight 1/4 + p/2) and b + p.
+                const float wl = p ? 0.75f : 0.25f, wr = 1.0f - wl;
+                const int x = 2 * b + p;
                 const float okx = float(a.ok[x]);
                 float sum = 0.0f;
+#pragma GCC unroll 2
                 for (int j = 0; j < 2; ++j)
+#pragma GCC unroll 2
                     for (int t = 0; t < 2; ++t) {
                         const int hx = b - 1 + p + t;
                         // Branch-free (validity flags are 0 / 1) so that the loop vectorizes.
@@ -108,16 +139,161 @@ TEXCACHE_SCREEN_CLONES void UpsampleRow(const UpRow& args) {
             const float* r1 = a.res[c][1];
             for (int p = 0; p < 2; ++p)
                 for (int i = 0; i < n; ++i) {
-                    const int b = b0 + i, hx = b - 1 + p;
-                    const float acc = wt[p][0][i] * r0[hx] + wt[p][1][i] * r0[hx + 1] +
-                                      wt[p][2][i] * r1[hx] + wt[p][3][i] * r1[hx + 1];
-                    const float own = a.own[c][2 * b + p];
-                    rows[p][i] = inv[p][i] > 0.0f ? acc * inv[p][i] : own;
+                    const int hx = b0 + i - 1 + p;
+                    rows[p][i] = (wt[p][0][i] * r0[hx] + wt[p][1][i] * r0[hx + 1] +
+                                  wt[p][2][i] * r1[hx] + wt[p][3][i] * r1[hx + 1]) *
+                                 inv[p][i];
                 }
-            float* o = a.out[c];
-            const int xe = std::min(2 * (b0 + n), a.w);
-            for (int x = 2 * b0; x < xe; ++x) o[x] = rows[x & 1][(x >> 1) - b0];
+            Interleave(rows, inv, n, a.own[c] + 2 * b0, a.out[c] + 2 * b0);
         }
+    }
+}
+
+// One half row of the reduction, on both full rows of its blocks (row1 = row0 and pres1 = 0
+// where the frame has no second row). Per block, the four samples unrolled with a presence
+// flag each and the choices as selects, not loops over the samples that exist; GCC still does
+// not vectorize it across blocks (the frame's vec3 rows are read at a stride of two pixels),
+// and it remains the reduction's largest cost after the reads themselves.
+struct ReduceRow {
+    int w, hw;
+    float pres1;            // 1 when the blocks' second row exists
+    const float* depth[2];  // the two full rows
+    const int32_t* id[2];
+    const float* nrm[2];  // xyz interleaved
+    const float* vis[2];
+    const float* cvis[2];    // cachedVisibility, or null
+    const float* glossy[2];  // or null
+    const float* ind[2];     // or null
+    const float* alb[2];     // or null
+    size_t rowStart[2];      // index of each full row's first pixel in the frame
+    uint32_t* rep;           // each block's representative pixel
+    float* hvis;
+    float* hcvis;    // or null
+    float* hglossy;  // xyz interleaved, or null
+    float* hind;     // or null
+};
+
+inline bool FiniteF(float v) {
+    return std::fabs(v) <= std::numeric_limits<float>::max();
+}
+
+TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
+    const ReduceRow a = args;
+    constexpr int kC = 128;
+    alignas(64) float same[4][kC];
+    alignas(64) int ra[kC], col[2][kC];
+    for (int b0 = 0; b0 < a.hw; b0 += kC) {
+        const int n = std::min(kC, a.hw - b0);
+        // The representative (the depth medoid among usable samples, samples of other objects
+        // counting as far) and the samples of its surface.
+        for (int i = 0; i < n; ++i) {
+            const int b = b0 + i;
+            const int xl = 2 * b, xr = std::min(2 * b + 1, a.w - 1);
+            const float presR = 2 * b + 1 < a.w ? 1.0f : 0.0f;
+            const float pres[4] = {1.0f, presR, a.pres1, presR * a.pres1};
+            float z[4], nx[4], ny[4], nz[4], use[4];
+            int id[4];
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) {
+                const int r = k >> 1, x = (k & 1) ? xr : xl;
+                z[k] = a.depth[r][x], id[k] = a.id[r][x];
+                nx[k] = a.nrm[r][3 * x], ny[k] = a.nrm[r][3 * x + 1], nz[k] = a.nrm[r][3 * x + 2];
+                use[k] = pres[k] > 0.0f && FiniteF(z[k]) && FiniteF(nx[k]) && FiniteF(ny[k]) &&
+                                 FiniteF(nz[k]) && id[k] >= 0
+                             ? 1.0f
+                             : 0.0f;
+            }
+            float best = INFINITY;
+            int r = 0;
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) {
+                const float inv = 1.0f / z[k];
+                float cost = 0.0f;
+#pragma GCC unroll 4
+                for (int m = 0; m < 4; ++m) {
+                    const bool sm = use[m] > 0.0f && id[m] == id[k];
+                    const float c = sm ? std::fabs(z[m] - z[k]) * inv : 1.0f;
+                    cost += pres[m] > 0.0f ? c : 0.0f;
+                }
+                const bool better = use[k] > 0.0f && cost < best;
+                best = better ? cost : best, r = better ? k : r;
+            }
+            auto pick = [&](const auto* v) {
+                return r == 0 ? v[0] : r == 1 ? v[1] : r == 2 ? v[2] : v[3];
+            };
+            const float zr = pick(z), nxr = pick(nx), nyr = pick(ny), nzr = pick(nz);
+            const int idr = pick(id);
+            const float user = pick(use);
+            float ns = 0.0f;
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) {
+                const float d = nx[k] * nxr + ny[k] * nyr + nz[k] * nzr;
+                const bool sm = user > 0.0f && use[k] > 0.0f && id[k] == idr &&
+                                std::fabs(z[k] - zr) <= kSameDepth * zr && d >= kMinNormalDot;
+                same[k][i] = sm ? 1.0f : 0.0f;
+                ns += same[k][i];
+            }
+            // No usable sample of its own surface: the representative alone.
+#pragma GCC unroll 4
+            for (int k = 0; k < 4; ++k) same[k][i] = ns == 0.0f && k == r ? 1.0f : same[k][i];
+            ra[i] = r, col[0][i] = xl, col[1][i] = xr;
+            a.rep[b] = uint32_t(a.rowStart[r >> 1] + size_t((r & 1) ? xr : xl));
+        }
+        // Means over the finite samples of the surface; the representative's own value when
+        // none is.
+        auto mean1 = [&](const float* const* src, float* dst) {
+            for (int i = 0; i < n; ++i) {
+                float sum = 0.0f, cnt = 0.0f, vr = 0.0f;
+#pragma GCC unroll 4
+                for (int k = 0; k < 4; ++k) {
+                    const float v = src[k >> 1][col[k & 1][i]];
+                    const bool m = same[k][i] > 0.0f && FiniteF(v);
+                    sum += m ? v : 0.0f, cnt += m ? 1.0f : 0.0f;
+                    vr = ra[i] == k ? v : vr;
+                }
+                dst[b0 + i] = cnt > 0.0f ? sum / cnt : vr;
+            }
+        };
+        mean1(a.vis, a.hvis);
+        if (a.hcvis) mean1(a.cvis, a.hcvis);
+        // Colour means; with `alb`, demodulated where the albedo can be divided out and
+        // remodulated with the representative's albedo, as the stage does.
+        auto mean3 = [&](const float* const* src, const float* const* alb, float* dst) {
+            for (int i = 0; i < n; ++i) {
+                float sum[3] = {0.0f, 0.0f, 0.0f}, cnt = 0.0f, vr[3] = {0.0f, 0.0f, 0.0f},
+                      ar[3] = {1.0f, 1.0f, 1.0f};
+                if (alb)
+#pragma GCC unroll 4
+                    for (int k = 0; k < 4; ++k)
+#pragma GCC unroll 3
+                        for (int c = 0; c < 3; ++c)
+                            ar[c] = ra[i] == k ? alb[k >> 1][3 * col[k & 1][i] + c] : ar[c];
+#pragma GCC unroll 4
+                for (int k = 0; k < 4; ++k) {
+                    float v[3];
+                    bool fin = same[k][i] > 0.0f;
+#pragma GCC unroll 3
+                    for (int c = 0; c < 3; ++c) {
+                        const float raw = src[k >> 1][3 * col[k & 1][i] + c];
+                        vr[c] = ra[i] == k ? raw : vr[c];
+                        v[c] = raw;
+                        if (alb) {
+                            const float al = alb[k >> 1][3 * col[k & 1][i] + c];
+                            v[c] = al > 1e-3f ? raw / al * ar[c] : kNaN;
+                        }
+                        fin = fin && FiniteF(v[c]);
+                    }
+#pragma GCC unroll 3
+                    for (int c = 0; c < 3; ++c) sum[c] += fin ? v[c] : 0.0f;
+                    cnt += fin ? 1.0f : 0.0f;
+                }
+#pragma GCC unroll 3
+                for (int c = 0; c < 3; ++c)
+                    dst[3 * (b0 + i) + c] = cnt > 0.0f ? sum[c] / cnt : vr[c];
+            }
+        };
+        if (a.hglossy) mean3(a.glossy, nullptr, a.hglossy);
+        if (a.hind) mean3(a.ind, a.alb[0] ? a.alb : nullptr, a.hind);
     }
 }
 
@@ -130,144 +306,90 @@ void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* h,
     h->width = hw, h->height = hh, h->time = f.time;
     h->camera = f.camera;
     h->camera.width = hw, h->camera.height = hh;
-    h->emitted.clear();  // composed at full resolution only
+    // Composed at full resolution only: the shading has the size a frame must have, unread.
+    h->emitted.clear(), h->blocker.clear(), h->lightSample.clear();
+    h->shading.resize(n);
     ForEachCopied(f, h, [&](const auto& src, auto& dst) { dst.resize(src.empty() ? 0 : n); });
     h->visibility.resize(n);
     h->cachedVisibility.resize(f.cachedVisibility.empty() ? 0 : n);
     h->glossy.resize(f.glossy.empty() ? 0 : n);
     h->indirect.resize(f.indirect.empty() ? 0 : n);
     h->cones.resize(f.cones.empty() || !withCones ? 0 : n * kNumCones);
-    const bool hasAlbedo = !f.albedo.empty();
     std::vector<uint32_t>& reps = *source;
     reps.resize(n);
+    // One pass: a half row's representatives and means, then every array the half frame
+    // copies from them, while the block row's full rows are still in the caches.
     ForRows(hh, [&](int by) {
-        for (int bx = 0; bx < hw; ++bx) {
-            size_t px[4] = {0, 0, 0, 0};
-            int np = 0;
-            for (int j = 0; j < 2; ++j)
-                for (int i = 0; i < 2; ++i) {
-                    const int x = 2 * bx + i, y = 2 * by + j;
-                    if (x < f.width && y < f.height)
-                        px[np++] = size_t(y) * size_t(f.width) + size_t(x);
-                }
-            bool use[4] = {false, false, false, false};
-            for (int a = 0; a < np; ++a) use[a] = Usable(f, px[a]);
-            // The depth medoid among usable samples, samples of other objects counting as far.
-            int ra = 0;
-            float best = INFINITY;
-            for (int a = 0; a < np; ++a) {
-                if (!use[a]) continue;
-                const float za = f.depth[px[a]], inv = 1.0f / za;
-                const int ida = f.objectId[px[a]];
-                float cost = 0.0f;
-                for (int b = 0; b < np; ++b) {
-                    const bool same = use[b] && f.objectId[px[b]] == ida;
-                    cost += same ? std::fabs(f.depth[px[b]] - za) * inv : 1.0f;
-                }
-                if (cost < best) best = cost, ra = a;
-            }
-            const size_t rep = px[ra];
-            const size_t o = size_t(by) * size_t(hw) + size_t(bx);
-            reps[o] = uint32_t(rep);
-            // The samples of the representative's surface (itself included when usable).
-            size_t same[4];
-            int ns = 0;
-            if (use[ra]) {
-                const float zr = f.depth[rep];
-                const glm::vec3 nr = f.normal[rep];
-                for (int a = 0; a < np; ++a) {
-                    const size_t p = px[a];
-                    if (use[a] && f.objectId[p] == f.objectId[rep] &&
-                        std::fabs(f.depth[p] - zr) <= kSameDepth * zr &&
-                        glm::dot(f.normal[p], nr) >= kMinNormalDot)
-                        same[ns++] = p;
-                }
-            }
-            if (ns == 0) same[ns++] = rep;
-            // Means over the finite samples; the representative's own value when none is.
-            auto meanOf = [&](auto get, auto fallback) {
-                decltype(fallback) sum{};
-                int k = 0;
-                for (int a = 0; a < ns; ++a) {
-                    const auto v = get(same[a]);
-                    if (Finite(glm::vec3(v))) sum += v, ++k;
-                }
-                return k ? sum / float(k) : fallback;
-            };
-            h->visibility[o] = meanOf([&](size_t p) { return f.visibility[p]; }, f.visibility[rep]);
-            if (!f.cachedVisibility.empty())
-                h->cachedVisibility[o] = meanOf([&](size_t p) { return f.cachedVisibility[p]; },
-                                                f.cachedVisibility[rep]);
-            if (!f.glossy.empty())
-                h->glossy[o] = meanOf([&](size_t p) { return f.glossy[p]; }, f.glossy[rep]);
-            if (!f.indirect.empty()) {
-                const glm::vec3 ar = hasAlbedo ? f.albedo[rep] : glm::vec3(1.0f);
-                h->indirect[o] = meanOf(
-                    [&](size_t p) {
-                        if (!hasAlbedo) return f.indirect[p];
-                        const glm::vec3 a = f.albedo[p];
-                        // Demodulated where the albedo can be divided out, as the stage does.
-                        return glm::vec3(a.x > 1e-3f ? f.indirect[p].x / a.x * ar.x : kNaN,
-                                         a.y > 1e-3f ? f.indirect[p].y / a.y * ar.y : kNaN,
-                                         a.z > 1e-3f ? f.indirect[p].z / a.z * ar.z : kNaN);
-                    },
-                    f.indirect[rep]);
-            }
+        const int y0 = 2 * by, y1 = std::min(2 * by + 1, f.height - 1);
+        const size_t rows[2] = {size_t(y0) * size_t(f.width), size_t(y1) * size_t(f.width)};
+        const size_t o = size_t(by) * size_t(hw);
+        ReduceRow a;
+        a.w = f.width, a.hw = hw, a.pres1 = 2 * by + 1 < f.height ? 1.0f : 0.0f;
+        for (int r = 0; r < 2; ++r) {
+            const size_t i = rows[r];
+            a.rowStart[r] = i;
+            a.depth[r] = &f.depth[i], a.id[r] = &f.objectId[i], a.nrm[r] = &f.normal[i].x;
+            a.vis[r] = &f.visibility[i];
+            a.cvis[r] = f.cachedVisibility.empty() ? nullptr : &f.cachedVisibility[i];
+            a.glossy[r] = f.glossy.empty() ? nullptr : &f.glossy[i].x;
+            a.ind[r] = f.indirect.empty() ? nullptr : &f.indirect[i].x;
+            a.alb[r] = f.albedo.empty() ? nullptr : &f.albedo[i].x;
         }
-    });
-    // The representative's geometry and factors: one gather per array.
-    ForEachCopied(f, h, [&](const auto& src, auto& dst) {
-        if (src.empty()) return;
-        ForRows(hh, [&](int by) {
-            const size_t o = size_t(by) * size_t(hw);
+        a.rep = &reps[o];
+        a.hvis = &h->visibility[o];
+        a.hcvis = f.cachedVisibility.empty() ? nullptr : &h->cachedVisibility[o];
+        a.hglossy = f.glossy.empty() ? nullptr : &h->glossy[o].x;
+        a.hind = f.indirect.empty() ? nullptr : &h->indirect[o].x;
+        ReduceBlocks(a);
+        ForEachCopied(f, h, [&](const auto& src, auto& dst) {
+            if (src.empty()) return;
             for (int bx = 0; bx < hw; ++bx) dst[o + bx] = src[reps[o + bx]];
         });
+        if (!h->cones.empty())
+            for (size_t k = o; k < o + size_t(hw); ++k)
+                std::copy_n(&f.cones[size_t(reps[k]) * kNumCones], kNumCones,
+                            &h->cones[k * kNumCones]);
     });
-    if (!h->cones.empty())
-        ForRows(hh, [&](int by) {
-            for (size_t o = size_t(by) * size_t(hw); o < size_t(by + 1) * size_t(hw); ++o)
-                std::copy_n(&f.cones[size_t(reps[o]) * kNumCones], kNumCones,
-                            &h->cones[o * kNumCones]);
-        });
 }
 
-void UpsampleResults(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half) {
+int UpsampledPlanes(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half) {
+    int n = 0;
+    for (int ci = 0; ci < 3; ++ci)
+        if (s.comp[ci].present && half.comp[ci].res[0]) n += s.comp[ci].nc;
+    return n;
+}
+
+void UpsampleRow(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half, int y,
+                 const float* const* own, float* const* out) {
     // The half denoiser has already swapped its guide sets: its last frame's are PrevG().
     const Guides& hg = half.PrevG();
-    const Guides& g = s.G();
+    const Guides& g = s.guides[s.cur];
     const int hh = half.h;
-    int nc[3] = {0, 0, 0};
-    for (int ci = 0; ci < 3; ++ci) {
-        ComponentPlanes& cp = s.comp[ci];
-        if (!cp.present || !half.comp[ci].res[0]) continue;
-        nc[ci] = cp.nc;
-        for (int c = 0; c < 3; ++c) cp.res[c] = c < cp.nc ? &s.scratch[ci].out[c] : nullptr;
+    // Row y's centre is half-resolution row y / 2 - 1/4 (even) or (y - 1) / 2 + 1/4 (odd).
+    const int y0 = (y - 1) >> 1;
+    const int sy[2] = {std::max(y0, 0), std::min(y0 + 1, hh - 1)};
+    UpRow a;
+    a.w = s.w, a.hw = half.w;
+    a.wy[0] = (y & 1) ? 0.75f : 0.25f, a.wy[1] = 1.0f - a.wy[0];
+    a.depthScale = 1.0f / (2.0f * s.set.sigmaDepth);
+    a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+    a.z = g.depth.Row(y), a.invDz = g.invDz.Row(y), a.id = g.objectId.Row(y);
+    a.ok = g.valid.Row(y);
+    for (int j = 0; j < 2; ++j) {
+        a.hnx[j] = hg.nx.Row(sy[j]), a.hny[j] = hg.ny.Row(sy[j]);
+        a.hnz[j] = hg.nz.Row(sy[j]), a.hz[j] = hg.depth.Row(sy[j]);
+        a.hid[j] = hg.objectId.Row(sy[j]), a.hok[j] = hg.valid.Row(sy[j]);
     }
-    ForRows(s.h, [&](int y) {
-        // Row y's centre is half-resolution row y / 2 - 1/4 (even) or (y - 1) / 2 + 1/4 (odd).
-        const int y0 = (y - 1) >> 1;
-        const int sy[2] = {std::max(y0, 0), std::min(y0 + 1, hh - 1)};
-        UpRow a;
-        a.w = s.w, a.hw = half.w;
-        a.wy[0] = (y & 1) ? 0.75f : 0.25f, a.wy[1] = 1.0f - a.wy[0];
-        a.depthScale = 1.0f / (2.0f * s.set.sigmaDepth);
-        a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
-        a.z = g.depth.Row(y), a.invDz = g.invDz.Row(y), a.id = g.objectId.Row(y);
-        a.ok = g.valid.Row(y);
-        for (int j = 0; j < 2; ++j) {
-            a.hnx[j] = hg.nx.Row(sy[j]), a.hny[j] = hg.ny.Row(sy[j]);
-            a.hnz[j] = hg.nz.Row(sy[j]), a.hz[j] = hg.depth.Row(sy[j]);
-            a.hid[j] = hg.objectId.Row(sy[j]), a.hok[j] = hg.valid.Row(sy[j]);
+    a.nplanes = 0;
+    for (int ci = 0; ci < 3; ++ci) {
+        if (!s.comp[ci].present || !half.comp[ci].res[0]) continue;
+        for (int c = 0; c < s.comp[ci].nc; ++c, ++a.nplanes) {
+            for (int j = 0; j < 2; ++j) a.res[a.nplanes][j] = half.comp[ci].res[c]->Row(sy[j]);
+            a.own[a.nplanes] = own[a.nplanes];
+            a.out[a.nplanes] = out[a.nplanes];
         }
-        a.nplanes = 0;
-        for (int ci = 0; ci < 3; ++ci)
-            for (int c = 0; c < nc[ci]; ++c, ++a.nplanes) {
-                for (int j = 0; j < 2; ++j) a.res[a.nplanes][j] = half.comp[ci].res[c]->Row(sy[j]);
-                a.own[a.nplanes] = s.comp[ci].v[c].Row(y);
-                a.out[a.nplanes] = s.scratch[ci].out[c].Row(y);
-            }
-        UpsampleRow(a);
-    });
+    }
+    UpsampleChunks(a);
 }
 
 }  // namespace texcache::screen::internal

@@ -58,6 +58,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include "screen_space/denoiser_state.h"
 #include "screen_space/internal.h"
@@ -524,16 +525,58 @@ TEXCACHE_SCREEN_CLONES void DepthTolRow(int w, const float* z, const float* zu, 
     }
 }
 
-// One sweep over the frame's buffers: guides and demodulated components as planes.
+// The glossy and indirect inputs of row y (those present), demodulated, with their
+// remodulation factors and validity: gl / ind = {v0, v1, v2, factor0, factor1, factor2, valid},
+// rows of w floats. Reads this frame's guide planes (PrepGuides) of the row.
+void PrepComponentRows(const ScreenSpaceDenoiser::State& s, const FrameBuffers& f,
+                       const BrdfPreintegration* brdf, bool demod, int y, bool stream,
+                       float* const* gl, float* const* ind) {
+    const Guides& g = s.guides[s.cur];
+    const int w = s.w;
+    const size_t row = size_t(y) * size_t(w);
+    if (s.comp[kGlossy].present) {
+        GlossyRow b;
+        b.w = w, b.stream = stream, b.c = &f.glossy[row].x;
+        const bool dm = demod && brdf;
+        b.f0 = dm ? &f.specular[row].x : nullptr, b.rough = dm ? &f.roughness[row] : nullptr;
+        b.table = dm ? &brdf->Data()->x : nullptr;
+        b.px = g.px.Row(y), b.py = g.py.Row(y), b.pz = g.pz.Row(y);
+        b.nx = g.nx.Row(y), b.ny = g.ny.Row(y), b.nz = g.nz.Row(y);
+        b.ok = g.valid.Row(y);
+        b.cam[0] = f.camera.position.x, b.cam[1] = f.camera.position.y;
+        b.cam[2] = f.camera.position.z;
+        for (int c = 0; c < 3; ++c) b.v[c] = gl[c], b.r[c] = gl[3 + c];
+        b.valid = gl[6];
+        dm ? PrepGlossyDemod(b) : PrepGlossy(b);
+    }
+    if (s.comp[kIndirect].present) {
+        IndirectRow c;
+        c.w = w, c.stream = stream, c.c = &f.indirect[row].x;
+        c.cones = s.conesPath ? &f.cones[row * kNumCones].x : nullptr;
+        c.albedo = f.albedo.empty() ? nullptr : &f.albedo[row].x;
+        c.ok = g.valid.Row(y);
+        for (int k = 0; k < 3; ++k) c.v[k] = ind[k], c.r[k] = ind[3 + k];
+        c.valid = ind[6];
+        if (s.conesPath)
+            PrepIndirectCones(c);
+        else
+            demod ? PrepIndirectDemod(c) : PrepIndirect(c);
+    }
+}
+
+// One sweep over the frame's buffers: guides and visibility as planes and, with `components`,
+// the demodulated glossy and indirect inputs and the cached visibility. Half resolution takes
+// the guides only: its components are reduced from the frame and the full-resolution ones are
+// prepared row by row where they are used (UpsampleCompose).
 void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPreintegration* brdf,
-             bool demod) {
+             bool demod, bool components) {
     Guides& g = s.G();
     const int w = s.w;
     ComponentPlanes& vis = s.comp[kVis];
     ComponentPlanes& gl = s.comp[kGlossy];
     ComponentPlanes& ind = s.comp[kIndirect];
     // Guides, visibility and its validity; each further component's 3 values, 3 factors, validity.
-    const int planes = 11 + (gl.present ? 7 : 0) + (ind.present ? 7 : 0);
+    const int planes = 11 + (components ? (gl.present ? 7 : 0) + (ind.present ? 7 : 0) : 0);
     const bool stream = StreamPlanes(s.w, s.h, planes);
     ForRows(s.h, [&](int y) {
         const size_t row = size_t(y) * size_t(w);
@@ -546,6 +589,7 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
         a.dz = g.depth.Row(y), a.oid = g.objectId.Row(y), a.ok = g.valid.Row(y);
         a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
         PrepGuides(a);
+        if (!components) return;
         if (s.hasCachedVis) {
             // -1 where there is none or the pixel's geometry is unusable.
             const float* cv = &f.cachedVisibility[row];
@@ -553,34 +597,13 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
             float* out = s.cachedVis.Row(y);
             for (int x = 0; x < w; ++x) out[x] = ok[x] && cv[x] >= 0.0f ? cv[x] : -1.0f;
         }
-        if (gl.present) {
-            GlossyRow b;
-            b.w = w, b.stream = stream, b.c = &f.glossy[row].x;
-            const bool dm = demod && brdf;
-            b.f0 = dm ? &f.specular[row].x : nullptr, b.rough = dm ? &f.roughness[row] : nullptr;
-            b.table = dm ? &brdf->Data()->x : nullptr;
-            b.px = g.px.Row(y), b.py = g.py.Row(y), b.pz = g.pz.Row(y);
-            b.nx = g.nx.Row(y), b.ny = g.ny.Row(y), b.nz = g.nz.Row(y);
-            b.ok = g.valid.Row(y);
-            b.cam[0] = f.camera.position.x, b.cam[1] = f.camera.position.y;
-            b.cam[2] = f.camera.position.z;
-            for (int c = 0; c < 3; ++c) b.v[c] = gl.v[c].Row(y), b.r[c] = gl.remod[c].Row(y);
-            b.valid = gl.valid.Row(y);
-            dm ? PrepGlossyDemod(b) : PrepGlossy(b);
+        float *glr[7], *indr[7];
+        for (int c = 0; c < 3; ++c) {
+            glr[c] = gl.v[c].Row(y), glr[3 + c] = gl.remod[c].Row(y);
+            indr[c] = ind.v[c].Row(y), indr[3 + c] = ind.remod[c].Row(y);
         }
-        if (ind.present) {
-            IndirectRow c;
-            c.w = w, c.stream = stream, c.c = &f.indirect[row].x;
-            c.cones = s.conesPath ? &f.cones[row * kNumCones].x : nullptr;
-            c.albedo = f.albedo.empty() ? nullptr : &f.albedo[row].x;
-            c.ok = g.valid.Row(y);
-            for (int k = 0; k < 3; ++k) c.v[k] = ind.v[k].Row(y), c.r[k] = ind.remod[k].Row(y);
-            c.valid = ind.valid.Row(y);
-            if (s.conesPath)
-                PrepIndirectCones(c);
-            else
-                demod ? PrepIndirectDemod(c) : PrepIndirect(c);
-        }
+        glr[6] = gl.valid.Row(y), indr[6] = ind.valid.Row(y);
+        PrepComponentRows(s, f, brdf, demod, y, stream, glr, indr);
     });
     ForRows(s.h, [&](int y) {
         const int yu = y > 0 ? y - 1 : y, yd = y + 1 < s.h ? y + 1 : y;
@@ -788,6 +811,73 @@ void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<g
     });
 }
 
+// Half resolution's last full-resolution pass, one row at a time: the row's own glossy and
+// indirect inputs and factors (PrepComponentRows, into per-thread rows rather than planes), the
+// upsample of `half`'s results (UpsampleRow) and the composition. Nothing of the full-resolution
+// components goes through memory but what the accessors (Visibility(), Glossy(), Indirect())
+// read: the visibility and the remodulated components, in s.scratch[ci].out.
+void UpsampleCompose(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half,
+                     const FrameBuffers& f, const BrdfPreintegration* brdf, bool demod,
+                     std::vector<glm::vec3>* out) {
+    out->resize(size_t(s.w) * size_t(s.h));
+    const int np = UpsampledPlanes(s, half);
+    const bool part[2] = {s.comp[kGlossy].present, s.comp[kIndirect].present};
+    // Rows per thread: each part's 7 inputs (PrepComponentRows) and the up to 7 results; one
+    // float past the row's end is read (UpsampleRow).
+    constexpr int kRows = 21;
+    const size_t stride = (size_t(s.w) + 16) / 16 * 16;
+    const size_t slot = kRows * stride;
+    const size_t need = size_t(tbb::this_task_arena::max_concurrency()) * slot;
+    if (s.rowScratch.size() < need) s.rowScratch.assign(need, 0.0f);
+    const bool stream = StreamPlanes(s.w, s.h, 3 + np);  // the RGB image and the results
+    ForRows(s.h, [&](int y) {
+        float* base =
+            s.rowScratch.data() + size_t(tbb::this_task_arena::current_thread_index()) * slot;
+        auto buf = [&](int k) { return base + size_t(k) * stride; };
+        float* in[2][7];
+        for (int k = 0; k < 7; ++k) in[0][k] = buf(k), in[1][k] = buf(7 + k);
+        PrepComponentRows(s, f, brdf, demod, y, false, in[0], in[1]);
+        const float* own[7];
+        float* res[7];
+        int first[2] = {-1, -1}, k = 0;
+        own[k] = s.comp[kVis].v[0].Row(y), res[k] = buf(14), ++k;
+        for (int p = 0; p < 2; ++p) {
+            if (!part[p]) continue;
+            first[p] = k;
+            for (int c = 0; c < 3; ++c, ++k) own[k] = in[p][c], res[k] = buf(14 + k);
+        }
+        UpsampleRow(s, half, y, own, res);
+        const size_t row = size_t(y) * size_t(s.w);
+        ComposeRowArgs a;
+        a.w = s.w;
+        a.emitted = f.emitted.empty() ? nullptr : &f.emitted[row].x;
+        a.shading = &f.shading[row].x;
+        a.vis = res[0];
+        for (int p = 0; p < 2; ++p)
+            for (int c = 0; c < 3; ++c) {
+                a.rm[p][c] = part[p] ? in[p][3 + c] : nullptr;
+                a.res[p][c] = part[p] ? res[first[p] + c] : nullptr;
+            }
+        a.out = &(*out)[row].x;
+        a.stream = stream;
+        ComposeRow(a);
+        StoreRow(res[0], s.w, s.scratch[kVis].out[0].Row(y), stream);
+        for (int p = 0; p < 2; ++p) {
+            if (!part[p]) continue;
+            for (int c = 0; c < 3; ++c) {
+                float* r = res[first[p] + c];
+                const float* rm = in[p][3 + c];
+                for (int x = 0; x < s.w; ++x) r[x] *= rm[x];
+                StoreRow(r, s.w, s.scratch[p ? kIndirect : kGlossy].out[c].Row(y), stream);
+            }
+        }
+    });
+    for (int ci = 0; ci < 3; ++ci)
+        for (int c = 0; c < 3; ++c)
+            s.comp[ci].res[c] =
+                s.comp[ci].present && c < s.comp[ci].nc ? &s.scratch[ci].out[c] : nullptr;
+}
+
 // The weight of the current frame in the temporal blends. Moving: alpha, an exponential average
 // worth about 1 / alpha frames. Still for `stillFrames` frames: a running mean that takes the
 // history as those 1 / alpha frames, so the weight starts at alpha (no jump when the view stops)
@@ -849,9 +939,10 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         for (const Plane*& r : s.comp[c].res) r = nullptr;
     }
     const BrdfPreintegration* brdf = demod && s.comp[kGlossy].present ? &Brdf() : nullptr;
-    Prepare(s, frame, brdf, demod);
+    const bool half = s.set.halfResolutionRows > 0 && frame.height >= s.set.halfResolutionRows;
+    Prepare(s, frame, brdf, demod, !half);
     clock.Lap(&StageTimings::prepare);
-    if (s.set.halfResolutionRows > 0 && frame.height >= s.set.halfResolutionRows) {
+    if (half) {
         if (!s.half) {
             DenoiserSettings hs = s.set;
             hs.halfResolutionRows = 0;
@@ -859,6 +950,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
             hs.atrousLevels = std::max(1, s.set.atrousLevels - 1);
             Brdf();  // one table for both
             s.half = std::make_unique<ScreenSpaceDenoiser>(hs, s.brdf);
+            s.half->s_->composes = false;
             if (s.stillFrames >= 0) s.half->SetStillView(true);
         }
         DownsampleFrame(frame, s.conesPath, &s.halfFrame, &s.halfSource);
@@ -866,9 +958,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         s.half->Denoise(s.halfFrame, method, demodulation, &s.halfImage);
         clock.Charge(s.half->Timings(), s.half->CpuTimings());
         s.lastHalf = true;
-        UpsampleResults(s, *s.half->s_);
-        clock.Lap(&StageTimings::spatial);
-        Compose(s, frame, image);
+        UpsampleCompose(s, *s.half->s_, frame, brdf, demod, image);
         FinishFrame(s, frame, clock);
         return;
     }
@@ -973,7 +1063,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         }
     }
 
-    Compose(s, frame, image);
+    if (s.composes) Compose(s, frame, image);
     FinishFrame(s, frame, clock);
 }
 
@@ -992,6 +1082,11 @@ std::vector<T> Collect(const ScreenSpaceDenoiser::State& s, Get&& get) {
 std::vector<glm::vec3> Remodulated(const ScreenSpaceDenoiser::State& s, int ci) {
     const ComponentPlanes& cp = s.comp[ci];
     if (!cp.present || !cp.res[0]) return {};
+    // Half resolution keeps the remodulated result (UpsampleCompose).
+    if (s.lastHalf)
+        return Collect<glm::vec3>(s, [&](int x, int y) {
+            return glm::vec3(cp.res[0]->At(x, y), cp.res[1]->At(x, y), cp.res[2]->At(x, y));
+        });
     return Collect<glm::vec3>(s, [&](int x, int y) {
         glm::vec3 c;
         for (int k = 0; k < 3; ++k) c[k] = cp.remod[k].At(x, y) * cp.res[k]->At(x, y);

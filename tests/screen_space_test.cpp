@@ -241,6 +241,44 @@ TEST(ScreenSpaceHalfResolution, KeepsObjectBoundaries) {
     }
 }
 
+// Odd sizes in both directions: the reduction's last column and row of blocks have one or two
+// samples, and the upsample writes its last output pair one past the row. At half resolution
+// the image is composed in the same pass as the upsample and the accessors read what that pass
+// keeps, so they must add up to the image: emitted + shading * Visibility() + Glossy() +
+// Indirect(), within float rounding (1e-5 of the value; the pass and the sum differ only in
+// the order of one multiply-add). Two frames: no history, then reprojected.
+TEST(ScreenSpaceHalfResolution, AccessorsAddUpToTheImageAtOddSizes) {
+    const SynthScene sc = FullScene(131, 91);
+    DenoiserSettings s;
+    s.halfResolutionRows = 1;
+    ScreenSpaceDenoiser dn(s, SharedBrdf());
+    for (int fr = 0; fr < 2; ++fr) {
+        const FrameBuffers f = SynthRender(sc, fr, 3);
+        std::vector<glm::vec3> img;
+        dn.Denoise(f, Method::Reliable, Demodulation::On, &img);
+        const std::vector<float> vis = dn.Visibility();
+        const std::vector<glm::vec3> gl = dn.Glossy(), ind = dn.Indirect();
+        ASSERT_EQ(img.size(), f.NumPixels());
+        ASSERT_EQ(vis.size(), f.NumPixels());
+        ASSERT_EQ(gl.size(), f.NumPixels());
+        ASSERT_EQ(ind.size(), f.NumPixels());
+        int checked = 0;
+        for (size_t i = 0; i < f.NumPixels(); ++i) {
+            ASSERT_TRUE(std::isfinite(img[i].x + img[i].y + img[i].z)) << "pixel " << i;
+            const glm::vec3 e = f.emitted.empty() ? glm::vec3(0.0f) : f.emitted[i];
+            if (!std::isfinite(e.x + e.y + e.z) ||
+                !std::isfinite(f.shading[i].x + f.shading[i].y + f.shading[i].z))
+                continue;
+            const glm::vec3 want = e + f.shading[i] * vis[i] + gl[i] + ind[i];
+            for (int c = 0; c < 3; ++c)
+                ASSERT_NEAR(img[i][c], want[c], 1e-5 * (1.0 + std::fabs(want[c])))
+                    << "frame " << fr << ", pixel " << i << ", channel " << c;
+            ++checked;
+        }
+        EXPECT_GT(checked, int(f.NumPixels() / 2));
+    }
+}
+
 TEST(ScreenSpaceRobustness, BadInputThrowsNamingTheBuffer) {
     const FrameBuffers good = SynthRender(FullScene(32, 24), 0, 1);
     auto expectError = [&](const FrameBuffers& f, Method m, Demodulation d,
