@@ -281,6 +281,9 @@ double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
 glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store,
                        const HitRecord& h);
 
+/// Starts loading the store's bin at record `h` (a hint for StoreCountAt / StoreLightAt: the
+/// table is far larger than the caches, and a lookup stalls on memory).
+void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h);
 /// The store's diffuse light over the block of 4x4 bins that holds record `h`'s bin at its level
 /// (the mean of their samples, in `light`; 0 without any) and the samples behind it (in HitUnit
 /// counts): one lookup for light that is smooth across a block (a ray's hit, StoreTerm).

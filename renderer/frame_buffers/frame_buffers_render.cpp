@@ -651,7 +651,8 @@ void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& s
 /// the tile, and `px` keeps what they need.
 void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
                 bool layered, const FrameStore* fs, int x, int y, int pixel, const Ray& ray,
-                const RayDifferentials* diff, bool found, const Hit& hit, screen::FrameBuffers& fb,
+                bool found, const Hit& hit, const SurfaceInteraction& si,
+                const HitRecord& storeRecord, int texelLevel, screen::FrameBuffers& fb,
                 PixelShadow& sh, std::vector<PendingShadow>& shadows, RayCounts& rays) {
     const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
     ClearPixel(fb, p);
@@ -673,7 +674,6 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
         fb.prevNormal[p] = motion.Normal(hit, n);
         return;
     }
-    const SurfaceInteraction si = c.rs.Interact(ray, hit, diff);
     const Bsdf bsdf = MakeBsdf(c, si);
     const Material& m = c.scene.materials[si.material];
     fb.emitted[p] = c.HitEmission(ray, hit);  // an emissive object's own light
@@ -702,8 +702,7 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
     // light is read back once every hit is added (ResolveStore).
     bool storePath = false;
     if (cachedIndirect && fs) {
-        int texelLevel = 0;
-        FrameHitRecord(c, si, hit.t, fs->bias, &fs->records[p], &texelLevel);
+        fs->records[p] = storeRecord;
         fs->binned[p] = {glm::vec3(kNaN), bsdf.DiffuseReflectance(), texelLevel};
         storePath =
             fs->InBudget(x, y) || StoreCountAt(*c.tsc, *fs->store, fs->records[p]) < fs->minCount;
@@ -790,6 +789,9 @@ struct TileScratch {
     std::array<RayDifferentials, kTilePixels> diff;
     std::array<Hit, kTilePixels> hit;
     std::array<bool, kTilePixels> found;
+    std::array<SurfaceInteraction, kTilePixels> si;
+    std::array<HitRecord, kTilePixels> storeRecord;  ///< where the pixel reads the store
+    std::array<int, kTilePixels> texelLevel;
     std::array<PixelShadow, kTilePixels> shadow;
     std::vector<PendingShadow> shadows;
 };
@@ -819,12 +821,22 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
         c.rs.Intersect16(&ts.ray[i], std::min(16, n - i), &ts.hit[i], &ts.found[i]);
     rays.camera += uint64_t(n);
 
+    // The tile's surface interactions first, and with the store, each hit's record and a
+    // prefetch of its bins: the store's table is far larger than the caches, and the pixel's
+    // read of it (StoreCountAt) waited on memory right after its record was known.
+    for (int i = 0; i < n; ++i) {
+        if (!ts.found[i] || ts.hit[i].light >= 0) continue;
+        ts.si[i] = c.rs.Interact(ts.ray[i], ts.hit[i], c.tsc ? &ts.diff[i] : nullptr);
+        if (!fs) continue;
+        FrameHitRecord(c, ts.si[i], ts.hit[i].t, fs->bias, &ts.storeRecord[i], &ts.texelLevel[i]);
+        PrefetchStoreAt(*c.tsc, *fs->store, ts.storeRecord[i]);
+    }
     ts.shadows.clear();
     for (int i = 0, y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++i) {
             ts.shadow[i].Reset();
-            ShadePixel(c, motion, envSamples, layered, fs, x, y, i, ts.ray[i],
-                       c.tsc ? &ts.diff[i] : nullptr, ts.found[i], ts.hit[i], fb, ts.shadow[i],
+            ShadePixel(c, motion, envSamples, layered, fs, x, y, i, ts.ray[i], ts.found[i],
+                       ts.hit[i], ts.si[i], ts.storeRecord[i], ts.texelLevel[i], fb, ts.shadow[i],
                        ts.shadows, rays);
         }
 

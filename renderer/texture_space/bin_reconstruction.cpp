@@ -475,6 +475,14 @@ double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
                       .count);
 }
 
+void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
+    store.Samples().Prefetch({g.FaceOffset() + uint32_t(face), uint8_t(level),
+                              uint16_t(QuantizeCoord(h.U(), res)),
+                              uint16_t(QuantizeCoord(h.V(), res))});
+}
+
 double StoreBlockAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
                     glm::vec3* light) {
     const MeshGrids& g = tsc.Grids(h.mesh);

@@ -38,6 +38,7 @@
 #include <vector>
 
 #include "texcache/huge_pages.h"
+#include "texcache/prefetch.h"
 #include "texcache/texel_key.h"
 
 namespace texcache {
@@ -268,6 +269,14 @@ public:
             if (k == TexelKey::kEmpty) break;
         }
         return {};
+    }
+
+    /// Starts loading the home slot of bin `key`'s block and the bin's words there (a hint:
+    /// Find and FindBlock read them), for a caller that knows its keys ahead of its reads.
+    void Prefetch(const TexelKey& key) const {
+        const Block* b = &bins_[Home(BlockKey(key))];
+        PrefetchLine(b);
+        PrefetchLine(&b->w[Lane(key) * Bin::kWords]);
     }
 
     /// The sum of the 16 bins of the block that holds bin `key` (4x4 bins of one face and level,
