@@ -4,13 +4,13 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <type_traits>
 
 #include <opensubdiv/far/patchMap.h>
 #include <opensubdiv/far/patchTableFactory.h>
 #include <opensubdiv/far/primvarRefiner.h>
 #include <opensubdiv/far/ptexIndices.h>
 #include <opensubdiv/far/topologyDescriptor.h>
+#include <xmmintrin.h>
 
 #include "osd_refiner.h"
 #include "texcache/error.h"
@@ -294,20 +294,22 @@ void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu
                           float dPdv[3]) const {
     const int entry = index_[ptexFace], boundary = entry & 15;
     const int* idx = &cvs_[size_t(entry >> 4) * 16];
-    // Interior patches read the cage's points in place; boundary ones need a copy to mirror in.
-    const float* cv[16];
-    float c[16][3];
-    for (int i = 0; i < 16; ++i) cv[i] = positions_[idx[i]].data();
+    // Each point as (x, y, z, 0) in one SSE register, loaded there directly: written to memory
+    // as floats and read back as vectors, the points stall on store forwarding (perf puts most
+    // of the evaluation on those reads).
+    __m128 c[16];
+    for (int i = 0; i < 16; ++i) {
+        const float* p = positions_[size_t(idx[i])].data();
+        // __m64 may alias the floats; x and y in one 8-byte load, z in a 4-byte one.
+        const __m128 xy = _mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(p));
+        c[i] = _mm_movelh_ps(xy, _mm_load_ss(p + 2));
+    }
     if (boundary) {
-        for (int i = 0; i < 16; ++i) {
-            for (int k = 0; k < 3; ++k) c[i][k] = cv[i][k];
-            cv[i] = c[i];
-        }
         // Boundary patches use phantom points mirrored across the boundary (OpenSubdiv's
         // B-spline boundary rule, P0 = 2 P1 - P2), substituted here in the transposed order of
         // OSD's weight adjustment (left, top, right, bottom) so corners come out the same.
         auto mirror = [&](int dst, int p1, int p2) {
-            for (int k = 0; k < 3; ++k) c[dst][k] = 2.0f * c[p1][k] - c[p2][k];
+            c[dst] = _mm_sub_ps(_mm_mul_ps(_mm_set1_ps(2.0f), c[p1]), c[p2]);
         };
         if (boundary & 8)
             for (int j = 0; j < 4; ++j) mirror(4 * j, 4 * j + 1, 4 * j + 2);
@@ -321,24 +323,23 @@ void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu
     float wu[4], du[4], wv[4], dv[4];
     BSpline(u, wu, du);
     BSpline(v, wv, dv);
-    // Local sums: the outputs might alias the points as far as the compiler knows.
-    float sp[3] = {0, 0, 0}, su[3] = {0, 0, 0}, sv[3] = {0, 0, 0};
-    auto sum = [&](auto withP) {
-        for (int j = 0; j < 4; ++j)
-            for (int i = 0; i < 4; ++i) {
-                const float* cp = cv[4 * j + i];
-                const float w = wu[i] * wv[j], wdu = du[i] * wv[j], wdv = wu[i] * dv[j];
-                for (int k = 0; k < 3; ++k) {
-                    if constexpr (decltype(withP)::value) sp[k] += w * cp[k];
-                    su[k] += wdu * cp[k];
-                    sv[k] += wdv * cp[k];
-                }
-            }
+    // The tensor product in two passes: each row of points summed along u (with the basis and
+    // with its derivative), then the rows along v: 2 x 16 + 3 x 4 vector multiply-adds over
+    // (x, y, z, 0), where weighting each point on its own takes 16 x 3 x 3 scalar ones.
+    auto sum4 = [](const float w[4], const __m128* x) {
+        __m128 s = _mm_mul_ps(_mm_set1_ps(w[0]), x[0]);
+        for (int i = 1; i < 4; ++i) s = _mm_add_ps(s, _mm_mul_ps(_mm_set1_ps(w[i]), x[i]));
+        return s;
     };
-    if (P)
-        sum(std::true_type{});
-    else
-        sum(std::false_type{});
+    __m128 row[4], rowDu[4];
+    for (int j = 0; j < 4; ++j) {
+        row[j] = sum4(wu, c + 4 * j);
+        rowDu[j] = sum4(du, c + 4 * j);
+    }
+    alignas(16) float sp[4], su[4], sv[4];
+    if (P) _mm_store_ps(sp, sum4(wv, row));
+    _mm_store_ps(su, sum4(wv, rowDu));
+    _mm_store_ps(sv, sum4(dv, row));
     for (int k = 0; k < 3; ++k) {
         if (P) P[k] = sp[k];
         dPdu[k] = su[k], dPdv[k] = sv[k];

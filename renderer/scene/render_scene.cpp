@@ -67,6 +67,7 @@ struct RenderScene::Impl {
     struct Instance {
         int mesh = -1;
         std::vector<glm::mat4> steps;  // 1 (static) or kMotionSteps over the shutter
+        glm::mat3 linear{1.0f};        // of steps[0]
         glm::mat3 normalMatrix{1.0f};  // of steps[0]
         glm::mat4 inverse{1.0f};       // of steps[0]
     };
@@ -125,6 +126,12 @@ struct RenderScene::Impl {
             if (m.scene) rtcReleaseScene(m.scene);
         if (top) rtcReleaseScene(top);
         if (device) rtcReleaseDevice(device);
+    }
+
+    /// Linear part of Transform(object, time): what maps object-space derivatives to world space.
+    glm::mat3 Linear(int object, float time) const {
+        const Instance& inst = objects[object];
+        return inst.steps.size() == 1 ? inst.linear : glm::mat3(Transform(object, time));
     }
 
     /// World-space geometric normal of a hit on an object (Embree gives it in object space).
@@ -318,7 +325,9 @@ RenderScene::RenderScene(const Scene& scene, const RenderSceneOptions& options)
         }
         rtcCommitGeometry(g);
         Impl::Map(I.geomToObject, rtcAttachGeometry(I.top, g), int(o));
-        // Static instances keep their normal matrix (a 3x3 inverse per hit otherwise).
+        // Static instances keep their linear part and normal matrix (per hit, the linear part
+        // otherwise takes a 4x4 copy, the normal matrix a 3x3 inverse).
+        inst.linear = glm::mat3(inst.steps[0]);
         inst.normalMatrix = glm::transpose(glm::inverse(glm::mat3(inst.steps[0])));
         inst.inverse = glm::inverse(inst.steps[0]);
         rtcReleaseGeometry(g);
@@ -605,18 +614,31 @@ void RenderScene::Occluded16(const Ray* rays, int n, bool* occluded) const {
 }
 
 namespace {
-// Least-squares (a, b) with a*X + b*Y ~= D (the normal equations of a 3x2 system).
-void SolveTangent(glm::vec3 X, glm::vec3 Y, glm::vec3 D, float* a, float* b) {
-    const float xx = glm::dot(X, X), xy = glm::dot(X, Y), yy = glm::dot(Y, Y);
-    const float dx = glm::dot(D, X), dy = glm::dot(D, Y);
-    const float det = xx * yy - xy * xy;
-    if (!(std::abs(det) > 1e-20f * xx * yy) || !std::isfinite(det)) {
-        *a = *b = 0.0f;
-        return;
+/// Least squares in the tangent basis (X, Y) = (dP/du, dP/dv): the (a, b) with a X + b Y ~= D,
+/// from the normal equations of the 3x2 system. Their matrix is the basis's alone, so it is
+/// formed once per hit for both pixel steps.
+class TangentSolver {
+public:
+    TangentSolver(glm::vec3 X, glm::vec3 Y)
+        : X_(X), Y_(Y), xx_(glm::dot(X, X)), xy_(glm::dot(X, Y)), yy_(glm::dot(Y, Y)) {
+        det_ = xx_ * yy_ - xy_ * xy_;
+        ok_ = std::abs(det_) > 1e-20f * xx_ * yy_ && std::isfinite(det_);
     }
-    *a = (yy * dx - xy * dy) / det;
-    *b = (xx * dy - xy * dx) / det;
-}
+    void Solve(glm::vec3 D, float* a, float* b) const {
+        if (!ok_) {
+            *a = *b = 0.0f;
+            return;
+        }
+        const float dx = glm::dot(D, X_), dy = glm::dot(D, Y_);
+        *a = (yy_ * dx - xy_ * dy) / det_;
+        *b = (xx_ * dy - xy_ * dx) / det_;
+    }
+
+private:
+    glm::vec3 X_, Y_;
+    float xx_, xy_, yy_, det_;
+    bool ok_;
+};
 }  // namespace
 
 SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
@@ -632,8 +654,7 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
     // Only the derivatives: the hit point itself comes from the ray (tessellated surface).
     alignas(16) float du[4] = {0, 0, 0, 0}, dv[4] = {0, 0, 0, 0};
     mesh.Eval(si.ptex, hit.primID, hit.U, hit.V, nullptr, du, dv);
-    const glm::mat4 M = I.Transform(hit.object, ray.time);
-    const glm::mat3 L(M);
+    const glm::mat3 L = I.Linear(hit.object, ray.time);
     si.dPdu = L * glm::vec3(du[0], du[1], du[2]);
     si.dPdv = L * glm::vec3(dv[0], dv[1], dv[2]);
 
@@ -675,8 +696,9 @@ SurfaceInteraction RenderScene::Interact(const Ray& ray, const Hit& hit,
             };
             widen(dPdx), widen(dPdy);
         }
-        SolveTangent(si.dPdu, si.dPdv, dPdx, &si.dudx, &si.dvdx);
-        SolveTangent(si.dPdu, si.dPdv, dPdy, &si.dudy, &si.dvdy);
+        const TangentSolver tangent(si.dPdu, si.dPdv);
+        tangent.Solve(dPdx, &si.dudx, &si.dvdx);
+        tangent.Solve(dPdy, &si.dudy, &si.dvdy);
     }
     return si;
 }

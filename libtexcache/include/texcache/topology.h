@@ -160,7 +160,7 @@ public:
     /// True when `ptexFace` has a regular patch here.
     bool Has(int ptexFace) const { return index_[ptexFace] >= 0; }
     /// Limit position and Ptex-space derivatives (object space); only valid when Has(ptexFace).
-    /// P may be null: only the derivatives (a third less work: what a ray hit needs).
+    /// P may be null: only the derivatives (what a ray hit needs).
     void Eval(int ptexFace, float u, float v, float P[3], float dPdu[3], float dPdv[3]) const;
     /// Fraction of Ptex faces with a regular patch.
     float Coverage() const;
