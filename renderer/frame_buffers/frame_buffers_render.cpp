@@ -550,8 +550,11 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
     glm::vec3 L(0.0f);
     if (!found) {
         // Direct light from the environment and the suns: the light sample's MIS partner.
-        if (c.env)
-            L = c.env->Eval(wi) * PowerHeuristic(1, pdf, 1, c.env->Pdf(si.N, wi) * c.PickPdf());
+        if (c.env) {
+            float envPdf;
+            L = c.env->EvalPdf(si.N, wi, &envPdf);
+            L *= PowerHeuristic(1, pdf, 1, envPdf * c.PickPdf());
+        }
         L += c.SunRadiance(wi, pdf);
     } else if (hit.light >= 0) {
         L = c.EmittedMis(ray, hit, pdf);

@@ -479,11 +479,14 @@ glm::vec3 LiPath(const Context& c, Ray ray, const Hit& firstHit, bool hitFirst, 
         if (depth == 0 && !emitFirst && (!found || hit.light >= 0)) break;
         if (!found) {
             if (c.env) {
-                const glm::vec3 Le = c.env->Eval(ray.dir);
+                float envPdf = 0.0f;
+                const glm::vec3 Le = prevPdf > 0.0f && !prevPsr
+                                         ? c.env->EvalPdf(prevN, ray.dir, &envPdf)
+                                         : c.env->Eval(ray.dir);
                 float w = 1.0f;
                 if (prevPdf > 0.0f) {
-                    const float pl = prevPsr ? ProductLightPdf(*prevPsr, *c.env, prevN, ray.dir)
-                                             : c.env->Pdf(prevN, ray.dir);
+                    const float pl =
+                        prevPsr ? ProductLightPdf(*prevPsr, *c.env, prevN, ray.dir) : envPdf;
                     w = PowerHeuristic(1, prevPdf, 1, pl * c.PickPdf());
                 }
                 L += beta * Le * w;

@@ -198,6 +198,16 @@ float EnvironmentMap::Pdf(glm::vec3 n, glm::vec3 dir) const {
     return PdfUv(DirToUv(dir));
 }
 
+glm::vec3 EnvironmentMap::EvalPdf(glm::vec3 n, glm::vec3 dir, float* pdf) const {
+    if (isConstant_) {
+        *pdf = CosineHemispherePdf(glm::dot(n, dir));
+        return constant_;
+    }
+    const glm::vec2 uv = DirToUv(dir);
+    *pdf = PdfUv(uv);
+    return EvalUv(uv);
+}
+
 float EnvironmentMap::PdfUv(glm::vec2 uv) const {
     const float sinTheta = std::sin(uv.y * kPiF);
     return sinTheta > 0.0f ? dist_.Pdf(uv) / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;

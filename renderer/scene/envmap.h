@@ -45,6 +45,9 @@ public:
     glm::vec3 Sample(glm::vec3 n, glm::vec2 u, glm::vec3* dir, float* pdfSolidAngle) const;
     /// Solid-angle density of Sample(n, ...) at `dir`.
     float Pdf(glm::vec3 n, glm::vec3 dir) const;
+    /// Eval(dir), and Pdf(n, dir) in `pdf`: a ray that escapes needs both (MIS), and the
+    /// direction's lat-long coordinates are found once.
+    glm::vec3 EvalPdf(glm::vec3 n, glm::vec3 dir, float* pdf) const;
     /// Mean radiance over the sphere.
     glm::vec3 AverageRadiance() const;
 
