@@ -264,9 +264,33 @@ inline int HitFilterLevels(TextureFilterKind kind, int radius) {
     }
 }
 
-/// Hit-binned diffuse light, phase 1 continued: the traced hits added to their bins.
+/// The frame buffers' store's bins of an object whose material sets filter `kind` (pass
+/// radius `radius`): HitFilterLevels', but for the trivial filter the schedule's two levels
+/// (-1), read bilinearly. The store gets one path for every frameBufferBudget pixels a frame, so
+/// a bin at the hit's own texel (about a pixel and a half on the car) holds one or two paths,
+/// and each pixel would read a single path's noise back.
+inline int StoreFilterLevels(TextureFilterKind kind, int radius) {
+    return kind == TextureFilterKind::None ? -1 : HitFilterLevels(kind, radius);
+}
+
+/// Hit-binned diffuse light, phase 1 continued: the traced hits added to their bins (with
+/// `frameStore`, the frame buffers' store's: StoreFilterLevels).
 void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
-                 float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins);
+                 float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins,
+                 bool frameStore = false);
+
+/// What BoundStoreHits did to a frame's traced hits: how many there were, how many it bounded,
+/// and the share of their summed luminance it kept.
+struct StoreHitBounds {
+    uint64_t traced = 0, bounded = 0;
+    double keptLight = 1.0;
+};
+/// The frame buffers' traced hits (records[p], binned[p].light finite) bounded before they are
+/// added to the store (BoundBrightHits, texture_space.h), each against the other traced hits of
+/// its mesh around it and what `store`, as the earlier frames left it, holds at its record (when
+/// at least one sample). Reads the store: before any add.
+StoreHitBounds BoundStoreHits(const Context& c, const HitRecord* records,
+                              const LightHitStore& store, float ratio, BinnedHit* binned);
 
 /// A frame-buffer pixel's camera hit `si` at distance `t` as hit binning records it: its record
 /// (`h`, reading the finer of its bins at `bias` levels above its texel until PathHitsAdd sets

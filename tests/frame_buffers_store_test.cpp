@@ -14,6 +14,7 @@
 
 #include "frame_buffers_util.h"
 #include "renderer/frame_buffers/frame_buffers_render.h"
+#include "renderer/integrators/bsdf.h"
 #include "renderer/texture_space/texture_space.h"
 #include "test_util.h"
 
@@ -202,6 +203,62 @@ TEST(FrameBufferStore, NonFiniteSamplesNeverEnterTheStore) {
             ASSERT_LT(records[i], UINT64_MAX / 2) << i;
         }
     }
+}
+
+// A lone bright path is bounded before it enters the store (BoundBrightHits): on a flat field of
+// traced hits of light 1, a hit of 1000 keeps kStoreBoundRatio x the median around it and its
+// 80 neighbours in the 9x9 window share the rest, so the frame's light is kept (to 1e-5
+// relative). A hit of 10 (under the ratio) is left alone, and so is a bright hit with no
+// reference (no neighbours of its group, no prior) or with a prior that makes it ordinary. Hits
+// that are not there (negative), NaN or infinite are left as they are and never count as
+// neighbours, so a window of them around a hit leaves it unbounded.
+TEST(FrameBufferStore, BrightHitIsBoundedAndItsExcessSpread) {
+    const int W = 24, H = 16;
+    const size_t n = size_t(W) * H;
+    std::vector<glm::vec3> light(n, glm::vec3(1.0f));
+    std::vector<float> prior(n, 0.0f);
+    std::vector<int32_t> group(n, 0);
+    auto at = [&](int x, int y) { return size_t(y) * W + size_t(x); };
+    light[at(5, 5)] = glm::vec3(1000.0f);    // a firefly
+    light[at(15, 5)] = glm::vec3(10.0f);     // bright, but under the ratio
+    light[at(20, 12)] = glm::vec3(1000.0f);  // its own group: no neighbours to compare with
+    group[at(20, 12)] = 1;
+    light[at(12, 12)] = glm::vec3(1000.0f);  // earlier frames saw this much there
+    prior[at(12, 12)] = 100.0f;
+    // A hit whose window (radius 4) holds only non-finite and missing ones.
+    for (int y = 0; y < 5; ++y)
+        for (int x = 0; x < 5; ++x)
+            light[at(x, H - 1 - y)] = glm::vec3((x + y) % 3 == 0   ? NAN
+                                                : (x + y) % 3 == 1 ? INFINITY
+                                                                   : -1.0f);
+    light[at(0, H - 1)] = glm::vec3(1000.0f);
+    auto total = [&](const std::vector<glm::vec3>& v) {
+        double sum = 0.0;
+        for (const glm::vec3& c : v)
+            if (Finite(c) && c.x >= 0.0f) sum += double(Luminance(c));
+        return sum;
+    };
+    const std::vector<glm::vec3> in = light;
+    EXPECT_EQ(BoundBrightHits(W, H, light.data(), group.data(), prior.data(), kStoreBoundRatio),
+              1u);
+    EXPECT_NEAR(total(light), total(in), 1e-5 * total(in));
+    EXPECT_NEAR(Luminance(light[at(5, 5)]), kStoreBoundRatio, 1e-3f);
+    EXPECT_NEAR(Luminance(light[at(6, 6)]), 1.0f + (1000.0f - kStoreBoundRatio) / 80.0f, 1e-3f);
+    EXPECT_NEAR(Luminance(light[at(15, 5)]), 10.0f, 1e-5f);
+    EXPECT_EQ(light[at(20, 12)], in[at(20, 12)]);
+    EXPECT_EQ(light[at(12, 12)], in[at(12, 12)]);
+    EXPECT_EQ(light[at(0, H - 1)], in[at(0, H - 1)]);
+    for (size_t p = 0; p < n; ++p) {
+        if (!Finite(in[p]) || in[p].x < 0.0f) {
+            ASSERT_FALSE(Finite(light[p]) && light[p].x >= 0.0f) << p;  // left as it was
+        } else {
+            ASSERT_TRUE(Finite(light[p])) << p;
+        }
+    }
+    // No prior at all (the first frame): the hit with a prior is judged by its neighbours alone.
+    light = in;
+    EXPECT_EQ(BoundBrightHits(W, H, light.data(), group.data(), nullptr, kStoreBoundRatio), 2u);
+    EXPECT_NEAR(total(light), total(in), 1e-5 * total(in));
 }
 
 }  // namespace

@@ -868,6 +868,13 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
 /// frame's.
 constexpr double kStoreMinSamples = 0.5;
 
+/// How many levels finer than the still renderer's schedule (HitBinLevels) the store's bins lie.
+/// The still renderer removes its bins' bias with each pixel's own samples
+/// (CombineWithOwnSamples); the frame buffers have one sample a pixel at most, so the store's
+/// bins must be small enough that their bias is not what the stage is left with, and a still
+/// view's running mean keeps converging (Preview.StageStillViewErrorFallsOverFrames).
+constexpr float kStoreFinerLevels = 2.0f;
+
 /// The frame buffers' store's most blocks (520 MiB of radiance bins).
 constexpr size_t kMaxStoreBlocks = size_t(1) << 20;
 
@@ -1013,9 +1020,11 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         // (FrameStoreKeep).
         int& bias = tsc.TemporalHitBias();
         const float alpha = std::clamp(opt.texture.temporalAlpha, 0.0f, 0.99f);
-        const float levels = TextureSpaceCache::HitBinLevels(
-            1, std::max(1, int(std::lround(1.0 / (1.0 - double(alpha))))), 0,
-            TextureSpaceCache::HitTerm::Light);
+        const float levels =
+            std::max(0.0f, TextureSpaceCache::HitBinLevels(
+                               1, std::max(1, int(std::lround(1.0 / (1.0 - double(alpha))))), 0,
+                               TextureSpaceCache::HitTerm::Light) -
+                               kStoreFinerLevels);
         if (bias == INT_MIN) bias = int(std::floor(levels));
         fs = std::make_unique<FrameStore>();
         fs->bias = bias;
@@ -1062,10 +1071,13 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         LightHitStore& store = need > before.NumBlocks() && before.NumBlocks() < kMaxStoreBlocks
                                    ? GrowStore(*ctx.tsc, std::min(need, kMaxStoreBlocks), 1u << 16)
                                    : *ctx.tsc->LightStoreIfAny();
+        // A lone bright path bounded, its excess spread over its neighbours' hits, before it
+        // reaches every pixel that reads its bin.
+        BoundStoreHits(ctx, fs->records, store, kStoreBoundRatio, fs->binned);
         tbb::parallel_for(tbb::blocked_range2d<int>(0, H, kTile, 0, W, kTile * 8),
                           [&](const tbb::blocked_range2d<int>& r) {
                               PathHitsAdd(ctx, r, 0, 1, fs->bias, fs->blend, fs->records,
-                                          fs->binned, store.Samples());
+                                          fs->binned, store.Samples(), true);
                           });
         store.AddsDone();
         ResolveStore(ctx, *fs, store, fb);

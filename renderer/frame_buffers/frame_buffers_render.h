@@ -102,20 +102,27 @@
 //   options.texture.specularLightSamples light samples, `visibility` that lobe's. The sum keeps
 //   the path tracer's expectation. Otherwise direct light stays per pixel (the split needs its
 //   visibility).
-//   Where the cached light comes from (options.texture.frameBufferSamples): by default (Hits)
-//   the one store (texcache/texture_store.h, the cache's LightStore) that the frames' own camera
-//   hits fill. Each frame, the pixels of one group of a 4x4 ordered-dither pattern (one pixel
-//   in frameBufferBudget, the group rotating with the cache's frame) trace the diffuse lobe's
-//   path at their hit (cosine-sampled, with one light sample when the cache holds direct light
-//   too: DiffuseRayLight, what a grid sample's rays estimate), and so does every pixel whose
+//   Where the cached light comes from (options.texture.frameBufferSamples): by default (Hits) the
+//   one store (texcache/texture_store.h, the cache's LightStore) that the frames' own camera hits
+//   fill. Each frame, the pixels of one group of a 4x4 ordered-dither pattern (one pixel in
+//   frameBufferBudget, the group rotating with the cache's frame) trace the diffuse lobe's path at
+//   their hit (cosine-sampled, with one light sample when the cache holds direct light too:
+//   DiffuseRayLight, what a grid sample's rays estimate), and so does every pixel whose
 //   reconstruction the store backs with under half a sample (a disocclusion, a first frame: a
-//   sample is shaded only where no hit gave it one); NaN or infinite paths are dropped. Once
-//   every such hit is added at its bins (hit binning's levels, chosen once per cache), every
-//   pixel reads the store back through the still renderer's reconstruction. Between frames the
-//   store decays by 1 - (1 - temporalAlpha) / frameBufferBudget while the view moves (a bin
-//   then holds 1 / (1 - alpha) samples of each of its pixels, as a grid texel's history holds
-//   that many frames) and not at all while TextureSpaceCache::Refresh says it is still (a
-//   running mean, which converges); an edited object's bins are forgotten
+//   sample is shaded only where no hit gave it one); NaN or infinite paths are dropped. Once every
+//   such hit is added at its bins (hit binning's two levels, chosen once per cache,
+//   kStoreFinerLevels below the still renderer's schedule, whose bias that renderer removes with
+//   each pixel's own samples; under the trivial filter too, which in the still renderer bins a hit
+//   at its own texel: here that texel, about a pixel, would hold one or two paths,
+//   StoreFilterLevels), every pixel reads the store back through the still renderer's
+//   reconstruction. Before the adds, a hit brighter than kStoreBoundRatio x the larger of the
+//   median of its mesh's traced hits around it and what the store held there is scaled down to
+//   that, the rest shared by those hits (BoundBrightHits): a lone path that finds a highlight or
+//   the sun would reach every pixel reading its bin for as many frames as the decay keeps it.
+//   Between frames the store decays by 1 - (1 - temporalAlpha) / frameBufferBudget while the view
+//   moves (a bin then holds 1 / (1 - alpha) samples of each of its pixels, as a grid texel's
+//   history holds that many frames) and not at all while TextureSpaceCache::Refresh says it is
+//   still (a running mean, which converges); an edited object's bins are forgotten
 //   (TextureSpaceCache::InvalidateObject). Its integer sums are read only between the frame's
 //   phases: the image is the same for any thread count. With Grid, the paper's grid samples,
 //   each shaded lazily with diffuseLayerPaths (or indirectSamples) paths of its own on a miss.

@@ -346,11 +346,12 @@ glm::vec3 FilteredReconstruct(const TextureSpaceCache& tsc,
 /// where h's level is its face's coarsest (both levels' bins were clamped to it).
 template <typename Bin, typename Variance>
 glm::vec3 Reconstruct(const TextureSpaceCache& tsc, const TextureStore<Bin, FilteredValue>& store,
-                      const HitRecord& h, LevelCells<Bin>& cells, double k, Variance&& variance) {
+                      const HitRecord& h, LevelCells<Bin>& cells, double k, Variance&& variance,
+                      bool frameStore = false) {
     // An object whose material sets a filter the bins serve reads them through it.
     const int object = tsc.ObjectOfMesh(h.mesh);
     const TextureFilterKind kind = tsc.FilterOf(object);
-    if (HitFilterLevels(kind, 0) >= 0)
+    if ((frameStore ? StoreFilterLevels(kind, 0) : HitFilterLevels(kind, 0)) >= 0)
         return FilteredReconstruct(tsc, store, h, cells, kind, tsc.PassRadiusOf(object));
     const BinTable<Bin>& bins = store.Samples();
     const MeshGrids& g = tsc.Grids(h.mesh);
@@ -385,13 +386,15 @@ float ReconstructAo(const TextureSpaceCache& tsc, const AoHitStore& store, const
 /// pass (PathHitsTrace); 0 when not measured.
 glm::vec3 ReconstructRadiance(const TextureSpaceCache& tsc, const LightHitStore& store,
                               const HitRecord& h, LevelCells<RadianceBin>& cells,
-                              double relativeVariance) {
-    return Reconstruct(tsc, store, h, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
-                       [&](const CellEstimate& fine, const CellEstimate& coarse) {
-                           const double y = Luminance(coarse.mean);
-                           return relativeVariance * y * y * double(fine.count2) *
-                                  double(tsc.HitUnit()) / (double(fine.count) * double(fine.count));
-                       });
+                              double relativeVariance, bool frameStore = false) {
+    return Reconstruct(
+        tsc, store, h, cells, relativeVariance > 0.0 ? kLightCoarseWeightK : 0.0,
+        [&](const CellEstimate& fine, const CellEstimate& coarse) {
+            const double y = Luminance(coarse.mean);
+            return relativeVariance * y * y * double(fine.count2) * double(tsc.HitUnit()) /
+                   (double(fine.count) * double(fine.count));
+        },
+        frameStore);
 }
 
 /// A camera sample's reconstruction and its own per-hit estimate.
@@ -465,7 +468,7 @@ void PathHitsResolve(const Context& c, const tbb::blocked_range2d<int>& r, int s
 
 glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store,
                        const HitRecord& h) {
-    return ReconstructRadiance(tsc, store, h, ThreadCells(store.Samples()), 0.0);
+    return ReconstructRadiance(tsc, store, h, ThreadCells(store.Samples()), 0.0, true);
 }
 
 double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h) {

@@ -5,8 +5,11 @@
 // that phase 2 (bin_reconstruction.cpp) can blend them. A sample's record keeps where it hit.
 // The note at the top of texture_space.h says why the bins' estimate converges.
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <vector>
+
+#include <tbb/parallel_for.h>
 
 #include "renderer/render_internal.h"
 
@@ -52,10 +55,13 @@ void BinKeys(const MeshGrids& g, int face, float u, float v, int texelLevel, int
     }
 }
 /// The bins of a hit of scene object `object`: at the level its material's filter sets, one
-/// level only (that filter reads no other), or BinKeys' two at the schedule's `bias`.
+/// level only (that filter reads no other), or BinKeys' two at the schedule's `bias`; in the
+/// frame buffers' store (`frameStore`) at StoreFilterLevels'.
 void ObjectBinKeys(const Context& c, int object, const MeshGrids& g, int face, float u, float v,
-                   int texelLevel, int bias, TexelKey keys[2]) {
-    const int own = HitFilterLevels(c.tsc->FilterOf(object), c.tsc->PassRadiusOf(object));
+                   int texelLevel, int bias, TexelKey keys[2], bool frameStore = false) {
+    const TextureFilterKind kind = c.tsc->FilterOf(object);
+    const int r = c.tsc->PassRadiusOf(object);
+    const int own = frameStore ? StoreFilterLevels(kind, r) : HitFilterLevels(kind, r);
     BinKeys(g, face, u, v, texelLevel, own < 0 ? bias : own, keys);
     if (own >= 0) keys[1] = keys[0];
 }
@@ -235,7 +241,8 @@ void PathHitsTrace(const Context& c, const tbb::blocked_range2d<int>& r, int s0,
 /// each binned hit of the tile to its bins at the levels `bias` and `bias` + 1 above its texel's,
 /// and sets the level its record reads. Binning again (the table overflowed) adds the same.
 void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1, int bias,
-                 float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins) {
+                 float blend, HitRecord* records, const BinnedHit* binnedHits, RadianceBins& bins,
+                 bool frameStore) {
     RadianceBins::Batch batch(bins);
     const int spp = s1 - s0;
     const uint64_t unit = c.tsc->HitUnit();
@@ -249,7 +256,7 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
                 const BinnedHit& b = binnedHits[index];
                 TexelKey keys[2];
                 ObjectBinKeys(c, c.tsc->ObjectOfMesh(h.mesh), c.tsc->Grids(h.mesh), h.Face(), h.U(),
-                              h.V(), b.texelLevel, bias, keys);
+                              h.V(), b.texelLevel, bias, keys, frameStore);
                 // Nothing to add for a record that only reads (the frame buffers' hits outside
                 // the frame's budget carry NaN light); finite light was checked when shaded.
                 RadianceBin::Value v;
@@ -264,6 +271,42 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
             }
 }
 
+StoreHitBounds BoundStoreHits(const Context& c, const HitRecord* records,
+                              const LightHitStore& store, float ratio, BinnedHit* binned) {
+    const int W = c.opt.width, H = c.opt.height;
+    const size_t n = size_t(W) * size_t(H);
+    std::vector<glm::vec3> light(n);
+    std::vector<float> prior(n);
+    std::vector<int32_t> group(n);
+    const double minPrior = double(c.tsc->HitUnit());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                          for (size_t p = r.begin(); p < r.end(); ++p) {
+                              const HitRecord& h = records[p];
+                              group[p] = h.mesh;
+                              // NaN: a hit that only reads, or no hit.
+                              light[p] = h.mesh >= 0 ? binned[p].light : glm::vec3(NAN);
+                              prior[p] = h.mesh >= 0 && StoreCountAt(*c.tsc, store, h) >= minPrior
+                                             ? Luminance(StoreLightAt(*c.tsc, store, h))
+                                             : 0.0f;
+                          }
+                      });
+    StoreHitBounds out;
+    double before = 0.0;
+    for (size_t p = 0; p < n; ++p)
+        if (std::isfinite(light[p].x + light[p].y + light[p].z))
+            ++out.traced, before += Luminance(light[p]);
+    out.bounded = BoundBrightHits(W, H, light.data(), group.data(), prior.data(), ratio);
+    double after = 0.0;
+    for (size_t p = 0; p < n; ++p)
+        if (records[p].mesh >= 0 && std::isfinite(light[p].x + light[p].y + light[p].z)) {
+            binned[p].light = light[p];
+            after += Luminance(light[p]);
+        }
+    out.keptLight = before > 0.0 ? after / before : 1.0;
+    return out;
+}
+
 void FrameHitRecord(const Context& c, const SurfaceInteraction& si, float t, int bias, HitRecord* h,
                     int* texelLevel) {
     const int mesh = c.tsc->MeshOf(si.object, si.backFacing);
@@ -272,8 +315,86 @@ void FrameHitRecord(const Context& c, const SurfaceInteraction& si, float t, int
           uint32_t(si.ptex.face) << 4};
     TexelKey keys[2];
     ObjectBinKeys(c, si.object, c.tsc->Grids(mesh), si.ptex.face, h->U(), h->V(), *texelLevel, bias,
-                  keys);
+                  keys, true);
     h->faceLevel |= keys[0].mip;
 }
 
 }  // namespace texcache::internal
+
+namespace texcache {
+
+size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* group,
+                       const float* prior, float ratio) {
+    const size_t n = size_t(std::max(width, 0)) * size_t(std::max(height, 0));
+    if (n == 0 || !(ratio > 0.0f)) return 0;
+    // Every pass reads the previous one's arrays and writes its own pixel's entries only: the
+    // result does not depend on how the rows are split between threads.
+    std::vector<float> luminance(n);
+    for (size_t p = 0; p < n; ++p) {
+        const glm::vec3& L = light[p];
+        const bool ok = std::isfinite(L.x + L.y + L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f;
+        luminance[p] = ok ? Luminance(L) : -1.0f;
+    }
+    constexpr int R = kStoreBoundRadius;
+    auto window = [&](int x, int y, auto&& visit) {
+        const size_t p = size_t(y) * size_t(width) + size_t(x);
+        for (int qy = std::max(0, y - R); qy <= std::min(height - 1, y + R); ++qy)
+            for (int qx = std::max(0, x - R); qx <= std::min(width - 1, x + R); ++qx) {
+                const size_t q = size_t(qy) * size_t(width) + size_t(qx);
+                if (q != p && luminance[q] >= 0.0f && group[q] == group[p]) visit(q);
+            }
+    };
+    // Each hit's share of its excess for each of its neighbours (0: not bounded).
+    std::vector<glm::vec3> share(n, glm::vec3(0.0f));
+    std::atomic<size_t> bounded{0};
+    tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
+        float others[(2 * R + 1) * (2 * R + 1)];
+        size_t count = 0;
+        for (int y = r.begin(); y < r.end(); ++y)
+            for (int x = 0; x < width; ++x) {
+                const size_t p = size_t(y) * size_t(width) + size_t(x);
+                if (!(luminance[p] >= 0.0f)) continue;
+                int k = 0;
+                double sum = 0.0;
+                window(x, y, [&](size_t q) { others[k++] = luminance[q], sum += luminance[q]; });
+                float reference = 0.0f;
+                if (k >= kStoreBoundMinOthers) {
+                    std::nth_element(others, others + k / 2, others + k);
+                    reference = others[k / 2];
+                    // Mostly dark around it: their mean still says what light there is.
+                    if (!(reference > 0.0f)) reference = float(sum / double(k));
+                }
+                const float pr = prior ? prior[p] : 0.0f;
+                if (pr > reference && pr < INFINITY) reference = pr;
+                const float bound = ratio * reference;
+                // Nothing to compare it with, or no one to give the excess to: left alone.
+                if (!(bound > 0.0f) || luminance[p] <= bound || k == 0) continue;
+                share[p] = light[p] * ((1.0f - bound / luminance[p]) / float(k));
+                ++count;
+            }
+        bounded.fetch_add(count, std::memory_order_relaxed);
+    });
+    // Each hit keeps its bounded part and gathers its neighbours' shares (the window's relation
+    // is symmetric: p is among q's others exactly when q is among p's).
+    std::vector<glm::vec3> out(n);
+    tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
+        for (int y = r.begin(); y < r.end(); ++y)
+            for (int x = 0; x < width; ++x) {
+                const size_t p = size_t(y) * size_t(width) + size_t(x);
+                if (!(luminance[p] >= 0.0f)) continue;
+                glm::vec3 v = light[p];
+                if (share[p] != glm::vec3(0.0f)) {
+                    int k = 0;
+                    window(x, y, [&](size_t) { ++k; });
+                    v -= share[p] * float(k);
+                }
+                window(x, y, [&](size_t q) { v += share[q]; });
+                out[p] = glm::max(v, glm::vec3(0.0f));
+            }
+    });
+    for (size_t p = 0; p < n; ++p)
+        if (luminance[p] >= 0.0f) light[p] = out[p];
+    return bounded.load();
+}
+
+}  // namespace texcache

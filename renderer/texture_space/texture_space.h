@@ -145,6 +145,27 @@ void CageBounds(const ControlCage& cage, glm::vec3* lo, glm::vec3* hi);
 /// are about a pixel).
 float MipZeroTexelSize(glm::vec3 lo, glm::vec3 hi, float texelFraction = 1.0f / 4096.0f);
 
+/// The frame buffers' bound on a hit's light (BoundBrightHits): at most this many times the
+/// reference luminance around it.
+inline constexpr float kStoreBoundRatio = 16.0f;
+/// BoundBrightHits' window (radius in pixels) and the fewest other hits in it that make a
+/// reference.
+inline constexpr int kStoreBoundRadius = 4;
+inline constexpr int kStoreBoundMinOthers = 3;
+/// Bounds the bright outliers among one frame's traced hits before they are added to a store
+/// whose bins many pixels read for many frames (a path that finds a highlight or the sun would
+/// otherwise reach all of them), and spreads what it takes off over the hit's neighbours, so that
+/// the frame's light is kept. Per pixel of a width x height frame: `light` (RGB) of its traced hit
+/// (NaN, infinite or negative: none, left as it is), `group` (hits are compared within a group: a
+/// mesh), `prior` (a reference luminance from earlier frames, 0: none; may be null). A hit's
+/// reference is the median luminance of the other hits of its group within kStoreBoundRadius
+/// pixels (their mean where the median is 0; none below kStoreBoundMinOthers of them) or its
+/// prior, whichever is larger; a hit above ratio x its reference is scaled down to that and the
+/// rest is shared equally by those other hits. Where there is no reference, unchanged. Returns
+/// how many hits it bounded. The same for any thread count.
+size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* group,
+                       const float* prior, float ratio);
+
 /// A shading cache for a scene: lives as long as its owner wants (e.g. across frames). The one
 /// door between the renderer and libtexcache: it picks each hit's texel and each object's
 /// filter, and blends texels over frames; nothing else touches the ShadingCache inside.
