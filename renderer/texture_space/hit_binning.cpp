@@ -286,7 +286,9 @@ StoreHitBounds BoundStoreHits(const Context& c, const HitRecord* records,
                               group[p] = h.mesh;
                               // NaN: a hit that only reads, or no hit.
                               light[p] = h.mesh >= 0 ? binned[p].light : glm::vec3(NAN);
-                              prior[p] = h.mesh >= 0 && StoreCountAt(*c.tsc, store, h) >= minPrior
+                              // Only a traced hit's prior is read (a store lookup each).
+                              const bool traced = std::isfinite(light[p].x);
+                              prior[p] = traced && StoreCountAt(*c.tsc, store, h) >= minPrior
                                              ? Luminance(StoreLightAt(*c.tsc, store, h))
                                              : 0.0f;
                           }
