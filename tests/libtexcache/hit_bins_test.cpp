@@ -246,5 +246,31 @@ TEST(RadianceBins, ConcurrentAddsSumExactly) {
     }
 }
 
+// FindBlock sums the 16 bins of the block that holds a key (4x4 bins of one face and level,
+// aligned on multiples of 4), whichever of its bins the key names; never a neighbouring block's,
+// another level's or another face's; a block never added reads zero. Prefetch changes nothing.
+TEST(HitBins, FindBlockSumsTheKeysBlockOnly) {
+    RadianceBins bins(64);
+    for (int v = 0; v < 8; ++v)
+        for (int u = 0; u < 8; ++u)
+            ASSERT_TRUE(bins.Add(Key(7, 2, u, v), Radiance(1.0f, 0.0f, float(u))));
+    ASSERT_TRUE(bins.Add(Key(7, 3, 1, 1), Radiance(100.0f, 0.0f, 0.0f)));  // other level
+    ASSERT_TRUE(bins.Add(Key(8, 2, 1, 1), Radiance(100.0f, 0.0f, 0.0f)));  // other face
+    const double k = RadianceBin::kScale;
+    for (int v = 0; v < 8; ++v)
+        for (int u = 0; u < 8; ++u) {
+            bins.Prefetch(Key(7, 2, u, v));
+            const RadianceBin::Value b = bins.FindBlock(Key(7, 2, u, v));
+            ASSERT_EQ(b.count, 16u) << u << " " << v;
+            ASSERT_EQ(b.sum[0], uint64_t(16 * k));
+            // Columns 0-3 or 4-7, four rows each.
+            const uint64_t first = u < 4 ? 0 : 4;
+            ASSERT_EQ(b.sum[2], uint64_t(4 * (4 * first + 6) * k)) << u;
+        }
+    EXPECT_EQ(bins.FindBlock(Key(7, 2, 8, 0)).count, 0u);  // a block never added
+    EXPECT_EQ(bins.FindBlock(Key(7, 3, 0, 0)).count, 1u);
+    EXPECT_EQ(bins.FindBlock(Key(8, 2, 3, 3)).sum[0], uint64_t(100 * k));
+}
+
 }  // namespace
 }  // namespace texcache
