@@ -87,6 +87,7 @@ struct ScreenSpaceDenoiser::State {
     bool lastHalf = false;             ///< the last frame was denoised at half resolution
     bool composes = true;              ///< false in the half denoiser: its image is never read
     std::vector<float> rowScratch;     ///< per-thread rows of UpsampleCompose
+    std::vector<int32_t> rowIds;       ///< per-thread object-id rows of UpsampleCompose
 
     internal::Guides& G() { return guides[cur]; }
     const internal::Guides& PrevG() const { return guides[cur ^ 1]; }
@@ -131,6 +132,14 @@ void CachedWhereNoHistory(ScreenSpaceDenoiser::State& s, bool svgf);
 void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* half,
                      std::vector<uint32_t>* source);
 
+/// Row y of this frame's full-resolution guides where they are read (PrepComponentRows,
+/// UpsampleRow): the planes' rows, or at half resolution per-thread rows prepared just before
+/// (the depth, its tolerance and the validity are planes at either resolution).
+struct GuideRowView {
+    const float *px, *py, *pz, *nx, *ny, *nz;
+    const int32_t* id;
+};
+
 /// How many result planes UpsampleRow brings back from `half`: the channels of the components
 /// present in both denoisers, in the order visibility, glossy, indirect.
 int UpsampledPlanes(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half);
@@ -141,7 +150,7 @@ int UpsampledPlanes(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenois
 /// (what a pixel keeps where no half-resolution sample of its surface is near; readable one
 /// entry past the row's end).
 void UpsampleRow(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half, int y,
-                 const float* const* own, float* const* out);
+                 const GuideRowView& gv, const float* const* own, float* const* out);
 
 }  // namespace internal
 }  // namespace texcache::screen

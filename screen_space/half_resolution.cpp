@@ -360,7 +360,7 @@ int UpsampledPlanes(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenois
 }
 
 void UpsampleRow(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::State& half, int y,
-                 const float* const* own, float* const* out) {
+                 const GuideRowView& gv, const float* const* own, float* const* out) {
     // The half denoiser has already swapped its guide sets: its last frame's are PrevG().
     const Guides& hg = half.PrevG();
     const Guides& g = s.guides[s.cur];
@@ -372,8 +372,8 @@ void UpsampleRow(const ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser:
     a.w = s.w, a.hw = half.w;
     a.wy[0] = (y & 1) ? 0.75f : 0.25f, a.wy[1] = 1.0f - a.wy[0];
     a.depthScale = 1.0f / (2.0f * s.set.sigmaDepth);
-    a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
-    a.z = g.depth.Row(y), a.invDz = g.invDz.Row(y), a.id = g.objectId.Row(y);
+    a.nx = gv.nx, a.ny = gv.ny, a.nz = gv.nz;
+    a.z = g.depth.Row(y), a.invDz = g.invDz.Row(y), a.id = gv.id;
     a.ok = g.valid.Row(y);
     for (int j = 0; j < 2; ++j) {
         a.hnx[j] = hg.nx.Row(sy[j]), a.hny[j] = hg.ny.Row(sy[j]);

@@ -313,8 +313,12 @@ struct GuideRow {
     const float* depth;
     const int32_t* id;
     const float* vis;
-    float *px, *py, *pz, *nx, *ny, *nz, *dz, *vv, *vok;
+    // Either group may be null and is then not written: half resolution keeps only the depth
+    // and validity as planes (DepthTolRow reads them on the rows above and below) and prepares
+    // the rest row by row where it is used (UpsampleCompose).
+    float *px, *py, *pz, *nx, *ny, *nz, *vv, *vok;
     int32_t* oid;
+    float* dz;
     uint8_t* ok;
 };
 TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
@@ -344,14 +348,18 @@ TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
             const float vg = good * Fin(v);
             vv[i] = vg > 0.0f ? v : 0.0f, vok[i] = vg;
         }
-        StoreRow(px, n, a.px + x0, a.stream), StoreRow(py, n, a.py + x0, a.stream),
-            StoreRow(pz, n, a.pz + x0, a.stream);
-        StoreRow(nx, n, a.nx + x0, a.stream), StoreRow(ny, n, a.ny + x0, a.stream),
-            StoreRow(nz, n, a.nz + x0, a.stream);
-        StoreRow(dz, n, a.dz + x0, a.stream), StoreRow(vv, n, a.vv + x0, a.stream),
-            StoreRow(vok, n, a.vok + x0, a.stream);
-        StoreRow(oid, n, a.oid + x0, a.stream);
-        for (int i = 0; i < n; ++i) a.ok[x0 + i] = okf[i] > 0.0f ? 1 : 0;
+        if (a.px) {
+            StoreRow(px, n, a.px + x0, a.stream), StoreRow(py, n, a.py + x0, a.stream),
+                StoreRow(pz, n, a.pz + x0, a.stream);
+            StoreRow(nx, n, a.nx + x0, a.stream), StoreRow(ny, n, a.ny + x0, a.stream),
+                StoreRow(nz, n, a.nz + x0, a.stream);
+            StoreRow(vv, n, a.vv + x0, a.stream), StoreRow(vok, n, a.vok + x0, a.stream);
+            StoreRow(oid, n, a.oid + x0, a.stream);
+        }
+        if (a.dz) {
+            StoreRow(dz, n, a.dz + x0, a.stream);
+            for (int i = 0; i < n; ++i) a.ok[x0 + i] = okf[i] > 0.0f ? 1 : 0;
+        }
     }
 }
 
@@ -527,10 +535,10 @@ TEXCACHE_SCREEN_CLONES void DepthTolRow(int w, const float* z, const float* zu, 
 
 // The glossy and indirect inputs of row y (those present), demodulated, with their
 // remodulation factors and validity: gl / ind = {v0, v1, v2, factor0, factor1, factor2, valid},
-// rows of w floats. Reads this frame's guide planes (PrepGuides) of the row.
+// rows of w floats. Reads this frame's guides of the row (`gv`, PrepGuides).
 void PrepComponentRows(const ScreenSpaceDenoiser::State& s, const FrameBuffers& f,
-                       const BrdfPreintegration* brdf, bool demod, int y, bool stream,
-                       float* const* gl, float* const* ind) {
+                       const BrdfPreintegration* brdf, bool demod, int y, const GuideRowView& gv,
+                       bool stream, float* const* gl, float* const* ind) {
     const Guides& g = s.guides[s.cur];
     const int w = s.w;
     const size_t row = size_t(y) * size_t(w);
@@ -540,8 +548,8 @@ void PrepComponentRows(const ScreenSpaceDenoiser::State& s, const FrameBuffers& 
         const bool dm = demod && brdf;
         b.f0 = dm ? &f.specular[row].x : nullptr, b.rough = dm ? &f.roughness[row] : nullptr;
         b.table = dm ? &brdf->Data()->x : nullptr;
-        b.px = g.px.Row(y), b.py = g.py.Row(y), b.pz = g.pz.Row(y);
-        b.nx = g.nx.Row(y), b.ny = g.ny.Row(y), b.nz = g.nz.Row(y);
+        b.px = gv.px, b.py = gv.py, b.pz = gv.pz;
+        b.nx = gv.nx, b.ny = gv.ny, b.nz = gv.nz;
         b.ok = g.valid.Row(y);
         b.cam[0] = f.camera.position.x, b.cam[1] = f.camera.position.y;
         b.cam[2] = f.camera.position.z;
@@ -575,8 +583,9 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
     ComponentPlanes& vis = s.comp[kVis];
     ComponentPlanes& gl = s.comp[kGlossy];
     ComponentPlanes& ind = s.comp[kIndirect];
-    // Guides, visibility and its validity; each further component's 3 values, 3 factors, validity.
-    const int planes = 11 + (components ? (gl.present ? 7 : 0) + (ind.present ? 7 : 0) : 0);
+    // Guides, visibility and its validity; each further component's 3 values, 3 factors,
+    // validity. Half resolution: the depth and the validity.
+    const int planes = components ? 11 + (gl.present ? 7 : 0) + (ind.present ? 7 : 0) : 2;
     const bool stream = StreamPlanes(s.w, s.h, planes);
     ForRows(s.h, [&](int y) {
         const size_t row = size_t(y) * size_t(w);
@@ -584,10 +593,14 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
         a.w = w, a.stream = stream;
         a.pos = &f.position[row].x, a.nrm = &f.normal[row].x;
         a.depth = &f.depth[row], a.id = &f.objectId[row], a.vis = &f.visibility[row];
-        a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
-        a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
-        a.dz = g.depth.Row(y), a.oid = g.objectId.Row(y), a.ok = g.valid.Row(y);
-        a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
+        a.dz = g.depth.Row(y), a.ok = g.valid.Row(y);
+        if (components) {
+            a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
+            a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+            a.oid = g.objectId.Row(y), a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
+        } else {
+            a.px = a.py = a.pz = a.nx = a.ny = a.nz = a.vv = a.vok = nullptr, a.oid = nullptr;
+        }
         PrepGuides(a);
         if (!components) return;
         if (s.hasCachedVis) {
@@ -603,7 +616,9 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
             indr[c] = ind.v[c].Row(y), indr[3 + c] = ind.remod[c].Row(y);
         }
         glr[6] = gl.valid.Row(y), indr[6] = ind.valid.Row(y);
-        PrepComponentRows(s, f, brdf, demod, y, stream, glr, indr);
+        const GuideRowView gv{g.px.Row(y), g.py.Row(y), g.pz.Row(y),      g.nx.Row(y),
+                              g.ny.Row(y), g.nz.Row(y), g.objectId.Row(y)};
+        PrepComponentRows(s, f, brdf, demod, y, gv, stream, glr, indr);
     });
     ForRows(s.h, [&](int y) {
         const int yu = y > 0 ? y - 1 : y, yd = y + 1 < s.h ? y + 1 : y;
@@ -811,8 +826,9 @@ void Compose(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, std::vector<g
     });
 }
 
-// Half resolution's last full-resolution pass, one row at a time: the row's own glossy and
-// indirect inputs and factors (PrepComponentRows, into per-thread rows rather than planes), the
+// Half resolution's last full-resolution pass, one row at a time: the row's guides (PrepGuides)
+// and its own glossy and indirect inputs and factors (PrepComponentRows), into per-thread rows
+// rather than planes, the
 // upsample of `half`'s results (UpsampleRow) and the composition. Nothing of the full-resolution
 // components goes through memory but what the accessors (Visibility(), Glossy(), Indirect())
 // read: the visibility and the remodulated components, in s.scratch[ci].out.
@@ -822,32 +838,44 @@ void UpsampleCompose(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::S
     out->resize(size_t(s.w) * size_t(s.h));
     const int np = UpsampledPlanes(s, half);
     const bool part[2] = {s.comp[kGlossy].present, s.comp[kIndirect].present};
-    // Rows per thread: each part's 7 inputs (PrepComponentRows) and the up to 7 results; one
-    // float past the row's end is read (UpsampleRow).
-    constexpr int kRows = 21;
+    // Rows per thread: each part's 7 inputs (PrepComponentRows), the up to 7 results and the
+    // row's guides (position, normal, visibility and its validity); one float past the row's
+    // end is read (UpsampleRow).
+    constexpr int kRows = 29;
     const size_t stride = (size_t(s.w) + 16) / 16 * 16;
     const size_t slot = kRows * stride;
-    const size_t need = size_t(tbb::this_task_arena::max_concurrency()) * slot;
-    if (s.rowScratch.size() < need) s.rowScratch.assign(need, 0.0f);
+    const size_t threads = size_t(tbb::this_task_arena::max_concurrency());
+    if (s.rowScratch.size() < threads * slot) s.rowScratch.assign(threads * slot, 0.0f);
+    if (s.rowIds.size() < threads * stride) s.rowIds.assign(threads * stride, 0);
     const bool stream = StreamPlanes(s.w, s.h, 3 + np);  // the RGB image and the results
     ForRows(s.h, [&](int y) {
-        float* base =
-            s.rowScratch.data() + size_t(tbb::this_task_arena::current_thread_index()) * slot;
+        const size_t t = size_t(tbb::this_task_arena::current_thread_index());
+        float* base = s.rowScratch.data() + t * slot;
         auto buf = [&](int k) { return base + size_t(k) * stride; };
+        const size_t row = size_t(y) * size_t(s.w);
+        GuideRow gr;
+        gr.w = s.w, gr.stream = false;
+        gr.pos = &f.position[row].x, gr.nrm = &f.normal[row].x;
+        gr.depth = &f.depth[row], gr.id = &f.objectId[row], gr.vis = &f.visibility[row];
+        gr.px = buf(21), gr.py = buf(22), gr.pz = buf(23);
+        gr.nx = buf(24), gr.ny = buf(25), gr.nz = buf(26), gr.vv = buf(27), gr.vok = buf(28);
+        gr.oid = s.rowIds.data() + t * stride;
+        gr.dz = nullptr, gr.ok = nullptr;  // planes (Prepare)
+        PrepGuides(gr);
+        const GuideRowView gv{gr.px, gr.py, gr.pz, gr.nx, gr.ny, gr.nz, gr.oid};
         float* in[2][7];
         for (int k = 0; k < 7; ++k) in[0][k] = buf(k), in[1][k] = buf(7 + k);
-        PrepComponentRows(s, f, brdf, demod, y, false, in[0], in[1]);
+        PrepComponentRows(s, f, brdf, demod, y, gv, false, in[0], in[1]);
         const float* own[7];
         float* res[7];
         int first[2] = {-1, -1}, k = 0;
-        own[k] = s.comp[kVis].v[0].Row(y), res[k] = buf(14), ++k;
+        own[k] = gr.vv, res[k] = buf(14), ++k;
         for (int p = 0; p < 2; ++p) {
             if (!part[p]) continue;
             first[p] = k;
             for (int c = 0; c < 3; ++c, ++k) own[k] = in[p][c], res[k] = buf(14 + k);
         }
-        UpsampleRow(s, half, y, own, res);
-        const size_t row = size_t(y) * size_t(s.w);
+        UpsampleRow(s, half, y, gv, own, res);
         ComposeRowArgs a;
         a.w = s.w;
         a.emitted = f.emitted.empty() ? nullptr : &f.emitted[row].x;
