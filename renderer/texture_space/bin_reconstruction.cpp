@@ -478,21 +478,23 @@ double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
                       .count);
 }
 
-void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h) {
+namespace {
+/// The key of the bin that record `h` falls in at its level.
+TexelKey RecordBinKey(const TextureSpaceCache& tsc, const HitRecord& h) {
     const MeshGrids& g = tsc.Grids(h.mesh);
     const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
-    store.Samples().Prefetch({g.FaceOffset() + uint32_t(face), uint8_t(level),
-                              uint16_t(QuantizeCoord(h.U(), res)),
-                              uint16_t(QuantizeCoord(h.V(), res))});
+    return {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(QuantizeCoord(h.U(), res)),
+            uint16_t(QuantizeCoord(h.V(), res))};
+}
+}  // namespace
+
+void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h) {
+    store.Samples().Prefetch(RecordBinKey(tsc, h));
 }
 
 double StoreBlockAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
                     glm::vec3* light) {
-    const MeshGrids& g = tsc.Grids(h.mesh);
-    const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
-    const TexelKey key{g.FaceOffset() + uint32_t(face), uint8_t(level),
-                       uint16_t(QuantizeCoord(h.U(), res)), uint16_t(QuantizeCoord(h.V(), res))};
-    const RadianceBin::Value v = store.Samples().FindBlock(key);
+    const RadianceBin::Value v = store.Samples().FindBlock(RecordBinKey(tsc, h));
     *light = v.count > 0 ? glm::vec3(BinSum(v) / double(v.count)) : glm::vec3(0.0f);
     return double(v.count);
 }
