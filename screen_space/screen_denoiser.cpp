@@ -572,37 +572,53 @@ void PrepComponentRows(const ScreenSpaceDenoiser::State& s, const FrameBuffers& 
     }
 }
 
-// One sweep over the frame's buffers: guides and visibility as planes and, with `components`,
-// the demodulated glossy and indirect inputs and the cached visibility. Half resolution takes
-// the guides only: its components are reduced from the frame and the full-resolution ones are
-// prepared row by row where they are used (UpsampleCompose).
+// The frame's buffers of row y that PrepGuides reads; its outputs are left null.
+GuideRow GuideInputs(const FrameBuffers& f, int w, int y, bool stream) {
+    const size_t row = size_t(y) * size_t(w);
+    GuideRow a;
+    a.w = w, a.stream = stream;
+    a.pos = &f.position[row].x, a.nrm = &f.normal[row].x;
+    a.depth = &f.depth[row], a.id = &f.objectId[row], a.vis = &f.visibility[row];
+    a.px = a.py = a.pz = a.nx = a.ny = a.nz = a.vv = a.vok = a.dz = nullptr;
+    a.oid = nullptr, a.ok = nullptr;
+    return a;
+}
+
+// The depth tolerance plane of this frame's guides (DepthTolRow), from its depth and validity.
+void DepthTolerance(ScreenSpaceDenoiser::State& s) {
+    Guides& g = s.G();
+    ForRows(s.h, [&](int y) {
+        const int yu = y > 0 ? y - 1 : y, yd = y + 1 < s.h ? y + 1 : y;
+        // A neighbour row outside the image gets validity flags that are all 0.
+        DepthTolRow(s.w, g.depth.Row(y), g.depth.Row(yu), g.depth.Row(yd), g.valid.Row(y),
+                    y > 0 ? g.valid.Row(yu) : s.zeroRow.data() + kPad,
+                    y + 1 < s.h ? g.valid.Row(yd) : s.zeroRow.data() + kPad, g.invDz.Row(y));
+    });
+}
+
+// One sweep over the frame's buffers: guides and visibility as planes, the demodulated glossy
+// and indirect inputs and the cached visibility. Half resolution does not take this path: it
+// prepares the depth and validity planes inside the reduction's pass (DownsampleFrame's row
+// hook) and the rest row by row where it is used (UpsampleCompose).
 void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPreintegration* brdf,
-             bool demod, bool components) {
+             bool demod) {
     Guides& g = s.G();
     const int w = s.w;
     ComponentPlanes& vis = s.comp[kVis];
     ComponentPlanes& gl = s.comp[kGlossy];
     ComponentPlanes& ind = s.comp[kIndirect];
     // Guides, visibility and its validity; each further component's 3 values, 3 factors,
-    // validity. Half resolution: the depth and the validity.
-    const int planes = components ? 11 + (gl.present ? 7 : 0) + (ind.present ? 7 : 0) : 2;
+    // validity.
+    const int planes = 11 + (gl.present ? 7 : 0) + (ind.present ? 7 : 0);
     const bool stream = StreamPlanes(s.w, s.h, planes);
     ForRows(s.h, [&](int y) {
         const size_t row = size_t(y) * size_t(w);
-        GuideRow a;
-        a.w = w, a.stream = stream;
-        a.pos = &f.position[row].x, a.nrm = &f.normal[row].x;
-        a.depth = &f.depth[row], a.id = &f.objectId[row], a.vis = &f.visibility[row];
+        GuideRow a = GuideInputs(f, w, y, stream);
         a.dz = g.depth.Row(y), a.ok = g.valid.Row(y);
-        if (components) {
-            a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
-            a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
-            a.oid = g.objectId.Row(y), a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
-        } else {
-            a.px = a.py = a.pz = a.nx = a.ny = a.nz = a.vv = a.vok = nullptr, a.oid = nullptr;
-        }
+        a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
+        a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+        a.oid = g.objectId.Row(y), a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
         PrepGuides(a);
-        if (!components) return;
         if (s.hasCachedVis) {
             // -1 where there is none or the pixel's geometry is unusable.
             const float* cv = &f.cachedVisibility[row];
@@ -620,13 +636,21 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
                               g.ny.Row(y), g.nz.Row(y), g.objectId.Row(y)};
         PrepComponentRows(s, f, brdf, demod, y, gv, stream, glr, indr);
     });
-    ForRows(s.h, [&](int y) {
-        const int yu = y > 0 ? y - 1 : y, yd = y + 1 < s.h ? y + 1 : y;
-        // A neighbour row outside the image gets validity flags that are all 0.
-        DepthTolRow(w, g.depth.Row(y), g.depth.Row(yu), g.depth.Row(yd), g.valid.Row(y),
-                    y > 0 ? g.valid.Row(yu) : s.zeroRow.data() + kPad,
-                    y + 1 < s.h ? g.valid.Row(yd) : s.zeroRow.data() + kPad, g.invDz.Row(y));
+    DepthTolerance(s);
+}
+
+// Half resolution's first pass: the frame reduced to the half frame (DownsampleFrame) and, for
+// each full row while the reduction has it in the caches, the row's depth and validity, the
+// only full-resolution guide planes; then their depth tolerance.
+void PrepareHalf(ScreenSpaceDenoiser::State& s, const FrameBuffers& f) {
+    Guides& g = s.G();
+    const bool stream = StreamPlanes(s.w, s.h, 2);
+    DownsampleFrame(f, s.conesPath, &s.halfFrame, &s.halfSource, [&](int y) {
+        GuideRow a = GuideInputs(f, s.w, y, stream);
+        a.dz = g.depth.Row(y), a.ok = g.valid.Row(y);
+        PrepGuides(a);
     });
+    DepthTolerance(s);
 }
 
 // ---- Filters -------------------------------------------------------------------------------
@@ -853,14 +877,10 @@ void UpsampleCompose(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::S
         float* base = s.rowScratch.data() + t * slot;
         auto buf = [&](int k) { return base + size_t(k) * stride; };
         const size_t row = size_t(y) * size_t(s.w);
-        GuideRow gr;
-        gr.w = s.w, gr.stream = false;
-        gr.pos = &f.position[row].x, gr.nrm = &f.normal[row].x;
-        gr.depth = &f.depth[row], gr.id = &f.objectId[row], gr.vis = &f.visibility[row];
+        GuideRow gr = GuideInputs(f, s.w, y, false);
         gr.px = buf(21), gr.py = buf(22), gr.pz = buf(23);
         gr.nx = buf(24), gr.ny = buf(25), gr.nz = buf(26), gr.vv = buf(27), gr.vok = buf(28);
-        gr.oid = s.rowIds.data() + t * stride;
-        gr.dz = nullptr, gr.ok = nullptr;  // planes (Prepare)
+        gr.oid = s.rowIds.data() + t * stride;  // the depth and validity are planes
         PrepGuides(gr);
         const GuideRowView gv{gr.px, gr.py, gr.pz, gr.nx, gr.ny, gr.nz, gr.oid};
         float* in[2][7];
@@ -968,9 +988,10 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     }
     const BrdfPreintegration* brdf = demod && s.comp[kGlossy].present ? &Brdf() : nullptr;
     const bool half = s.set.halfResolutionRows > 0 && frame.height >= s.set.halfResolutionRows;
-    Prepare(s, frame, brdf, demod, !half);
-    clock.Lap(&StageTimings::prepare);
-    if (half) {
+    if (!half) {
+        Prepare(s, frame, brdf, demod);
+        clock.Lap(&StageTimings::prepare);
+    } else {
         if (!s.half) {
             DenoiserSettings hs = s.set;
             hs.halfResolutionRows = 0;
@@ -981,7 +1002,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
             s.half->s_->composes = false;
             if (s.stillFrames >= 0) s.half->SetStillView(true);
         }
-        DownsampleFrame(frame, s.conesPath, &s.halfFrame, &s.halfSource);
+        PrepareHalf(s, frame);
         clock.Lap(&StageTimings::prepare);
         s.half->Denoise(s.halfFrame, method, demodulation, &s.halfImage);
         clock.Charge(s.half->Timings(), s.half->CpuTimings());
