@@ -313,15 +313,19 @@ struct GuideRow {
     const float* depth;
     const int32_t* id;
     const float* vis;
-    // Either group may be null and is then not written: half resolution keeps only the depth
-    // and validity as planes (DepthTolRow reads them on the rows above and below) and prepares
-    // the rest row by row where it is used (UpsampleCompose).
+    // The first group (PrepGuidesRest) or the second (PrepGuidesDepth) alone at half
+    // resolution: it keeps only the depth and validity as planes (DepthTolRow reads them on
+    // the rows above and below) and prepares the rest row by row where it is used
+    // (UpsampleCompose).
     float *px, *py, *pz, *nx, *ny, *nz, *vv, *vok;
     int32_t* oid;
     float* dz;
     uint8_t* ok;
 };
-TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
+// Rest: the first group (px .. oid); Depth: dz and ok. Each variant computes only what it
+// writes: half resolution's depth pass needs the validity, not the normalized normal.
+template <bool Rest, bool Depth>
+inline __attribute__((always_inline)) void PrepGuidesImpl(const GuideRow& args) {
     const GuideRow a = args;
     constexpr int kC = kPrepChunk;
     alignas(64) float px[kC], py[kC], pz[kC], nx[kC], ny[kC], nz[kC], dz[kC], vv[kC], vok[kC],
@@ -337,18 +341,19 @@ TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
             const float nl2 = n0 * n0 + n1 * n1 + n2 * n2;
             const float good = Fin(p0 + p1 + p2) * Fin(nl2) * (nl2 > 0.0f ? 1.0f : 0.0f) * Fin(z) *
                                (z > 0.0f ? 1.0f : 0.0f);
-            const float inl = good > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
-            px[i] = good > 0.0f ? p0 : 0.0f, py[i] = good > 0.0f ? p1 : 0.0f;
-            pz[i] = good > 0.0f ? p2 : 0.0f;
-            nx[i] = n0 * inl, ny[i] = n1 * inl, nz[i] = n2 * inl;
-            dz[i] = good > 0.0f ? z : 0.0f;
-            oid[i] = good > 0.0f ? a.id[x] : -2;
-            okf[i] = good;
-            const float v = a.vis[x];
-            const float vg = good * Fin(v);
-            vv[i] = vg > 0.0f ? v : 0.0f, vok[i] = vg;
+            if constexpr (Rest) {
+                const float inl = good > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
+                px[i] = good > 0.0f ? p0 : 0.0f, py[i] = good > 0.0f ? p1 : 0.0f;
+                pz[i] = good > 0.0f ? p2 : 0.0f;
+                nx[i] = n0 * inl, ny[i] = n1 * inl, nz[i] = n2 * inl;
+                oid[i] = good > 0.0f ? a.id[x] : -2;
+                const float v = a.vis[x];
+                const float vg = good * Fin(v);
+                vv[i] = vg > 0.0f ? v : 0.0f, vok[i] = vg;
+            }
+            if constexpr (Depth) dz[i] = good > 0.0f ? z : 0.0f, okf[i] = good;
         }
-        if (a.px) {
+        if constexpr (Rest) {
             StoreRow(px, n, a.px + x0, a.stream), StoreRow(py, n, a.py + x0, a.stream),
                 StoreRow(pz, n, a.pz + x0, a.stream);
             StoreRow(nx, n, a.nx + x0, a.stream), StoreRow(ny, n, a.ny + x0, a.stream),
@@ -356,11 +361,20 @@ TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
             StoreRow(vv, n, a.vv + x0, a.stream), StoreRow(vok, n, a.vok + x0, a.stream);
             StoreRow(oid, n, a.oid + x0, a.stream);
         }
-        if (a.dz) {
+        if constexpr (Depth) {
             StoreRow(dz, n, a.dz + x0, a.stream);
             for (int i = 0; i < n; ++i) a.ok[x0 + i] = okf[i] > 0.0f ? 1 : 0;
         }
     }
+}
+TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& a) {
+    PrepGuidesImpl<true, true>(a);
+}
+TEXCACHE_SCREEN_CLONES void PrepGuidesRest(const GuideRow& a) {
+    PrepGuidesImpl<true, false>(a);
+}
+TEXCACHE_SCREEN_CLONES void PrepGuidesDepth(const GuideRow& a) {
+    PrepGuidesImpl<false, true>(a);
 }
 
 // Glossy of one row, divided by F_beta = F0 A + B at (n.v, alpha) (bilinear in the table) when
@@ -648,7 +662,7 @@ void PrepareHalf(ScreenSpaceDenoiser::State& s, const FrameBuffers& f) {
     DownsampleFrame(f, s.conesPath, &s.halfFrame, &s.halfSource, [&](int y) {
         GuideRow a = GuideInputs(f, s.w, y, stream);
         a.dz = g.depth.Row(y), a.ok = g.valid.Row(y);
-        PrepGuides(a);
+        PrepGuidesDepth(a);
     });
     DepthTolerance(s);
 }
@@ -881,7 +895,7 @@ void UpsampleCompose(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::S
         gr.px = buf(21), gr.py = buf(22), gr.pz = buf(23);
         gr.nx = buf(24), gr.ny = buf(25), gr.nz = buf(26), gr.vv = buf(27), gr.vok = buf(28);
         gr.oid = s.rowIds.data() + t * stride;  // the depth and validity are planes
-        PrepGuides(gr);
+        PrepGuidesRest(gr);
         const GuideRowView gv{gr.px, gr.py, gr.pz, gr.nx, gr.ny, gr.nz, gr.oid};
         float* in[2][7];
         for (int k = 0; k < 7; ++k) in[0][k] = buf(k), in[1][k] = buf(7 + k);
