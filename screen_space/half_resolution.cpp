@@ -200,24 +200,68 @@ inline __attribute__((always_inline)) V8i FiniteV(V8 v) {
     return AbsV(v) <= std::numeric_limits<float>::max();
 }
 
-// Sample k's entries of a chunk of n blocks from b0 on: dst[k][i] = src[row k / 2][(2 (b0 + i)
-// + k % 2) * nc + c] for channel c of nc, the right pixel clamped to the row (its presence flag
-// is 0 there).
+// 16 entries of a frame row, read unaligned.
 template <class T>
-inline __attribute__((always_inline)) void UnpackSamples(const T* const* src, int nc, int c, int w,
-                                                         int b0, int n, T (*dst)[kReduceChunk]) {
-    const bool clamp = 2 * (b0 + n) > w;  // only the last chunk of an odd-width row
+struct Row16;
+template <>
+struct Row16<float> {
+    using V = float __attribute__((vector_size(64), aligned(4), may_alias));
+    using Half = V8;
+};
+template <>
+struct Row16<int32_t> {
+    using V = int32_t __attribute__((vector_size(64), aligned(4), may_alias));
+    using Half = V8i;
+};
+
+// Lanes of 8 blocks' left (Off = C) or right (Off = NC + C) samples of channel C in 16 pixels
+// of NC channels: entry Off + 2 NC i, i < 8. With NC = 3 they span three 16-lane loads: the
+// lanes below 32 are taken from the first two, then the rest from the third.
+#define TEXCACHE_J(i) (Off + 2 * NC * (i))
+#define TEXCACHE_LO(i) (TEXCACHE_J(i) < 32 ? TEXCACHE_J(i) : 0)
+#define TEXCACHE_HI(i) (TEXCACHE_J(i) < 32 ? (i) : TEXCACHE_J(i) - 16)
+template <int NC, int Off, class T, class V = typename Row16<T>::V>
+inline __attribute__((always_inline)) typename Row16<T>::Half Deinterleave(const V* a) {
+    if constexpr (NC == 1) {
+        return __builtin_shufflevector(a[0], a[0], TEXCACHE_J(0), TEXCACHE_J(1), TEXCACHE_J(2),
+                                       TEXCACHE_J(3), TEXCACHE_J(4), TEXCACHE_J(5), TEXCACHE_J(6),
+                                       TEXCACHE_J(7));
+    } else {
+        static_assert(NC == 3);
+        const V t = __builtin_shufflevector(
+            a[0], a[1], TEXCACHE_LO(0), TEXCACHE_LO(1), TEXCACHE_LO(2), TEXCACHE_LO(3),
+            TEXCACHE_LO(4), TEXCACHE_LO(5), TEXCACHE_LO(6), TEXCACHE_LO(7), 0, 0, 0, 0, 0, 0, 0, 0);
+        return __builtin_shufflevector(t, a[2], TEXCACHE_HI(0), TEXCACHE_HI(1), TEXCACHE_HI(2),
+                                       TEXCACHE_HI(3), TEXCACHE_HI(4), TEXCACHE_HI(5),
+                                       TEXCACHE_HI(6), TEXCACHE_HI(7));
+    }
+}
+#undef TEXCACHE_J
+#undef TEXCACHE_LO
+#undef TEXCACHE_HI
+
+// Sample k's entries of a chunk of n blocks from b0 on: dst[k][i] = src[row k / 2][(2 (b0 + i)
+// + k % 2) * NC + C], the right pixel clamped to the row (its presence flag is 0 there). Groups
+// of 8 blocks whose 16 pixels lie in the row are deinterleaved with shuffles (GCC leaves the
+// strided copy scalar, and it took most of the reduction's time); the rest entry by entry.
+template <int NC, int C, class T>
+inline __attribute__((always_inline)) void UnpackSamples(const T* const* src, int w, int b0, int n,
+                                                         T (*dst)[kReduceChunk]) {
+    using V = typename Row16<T>::V;
+    using H = typename Row16<T>::Half;
+    const int groups = std::max(0, std::min(n, w / 2 - b0)) / 8;
 #pragma GCC unroll 2
     for (int r = 0; r < 2; ++r) {
-        const T* s = src[r] + size_t(2 * b0) * size_t(nc) + size_t(c);
-        if (!clamp) {
-            for (int i = 0; i < n; ++i)
-                dst[2 * r][i] = s[2 * nc * i], dst[2 * r + 1][i] = s[2 * nc * i + nc];
-        } else {
-            for (int i = 0; i < n; ++i) {
-                const int xr = std::min(2 * (b0 + i) + 1, w - 1) - 2 * b0;
-                dst[2 * r][i] = s[2 * nc * i], dst[2 * r + 1][i] = s[nc * xr];
-            }
+        const T* s = src[r] + size_t(2 * b0) * size_t(NC);
+        for (int g = 0; g < groups; ++g) {
+            V in[NC];
+            for (int k = 0; k < NC; ++k) in[k] = reinterpret_cast<const V*>(s + 16 * NC * g)[k];
+            *reinterpret_cast<H*>(&dst[2 * r][8 * g]) = Deinterleave<NC, C, T>(in);
+            *reinterpret_cast<H*>(&dst[2 * r + 1][8 * g]) = Deinterleave<NC, NC + C, T>(in);
+        }
+        for (int i = 8 * groups; i < n; ++i) {
+            const int xr = std::min(2 * (b0 + i) + 1, w - 1) - 2 * b0;
+            dst[2 * r][i] = s[2 * NC * i + C], dst[2 * r + 1][i] = s[NC * xr + C];
         }
     }
 }
@@ -231,11 +275,11 @@ TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
     alignas(64) int id[4][kC] = {}, ra[kC] = {};
     for (int b0 = 0; b0 < a.hw; b0 += kC) {
         const int n = std::min(kC, a.hw - b0);
-        UnpackSamples(a.depth, 1, 0, a.w, b0, n, z);
-        UnpackSamples(a.nrm, 3, 0, a.w, b0, n, nx);
-        UnpackSamples(a.nrm, 3, 1, a.w, b0, n, ny);
-        UnpackSamples(a.nrm, 3, 2, a.w, b0, n, nz);
-        UnpackSamples(a.id, 1, 0, a.w, b0, n, id);
+        UnpackSamples<1, 0>(a.depth, a.w, b0, n, z);
+        UnpackSamples<3, 0>(a.nrm, a.w, b0, n, nx);
+        UnpackSamples<3, 1>(a.nrm, a.w, b0, n, ny);
+        UnpackSamples<3, 2>(a.nrm, a.w, b0, n, nz);
+        UnpackSamples<1, 0>(a.id, a.w, b0, n, id);
         for (int i = 0; i < n; ++i) {
             const float presR = 2 * (b0 + i) + 1 < a.w ? 1.0f : 0.0f;
             pres[0][i] = 1.0f, pres[1][i] = presR, pres[2][i] = a.pres1;
@@ -304,7 +348,7 @@ TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
         // Means over the finite samples of the surface; the representative's own value when
         // none is.
         auto mean1 = [&](const float* const* src, float* dst) __attribute__((always_inline)) {
-            UnpackSamples(src, 1, 0, a.w, b0, n, v[0]);
+            UnpackSamples<1, 0>(src, a.w, b0, n, v[0]);
             for (int i = 0; i < n; ++i) {
                 float sum = 0.0f, cnt = 0.0f, vr = 0.0f;
 #pragma GCC unroll 4
@@ -326,12 +370,15 @@ TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
         alignas(64) float out[3][kC];
         auto mean3 = [&](const float* const* src, const float* const* alb, float* dst)
             __attribute__((always_inline)) {
-            for (int c = 0; c < 3; ++c) {
-                UnpackSamples(src, 3, c, a.w, b0, n, v[c]);
-                if (alb)
-                    UnpackSamples(alb, 3, c, a.w, b0, n, al[c]);
-                else
-                    std::fill_n(&al[c][0][0], 4 * kC, 1.0f);
+            UnpackSamples<3, 0>(src, a.w, b0, n, v[0]);
+            UnpackSamples<3, 1>(src, a.w, b0, n, v[1]);
+            UnpackSamples<3, 2>(src, a.w, b0, n, v[2]);
+            if (alb) {
+                UnpackSamples<3, 0>(alb, a.w, b0, n, al[0]);
+                UnpackSamples<3, 1>(alb, a.w, b0, n, al[1]);
+                UnpackSamples<3, 2>(alb, a.w, b0, n, al[2]);
+            } else {
+                std::fill_n(&al[0][0][0], 3 * 4 * kC, 1.0f);
             }
             for (int i = 0; i < n; i += 8) {
                 const V8i rv = *reinterpret_cast<const V8i*>(&ra[i]);
