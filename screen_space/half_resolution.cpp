@@ -188,7 +188,7 @@ constexpr int kReduceChunk = 64;  // a multiple of 8, the lanes of V8
 using V8 = float __attribute__((vector_size(32)));
 using V8i = int32_t __attribute__((vector_size(32)));
 
-// The helpers and lambdas that take or return V8 are always inlined into the ISA clones, so
+// The functions and lambdas that take or return V8 are always inlined into the ISA clones, so
 // the vector ABI GCC warns about is never used (GCC reports it for the baseline clone at the
 // end of the file, hence no pop).
 #pragma GCC diagnostic ignored "-Wpsabi"
