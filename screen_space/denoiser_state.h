@@ -6,6 +6,7 @@
 // = the previous frame's) are swapped after every frame; nothing is copied between frames. All
 // planes are allocated when the size changes, never per frame.
 #pragma once
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -129,8 +130,11 @@ void CachedWhereNoHistory(ScreenSpaceDenoiser::State& s, bool svgf);
 /// The frame reduced to one sample per 2x2 block (half_resolution.cpp's design note) into `half`,
 /// whose allocations are reused; `source` receives each block's representative pixel. The cones
 /// are copied only `withCones` (the only pass that reads them is Reliable's cone path).
+/// fullRow(y) is called once for every row y of `f`, on the thread that reduces that row's
+/// blocks and just before it does, so that a pass over the same rows of the frame reads them
+/// from the caches rather than from memory.
 void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* half,
-                     std::vector<uint32_t>* source);
+                     std::vector<uint32_t>* source, const std::function<void(int)>& fullRow);
 
 /// Row y of this frame's full-resolution guides where they are read (PrepComponentRows,
 /// UpsampleRow): the planes' rows, or at half resolution per-thread rows prepared just before

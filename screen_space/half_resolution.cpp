@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "screen_space/denoiser_state.h"
 #include "screen_space/internal.h"
@@ -150,10 +151,13 @@ TEXCACHE_SCREEN_CLONES void UpsampleChunks(const UpRow& args) {
 }
 
 // One half row of the reduction, on both full rows of its blocks (row1 = row0 and pres1 = 0
-// where the frame has no second row). Per block, the four samples unrolled with a presence
-// flag each and the choices as selects, not loops over the samples that exist; GCC still does
-// not vectorize it across blocks (the frame's vec3 rows are read at a stride of two pixels),
-// and it remains the reduction's largest cost after the reads themselves.
+// where the frame has no second row). A chunk of blocks is first unpacked into local arrays,
+// one per sample k of the block (0, 1: the first row's left and right pixel; 2, 3: the
+// second's) and channel, so that the choices and the means read them at unit stride, 8 blocks
+// a time: read in place (a stride of two pixels of interleaved vec3 rows) and written as plain
+// loops, GCC left every loop of the reduction scalar. The choices are selects over the four
+// samples with a presence flag each, not loops over the samples that exist; the representative
+// and the colour means use GCC's generic vectors, whose selects it does not have to if-convert.
 struct ReduceRow {
     int w, hw;
     float pres1;            // 1 when the blocks' second row exists
@@ -165,7 +169,7 @@ struct ReduceRow {
     const float* glossy[2];  // or null
     const float* ind[2];     // or null
     const float* alb[2];     // or null
-    size_t rowStart[2];      // index of each full row's first pixel in the frame
+    uint32_t rowStart[2];    // index of each full row's first pixel in the frame
     uint32_t* rep;           // each block's representative pixel
     float* hvis;
     float* hcvis;    // or null
@@ -177,79 +181,182 @@ inline bool FiniteF(float v) {
     return std::fabs(v) <= std::numeric_limits<float>::max();
 }
 
+constexpr int kReduceChunk = 64;  // a multiple of 8, the lanes of V8
+
+// GCC's generic vectors: 8 lanes of the reduction's per-block arithmetic, with selects
+// (mask ? a : b) where the scalar form has branches GCC does not if-convert.
+using V8 = float __attribute__((vector_size(32)));
+using V8i = int32_t __attribute__((vector_size(32)));
+
+// The functions and lambdas that take or return V8 are always inlined into the ISA clones, so
+// the vector ABI GCC warns about is never used (GCC reports it for the baseline clone at the
+// end of the file, hence no pop).
+#pragma GCC diagnostic ignored "-Wpsabi"
+inline __attribute__((always_inline)) V8 AbsV(V8 v) {
+    return reinterpret_cast<V8>(reinterpret_cast<V8i>(v) & 0x7fffffff);
+}
+// FiniteF per lane, as a mask.
+inline __attribute__((always_inline)) V8i FiniteV(V8 v) {
+    return AbsV(v) <= std::numeric_limits<float>::max();
+}
+
+// 16 entries of a frame row, read unaligned.
+template <class T>
+struct Row16;
+template <>
+struct Row16<float> {
+    using V = float __attribute__((vector_size(64), aligned(4), may_alias));
+    using Half = V8;
+};
+template <>
+struct Row16<int32_t> {
+    using V = int32_t __attribute__((vector_size(64), aligned(4), may_alias));
+    using Half = V8i;
+};
+
+// Lanes of 8 blocks' left (Off = C) or right (Off = NC + C) samples of channel C in 16 pixels
+// of NC channels: entry Off + 2 NC i, i < 8. With NC = 3 they span three 16-lane loads: the
+// lanes below 32 are taken from the first two, then the rest from the third.
+#define TEXCACHE_J(i) (Off + 2 * NC * (i))
+#define TEXCACHE_LO(i) (TEXCACHE_J(i) < 32 ? TEXCACHE_J(i) : 0)
+#define TEXCACHE_HI(i) (TEXCACHE_J(i) < 32 ? (i) : TEXCACHE_J(i) - 16)
+template <int NC, int Off, class T, class V = typename Row16<T>::V>
+inline __attribute__((always_inline)) typename Row16<T>::Half Deinterleave(const V* a) {
+    if constexpr (NC == 1) {
+        return __builtin_shufflevector(a[0], a[0], TEXCACHE_J(0), TEXCACHE_J(1), TEXCACHE_J(2),
+                                       TEXCACHE_J(3), TEXCACHE_J(4), TEXCACHE_J(5), TEXCACHE_J(6),
+                                       TEXCACHE_J(7));
+    } else {
+        static_assert(NC == 3);
+        const V t = __builtin_shufflevector(
+            a[0], a[1], TEXCACHE_LO(0), TEXCACHE_LO(1), TEXCACHE_LO(2), TEXCACHE_LO(3),
+            TEXCACHE_LO(4), TEXCACHE_LO(5), TEXCACHE_LO(6), TEXCACHE_LO(7), 0, 0, 0, 0, 0, 0, 0, 0);
+        return __builtin_shufflevector(t, a[2], TEXCACHE_HI(0), TEXCACHE_HI(1), TEXCACHE_HI(2),
+                                       TEXCACHE_HI(3), TEXCACHE_HI(4), TEXCACHE_HI(5),
+                                       TEXCACHE_HI(6), TEXCACHE_HI(7));
+    }
+}
+#undef TEXCACHE_J
+#undef TEXCACHE_LO
+#undef TEXCACHE_HI
+
+// Sample k's entries of a chunk of n blocks from b0 on: dst[k][i] = src[row k / 2][(2 (b0 + i)
+// + k % 2) * NC + C], the right pixel clamped to the row (its presence flag is 0 there). Groups
+// of 8 blocks whose 16 pixels lie in the row are deinterleaved with shuffles (GCC leaves the
+// strided copy scalar, and it took most of the reduction's time); the rest entry by entry.
+template <int NC, int C, class T>
+inline __attribute__((always_inline)) void UnpackSamples(const T* const* src, int w, int b0, int n,
+                                                         T (*dst)[kReduceChunk]) {
+    using V = typename Row16<T>::V;
+    using H = typename Row16<T>::Half;
+    const int groups = std::max(0, std::min(n, w / 2 - b0)) / 8;
+#pragma GCC unroll 2
+    for (int r = 0; r < 2; ++r) {
+        const T* s = src[r] + size_t(2 * b0) * size_t(NC);
+        for (int g = 0; g < groups; ++g) {
+            V in[NC];
+            for (int k = 0; k < NC; ++k) in[k] = reinterpret_cast<const V*>(s + 16 * NC * g)[k];
+            *reinterpret_cast<H*>(&dst[2 * r][8 * g]) = Deinterleave<NC, C, T>(in);
+            *reinterpret_cast<H*>(&dst[2 * r + 1][8 * g]) = Deinterleave<NC, NC + C, T>(in);
+        }
+        for (int i = 8 * groups; i < n; ++i) {
+            const int xr = std::min(2 * (b0 + i) + 1, w - 1) - 2 * b0;
+            dst[2 * r][i] = s[2 * NC * i + C], dst[2 * r + 1][i] = s[NC * xr + C];
+        }
+    }
+}
+
 TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
     const ReduceRow a = args;
-    constexpr int kC = 128;
-    alignas(64) float same[4][kC];
-    alignas(64) int ra[kC], col[2][kC];
+    constexpr int kC = kReduceChunk;
+    // Zeroed once: a last chunk shorter than 8 blocks computes its lanes past n from them.
+    alignas(64) float z[4][kC] = {}, nx[4][kC] = {}, ny[4][kC] = {}, nz[4][kC] = {},
+                      same[4][kC] = {}, pres[4][kC] = {}, v[3][4][kC] = {}, al[3][4][kC] = {};
+    alignas(64) int id[4][kC] = {}, ra[kC] = {};
     for (int b0 = 0; b0 < a.hw; b0 += kC) {
         const int n = std::min(kC, a.hw - b0);
-        // The representative (the depth medoid among usable samples, samples of other objects
-        // counting as far) and the samples of its surface.
+        UnpackSamples<1, 0>(a.depth, a.w, b0, n, z);
+        UnpackSamples<3, 0>(a.nrm, a.w, b0, n, nx);
+        UnpackSamples<3, 1>(a.nrm, a.w, b0, n, ny);
+        UnpackSamples<3, 2>(a.nrm, a.w, b0, n, nz);
+        UnpackSamples<1, 0>(a.id, a.w, b0, n, id);
         for (int i = 0; i < n; ++i) {
-            const int b = b0 + i;
-            const int xl = 2 * b, xr = std::min(2 * b + 1, a.w - 1);
-            const float presR = 2 * b + 1 < a.w ? 1.0f : 0.0f;
-            const float pres[4] = {1.0f, presR, a.pres1, presR * a.pres1};
-            float z[4], nx[4], ny[4], nz[4], use[4];
-            int id[4];
+            const float presR = 2 * (b0 + i) + 1 < a.w ? 1.0f : 0.0f;
+            pres[0][i] = 1.0f, pres[1][i] = presR, pres[2][i] = a.pres1;
+            pres[3][i] = presR * a.pres1;
+        }
+        // The representative (the depth medoid among usable samples, samples of other objects
+        // counting as far) and the samples of its surface, 8 blocks at a time (the entries past
+        // n hold an earlier chunk's values or 0 and are not stored).
+        for (int i = 0; i < n; i += 8) {
+            auto ld = [&](const auto& arr, int k) __attribute__((always_inline)) {
+                using E = std::remove_cvref_t<decltype(arr[0][0])>;
+                using V = std::conditional_t<std::is_same_v<E, float>, V8, V8i>;
+                return *reinterpret_cast<const V*>(&arr[k][i]);
+            };
+            V8 zk[4], nxk[4], nyk[4], nzk[4], pk[4];
+            V8i idk[4], use[4];
 #pragma GCC unroll 4
             for (int k = 0; k < 4; ++k) {
-                const int r = k >> 1, x = (k & 1) ? xr : xl;
-                z[k] = a.depth[r][x], id[k] = a.id[r][x];
-                nx[k] = a.nrm[r][3 * x], ny[k] = a.nrm[r][3 * x + 1], nz[k] = a.nrm[r][3 * x + 2];
-                use[k] = pres[k] > 0.0f && FiniteF(z[k]) && FiniteF(nx[k]) && FiniteF(ny[k]) &&
-                                 FiniteF(nz[k]) && id[k] >= 0
-                             ? 1.0f
-                             : 0.0f;
+                zk[k] = ld(z, k), nxk[k] = ld(nx, k), nyk[k] = ld(ny, k), nzk[k] = ld(nz, k);
+                pk[k] = ld(pres, k), idk[k] = ld(id, k);
+                use[k] = (pk[k] > 0.0f) & FiniteV(zk[k]) & FiniteV(nxk[k]) & FiniteV(nyk[k]) &
+                         FiniteV(nzk[k]) & (idk[k] >= 0);
             }
-            float best = INFINITY;
-            int r = 0;
+            V8 best = V8{} + INFINITY;
+            V8i r = V8i{};
 #pragma GCC unroll 4
             for (int k = 0; k < 4; ++k) {
-                const float inv = 1.0f / z[k];
-                float cost = 0.0f;
+                const V8 inv = 1.0f / zk[k];
+                V8 cost = V8{};
 #pragma GCC unroll 4
                 for (int m = 0; m < 4; ++m) {
-                    const bool sm = use[m] > 0.0f && id[m] == id[k];
-                    const float c = sm ? std::fabs(z[m] - z[k]) * inv : 1.0f;
-                    cost += pres[m] > 0.0f ? c : 0.0f;
+                    const V8i sm = use[m] & (idk[m] == idk[k]);
+                    const V8 c = sm ? AbsV(zk[m] - zk[k]) * inv : V8{} + 1.0f;
+                    cost += pk[m] > 0.0f ? c : V8{};
                 }
-                const bool better = use[k] > 0.0f && cost < best;
-                best = better ? cost : best, r = better ? k : r;
+                const V8i better = use[k] & (cost < best);
+                best = better ? cost : best, r = better ? V8i{} + k : r;
             }
-            auto pick = [&](const auto* v) {
+            auto pick = [&](const auto* v) __attribute__((always_inline)) {
                 return r == 0 ? v[0] : r == 1 ? v[1] : r == 2 ? v[2] : v[3];
             };
-            const float zr = pick(z), nxr = pick(nx), nyr = pick(ny), nzr = pick(nz);
-            const int idr = pick(id);
-            const float user = pick(use);
-            float ns = 0.0f;
+            const V8 zr = pick(zk), nxr = pick(nxk), nyr = pick(nyk), nzr = pick(nzk);
+            const V8i idr = pick(idk), user = pick(use);
+            V8 sk[4], ns = V8{};
 #pragma GCC unroll 4
             for (int k = 0; k < 4; ++k) {
-                const float d = nx[k] * nxr + ny[k] * nyr + nz[k] * nzr;
-                const bool sm = user > 0.0f && use[k] > 0.0f && id[k] == idr &&
-                                std::fabs(z[k] - zr) <= kSameDepth * zr && d >= kMinNormalDot;
-                same[k][i] = sm ? 1.0f : 0.0f;
-                ns += same[k][i];
+                const V8 d = nxk[k] * nxr + nyk[k] * nyr + nzk[k] * nzr;
+                const V8i sm = user & use[k] & (idk[k] == idr) &
+                               (AbsV(zk[k] - zr) <= kSameDepth * zr) & (d >= kMinNormalDot);
+                sk[k] = sm ? V8{} + 1.0f : V8{};
+                ns += sk[k];
             }
             // No usable sample of its own surface: the representative alone.
 #pragma GCC unroll 4
-            for (int k = 0; k < 4; ++k) same[k][i] = ns == 0.0f && k == r ? 1.0f : same[k][i];
-            ra[i] = r, col[0][i] = xl, col[1][i] = xr;
-            a.rep[b] = uint32_t(a.rowStart[r >> 1] + size_t((r & 1) ? xr : xl));
+            for (int k = 0; k < 4; ++k) {
+                sk[k] = (ns == 0.0f) & (r == k) ? V8{} + 1.0f : sk[k];
+                *reinterpret_cast<V8*>(&same[k][i]) = sk[k];
+            }
+            *reinterpret_cast<V8i*>(&ra[i]) = r;
+        }
+        for (int i = 0; i < n; ++i) {
+            const uint32_t xl = uint32_t(2 * (b0 + i));
+            const uint32_t xr = uint32_t(std::min(2 * (b0 + i) + 1, a.w - 1));
+            a.rep[b0 + i] = (ra[i] >= 2 ? a.rowStart[1] : a.rowStart[0]) + ((ra[i] & 1) ? xr : xl);
         }
         // Means over the finite samples of the surface; the representative's own value when
         // none is.
-        auto mean1 = [&](const float* const* src, float* dst) {
+        auto mean1 = [&](const float* const* src, float* dst) __attribute__((always_inline)) {
+            UnpackSamples<1, 0>(src, a.w, b0, n, v[0]);
             for (int i = 0; i < n; ++i) {
                 float sum = 0.0f, cnt = 0.0f, vr = 0.0f;
 #pragma GCC unroll 4
                 for (int k = 0; k < 4; ++k) {
-                    const float v = src[k >> 1][col[k & 1][i]];
-                    const bool m = same[k][i] > 0.0f && FiniteF(v);
-                    sum += m ? v : 0.0f, cnt += m ? 1.0f : 0.0f;
-                    vr = ra[i] == k ? v : vr;
+                    const float x = v[0][k][i];
+                    const bool m = (same[k][i] > 0.0f) & FiniteF(x);
+                    sum += m ? x : 0.0f, cnt += m ? 1.0f : 0.0f;
+                    vr = ra[i] == k ? x : vr;
                 }
                 dst[b0 + i] = cnt > 0.0f ? sum / cnt : vr;
             }
@@ -257,40 +364,54 @@ TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
         mean1(a.vis, a.hvis);
         if (a.hcvis) mean1(a.cvis, a.hcvis);
         // Colour means; with `alb`, demodulated where the albedo can be divided out and
-        // remodulated with the representative's albedo, as the stage does.
-        auto mean3 = [&](const float* const* src, const float* const* alb, float* dst) {
-            for (int i = 0; i < n; ++i) {
-                float sum[3] = {0.0f, 0.0f, 0.0f}, cnt = 0.0f, vr[3] = {0.0f, 0.0f, 0.0f},
-                      ar[3] = {1.0f, 1.0f, 1.0f};
-                if (alb)
+        // remodulated with the representative's albedo, as the stage does. Without, the albedo
+        // is taken as 1, which leaves every value as it is (raw / 1 * 1 = raw) and keeps the
+        // loop free of branches.
+        alignas(64) float out[3][kC];
+        auto mean3 = [&](const float* const* src, const float* const* alb, float* dst)
+            __attribute__((always_inline)) {
+            UnpackSamples<3, 0>(src, a.w, b0, n, v[0]);
+            UnpackSamples<3, 1>(src, a.w, b0, n, v[1]);
+            UnpackSamples<3, 2>(src, a.w, b0, n, v[2]);
+            if (alb) {
+                UnpackSamples<3, 0>(alb, a.w, b0, n, al[0]);
+                UnpackSamples<3, 1>(alb, a.w, b0, n, al[1]);
+                UnpackSamples<3, 2>(alb, a.w, b0, n, al[2]);
+            } else {
+                std::fill_n(&al[0][0][0], 3 * 4 * kC, 1.0f);
+            }
+            for (int i = 0; i < n; i += 8) {
+                const V8i rv = *reinterpret_cast<const V8i*>(&ra[i]);
+                V8 sum[3] = {}, cnt = V8{}, vr[3] = {}, ar[3];
+                for (int c = 0; c < 3; ++c) ar[c] = V8{} + 1.0f;
 #pragma GCC unroll 4
-                    for (int k = 0; k < 4; ++k)
+                for (int k = 0; k < 4; ++k)
 #pragma GCC unroll 3
-                        for (int c = 0; c < 3; ++c)
-                            ar[c] = ra[i] == k ? alb[k >> 1][3 * col[k & 1][i] + c] : ar[c];
+                    for (int c = 0; c < 3; ++c)
+                        ar[c] = rv == k ? *reinterpret_cast<const V8*>(&al[c][k][i]) : ar[c];
 #pragma GCC unroll 4
                 for (int k = 0; k < 4; ++k) {
-                    float v[3];
-                    bool fin = same[k][i] > 0.0f;
+                    V8 x[3];
+                    V8i fin = *reinterpret_cast<const V8*>(&same[k][i]) > 0.0f;
 #pragma GCC unroll 3
                     for (int c = 0; c < 3; ++c) {
-                        const float raw = src[k >> 1][3 * col[k & 1][i] + c];
-                        vr[c] = ra[i] == k ? raw : vr[c];
-                        v[c] = raw;
-                        if (alb) {
-                            const float al = alb[k >> 1][3 * col[k & 1][i] + c];
-                            v[c] = al > 1e-3f ? raw / al * ar[c] : kNaN;
-                        }
-                        fin = fin && FiniteF(v[c]);
+                        const V8 raw = *reinterpret_cast<const V8*>(&v[c][k][i]);
+                        const V8 alk = *reinterpret_cast<const V8*>(&al[c][k][i]);
+                        vr[c] = rv == k ? raw : vr[c];
+                        x[c] = alk > 1e-3f ? raw / alk * ar[c] : V8{} + kNaN;
+                        fin = fin & FiniteV(x[c]);
                     }
 #pragma GCC unroll 3
-                    for (int c = 0; c < 3; ++c) sum[c] += fin ? v[c] : 0.0f;
-                    cnt += fin ? 1.0f : 0.0f;
+                    for (int c = 0; c < 3; ++c) sum[c] += fin ? x[c] : V8{};
+                    cnt += fin ? V8{} + 1.0f : V8{};
                 }
 #pragma GCC unroll 3
                 for (int c = 0; c < 3; ++c)
-                    dst[3 * (b0 + i) + c] = cnt > 0.0f ? sum[c] / cnt : vr[c];
+                    *reinterpret_cast<V8*>(&out[c][i]) = cnt > 0.0f ? sum[c] / cnt : vr[c];
             }
+            float* d = dst + 3 * size_t(b0);
+            for (int i = 0; i < n; ++i)
+                d[3 * i] = out[0][i], d[3 * i + 1] = out[1][i], d[3 * i + 2] = out[2][i];
         };
         if (a.hglossy) mean3(a.glossy, nullptr, a.hglossy);
         if (a.hind) mean3(a.ind, a.alb[0] ? a.alb : nullptr, a.hind);
@@ -300,7 +421,7 @@ TEXCACHE_SCREEN_CLONES void ReduceBlocks(const ReduceRow& args) {
 }  // namespace
 
 void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* h,
-                     std::vector<uint32_t>* source) {
+                     std::vector<uint32_t>* source, const std::function<void(int)>& fullRow) {
     const int hw = (f.width + 1) / 2, hh = (f.height + 1) / 2;
     const size_t n = size_t(hw) * size_t(hh);
     h->width = hw, h->height = hh, h->time = f.time;
@@ -321,13 +442,15 @@ void DownsampleFrame(const FrameBuffers& f, bool withCones, FrameBuffers* h,
     // copies from them, while the block row's full rows are still in the caches.
     ForRows(hh, [&](int by) {
         const int y0 = 2 * by, y1 = std::min(2 * by + 1, f.height - 1);
+        fullRow(y0);
+        if (y1 != y0) fullRow(y1);
         const size_t rows[2] = {size_t(y0) * size_t(f.width), size_t(y1) * size_t(f.width)};
         const size_t o = size_t(by) * size_t(hw);
         ReduceRow a;
         a.w = f.width, a.hw = hw, a.pres1 = 2 * by + 1 < f.height ? 1.0f : 0.0f;
         for (int r = 0; r < 2; ++r) {
             const size_t i = rows[r];
-            a.rowStart[r] = i;
+            a.rowStart[r] = uint32_t(i);
             a.depth[r] = &f.depth[i], a.id[r] = &f.objectId[i], a.nrm[r] = &f.normal[i].x;
             a.vis[r] = &f.visibility[i];
             a.cvis[r] = f.cachedVisibility.empty() ? nullptr : &f.cachedVisibility[i];

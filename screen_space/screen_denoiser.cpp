@@ -313,15 +313,19 @@ struct GuideRow {
     const float* depth;
     const int32_t* id;
     const float* vis;
-    // Either group may be null and is then not written: half resolution keeps only the depth
-    // and validity as planes (DepthTolRow reads them on the rows above and below) and prepares
-    // the rest row by row where it is used (UpsampleCompose).
+    // The first group (PrepGuidesRest) or the second (PrepGuidesDepth) alone at half
+    // resolution: it keeps only the depth and validity as planes (DepthTolRow reads them on
+    // the rows above and below) and prepares the rest row by row where it is used
+    // (UpsampleCompose).
     float *px, *py, *pz, *nx, *ny, *nz, *vv, *vok;
     int32_t* oid;
     float* dz;
     uint8_t* ok;
 };
-TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
+// Rest: the first group (px .. oid); Depth: dz and ok. Each variant computes only what it
+// writes: half resolution's depth pass needs the validity, not the normalized normal.
+template <bool Rest, bool Depth>
+inline __attribute__((always_inline)) void PrepGuidesImpl(const GuideRow& args) {
     const GuideRow a = args;
     constexpr int kC = kPrepChunk;
     alignas(64) float px[kC], py[kC], pz[kC], nx[kC], ny[kC], nz[kC], dz[kC], vv[kC], vok[kC],
@@ -337,18 +341,19 @@ TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
             const float nl2 = n0 * n0 + n1 * n1 + n2 * n2;
             const float good = Fin(p0 + p1 + p2) * Fin(nl2) * (nl2 > 0.0f ? 1.0f : 0.0f) * Fin(z) *
                                (z > 0.0f ? 1.0f : 0.0f);
-            const float inl = good > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
-            px[i] = good > 0.0f ? p0 : 0.0f, py[i] = good > 0.0f ? p1 : 0.0f;
-            pz[i] = good > 0.0f ? p2 : 0.0f;
-            nx[i] = n0 * inl, ny[i] = n1 * inl, nz[i] = n2 * inl;
-            dz[i] = good > 0.0f ? z : 0.0f;
-            oid[i] = good > 0.0f ? a.id[x] : -2;
-            okf[i] = good;
-            const float v = a.vis[x];
-            const float vg = good * Fin(v);
-            vv[i] = vg > 0.0f ? v : 0.0f, vok[i] = vg;
+            if constexpr (Rest) {
+                const float inl = good > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
+                px[i] = good > 0.0f ? p0 : 0.0f, py[i] = good > 0.0f ? p1 : 0.0f;
+                pz[i] = good > 0.0f ? p2 : 0.0f;
+                nx[i] = n0 * inl, ny[i] = n1 * inl, nz[i] = n2 * inl;
+                oid[i] = good > 0.0f ? a.id[x] : -2;
+                const float v = a.vis[x];
+                const float vg = good * Fin(v);
+                vv[i] = vg > 0.0f ? v : 0.0f, vok[i] = vg;
+            }
+            if constexpr (Depth) dz[i] = good > 0.0f ? z : 0.0f, okf[i] = good;
         }
-        if (a.px) {
+        if constexpr (Rest) {
             StoreRow(px, n, a.px + x0, a.stream), StoreRow(py, n, a.py + x0, a.stream),
                 StoreRow(pz, n, a.pz + x0, a.stream);
             StoreRow(nx, n, a.nx + x0, a.stream), StoreRow(ny, n, a.ny + x0, a.stream),
@@ -356,11 +361,20 @@ TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& args) {
             StoreRow(vv, n, a.vv + x0, a.stream), StoreRow(vok, n, a.vok + x0, a.stream);
             StoreRow(oid, n, a.oid + x0, a.stream);
         }
-        if (a.dz) {
+        if constexpr (Depth) {
             StoreRow(dz, n, a.dz + x0, a.stream);
             for (int i = 0; i < n; ++i) a.ok[x0 + i] = okf[i] > 0.0f ? 1 : 0;
         }
     }
+}
+TEXCACHE_SCREEN_CLONES void PrepGuides(const GuideRow& a) {
+    PrepGuidesImpl<true, true>(a);
+}
+TEXCACHE_SCREEN_CLONES void PrepGuidesRest(const GuideRow& a) {
+    PrepGuidesImpl<true, false>(a);
+}
+TEXCACHE_SCREEN_CLONES void PrepGuidesDepth(const GuideRow& a) {
+    PrepGuidesImpl<false, true>(a);
 }
 
 // Glossy of one row, divided by F_beta = F0 A + B at (n.v, alpha) (bilinear in the table) when
@@ -377,14 +391,63 @@ struct GlossyRow {
     float cam[3];
     float *v[3], *r[3], *valid;
 };
+// The table's (A, B) pairs at (iu, it), (iu + 1, it), (iu, it + 1), (iu + 1, it + 1) for each
+// pixel of a chunk, e00[i] being the first one's index: q[0..3][i] = A, B at iu and A, B at
+// iu + 1 of row it, q[4..7][i] the same of row it + 1. Each row's four floats are adjacent, so
+// they are read as one 16-byte load and four pixels transposed at a time: GCC tunes AVX-512
+// code for CPUs whose gather instructions are slow and emulates the 8 gathers per pixel of the
+// plain lookup with scalar loads and inserts, which took about 40% of PrepGlossyDemod.
+inline __attribute__((always_inline)) void FetchBrdfQuads(const float* tb, const int* e00, int n,
+                                                          float (*q)[kPrepChunk]) {
+    constexpr int kRow = 2 * BrdfPreintegration::kSize;
+    int i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (int r = 0; r < 2; ++r) {
+            __m128 v0 = _mm_loadu_ps(tb + e00[i] + r * kRow);
+            __m128 v1 = _mm_loadu_ps(tb + e00[i + 1] + r * kRow);
+            __m128 v2 = _mm_loadu_ps(tb + e00[i + 2] + r * kRow);
+            __m128 v3 = _mm_loadu_ps(tb + e00[i + 3] + r * kRow);
+            _MM_TRANSPOSE4_PS(v0, v1, v2, v3);
+            _mm_storeu_ps(&q[4 * r][i], v0), _mm_storeu_ps(&q[4 * r + 1][i], v1);
+            _mm_storeu_ps(&q[4 * r + 2][i], v2), _mm_storeu_ps(&q[4 * r + 3][i], v3);
+        }
+    for (; i < n; ++i)
+        for (int k = 0; k < 8; ++k) q[k][i] = tb[e00[i] + (k >> 2) * kRow + (k & 3)];
+}
+
 template <bool Demod>
 inline __attribute__((always_inline)) void PrepGlossyImpl(const GlossyRow& args) {
     const GlossyRow a = args;
     constexpr int kC = kPrepChunk;
     constexpr int kT = BrdfPreintegration::kSize;
     alignas(64) float gv[3][kC], gr[3][kC], gok[kC];
+    alignas(64) float fu[kC], ft[kC], cosT[kC], q[Demod ? 8 : 1][kC];
+    alignas(64) int e00[kC];
     for (int x0 = 0; x0 < a.w; x0 += kC) {
         const int n = std::min(kC, a.w - x0);
+        if constexpr (Demod) {
+            // The table coordinates (cos theta, alpha) of each pixel; the lookup itself below.
+            for (int i = 0; i < n; ++i) {
+                const int x = x0 + i;
+                const float f0 = a.f0[3 * x], f1 = a.f0[3 * x + 1], f2 = a.f0[3 * x + 2];
+                const float ro = a.rough[x];
+                const float good = a.ok[x] ? 1.0f : 0.0f;
+                const float vx = a.cam[0] - a.px[x], vy = a.cam[1] - a.py[x],
+                            vz = a.cam[2] - a.pz[x];
+                const float vl2 = vx * vx + vy * vy + vz * vz;
+                const float ct =
+                    (a.nx[x] * vx + a.ny[x] * vy + a.nz[x] * vz) / std::sqrt(std::max(vl2, 1e-30f));
+                const float use = good * Fin(f0 + f1 + f2) * Fin(ro) * Fin(ct);
+                constexpr float kS = float(kT - 1);
+                const float u = std::min(std::max(use > 0.0f ? ct : 0.0f, 0.0f), 1.0f) * kS;
+                const float t = std::min(std::max(use > 0.0f ? ro : 0.0f, 0.0f), 1.0f) * kS;
+                const int iu = std::min(int(u), kT - 2), it = std::min(int(t), kT - 2);
+                fu[i] = u - float(iu), ft[i] = t - float(it);
+                e00[i] = 2 * (it * kT + iu);
+                cosT[i] = ct;
+            }
+            FetchBrdfQuads(a.table, e00, n, q);
+        }
         for (int i = 0; i < n; ++i) {
             const int x = x0 + i;
             const float c0 = a.c[3 * x], c1 = a.c[3 * x + 1], c2 = a.c[3 * x + 2];
@@ -392,24 +455,12 @@ inline __attribute__((always_inline)) void PrepGlossyImpl(const GlossyRow& args)
             float r0 = 1.0f, r1 = 1.0f, r2 = 1.0f;
             if constexpr (Demod) {
                 const float f0 = a.f0[3 * x], f1 = a.f0[3 * x + 1], f2 = a.f0[3 * x + 2];
-                const float ro = a.rough[x];
-                const float vx = a.cam[0] - a.px[x], vy = a.cam[1] - a.py[x],
-                            vz = a.cam[2] - a.pz[x];
-                const float vl2 = vx * vx + vy * vy + vz * vz;
-                const float cosT =
-                    (a.nx[x] * vx + a.ny[x] * vy + a.nz[x] * vz) / std::sqrt(std::max(vl2, 1e-30f));
-                const float use = good * Fin(f0 + f1 + f2) * Fin(ro) * Fin(cosT);
-                constexpr float kS = float(kT - 1);
-                const float u = std::min(std::max(use > 0.0f ? cosT : 0.0f, 0.0f), 1.0f) * kS;
-                const float t = std::min(std::max(use > 0.0f ? ro : 0.0f, 0.0f), 1.0f) * kS;
-                const int iu = std::min(int(u), kT - 2), it = std::min(int(t), kT - 2);
-                const float fu = u - float(iu), ft = t - float(it);
-                const int e00 = 2 * (it * kT + iu), e01 = e00 + 2 * kT;
-                const float* tb = a.table;
-                const float sa = (1.0f - ft) * ((1.0f - fu) * tb[e00] + fu * tb[e00 + 2]) +
-                                 ft * ((1.0f - fu) * tb[e01] + fu * tb[e01 + 2]);
-                const float sb = (1.0f - ft) * ((1.0f - fu) * tb[e00 + 1] + fu * tb[e00 + 3]) +
-                                 ft * ((1.0f - fu) * tb[e01 + 1] + fu * tb[e01 + 3]);
+                const float use = good * Fin(f0 + f1 + f2) * Fin(a.rough[x]) * Fin(cosT[i]);
+                const float u = fu[i], t = ft[i];
+                const float sa = (1.0f - t) * ((1.0f - u) * q[0][i] + u * q[2][i]) +
+                                 t * ((1.0f - u) * q[4][i] + u * q[6][i]);
+                const float sb = (1.0f - t) * ((1.0f - u) * q[1][i] + u * q[3][i]) +
+                                 t * ((1.0f - u) * q[5][i] + u * q[7][i]);
                 const float b0 = f0 * sa + sb, b1 = f1 * sa + sb, b2 = f2 * sa + sb;
                 r0 = use > 0.0f && b0 > kMinRemod ? b0 : 1.0f;
                 r1 = use > 0.0f && b1 > kMinRemod ? b1 : 1.0f;
@@ -572,37 +623,53 @@ void PrepComponentRows(const ScreenSpaceDenoiser::State& s, const FrameBuffers& 
     }
 }
 
-// One sweep over the frame's buffers: guides and visibility as planes and, with `components`,
-// the demodulated glossy and indirect inputs and the cached visibility. Half resolution takes
-// the guides only: its components are reduced from the frame and the full-resolution ones are
-// prepared row by row where they are used (UpsampleCompose).
+// The frame's buffers of row y that PrepGuides reads; its outputs are left null.
+GuideRow GuideInputs(const FrameBuffers& f, int w, int y, bool stream) {
+    const size_t row = size_t(y) * size_t(w);
+    GuideRow a;
+    a.w = w, a.stream = stream;
+    a.pos = &f.position[row].x, a.nrm = &f.normal[row].x;
+    a.depth = &f.depth[row], a.id = &f.objectId[row], a.vis = &f.visibility[row];
+    a.px = a.py = a.pz = a.nx = a.ny = a.nz = a.vv = a.vok = a.dz = nullptr;
+    a.oid = nullptr, a.ok = nullptr;
+    return a;
+}
+
+// The depth tolerance plane of this frame's guides (DepthTolRow), from its depth and validity.
+void DepthTolerance(ScreenSpaceDenoiser::State& s) {
+    Guides& g = s.G();
+    ForRows(s.h, [&](int y) {
+        const int yu = y > 0 ? y - 1 : y, yd = y + 1 < s.h ? y + 1 : y;
+        // A neighbour row outside the image gets validity flags that are all 0.
+        DepthTolRow(s.w, g.depth.Row(y), g.depth.Row(yu), g.depth.Row(yd), g.valid.Row(y),
+                    y > 0 ? g.valid.Row(yu) : s.zeroRow.data() + kPad,
+                    y + 1 < s.h ? g.valid.Row(yd) : s.zeroRow.data() + kPad, g.invDz.Row(y));
+    });
+}
+
+// One sweep over the frame's buffers: guides and visibility as planes, the demodulated glossy
+// and indirect inputs and the cached visibility. Half resolution does not take this path: it
+// prepares the depth and validity planes inside the reduction's pass (DownsampleFrame's row
+// hook) and the rest row by row where it is used (UpsampleCompose).
 void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPreintegration* brdf,
-             bool demod, bool components) {
+             bool demod) {
     Guides& g = s.G();
     const int w = s.w;
     ComponentPlanes& vis = s.comp[kVis];
     ComponentPlanes& gl = s.comp[kGlossy];
     ComponentPlanes& ind = s.comp[kIndirect];
     // Guides, visibility and its validity; each further component's 3 values, 3 factors,
-    // validity. Half resolution: the depth and the validity.
-    const int planes = components ? 11 + (gl.present ? 7 : 0) + (ind.present ? 7 : 0) : 2;
+    // validity.
+    const int planes = 11 + (gl.present ? 7 : 0) + (ind.present ? 7 : 0);
     const bool stream = StreamPlanes(s.w, s.h, planes);
     ForRows(s.h, [&](int y) {
         const size_t row = size_t(y) * size_t(w);
-        GuideRow a;
-        a.w = w, a.stream = stream;
-        a.pos = &f.position[row].x, a.nrm = &f.normal[row].x;
-        a.depth = &f.depth[row], a.id = &f.objectId[row], a.vis = &f.visibility[row];
+        GuideRow a = GuideInputs(f, w, y, stream);
         a.dz = g.depth.Row(y), a.ok = g.valid.Row(y);
-        if (components) {
-            a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
-            a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
-            a.oid = g.objectId.Row(y), a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
-        } else {
-            a.px = a.py = a.pz = a.nx = a.ny = a.nz = a.vv = a.vok = nullptr, a.oid = nullptr;
-        }
+        a.px = g.px.Row(y), a.py = g.py.Row(y), a.pz = g.pz.Row(y);
+        a.nx = g.nx.Row(y), a.ny = g.ny.Row(y), a.nz = g.nz.Row(y);
+        a.oid = g.objectId.Row(y), a.vv = vis.v[0].Row(y), a.vok = vis.valid.Row(y);
         PrepGuides(a);
-        if (!components) return;
         if (s.hasCachedVis) {
             // -1 where there is none or the pixel's geometry is unusable.
             const float* cv = &f.cachedVisibility[row];
@@ -620,13 +687,21 @@ void Prepare(ScreenSpaceDenoiser::State& s, const FrameBuffers& f, const BrdfPre
                               g.ny.Row(y), g.nz.Row(y), g.objectId.Row(y)};
         PrepComponentRows(s, f, brdf, demod, y, gv, stream, glr, indr);
     });
-    ForRows(s.h, [&](int y) {
-        const int yu = y > 0 ? y - 1 : y, yd = y + 1 < s.h ? y + 1 : y;
-        // A neighbour row outside the image gets validity flags that are all 0.
-        DepthTolRow(w, g.depth.Row(y), g.depth.Row(yu), g.depth.Row(yd), g.valid.Row(y),
-                    y > 0 ? g.valid.Row(yu) : s.zeroRow.data() + kPad,
-                    y + 1 < s.h ? g.valid.Row(yd) : s.zeroRow.data() + kPad, g.invDz.Row(y));
+    DepthTolerance(s);
+}
+
+// Half resolution's first pass: the frame reduced to the half frame (DownsampleFrame) and, for
+// each full row while the reduction has it in the caches, the row's depth and validity, the
+// only full-resolution guide planes; then their depth tolerance.
+void PrepareHalf(ScreenSpaceDenoiser::State& s, const FrameBuffers& f) {
+    Guides& g = s.G();
+    const bool stream = StreamPlanes(s.w, s.h, 2);
+    DownsampleFrame(f, s.conesPath, &s.halfFrame, &s.halfSource, [&](int y) {
+        GuideRow a = GuideInputs(f, s.w, y, stream);
+        a.dz = g.depth.Row(y), a.ok = g.valid.Row(y);
+        PrepGuidesDepth(a);
     });
+    DepthTolerance(s);
 }
 
 // ---- Filters -------------------------------------------------------------------------------
@@ -853,15 +928,11 @@ void UpsampleCompose(ScreenSpaceDenoiser::State& s, const ScreenSpaceDenoiser::S
         float* base = s.rowScratch.data() + t * slot;
         auto buf = [&](int k) { return base + size_t(k) * stride; };
         const size_t row = size_t(y) * size_t(s.w);
-        GuideRow gr;
-        gr.w = s.w, gr.stream = false;
-        gr.pos = &f.position[row].x, gr.nrm = &f.normal[row].x;
-        gr.depth = &f.depth[row], gr.id = &f.objectId[row], gr.vis = &f.visibility[row];
+        GuideRow gr = GuideInputs(f, s.w, y, false);
         gr.px = buf(21), gr.py = buf(22), gr.pz = buf(23);
         gr.nx = buf(24), gr.ny = buf(25), gr.nz = buf(26), gr.vv = buf(27), gr.vok = buf(28);
-        gr.oid = s.rowIds.data() + t * stride;
-        gr.dz = nullptr, gr.ok = nullptr;  // planes (Prepare)
-        PrepGuides(gr);
+        gr.oid = s.rowIds.data() + t * stride;  // the depth and validity are planes
+        PrepGuidesRest(gr);
         const GuideRowView gv{gr.px, gr.py, gr.pz, gr.nx, gr.ny, gr.nz, gr.oid};
         float* in[2][7];
         for (int k = 0; k < 7; ++k) in[0][k] = buf(k), in[1][k] = buf(7 + k);
@@ -968,9 +1039,10 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     }
     const BrdfPreintegration* brdf = demod && s.comp[kGlossy].present ? &Brdf() : nullptr;
     const bool half = s.set.halfResolutionRows > 0 && frame.height >= s.set.halfResolutionRows;
-    Prepare(s, frame, brdf, demod, !half);
-    clock.Lap(&StageTimings::prepare);
-    if (half) {
+    if (!half) {
+        Prepare(s, frame, brdf, demod);
+        clock.Lap(&StageTimings::prepare);
+    } else {
         if (!s.half) {
             DenoiserSettings hs = s.set;
             hs.halfResolutionRows = 0;
@@ -981,7 +1053,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
             s.half->s_->composes = false;
             if (s.stillFrames >= 0) s.half->SetStillView(true);
         }
-        DownsampleFrame(frame, s.conesPath, &s.halfFrame, &s.halfSource);
+        PrepareHalf(s, frame);
         clock.Lap(&StageTimings::prepare);
         s.half->Denoise(s.halfFrame, method, demodulation, &s.halfImage);
         clock.Charge(s.half->Timings(), s.half->CpuTimings());

@@ -241,14 +241,16 @@ TEST(ScreenSpaceHalfResolution, KeepsObjectBoundaries) {
     }
 }
 
-// Odd sizes in both directions: the reduction's last column and row of blocks have one or two
-// samples, and the upsample writes its last output pair one past the row. At half resolution
-// the image is composed in the same pass as the upsample and the accessors read what that pass
-// keeps, so they must add up to the image: emitted + shading * Visibility() + Glossy() +
-// Indirect(), within float rounding (1e-5 of the value; the pass and the sum differ only in
-// the order of one multiply-add). Two frames: no history, then reprojected.
-TEST(ScreenSpaceHalfResolution, AccessorsAddUpToTheImageAtOddSizes) {
-    const SynthScene sc = FullScene(131, 91);
+// The half-resolution stage on a width x height frame. Odd sizes: the reduction's last column
+// and row of blocks have one or two samples, and the upsample writes its last output pair one
+// past the row. At half resolution the image is composed in the same pass as the upsample and
+// the accessors read what that pass keeps, so they must add up to the image: emitted + shading
+// * Visibility() + Glossy() + Indirect(), within float rounding (1e-5 of the value; the pass
+// and the sum differ only in the order of one multiply-add). Two frames: no history, then
+// reprojected.
+void ExpectAccessorsAddUpToTheImage(int width, int height) {
+    SCOPED_TRACE(std::to_string(width) + "x" + std::to_string(height));
+    const SynthScene sc = FullScene(width, height);
     DenoiserSettings s;
     s.halfResolutionRows = 1;
     ScreenSpaceDenoiser dn(s, SharedBrdf());
@@ -277,6 +279,19 @@ TEST(ScreenSpaceHalfResolution, AccessorsAddUpToTheImageAtOddSizes) {
         }
         EXPECT_GT(checked, int(f.NumPixels() / 2));
     }
+}
+
+TEST(ScreenSpaceHalfResolution, AccessorsAddUpToTheImageAtOddSizes) {
+    ExpectAccessorsAddUpToTheImage(131, 91);
+}
+
+// The reduction takes blocks in chunks of 64, 8 at a time: widths whose half rows end with a
+// full chunk plus one block, a chunk plus 7 blocks, and two chunks plus 3 blocks with a last
+// block of one column, on a few rows. The image stays finite and consistent with the
+// accessors where a chunk's last lanes are partly past the row (those lanes are computed but
+// not stored).
+TEST(ScreenSpaceHalfResolution, AccessorsAddUpToTheImageAtChunkTails) {
+    for (const int w : {2 * 65, 2 * 71, 2 * 131 - 1}) ExpectAccessorsAddUpToTheImage(w, 11);
 }
 
 TEST(ScreenSpaceRobustness, BadInputThrowsNamingTheBuffer) {
