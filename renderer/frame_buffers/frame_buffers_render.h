@@ -123,7 +123,17 @@
 //   moves (a bin then holds 1 / (1 - alpha) samples of each of its pixels, as a grid texel's
 //   history holds that many frames) and not at all while TextureSpaceCache::Refresh says it is
 //   still (a running mean, which converges); an edited object's bins are forgotten
-//   (TextureSpaceCache::InvalidateObject). Its integer sums are read only between the frame's
+//   (TextureSpaceCache::InvalidateObject). A running mean of bins converges to the bins' blurred
+//   value, not the pixel's, so while the view is still each pixel also keeps its own traced
+//   paths' light (TextureSpaceCache::StillOwnLight: their sum, the sum of their luminance
+//   squared and their count, as traced, before the bound; NaN or infinite paths are dropped;
+//   released while the view moves, started again after a move, a resize, an animation's frame or
+//   an edit), and its read-back is the store's reconstruction moved towards its own mean by
+//   1 - CoarseWeight of their difference and of the own mean's variance, each summed over the
+//   5x5 pixels around it (BlendWithOwnLight): the step from the bins to the pixels' own samples
+//   that the still renderer takes (CombineWithOwnSamples), so that with few own samples it reads
+//   the bins and with many, where the bins are biased (an edge, a contact shadow within a bin),
+//   its own mean, and the error keeps falling. Its integer sums are read only between the frame's
 //   phases: the image is the same for any thread count. With Grid, the paper's grid samples,
 //   each shaded lazily with diffuseLayerPaths (or indirectSamples) paths of its own on a miss.
 //   The specular lobe's ray takes the diffuse lobe's light at its hit from the cache too (that
