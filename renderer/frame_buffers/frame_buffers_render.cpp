@@ -869,6 +869,12 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
 /// frame's.
 constexpr double kStoreMinSamples = 0.5;
 
+/// The store's budget while the view is still: one pixel in this many traces its path a frame.
+/// Every pixel: the store's running mean and the pixels' own samples then gather paths
+/// frameBufferBudget times as fast as while moving, for that much more of the paths' render time
+/// (results/preview.md, "A still view's own samples").
+constexpr int kStillStoreBudget = 1;
+
 /// How many levels finer than the still renderer's schedule (HitBinLevels) the store's bins lie.
 /// The still renderer removes its bins' bias with each pixel's own samples
 /// (CombineWithOwnSamples); the frame buffers have one sample a pixel at most, so the store's
@@ -1052,6 +1058,9 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->records = tsc.HitRecords(n);
         fs->binned = tsc.BinnedHits(n);
         fs->own = tsc.StillOwnLight(W, H);
+        // A still view traces every pixel's path every frame (kStillStoreBudget).
+        if (fs->own)
+            fs->budget = kStillStoreBudget, fs->group = tsc.Frame() % uint32_t(kStillStoreBudget);
         // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.
         const size_t guess =
             4 * tsc.NumFaces() + 2 * n / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
