@@ -205,7 +205,7 @@ TEST(FrameBufferStore, NonFiniteSamplesNeverEnterTheStore) {
     const PixelOwnLight* own = cache.StillOwnLight(o.width, o.height);
     ASSERT_NE(own, nullptr);
     for (size_t p = 0; p < fb.NumPixels(); ++p) {
-        ASSERT_TRUE(std::isfinite(own[p].sum.x + own[p].sum.y + own[p].sum.z + own[p].sum2)) << p;
+        ASSERT_TRUE(Finite(own[p].mean) && std::isfinite(own[p].m2)) << p;
     }
     // No bin saturated: an infinite sample clamped instead of dropped would fill its sums.
     std::vector<uint64_t> records;

@@ -248,12 +248,14 @@ void CombineWithOwnSamples(const double* rgb, const double* own, int width, int 
                            float* out);
 
 /// A frame-buffer pixel's own diffuse light over the frames of a still view (the frame buffers'
-/// store, frame_buffers_render.h): the sum of its traced paths' light, of their luminance
-/// squared, and their count; beside it the frame's read-back of the store there and the two
-/// terms BlendWithOwnLight weighs it by (scratch, rewritten every frame).
+/// store, frame_buffers_render.h): the mean of its traced paths' light, the sum of the squared
+/// deviations of their luminance from it (Welford's update, stable; in double: a bright path's
+/// square overflows a float) and their count; beside it the frame's read-back of the store there
+/// and the two terms BlendWithOwnLight weighs it by (scratch, rewritten every frame). 48 bytes a
+/// pixel.
 struct PixelOwnLight {
-    glm::dvec3 sum{0.0};
-    double sum2 = 0.0;
+    double m2 = 0.0;
+    glm::vec3 mean{0.0f};
     uint32_t n = 0;
     glm::vec3 bin{0.0f};  ///< the store's reconstruction this frame
     float var = 0.0f;     ///< the variance of the own mean (luminance); 0: no own estimate
