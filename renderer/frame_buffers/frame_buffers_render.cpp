@@ -483,6 +483,7 @@ struct FrameStore {
     double termCount = 0.0;      ///< a cell with fewer counts is not read at a ray's hit
     HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
     BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
+    PixelOwnLight* own;          ///< a still view's own samples per pixel; null while moving
 
     /// Whether pixel (x, y) traces its path this frame: its place in a 4x4 ordered-dither
     /// (Bayer) matrix picks its group, and the frame's group rotates, so each pixel traces once
@@ -868,6 +869,12 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
 /// frame's.
 constexpr double kStoreMinSamples = 0.5;
 
+/// The store's budget while the view is still: one pixel in this many traces its path a frame.
+/// Every pixel: the store's running mean and the pixels' own samples then gather paths
+/// frameBufferBudget times as fast as while moving, for that much more of the paths' render time
+/// (results/preview.md, "A still view's own samples").
+constexpr int kStillStoreBudget = 1;
+
 /// How many levels finer than the still renderer's schedule (HitBinLevels) the store's bins lie.
 /// The still renderer removes its bins' bias with each pixel's own samples
 /// (CombineWithOwnSamples); the frame buffers have one sample a pixel at most, so the store's
@@ -908,22 +915,37 @@ LightHitStore& DecayStore(TextureSpaceCache& tsc, size_t firstBlocks, uint32_t k
 }
 
 /// Each stored pixel's diffuse light read back from the store, now holding the frame's hits:
-/// `indirect` is albedo x the reconstruction, and the six cones all hold it (as the grid's).
+/// `indirect` is albedo x the reconstruction, and the six cones all hold it (as the grid's). In a
+/// still view (fs.own) the reconstruction is first blended with the pixel's own samples
+/// (BlendWithOwnLight), which needs its neighbours' estimates: a second pass.
 void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& store,
                   screen::FrameBuffers& fb) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, c.opt.height, 4),
-                      [&](const tbb::blocked_range<int>& r) {
-                          for (int y = r.begin(); y < r.end(); ++y)
-                              for (int x = 0; x < c.opt.width; ++x) {
-                                  const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
-                                  const HitRecord& h = fs.records[p];
-                                  if (h.mesh < 0) continue;
-                                  const glm::vec3 E = FiniteOrZero(StoreLightAt(*c.tsc, store, h));
-                                  fb.indirect[p] = FiniteOrZero(fs.binned[p].albedo * E);
-                                  for (int k = 0; k < screen::kNumCones; ++k)
-                                      fb.cones[p * screen::kNumCones + k] = E;
-                              }
-                      });
+    const int W = c.opt.width, H = c.opt.height;
+    auto write = [&](size_t p, glm::vec3 E) {
+        E = FiniteOrZero(E);
+        fb.indirect[p] = FiniteOrZero(fs.binned[p].albedo * E);
+        for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = E;
+    };
+    auto rows = [&](auto&& pixel) {
+        tbb::parallel_for(tbb::blocked_range<int>(0, H, 4), [&](const tbb::blocked_range<int>& r) {
+            for (int y = r.begin(); y < r.end(); ++y)
+                for (int x = 0; x < W; ++x) pixel(x, y, size_t(y) * size_t(W) + size_t(x));
+        });
+    };
+    rows([&](int, int, size_t p) {
+        const HitRecord& h = fs.records[p];
+        if (!fs.own) {
+            if (h.mesh >= 0) write(p, StoreLightAt(*c.tsc, store, h));
+        } else if (h.mesh >= 0) {
+            PrepareOwnLight(fs.own[p], FiniteOrZero(StoreLightAt(*c.tsc, store, h)));
+        } else {
+            fs.own[p] = {};  // nothing to read: nor to weigh in a neighbour's window
+        }
+    });
+    if (!fs.own) return;
+    rows([&](int x, int y, size_t p) {
+        if (fs.records[p].mesh >= 0) write(p, BlendWithOwnLight(fs.own, W, H, x, y));
+    });
 }
 
 }  // namespace
@@ -1035,6 +1057,10 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->termCount = kStoreTermSamples * double(tsc.HitUnit());
         fs->records = tsc.HitRecords(n);
         fs->binned = tsc.BinnedHits(n);
+        fs->own = tsc.StillOwnLight(W, H);
+        // A still view traces every pixel's path every frame (kStillStoreBudget).
+        if (fs->own)
+            fs->budget = kStillStoreBudget, fs->group = tsc.Frame() % uint32_t(kStillStoreBudget);
         // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.
         const size_t guess =
             4 * tsc.NumFaces() + 2 * n / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
@@ -1060,10 +1086,14 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         // stored pixel read back. The table is kept at most half full, counting a new block
         // for every eighth traced hit (a frame's hits mostly fall in blocks the store has;
         // an add that finds no room is dropped and counted, and the next frame's table grows).
+        // A still view's pixels keep their paths' light as traced, before BoundStoreHits: their
+        // own mean is the unbiased end of the blend (a lone bright path shows in its variance).
         for (size_t p = 0; p < n; ++p)
             if (fs->records[p].mesh >= 0) {
                 ++storeReads;
-                storeTraced += std::isnan(fs->binned[p].light.x) ? 0 : 1;
+                const bool traced = !std::isnan(fs->binned[p].light.x);
+                storeTraced += traced ? 1 : 0;
+                if (traced && fs->own) AddOwnLight(fs->own[p], fs->binned[p].light);
             }
         const size_t traced = storeTraced;
         const RadianceBins& before = fs->store->Samples();

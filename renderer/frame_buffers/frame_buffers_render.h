@@ -123,17 +123,28 @@
 //   moves (a bin then holds 1 / (1 - alpha) samples of each of its pixels, as a grid texel's
 //   history holds that many frames) and not at all while TextureSpaceCache::Refresh says it is
 //   still (a running mean, which converges); an edited object's bins are forgotten
-//   (TextureSpaceCache::InvalidateObject). Its integer sums are read only between the frame's
-//   phases: the image is the same for any thread count. With Grid, the paper's grid samples,
-//   each shaded lazily with diffuseLayerPaths (or indirectSamples) paths of its own on a miss.
-//   The specular lobe's ray takes the diffuse lobe's light at its hit from the cache too (that
-//   lobe's indirect light, or with cacheDiffuseLayer all of it), as a camera hit's would; only
-//   the hit's specular lobe goes on. From the store, so does the first hit of a path traced into
-//   it: both read the store's block of 4x4 bins for that point at the camera's level where it
-//   holds four samples or more, and go on as paths elsewhere (surfaces the camera does not see), so
-//   the store's frame buffers never allocate the grid (unless cachedVisibility asks for it).
-//   From the grid, the texel is chosen for a footprint of the lobe's width. The paths' light
-//   samples of an environment map come from the frame's table of the map's samples
+//   (TextureSpaceCache::InvalidateObject). A running mean of bins converges to the bins' blurred
+//   value, not the pixel's, so while the view is still every pixel traces its path every frame
+//   (kStillStoreBudget) and also keeps its own traced paths' light
+//   (TextureSpaceCache::StillOwnLight: their mean, the spread of their luminance and their
+//   count, as traced, before the bound; NaN or infinite paths are dropped; released while the view
+//   moves, started again after a move, a resize, an animation's frame or an edit), and its
+//   read-back is the store's reconstruction moved towards its own mean by 1 - CoarseWeight of their
+//   difference and of the own mean's variance, each summed over the 5x5 pixels around it
+//   (BlendWithOwnLight): the step from the bins to the pixels' own samples that the still renderer
+//   takes (CombineWithOwnSamples), so that with few own samples it reads the bins and with many,
+//   where the bins are biased (an edge, a contact shadow within a bin), its own mean, and the error
+//   keeps falling. The store's integer sums are read only between the frame's phases, and a
+//   pixel's own sums take one path a frame: the image is the same for any thread count. With Grid,
+//   the paper's grid samples, each shaded lazily with diffuseLayerPaths (or indirectSamples) paths
+//   of its own on a miss. The specular lobe's ray takes the diffuse lobe's light at its hit from
+//   the cache too (that lobe's indirect light, or with cacheDiffuseLayer all of it), as a camera
+//   hit's would; only the hit's specular lobe goes on. From the store, so does the first hit of a
+//   path traced into it: both read the store's block of 4x4 bins for that point at the camera's
+//   level where it holds four samples or more, and go on as paths elsewhere (surfaces the camera
+//   does not see), so the store's frame buffers never allocate the grid (unless cachedVisibility
+//   asks for it). From the grid, the texel is chosen for a footprint of the lobe's width. The
+//   paths' light samples of an environment map come from the frame's table of the map's samples
 //   (Context::envTable), as the pixels' own do.
 // * cachedVisibility (options.texture.enabled and options.texture.cachedVisibility; empty
 //   otherwise): for diffuse materials facing the camera, the texel-cache lookup of the pixel's

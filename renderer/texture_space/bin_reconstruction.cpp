@@ -548,4 +548,40 @@ void CombineWithOwnSamples(const double* rgb, const double* own, int width, int 
     }
 }
 
+void AddOwnLight(PixelOwnLight& px, glm::vec3 light) {
+    if (!std::isfinite(light.x + light.y + light.z)) return;
+    const double before = Luminance(px.mean), y = Luminance(light);
+    ++px.n;
+    px.mean += (light - px.mean) / float(px.n);
+    px.m2 += (y - before) * (y - double(Luminance(px.mean)));
+}
+
+void PrepareOwnLight(PixelOwnLight& px, glm::vec3 bin) {
+    px.bin = bin, px.var = 0.0f, px.d2 = 0.0f;
+    if (px.n < 2) return;
+    const double n = double(px.n);
+    const float var = float(std::max(px.m2, 0.0) / ((n - 1.0) * n));
+    const double d = double(Luminance(bin)) - double(Luminance(px.mean));
+    const float d2 = float(d * d);
+    if (!std::isfinite(var) || !std::isfinite(d2)) return;  // no estimate: the bin
+    px.var = var, px.d2 = d2;
+}
+
+glm::vec3 BlendWithOwnLight(const PixelOwnLight* px, int width, int height, int x, int y) {
+    const PixelOwnLight& me = px[size_t(y) * size_t(width) + size_t(x)];
+    if (me.n < 2) return me.bin;
+    const int R = kOwnWindowRadius;
+    double var = 0.0, d2 = 0.0;
+    for (int j = std::max(0, y - R); j <= std::min(height - 1, y + R); ++j)
+        for (int i = std::max(0, x - R); i <= std::min(width - 1, x + R); ++i) {
+            const PixelOwnLight& q = px[size_t(j) * size_t(width) + size_t(i)];
+            var += double(q.var), d2 += double(q.d2);
+        }
+    const double alpha =
+        CoarseWeight(std::sqrt(d2), var, OwnWeightK(int(std::min(me.n, 1u << 20))));
+    const glm::dvec3 mine(me.mean);
+    const glm::dvec3 v = mine + alpha * (glm::dvec3(me.bin) - mine);
+    return std::isfinite(v.x + v.y + v.z) ? glm::vec3(v) : me.bin;
+}
+
 }  // namespace texcache::internal

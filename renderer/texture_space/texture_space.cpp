@@ -110,6 +110,7 @@ void TextureSpaceCache::BeginFrame(uint32_t frame) {
     Invalidate();
     pass_ = 0;
     passRadiusOf_ = radiusOf_;
+    ownStale_ = true;  // objects moved: a pixel's hit is another point
 }
 
 void TextureSpaceCache::Refresh(uint32_t frame, uint32_t parts, bool still) {
@@ -118,6 +119,7 @@ void TextureSpaceCache::Refresh(uint32_t frame, uint32_t parts, bool still) {
     passRadiusOf_ = radiusOf_;
     if (history_) history_->SetRunningMean(still);
     storeStill_ = still;
+    ownStale_ |= !still;
     if (parts == 0) return;
     const uint64_t part = frame % parts;
     cache_.InvalidateKeys([parts, part](uint64_t k) {
@@ -127,6 +129,7 @@ void TextureSpaceCache::Refresh(uint32_t frame, uint32_t parts, bool still) {
 }
 
 void TextureSpaceCache::InvalidateObject(int object) {
+    ownStale_ = true;  // the pixels' own paths saw the object as it was
     const size_t o = size_t(object);
     for (const std::vector<int>* meshes : {&meshOf_, &backMeshOf_, &visMeshOf_, &visBackMeshOf_}) {
         if (o >= meshes->size() || (*meshes)[o] < 0) continue;
@@ -234,6 +237,20 @@ void TextureSpaceCache::AssignFilters(const Scene& scene) {
     passRadiusOf_ = radiusOf_;
 }
 
+internal::PixelOwnLight* TextureSpaceCache::StillOwnLight(int width, int height) {
+    if (!storeStill_) {
+        // A moving view keeps no own samples: release them rather than hold a frame's worth.
+        if (!ownLight_.empty()) std::vector<internal::PixelOwnLight>().swap(ownLight_);
+        ownStale_ = true;
+        return nullptr;
+    }
+    if (ownStale_ || width != ownWidth_ || height != ownHeight_) {
+        ownLight_.assign(size_t(std::max(width, 0)) * size_t(std::max(height, 0)), {});
+        ownWidth_ = width, ownHeight_ = height, ownStale_ = false;
+    }
+    return ownLight_.data();
+}
+
 bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOptions& options) {
     const CacheSettings &a = options.cache, &b = options_.cache;
     const bool sameStorage =
@@ -250,6 +267,7 @@ bool TextureSpaceCache::Reconfigure(const RenderScene& rs, const TextureSpaceOpt
     frame_ = 0;
     pass_ = 0;
     hitStoreFrame_ = -1, temporalHitBias_ = INT_MIN;
+    storeStill_ = false, ownStale_ = true;
     Invalidate();
     return true;
 }

@@ -247,6 +247,31 @@ constexpr int kOwnWindowRadius = 2;
 void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
                            float* out);
 
+/// A frame-buffer pixel's own diffuse light over the frames of a still view (the frame buffers'
+/// store, frame_buffers_render.h): the mean of its traced paths' light, the sum of the squared
+/// deviations of their luminance from it (Welford's update, stable; in double: a bright path's
+/// square overflows a float) and their count; beside it the frame's read-back of the store there
+/// and the two terms BlendWithOwnLight weighs it by (scratch, rewritten every frame). 48 bytes a
+/// pixel.
+struct PixelOwnLight {
+    double m2 = 0.0;
+    glm::vec3 mean{0.0f};
+    uint32_t n = 0;
+    glm::vec3 bin{0.0f};  ///< the store's reconstruction this frame
+    float var = 0.0f;     ///< the variance of the own mean (luminance); 0: no own estimate
+    float d2 = 0.0f;      ///< the squared luminance difference of the own mean and `bin`
+};
+/// Adds one traced path's light to a pixel's own samples; NaN or infinite light is dropped.
+void AddOwnLight(PixelOwnLight& px, glm::vec3 light);
+/// Sets `px.bin` to the store's reconstruction `bin` and the pixel's var and d2 from its own
+/// samples (both 0 with fewer than two: no spread to weigh).
+void PrepareOwnLight(PixelOwnLight& px, glm::vec3 bin);
+/// The frame buffers' store's finest level, as CombineWithOwnSamples is hit binning's: pixel
+/// (x, y)'s read-back of the store moved towards the mean of its own samples by 1 - CoarseWeight
+/// of their difference and of the own mean's variance, both summed over the window around it
+/// (`px` a width x height frame after PrepareOwnLight); the read-back where that is not finite.
+glm::vec3 BlendWithOwnLight(const PixelOwnLight* px, int width, int height, int x, int y);
+
 /// What the visibility prepass keeps of a pass for its shading pass (the renderer's PassTexels).
 struct PassScratch {
     std::vector<PassTexel> texels;  ///< per camera sample of the pass
@@ -450,6 +475,11 @@ public:
         }
         return static_cast<internal::BinnedHit*>(hitAlbedos_.get());
     }
+    /// Each pixel's own diffuse light over a still view of a width x height frame (the frame
+    /// buffers' store): null while the view moves (the last Refresh said so), and then released;
+    /// while it is still, kept from frame to frame, and empty again after a move, a resize, a new
+    /// frame of an animation (BeginFrame) or an edit (InvalidateObject).
+    internal::PixelOwnLight* StillOwnLight(int width, int height);
     /// The grids of a cache mesh (resolutions, Ptex adjacency).
     const MeshGrids& Grids(int mesh) const { return cache_.Mesh(mesh); }
     /// Ptex faces of all cache meshes.
@@ -507,7 +537,8 @@ public:
                (aoStore_ ? aoStore_->BytesUsed() : 0) +
                (lightStore_ ? lightStore_->BytesUsed() : 0) +
                hitRecordCount_ * sizeof(internal::HitRecord) +
-               hitAlbedoCount_ * sizeof(internal::BinnedHit);
+               hitAlbedoCount_ * sizeof(internal::BinnedHit) +
+               ownLight_.capacity() * sizeof(internal::PixelOwnLight);
     }
     size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
     size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
@@ -556,6 +587,9 @@ private:
     std::unique_ptr<LightHitStore> lightStore_;
     std::unique_ptr<void, Free> hitAlbedos_;
     size_t hitAlbedoCount_ = 0;
+    std::vector<internal::PixelOwnLight> ownLight_;  ///< see StillOwnLight
+    int ownWidth_ = 0, ownHeight_ = 0;
+    bool ownStale_ = true;  ///< ownLight_ holds another view's samples
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
     int64_t hitStoreFrame_ = -1;
