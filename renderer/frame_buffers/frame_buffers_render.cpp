@@ -481,6 +481,7 @@ struct FrameStore {
     uint32_t group = 0;          ///< this frame's pixels: those of this dither group
     double minCount = 0.0;       ///< a cell with fewer counts needs its hits' paths
     double termCount = 0.0;      ///< a cell with fewer counts is not read at a ray's hit
+    double minPrior = 0.0;       ///< a cell with fewer counts is no traced hit's prior
     HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
     BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
 
@@ -707,8 +708,12 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
     if (cachedIndirect && fs) {
         fs->records[p] = storeRecord;
         fs->binned[p] = {glm::vec3(kNaN), bsdf.DiffuseReflectance(), texelLevel};
-        storePath =
-            fs->InBudget(x, y) || StoreCountAt(*c.tsc, *fs->store, fs->records[p]) < fs->minCount;
+        // The store's count at the record (its bins prefetched by RenderTile), and for a traced
+        // hit the light it holds there: BoundStoreHits' reference.
+        const double count = StoreCountAt(*c.tsc, *fs->store, fs->records[p]);
+        storePath = fs->InBudget(x, y) || count < fs->minCount;
+        if (storePath && count >= fs->minPrior)
+            fs->binned[p].prior = Luminance(StoreLightAt(*c.tsc, *fs->store, fs->records[p]));
     } else if (cachedIndirect) {
         const glm::vec3 E = CachedDiffuse(c, si, layered, rays);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
@@ -911,10 +916,12 @@ LightHitStore& DecayStore(TextureSpaceCache& tsc, size_t firstBlocks, uint32_t k
 /// `indirect` is albedo x the reconstruction, and the six cones all hold it (as the grid's).
 void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& store,
                   screen::FrameBuffers& fb) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, c.opt.height, 4),
-                      [&](const tbb::blocked_range<int>& r) {
-                          for (int y = r.begin(); y < r.end(); ++y)
-                              for (int x = 0; x < c.opt.width; ++x) {
+    // In tiles: a thread's memo of the bins it read (ThreadCells) holds a tile's, where a row's
+    // would be evicted before the next row reads them again.
+    tbb::parallel_for(tbb::blocked_range2d<int>(0, c.opt.height, 16, 0, c.opt.width, 16),
+                      [&](const tbb::blocked_range2d<int>& r) {
+                          for (int y = r.rows().begin(); y < r.rows().end(); ++y) {
+                              for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
                                   const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
                                   const HitRecord& h = fs.records[p];
                                   if (h.mesh < 0) continue;
@@ -923,6 +930,7 @@ void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& s
                                   for (int k = 0; k < screen::kNumCones; ++k)
                                       fb.cones[p * screen::kNumCones + k] = E;
                               }
+                          }
                       });
 }
 
@@ -1033,6 +1041,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->group = tsc.Frame() % uint32_t(k);
         fs->minCount = kStoreMinSamples * double(tsc.HitUnit());
         fs->termCount = kStoreTermSamples * double(tsc.HitUnit());
+        fs->minPrior = double(tsc.HitUnit());
         fs->records = tsc.HitRecords(n);
         fs->binned = tsc.BinnedHits(n);
         // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.
@@ -1073,7 +1082,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                                    : *ctx.tsc->LightStoreIfAny();
         // A lone bright path bounded, its excess spread over its neighbours' hits, before it
         // reaches every pixel that reads its bin.
-        BoundStoreHits(ctx, fs->records, store, kStoreBoundRatio, fs->binned);
+        BoundStoreHits(ctx, fs->records, kStoreBoundRatio, fs->binned);
         tbb::parallel_for(tbb::blocked_range2d<int>(0, H, kTile, 0, W, kTile * 8),
                           [&](const tbb::blocked_range2d<int>& r) {
                               PathHitsAdd(ctx, r, 0, 1, fs->bias, fs->blend, fs->records,

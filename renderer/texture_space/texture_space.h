@@ -199,6 +199,23 @@ struct HitRecord {
 struct BinnedHit {
     glm::vec3 light, albedo;
     int32_t texelLevel;
+    /// The frame buffers' traced hits: the luminance the store held at the hit before the frame
+    /// (0: too few samples), BoundStoreHits' reference; read while shading, where the hit's bins
+    /// are in the caches already.
+    float prior = 0.0f;
+};
+/// BoundStoreHits' frame-sized arrays, kept with the cache from frame to frame: a frame's bound
+/// allocates nothing (fresh pages were a visible share of its time).
+struct StoreBoundScratch {
+    std::vector<glm::vec3> light, share;
+    std::vector<float> prior, luminance;
+    std::vector<int32_t> group;
+    std::vector<uint8_t> touched;
+    size_t Bytes() const {
+        return (light.capacity() + share.capacity()) * sizeof(glm::vec3) +
+               (prior.capacity() + luminance.capacity()) * sizeof(float) +
+               group.capacity() * sizeof(int32_t) + touched.capacity();
+    }
 };
 /// A material filter's value at a bin centre (bin_reconstruction.cpp, FilterAt): `weight` is the
 /// count behind it, 0 where its window holds no bin. The texel level of the hit stores.
@@ -450,6 +467,8 @@ public:
         }
         return static_cast<internal::BinnedHit*>(hitAlbedos_.get());
     }
+    /// BoundStoreHits' arrays (kept as HitRecords).
+    internal::StoreBoundScratch& BoundScratch() { return boundScratch_; }
     /// The grids of a cache mesh (resolutions, Ptex adjacency).
     const MeshGrids& Grids(int mesh) const { return cache_.Mesh(mesh); }
     /// Ptex faces of all cache meshes.
@@ -507,7 +526,7 @@ public:
                (aoStore_ ? aoStore_->BytesUsed() : 0) +
                (lightStore_ ? lightStore_->BytesUsed() : 0) +
                hitRecordCount_ * sizeof(internal::HitRecord) +
-               hitAlbedoCount_ * sizeof(internal::BinnedHit);
+               hitAlbedoCount_ * sizeof(internal::BinnedHit) + boundScratch_.Bytes();
     }
     size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
     size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
@@ -556,6 +575,7 @@ private:
     std::unique_ptr<LightHitStore> lightStore_;
     std::unique_ptr<void, Free> hitAlbedos_;
     size_t hitAlbedoCount_ = 0;
+    internal::StoreBoundScratch boundScratch_;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
     int64_t hitStoreFrame_ = -1;
