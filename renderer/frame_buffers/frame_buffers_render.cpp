@@ -906,7 +906,11 @@ LightHitStore& DecayStore(TextureSpaceCache& tsc, size_t firstBlocks, uint32_t k
     if (2 * bins.BlocksUsed() > bins.NumBlocks())
         return GrowStore(tsc, std::min(4 * bins.BlocksUsed(), kMaxStoreBlocks), keep);
     if (keep < (1u << 16))
-        store->DecayInPlace(keep);
+        store->DecayInPlace(keep, [](size_t n, auto&& body) {
+            tbb::parallel_for(
+                tbb::blocked_range<size_t>(0, n, 4096),
+                [&](const tbb::blocked_range<size_t>& r) { body(r.begin(), r.end()); });
+        });
     else
         store->AddsDone();  // a new generation: nothing read before is kept
     return *store;

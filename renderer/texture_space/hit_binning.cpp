@@ -300,9 +300,7 @@ size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* g
     // Each hit's share of its excess for each of its neighbours (0: not bounded), and the rows
     // that hold a bounded hit. Both are all 0 between calls (reset below where set).
     scratch.share.resize(n, glm::vec3(0.0f));
-    scratch.touched.resize(n, 0);
     glm::vec3* share = scratch.share.data();
-    uint8_t* touched = scratch.touched.data();
     std::vector<uint8_t> rowBounded(size_t(height), 0);
     std::atomic<size_t> bounded{0};
     tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
@@ -338,35 +336,26 @@ size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* g
         bounded.fetch_add(count, std::memory_order_relaxed);
     });
     if (bounded.load() == 0) return 0;
-    // Only the bounded hits and their windows change: they are marked (few).
-    for (int y = 0; y < height; ++y) {
-        if (!rowBounded[size_t(y)]) continue;
-        for (int x = 0; x < width; ++x) {
-            const size_t p = size_t(y) * size_t(width) + size_t(x);
-            if (share[p] == glm::vec3(0.0f)) continue;
-            touched[p] = 1;
-            window(x, y, [&](size_t q) { touched[q] = 1; });
-        }
-    }
-    // Each touched hit keeps its bounded part and gathers its neighbours' shares (the window's
-    // relation is symmetric: p is among q's others exactly when q is among p's). In place: a
-    // gather reads the shares and the luminances, never another hit's light.
-    tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
-        for (int y = r.begin(); y < r.end(); ++y)
+    // Each bounded hit keeps its bounded part and gives its share to each of its window's hits,
+    // in pixel order (few: serial, so the sums are the same for any thread count). A share was
+    // taken from its hit's light before any gift, so the order changes only the rounding.
+    auto forBounded = [&](auto&& body) {
+        for (int y = 0; y < height; ++y) {
+            if (!rowBounded[size_t(y)]) continue;
             for (int x = 0; x < width; ++x) {
                 const size_t p = size_t(y) * size_t(width) + size_t(x);
-                if (!touched[p]) continue;
-                touched[p] = 0;
-                if (!(luminance[p] >= 0.0f)) continue;
-                glm::vec3 v = light[p];
-                if (share[p] != glm::vec3(0.0f)) {
-                    int k = 0;
-                    window(x, y, [&](size_t) { ++k; });
-                    v -= share[p] * float(k);
-                }
-                window(x, y, [&](size_t q) { v += share[q]; });
-                light[p] = glm::max(v, glm::vec3(0.0f));
+                if (share[p] != glm::vec3(0.0f)) body(x, y, p);
             }
+        }
+    };
+    forBounded([&](int x, int y, size_t p) {
+        int k = 0;
+        window(x, y, [&](size_t q) { light[q] += share[p], ++k; });
+        light[p] -= share[p] * float(k);
+    });
+    forBounded([&](int x, int y, size_t p) {
+        light[p] = glm::max(light[p], glm::vec3(0.0f));
+        window(x, y, [&](size_t q) { light[q] = glm::max(light[q], glm::vec3(0.0f)); });
     });
     for (int y = 0; y < height; ++y)
         if (rowBounded[size_t(y)])

@@ -210,11 +210,10 @@ struct StoreBoundScratch {
     std::vector<glm::vec3> light, share;
     std::vector<float> prior, luminance;
     std::vector<int32_t> group;
-    std::vector<uint8_t> touched;
     size_t Bytes() const {
         return (light.capacity() + share.capacity()) * sizeof(glm::vec3) +
                (prior.capacity() + luminance.capacity()) * sizeof(float) +
-               group.capacity() * sizeof(int32_t) + touched.capacity();
+               group.capacity() * sizeof(int32_t);
     }
 };
 /// A material filter's value at a bin centre (bin_reconstruction.cpp, FilterAt): `weight` is the
