@@ -287,10 +287,13 @@ struct StoreHitBounds {
 };
 /// The frame buffers' traced hits (records[p], binned[p].light finite) bounded before they are
 /// added to the store (BoundBrightHits, texture_space.h), each against the other traced hits of
-/// its mesh around it and what `store`, as the earlier frames left it, holds at its record (when
-/// at least one sample). Reads the store: before any add.
-StoreHitBounds BoundStoreHits(const Context& c, const HitRecord* records,
-                              const LightHitStore& store, float ratio, BinnedHit* binned);
+/// its mesh around it and its prior (binned[p].prior: what the store, as the earlier frames left
+/// it, held at its record). Its arrays are the cache's (TextureSpaceCache::BoundScratch).
+StoreHitBounds BoundStoreHits(const Context& c, const HitRecord* records, float ratio,
+                              BinnedHit* binned);
+/// BoundBrightHits (texture_space.h) with its arrays in `scratch`.
+size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* group,
+                       const float* prior, float ratio, StoreBoundScratch& scratch);
 
 /// A frame-buffer pixel's camera hit `si` at distance `t` as hit binning records it: its record
 /// (`h`, reading the finer of its bins at `bias` levels above its texel until PathHitsAdd sets

@@ -20,6 +20,7 @@
 #include <tbb/blocked_range2d.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "renderer/integrators/path_tracer.h"
@@ -481,6 +482,7 @@ struct FrameStore {
     uint32_t group = 0;          ///< this frame's pixels: those of this dither group
     double minCount = 0.0;       ///< a cell with fewer counts needs its hits' paths
     double termCount = 0.0;      ///< a cell with fewer counts is not read at a ray's hit
+    double minPrior = 0.0;       ///< a cell with fewer counts is no traced hit's prior
     HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
     BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
     PixelOwnLight* own;          ///< a still view's own samples per pixel; null while moving
@@ -708,8 +710,12 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
     if (cachedIndirect && fs) {
         fs->records[p] = storeRecord;
         fs->binned[p] = {glm::vec3(kNaN), bsdf.DiffuseReflectance(), texelLevel};
-        storePath =
-            fs->InBudget(x, y) || StoreCountAt(*c.tsc, *fs->store, fs->records[p]) < fs->minCount;
+        // The store's count at the record (its bins prefetched by RenderTile), and for a traced
+        // hit the light it holds there: BoundStoreHits' reference.
+        const double count = StoreCountAt(*c.tsc, *fs->store, fs->records[p]);
+        storePath = fs->InBudget(x, y) || count < fs->minCount;
+        if (storePath && count >= fs->minPrior)
+            fs->binned[p].prior = Luminance(StoreLightAt(*c.tsc, *fs->store, fs->records[p]));
     } else if (cachedIndirect) {
         const glm::vec3 E = CachedDiffuse(c, si, layered, rays);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
@@ -908,7 +914,11 @@ LightHitStore& DecayStore(TextureSpaceCache& tsc, size_t firstBlocks, uint32_t k
     if (2 * bins.BlocksUsed() > bins.NumBlocks())
         return GrowStore(tsc, std::min(4 * bins.BlocksUsed(), kMaxStoreBlocks), keep);
     if (keep < (1u << 16))
-        store->DecayInPlace(keep);
+        store->DecayInPlace(keep, [](size_t n, auto&& body) {
+            tbb::parallel_for(
+                tbb::blocked_range<size_t>(0, n, 4096),
+                [&](const tbb::blocked_range<size_t>& r) { body(r.begin(), r.end()); });
+        });
     else
         store->AddsDone();  // a new generation: nothing read before is kept
     return *store;
@@ -926,13 +936,17 @@ void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& s
         fb.indirect[p] = FiniteOrZero(fs.binned[p].albedo * E);
         for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = E;
     };
-    auto rows = [&](auto&& pixel) {
-        tbb::parallel_for(tbb::blocked_range<int>(0, H, 4), [&](const tbb::blocked_range<int>& r) {
-            for (int y = r.begin(); y < r.end(); ++y)
-                for (int x = 0; x < W; ++x) pixel(x, y, size_t(y) * size_t(W) + size_t(x));
-        });
+    // In tiles: a thread's memo of the bins it read (ThreadCells) holds a tile's, where a row's
+    // would be evicted before the next row reads them again.
+    auto tiles = [&](auto&& pixel) {
+        tbb::parallel_for(tbb::blocked_range2d<int>(0, H, 16, 0, W, 16),
+                          [&](const tbb::blocked_range2d<int>& r) {
+                              for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+                                  for (int x = r.cols().begin(); x < r.cols().end(); ++x)
+                                      pixel(x, y, size_t(y) * size_t(W) + size_t(x));
+                          });
     };
-    rows([&](int, int, size_t p) {
+    tiles([&](int, int, size_t p) {
         const HitRecord& h = fs.records[p];
         if (!fs.own) {
             if (h.mesh >= 0) write(p, StoreLightAt(*c.tsc, store, h));
@@ -943,7 +957,7 @@ void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& s
         }
     });
     if (!fs.own) return;
-    rows([&](int x, int y, size_t p) {
+    tiles([&](int x, int y, size_t p) {
         if (fs.records[p].mesh >= 0) write(p, BlendWithOwnLight(fs.own, W, H, x, y));
     });
 }
@@ -1055,6 +1069,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->group = tsc.Frame() % uint32_t(k);
         fs->minCount = kStoreMinSamples * double(tsc.HitUnit());
         fs->termCount = kStoreTermSamples * double(tsc.HitUnit());
+        fs->minPrior = double(tsc.HitUnit());
         fs->records = tsc.HitRecords(n);
         fs->binned = tsc.BinnedHits(n);
         fs->own = tsc.StillOwnLight(W, H);
@@ -1088,13 +1103,23 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         // an add that finds no room is dropped and counted, and the next frame's table grows).
         // A still view's pixels keep their paths' light as traced, before BoundStoreHits: their
         // own mean is the unbiased end of the blend (a lone bright path shows in its variance).
-        for (size_t p = 0; p < n; ++p)
-            if (fs->records[p].mesh >= 0) {
-                ++storeReads;
-                const bool traced = !std::isnan(fs->binned[p].light.x);
-                storeTraced += traced ? 1 : 0;
-                if (traced && fs->own) AddOwnLight(fs->own[p], fs->binned[p].light);
-            }
+        using Counts = std::pair<size_t, size_t>;  // reads, traced
+        const Counts counted = tbb::parallel_reduce(
+            tbb::blocked_range<size_t>(0, n, 16384), Counts(0, 0),
+            [&](const tbb::blocked_range<size_t>& r, Counts acc) {
+                for (size_t p = r.begin(); p < r.end(); ++p)
+                    if (fs->records[p].mesh >= 0) {
+                        ++acc.first;
+                        const bool traced = !std::isnan(fs->binned[p].light.x);
+                        acc.second += traced ? 1 : 0;
+                        if (traced && fs->own) AddOwnLight(fs->own[p], fs->binned[p].light);
+                    }
+                return acc;
+            },
+            [](Counts a, const Counts& b) {
+                return Counts(a.first + b.first, a.second + b.second);
+            });
+        storeReads = counted.first, storeTraced = counted.second;
         const size_t traced = storeTraced;
         const RadianceBins& before = fs->store->Samples();
         const size_t need = 2 * (before.BlocksUsed() + traced / 8);
@@ -1103,7 +1128,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                                    : *ctx.tsc->LightStoreIfAny();
         // A lone bright path bounded, its excess spread over its neighbours' hits, before it
         // reaches every pixel that reads its bin.
-        BoundStoreHits(ctx, fs->records, store, kStoreBoundRatio, fs->binned);
+        BoundStoreHits(ctx, fs->records, kStoreBoundRatio, fs->binned);
         tbb::parallel_for(tbb::blocked_range2d<int>(0, H, kTile, 0, W, kTile * 8),
                           [&](const tbb::blocked_range2d<int>& r) {
                               PathHitsAdd(ctx, r, 0, 1, fs->bias, fs->blend, fs->records,

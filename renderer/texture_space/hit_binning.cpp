@@ -271,41 +271,145 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
             }
 }
 
-StoreHitBounds BoundStoreHits(const Context& c, const HitRecord* records,
-                              const LightHitStore& store, float ratio, BinnedHit* binned) {
+size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* group,
+                       const float* prior, float ratio, StoreBoundScratch& scratch) {
+    const size_t n = size_t(std::max(width, 0)) * size_t(std::max(height, 0));
+    if (n == 0 || !(ratio > 0.0f)) return 0;
+    // Every pass reads the previous one's arrays and writes its own pixel's entries only: the
+    // result does not depend on how the rows are split between threads.
+    scratch.luminance.resize(n);
+    float* luminance = scratch.luminance.data();
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, n, 8192), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t p = r.begin(); p < r.end(); ++p) {
+                const glm::vec3& L = light[p];
+                const bool ok =
+                    std::isfinite(L.x + L.y + L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f;
+                luminance[p] = ok ? Luminance(L) : -1.0f;
+            }
+        });
+    constexpr int R = kStoreBoundRadius;
+    auto window = [&](int x, int y, auto&& visit) {
+        const size_t p = size_t(y) * size_t(width) + size_t(x);
+        for (int qy = std::max(0, y - R); qy <= std::min(height - 1, y + R); ++qy)
+            for (int qx = std::max(0, x - R); qx <= std::min(width - 1, x + R); ++qx) {
+                const size_t q = size_t(qy) * size_t(width) + size_t(qx);
+                if (q != p && luminance[q] >= 0.0f && group[q] == group[p]) visit(q);
+            }
+    };
+    // Each hit's share of its excess for each of its neighbours (0: not bounded), and the rows
+    // that hold a bounded hit. Both are all 0 between calls (reset below where set).
+    scratch.share.resize(n, glm::vec3(0.0f));
+    glm::vec3* share = scratch.share.data();
+    std::vector<uint8_t> rowBounded(size_t(height), 0);
+    std::atomic<size_t> bounded{0};
+    tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
+        float others[(2 * R + 1) * (2 * R + 1)];
+        size_t count = 0;
+        for (int y = r.begin(); y < r.end(); ++y)
+            for (int x = 0; x < width; ++x) {
+                const size_t p = size_t(y) * size_t(width) + size_t(x);
+                if (!(luminance[p] >= 0.0f)) continue;
+                // The reference is at least the prior: a hit under ratio x its prior stays as it
+                // is whatever its neighbours' median, which is then not sought (most traced hits
+                // of a warm store).
+                const float pr = prior ? prior[p] : 0.0f;
+                if (pr < INFINITY && luminance[p] <= ratio * pr) continue;
+                int k = 0;
+                double sum = 0.0;
+                window(x, y, [&](size_t q) { others[k++] = luminance[q], sum += luminance[q]; });
+                float reference = 0.0f;
+                if (k >= kStoreBoundMinOthers) {
+                    std::nth_element(others, others + k / 2, others + k);
+                    reference = others[k / 2];
+                    // Mostly dark around it: their mean still says what light there is.
+                    if (!(reference > 0.0f)) reference = float(sum / double(k));
+                }
+                if (pr > reference && pr < INFINITY) reference = pr;
+                const float bound = ratio * reference;
+                // Nothing to compare it with, or no one to give the excess to: left alone.
+                if (!(bound > 0.0f) || luminance[p] <= bound || k == 0) continue;
+                share[p] = light[p] * ((1.0f - bound / luminance[p]) / float(k));
+                rowBounded[size_t(y)] = 1;
+                ++count;
+            }
+        bounded.fetch_add(count, std::memory_order_relaxed);
+    });
+    if (bounded.load() == 0) return 0;
+    // Each bounded hit keeps its bounded part and gives its share to each of its window's hits,
+    // in pixel order (few: serial, so the sums are the same for any thread count). A share was
+    // taken from its hit's light before any gift, so the order changes only the rounding.
+    auto forBounded = [&](auto&& body) {
+        for (int y = 0; y < height; ++y) {
+            if (!rowBounded[size_t(y)]) continue;
+            for (int x = 0; x < width; ++x) {
+                const size_t p = size_t(y) * size_t(width) + size_t(x);
+                if (share[p] != glm::vec3(0.0f)) body(x, y, p);
+            }
+        }
+    };
+    forBounded([&](int x, int y, size_t p) {
+        int k = 0;
+        window(x, y, [&](size_t q) { light[q] += share[p], ++k; });
+        light[p] -= share[p] * float(k);
+    });
+    forBounded([&](int x, int y, size_t p) {
+        light[p] = glm::max(light[p], glm::vec3(0.0f));
+        window(x, y, [&](size_t q) { light[q] = glm::max(light[q], glm::vec3(0.0f)); });
+    });
+    for (int y = 0; y < height; ++y)
+        if (rowBounded[size_t(y)])
+            std::fill(share + size_t(y) * size_t(width), share + size_t(y + 1) * size_t(width),
+                      glm::vec3(0.0f));
+    return bounded.load();
+}
+
+StoreHitBounds BoundStoreHits(const Context& c, const HitRecord* records, float ratio,
+                              BinnedHit* binned) {
     const int W = c.opt.width, H = c.opt.height;
     const size_t n = size_t(W) * size_t(H);
-    std::vector<glm::vec3> light(n);
-    std::vector<float> prior(n);
-    std::vector<int32_t> group(n);
-    const double minPrior = double(c.tsc->HitUnit());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                          for (size_t p = r.begin(); p < r.end(); ++p) {
-                              const HitRecord& h = records[p];
-                              group[p] = h.mesh;
-                              // NaN: a hit that only reads, or no hit.
-                              light[p] = h.mesh >= 0 ? binned[p].light : glm::vec3(NAN);
-                              // Only a traced hit's prior is read (a store lookup each).
-                              const bool traced = std::isfinite(light[p].x);
-                              prior[p] = traced && StoreCountAt(*c.tsc, store, h) >= minPrior
-                                             ? Luminance(StoreLightAt(*c.tsc, store, h))
-                                             : 0.0f;
-                          }
-                      });
-    StoreHitBounds out;
-    double before = 0.0;
-    for (size_t p = 0; p < n; ++p)
-        if (std::isfinite(light[p].x + light[p].y + light[p].z))
-            ++out.traced, before += Luminance(light[p]);
-    out.bounded = BoundBrightHits(W, H, light.data(), group.data(), prior.data(), ratio);
-    double after = 0.0;
-    for (size_t p = 0; p < n; ++p)
-        if (records[p].mesh >= 0 && std::isfinite(light[p].x + light[p].y + light[p].z)) {
-            binned[p].light = light[p];
-            after += Luminance(light[p]);
+    StoreBoundScratch& scratch = c.tsc->BoundScratch();
+    scratch.light.resize(n), scratch.prior.resize(n), scratch.group.resize(n);
+    glm::vec3* light = scratch.light.data();
+    float* prior = scratch.prior.data();
+    int32_t* group = scratch.group.data();
+    // Each row's traced hits and their summed luminance before and after, per block of rows
+    // (added in block order: the same sums for any thread count).
+    const int rowsPerBlock = 16, blocks = (H + rowsPerBlock - 1) / rowsPerBlock;
+    std::vector<double> before(size_t(blocks), 0.0), after(size_t(blocks), 0.0);
+    std::vector<uint64_t> traced(size_t(blocks), 0);
+    auto rows = [&](auto&& body) {
+        tbb::parallel_for(tbb::blocked_range<int>(0, blocks),
+                          [&](const tbb::blocked_range<int>& r) {
+                              for (int b = r.begin(); b < r.end(); ++b)
+                                  body(b, size_t(b * rowsPerBlock) * size_t(W),
+                                       size_t(std::min(H, (b + 1) * rowsPerBlock)) * size_t(W));
+                          });
+    };
+    rows([&](int b, size_t p0, size_t p1) {
+        for (size_t p = p0; p < p1; ++p) {
+            group[p] = records[p].mesh;
+            // NaN: a hit that only reads, or no hit.
+            light[p] = records[p].mesh >= 0 ? binned[p].light : glm::vec3(NAN);
+            prior[p] = records[p].mesh >= 0 ? binned[p].prior : 0.0f;
+            if (std::isfinite(light[p].x + light[p].y + light[p].z))
+                ++traced[size_t(b)], before[size_t(b)] += Luminance(light[p]);
         }
-    out.keptLight = before > 0.0 ? after / before : 1.0;
+    });
+    StoreHitBounds out;
+    out.bounded = BoundBrightHits(W, H, light, group, prior, ratio, scratch);
+    rows([&](int b, size_t p0, size_t p1) {
+        for (size_t p = p0; p < p1; ++p)
+            if (records[p].mesh >= 0 && std::isfinite(light[p].x + light[p].y + light[p].z)) {
+                binned[p].light = light[p];
+                after[size_t(b)] += Luminance(light[p]);
+            }
+    });
+    double sumBefore = 0.0, sumAfter = 0.0;
+    for (int b = 0; b < blocks; ++b)
+        out.traced += traced[size_t(b)], sumBefore += before[size_t(b)],
+            sumAfter += after[size_t(b)];
+    out.keptLight = sumBefore > 0.0 ? sumAfter / sumBefore : 1.0;
     return out;
 }
 
@@ -327,76 +431,8 @@ namespace texcache {
 
 size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* group,
                        const float* prior, float ratio) {
-    const size_t n = size_t(std::max(width, 0)) * size_t(std::max(height, 0));
-    if (n == 0 || !(ratio > 0.0f)) return 0;
-    // Every pass reads the previous one's arrays and writes its own pixel's entries only: the
-    // result does not depend on how the rows are split between threads.
-    std::vector<float> luminance(n);
-    for (size_t p = 0; p < n; ++p) {
-        const glm::vec3& L = light[p];
-        const bool ok = std::isfinite(L.x + L.y + L.z) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f;
-        luminance[p] = ok ? Luminance(L) : -1.0f;
-    }
-    constexpr int R = kStoreBoundRadius;
-    auto window = [&](int x, int y, auto&& visit) {
-        const size_t p = size_t(y) * size_t(width) + size_t(x);
-        for (int qy = std::max(0, y - R); qy <= std::min(height - 1, y + R); ++qy)
-            for (int qx = std::max(0, x - R); qx <= std::min(width - 1, x + R); ++qx) {
-                const size_t q = size_t(qy) * size_t(width) + size_t(qx);
-                if (q != p && luminance[q] >= 0.0f && group[q] == group[p]) visit(q);
-            }
-    };
-    // Each hit's share of its excess for each of its neighbours (0: not bounded).
-    std::vector<glm::vec3> share(n, glm::vec3(0.0f));
-    std::atomic<size_t> bounded{0};
-    tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
-        float others[(2 * R + 1) * (2 * R + 1)];
-        size_t count = 0;
-        for (int y = r.begin(); y < r.end(); ++y)
-            for (int x = 0; x < width; ++x) {
-                const size_t p = size_t(y) * size_t(width) + size_t(x);
-                if (!(luminance[p] >= 0.0f)) continue;
-                int k = 0;
-                double sum = 0.0;
-                window(x, y, [&](size_t q) { others[k++] = luminance[q], sum += luminance[q]; });
-                float reference = 0.0f;
-                if (k >= kStoreBoundMinOthers) {
-                    std::nth_element(others, others + k / 2, others + k);
-                    reference = others[k / 2];
-                    // Mostly dark around it: their mean still says what light there is.
-                    if (!(reference > 0.0f)) reference = float(sum / double(k));
-                }
-                const float pr = prior ? prior[p] : 0.0f;
-                if (pr > reference && pr < INFINITY) reference = pr;
-                const float bound = ratio * reference;
-                // Nothing to compare it with, or no one to give the excess to: left alone.
-                if (!(bound > 0.0f) || luminance[p] <= bound || k == 0) continue;
-                share[p] = light[p] * ((1.0f - bound / luminance[p]) / float(k));
-                ++count;
-            }
-        bounded.fetch_add(count, std::memory_order_relaxed);
-    });
-    // Each hit keeps its bounded part and gathers its neighbours' shares (the window's relation
-    // is symmetric: p is among q's others exactly when q is among p's).
-    std::vector<glm::vec3> out(n);
-    tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& r) {
-        for (int y = r.begin(); y < r.end(); ++y)
-            for (int x = 0; x < width; ++x) {
-                const size_t p = size_t(y) * size_t(width) + size_t(x);
-                if (!(luminance[p] >= 0.0f)) continue;
-                glm::vec3 v = light[p];
-                if (share[p] != glm::vec3(0.0f)) {
-                    int k = 0;
-                    window(x, y, [&](size_t) { ++k; });
-                    v -= share[p] * float(k);
-                }
-                window(x, y, [&](size_t q) { v += share[q]; });
-                out[p] = glm::max(v, glm::vec3(0.0f));
-            }
-    });
-    for (size_t p = 0; p < n; ++p)
-        if (luminance[p] >= 0.0f) light[p] = out[p];
-    return bounded.load();
+    internal::StoreBoundScratch scratch;
+    return internal::BoundBrightHits(width, height, light, group, prior, ratio, scratch);
 }
 
 }  // namespace texcache

@@ -199,6 +199,22 @@ struct HitRecord {
 struct BinnedHit {
     glm::vec3 light, albedo;
     int32_t texelLevel;
+    /// The frame buffers' traced hits: the luminance the store held at the hit before the frame
+    /// (0: too few samples), BoundStoreHits' reference; read while shading, where the hit's bins
+    /// are in the caches already.
+    float prior = 0.0f;
+};
+/// BoundStoreHits' frame-sized arrays, kept with the cache from frame to frame: a frame's bound
+/// allocates nothing (fresh pages were a visible share of its time).
+struct StoreBoundScratch {
+    std::vector<glm::vec3> light, share;
+    std::vector<float> prior, luminance;
+    std::vector<int32_t> group;
+    size_t Bytes() const {
+        return (light.capacity() + share.capacity()) * sizeof(glm::vec3) +
+               (prior.capacity() + luminance.capacity()) * sizeof(float) +
+               group.capacity() * sizeof(int32_t);
+    }
 };
 /// A material filter's value at a bin centre (bin_reconstruction.cpp, FilterAt): `weight` is the
 /// count behind it, 0 where its window holds no bin. The texel level of the hit stores.
@@ -480,6 +496,8 @@ public:
     /// while it is still, kept from frame to frame, and empty again after a move, a resize, a new
     /// frame of an animation (BeginFrame) or an edit (InvalidateObject).
     internal::PixelOwnLight* StillOwnLight(int width, int height);
+    /// BoundStoreHits' arrays (kept as HitRecords).
+    internal::StoreBoundScratch& BoundScratch() { return boundScratch_; }
     /// The grids of a cache mesh (resolutions, Ptex adjacency).
     const MeshGrids& Grids(int mesh) const { return cache_.Mesh(mesh); }
     /// Ptex faces of all cache meshes.
@@ -538,7 +556,7 @@ public:
                (lightStore_ ? lightStore_->BytesUsed() : 0) +
                hitRecordCount_ * sizeof(internal::HitRecord) +
                hitAlbedoCount_ * sizeof(internal::BinnedHit) +
-               ownLight_.capacity() * sizeof(internal::PixelOwnLight);
+               ownLight_.capacity() * sizeof(internal::PixelOwnLight) + boundScratch_.Bytes();
     }
     size_t SampleCacheBytes() const { return cache_.SampleCacheBytes(); }
     size_t TexelCacheBytes() const { return cache_.TexelCacheBytes(); }
@@ -590,6 +608,7 @@ private:
     std::vector<internal::PixelOwnLight> ownLight_;  ///< see StillOwnLight
     int ownWidth_ = 0, ownHeight_ = 0;
     bool ownStale_ = true;  ///< ownLight_ holds another view's samples
+    internal::StoreBoundScratch boundScratch_;
     uint32_t frame_ = 0;
     uint32_t pass_ = 0;
     int64_t hitStoreFrame_ = -1;

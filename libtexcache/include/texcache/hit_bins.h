@@ -233,12 +233,21 @@ public:
     /// stay claimed (no table rebuilt), for a table decayed every frame whose blocks mostly stay
     /// in use; Scale releases them. Never while Add or Find run. A new Generation.
     void ScaleInPlace(uint32_t keep) {
-        for (size_t i = 0; i < blocks_; ++i) {
-            if (bins_[i].key.load(std::memory_order_relaxed) == TexelKey::kEmpty) continue;
-            for (auto& w : bins_[i].w)
-                w.store(Bin::ScaleWord(w.load(std::memory_order_relaxed), keep),
-                        std::memory_order_relaxed);
-        }
+        ScaleInPlace(keep, [](size_t n, auto&& body) { body(size_t(0), n); });
+    }
+    /// As ScaleInPlace, with the blocks split by `forRange(n, body)`, which calls body(begin,
+    /// end) over ranges that cover [0, n) once, in any order or in parallel (each block is
+    /// scaled on its own): a table of many blocks is a serial pass over memory between frames.
+    template <typename ForRange>
+    void ScaleInPlace(uint32_t keep, ForRange&& forRange) {
+        forRange(blocks_, [&](size_t begin, size_t end) {
+            for (size_t i = begin; i < end; ++i) {
+                if (bins_[i].key.load(std::memory_order_relaxed) == TexelKey::kEmpty) continue;
+                for (auto& w : bins_[i].w)
+                    w.store(Bin::ScaleWord(w.load(std::memory_order_relaxed), keep),
+                            std::memory_order_relaxed);
+            }
+        });
         generation_ = internal::NextGeneration();
     }
     /// Scales records of ExportBlocks as Scale scales the bins, and removes those that fall to

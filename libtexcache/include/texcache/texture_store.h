@@ -144,6 +144,12 @@ public:
         samples_.ScaleInPlace(keep);
         texels_.InvalidateAll();
     }
+    /// As DecayInPlace, the blocks split by `forRange` (BinTable::ScaleInPlace).
+    template <typename ForRange>
+    void DecayInPlace(uint32_t keep, ForRange&& forRange) {
+        samples_.ScaleInPlace(keep, forRange);
+        texels_.InvalidateAll();
+    }
 
     /// Bytes of both levels (fixed at construction).
     size_t BytesUsed() const { return samples_.BytesUsed() + texels_.BytesUsed(); }
