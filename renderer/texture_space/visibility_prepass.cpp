@@ -52,9 +52,11 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
             t.at = TexelAddress{};
             if (!cs.found || cs.hit.object < 0) continue;
             const TexelKey k = c.tsc->TexelKeyOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff), &t.mesh);
-            t.at = c.tsc->AddressOf(k);
-            t.probe = VisibleTexels::Probe(k), t.bit = VisibleTexels::Bit(k);
+            t.at.key = k.Pack();
+            // A repeat is neither marked nor looked up again: it needs no hashes.
             if (i > 0 && t.at.key == texels[i - 1].at.key) continue;
+            t.at.hash = c.tsc->AddressOf(k).hash;
+            t.probe = VisibleTexels::Probe(k), t.bit = VisibleTexels::Bit(k);
             visible.PrefetchAt(t.probe);
             if (find) c.tsc->Prefetch(t.at);
         }
@@ -92,6 +94,10 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
                 ++out->added[pixel];
                 continue;
             }
+            // Read first: a cold pass leaves every row, and a store each time would bounce the
+            // flags' line between the threads.
+            if (!out->rowLeft[mark.y].load(std::memory_order_relaxed))
+                out->rowLeft[mark.y].store(1, std::memory_order_relaxed);
             PassTexel& p = (*out)[out->Index(mark.x, mark.y, mark.s)];
             p.key = t.at.key, p.mesh = mesh,
             p.found = mesh == PassTexels::kFound ? found : glm::vec3(0.0f);
@@ -113,7 +119,8 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
     thread_local std::vector<SampleRequest> texels;
     left.clear();
     texels.clear();
-    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y) {
+        if (!pt.rowLeft[y].load(std::memory_order_relaxed)) continue;
         for (int x = r.cols().begin(); x < r.cols().end(); ++x)
             for (int s = pt.s0 + int(pt.added[size_t(y) * size_t(pt.width) + size_t(x)]); s < pt.s1;
                  ++s) {
@@ -124,6 +131,7 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
                 texels.back() = c.tsc->RequestOf(t.mesh, TexelKey::Unpack(t.key));
                 c.tsc->Prefetch(texels.back());
             }
+    }
     CacheStats& stats = c.cacheStats->local();
     for (size_t i = 0; i < left.size(); ++i) {
         const Left at = left[i];
