@@ -46,7 +46,17 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         // lookups. A sample on the texel of the sample before it (a pixel's samples mostly share
         // one) takes that one's mark and lookup: nothing writes the texel cache during the
         // prepass, so a lookup again would find the same.
+        // A texel whose first slot holds another key gets its other two slots prefetched too,
+        // kSecond samples later, when the first slot's line has arrived to tell.
+        constexpr size_t kSecond = 4;
+        auto prefetchOthers = [&](size_t i) {
+            const Texel& t = texels[i];
+            if (find && t.at.key != TexelKey::kEmpty &&
+                !(i > 0 && t.at.key == texels[i - 1].at.key))
+                c.tsc->PrefetchOtherSlots(t.at);
+        };
         for (size_t i = 0; i < n; ++i) {
+            if (i >= kSecond) prefetchOthers(i - kSecond);
             const CameraSample& cs = block[i];
             Texel& t = texels[i];
             t.at = TexelAddress{};
@@ -60,6 +70,7 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
             visible.PrefetchAt(t.probe);
             if (find) c.tsc->Prefetch(t.at);
         }
+        for (size_t i = n > kSecond ? n - kSecond : 0; i < n; ++i) prefetchOthers(i);
         bool foundLast = false;
         glm::vec3 found(0.0f);
         for (size_t i = 0; i < n; ++i, mark.Next(r, s0, s1)) {
