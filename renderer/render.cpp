@@ -155,6 +155,7 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     const bool prepassAo = twoPhaseAo && fc.Visible() != nullptr;
     constexpr size_t kMaxPassTexelBytes = size_t(256) << 20;
     PassTexels passTexels;
+    std::vector<std::atomic<uint8_t>> rowLeft(prepassAo ? size_t(opt.height) : 0);
     // Light binned at the hits: the path integrator's, or the direct one's (PathHitsTrace).
     const bool pathHits = hits && opt.integrator != IntegratorKind::AO;
     // Temporal accumulation at the hits: the stores decay by alpha between frames instead of
@@ -199,6 +200,8 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
             if (pixels > store.added.size()) store.added.resize(pixels);
             passTexels.at = store.texels.data(), passTexels.added = store.added.data();
             passTexels.sum = sums.rgb.data(), passTexels.width = W;
+            for (auto& row : rowLeft) row.store(0, std::memory_order_relaxed);
+            passTexels.rowLeft = rowLeft.data();
             passTexels.s0 = s0, passTexels.s1 = s1;
         }
         const auto passStart = Clock::now();

@@ -12,6 +12,7 @@
 // each stage's loop keeps them inlined. Internal to renderer/.
 #pragma once
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cstddef>
 #include <cstdint>
@@ -190,6 +191,10 @@ struct PassTexels {
     PassTexel* at = nullptr;
     uint32_t* added = nullptr;  ///< per pixel (y * width + x)
     double* sum = nullptr;      ///< the frame's sums, 3 per pixel
+    /// Per image row: whether the prepass left any of its samples to the shading pass, which
+    /// then skips the others (a warm frame leaves a handful of rows, and reading every pixel's
+    /// `added` again was a visible part of its cost). Zero at the start of the pass.
+    std::atomic<uint8_t>* rowLeft = nullptr;
     int width = 0, s0 = 0, s1 = 0;
     /// Nothing to find: the pass began by emptying the cache, or it holds no texels yet.
     bool cacheEmptied = false;

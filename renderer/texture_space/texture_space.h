@@ -349,6 +349,7 @@ public:
     /// batch of texels before their lookups.
     void Prefetch(const SampleRequest& texel) const { cache_.Prefetch(texel); }
     void Prefetch(const TexelAddress& texel) const { cache_.Prefetch(texel); }
+    void PrefetchOtherSlots(const TexelAddress& texel) const { cache_.PrefetchOtherSlots(texel); }
     /// The texel's value when the texel cache holds it right now: read-only (never shades,
     /// claims or counts), and the value a Lookup hit would return.
     bool FindTexel(const SampleRequest& texel, glm::vec3* value) const {

@@ -46,18 +46,31 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         // lookups. A sample on the texel of the sample before it (a pixel's samples mostly share
         // one) takes that one's mark and lookup: nothing writes the texel cache during the
         // prepass, so a lookup again would find the same.
+        // A texel whose first slot holds another key gets its other two slots prefetched too,
+        // kSecond samples later, when the first slot's line has arrived to tell.
+        constexpr size_t kSecond = 4;
+        auto prefetchOthers = [&](size_t i) {
+            const Texel& t = texels[i];
+            if (find && t.at.key != TexelKey::kEmpty &&
+                !(i > 0 && t.at.key == texels[i - 1].at.key))
+                c.tsc->PrefetchOtherSlots(t.at);
+        };
         for (size_t i = 0; i < n; ++i) {
+            if (i >= kSecond) prefetchOthers(i - kSecond);
             const CameraSample& cs = block[i];
             Texel& t = texels[i];
             t.at = TexelAddress{};
             if (!cs.found || cs.hit.object < 0) continue;
             const TexelKey k = c.tsc->TexelKeyOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff), &t.mesh);
-            t.at = c.tsc->AddressOf(k);
-            t.probe = VisibleTexels::Probe(k), t.bit = VisibleTexels::Bit(k);
+            t.at.key = k.Pack();
+            // A repeat is neither marked nor looked up again: it needs no hashes.
             if (i > 0 && t.at.key == texels[i - 1].at.key) continue;
+            t.at.hash = c.tsc->AddressOf(k).hash;
+            t.probe = VisibleTexels::Probe(k), t.bit = VisibleTexels::Bit(k);
             visible.PrefetchAt(t.probe);
             if (find) c.tsc->Prefetch(t.at);
         }
+        for (size_t i = n > kSecond ? n - kSecond : 0; i < n; ++i) prefetchOthers(i);
         bool foundLast = false;
         glm::vec3 found(0.0f);
         for (size_t i = 0; i < n; ++i, mark.Next(r, s0, s1)) {
@@ -92,6 +105,10 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
                 ++out->added[pixel];
                 continue;
             }
+            // Read first: a cold pass leaves every row, and a store each time would bounce the
+            // flags' line between the threads.
+            if (!out->rowLeft[mark.y].load(std::memory_order_relaxed))
+                out->rowLeft[mark.y].store(1, std::memory_order_relaxed);
             PassTexel& p = (*out)[out->Index(mark.x, mark.y, mark.s)];
             p.key = t.at.key, p.mesh = mesh,
             p.found = mesh == PassTexels::kFound ? found : glm::vec3(0.0f);
@@ -113,7 +130,8 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
     thread_local std::vector<SampleRequest> texels;
     left.clear();
     texels.clear();
-    for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+    for (int y = r.rows().begin(); y < r.rows().end(); ++y) {
+        if (!pt.rowLeft[y].load(std::memory_order_relaxed)) continue;
         for (int x = r.cols().begin(); x < r.cols().end(); ++x)
             for (int s = pt.s0 + int(pt.added[size_t(y) * size_t(pt.width) + size_t(x)]); s < pt.s1;
                  ++s) {
@@ -124,6 +142,7 @@ void AoTileFromPrepass(const Context& c, const tbb::blocked_range2d<int>& r, con
                 texels.back() = c.tsc->RequestOf(t.mesh, TexelKey::Unpack(t.key));
                 c.tsc->Prefetch(texels.back());
             }
+    }
     CacheStats& stats = c.cacheStats->local();
     for (size_t i = 0; i < left.size(); ++i) {
         const Left at = left[i];

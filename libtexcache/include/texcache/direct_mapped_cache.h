@@ -193,16 +193,27 @@ public:
     /// Read-only lookup: true and the payload on a hit; never claims.
     bool Find(uint64_t untagged, uint64_t hash, T* out) const {
         const uint64_t key = untagged | tag_.load(std::memory_order_relaxed);
-        const Slot* s1 = &slots_[SlotOf(hash)];
-        const Slot* s2 = threeChoices_ ? &slots_[SlotOf(SecondHash(hash))] : s1;
-        const Slot* s3 = threeChoices_ ? &slots_[SlotOf(ThirdHash(hash))] : s1;
+        const Slot* const s1 = &slots_[SlotOf(hash)];
+        // The other two slots are addressed only when the first does not hold the key: most
+        // lookups end in the first (see Prefetch), and their hashes and slot indices are a
+        // visible part of a warm frame's lookups. A key in no slot returns at once; only a
+        // slot of our key that a writer holds or changes is read again.
+        const Slot* s2 = nullptr;
+        const Slot* s3 = nullptr;
         for (int attempt = 0; attempt < 4; ++attempt) {
-            for (const Slot* s : {s1, s2, s3}) {
-                const uint64_t seq = s->seq.load(std::memory_order_acquire);
-                if (s->key.load(std::memory_order_acquire) != key) continue;
-                const int r = TryRead(*s, seq, out);
-                if (r == kHit) return true;
+            int r = ReadIfKey(*s1, key, out);
+            if (r == kHit) return true;
+            bool seen = r != kAbsent;
+            if (threeChoices_) {
+                if (!s2)
+                    s2 = &slots_[SlotOf(SecondHash(hash))], s3 = &slots_[SlotOf(ThirdHash(hash))];
+                for (const Slot* s : {s2, s3}) {
+                    r = ReadIfKey(*s, key, out);
+                    if (r == kHit) return true;
+                    seen = seen || r != kAbsent;
+                }
             }
+            if (!seen) return false;
         }
         return false;
     }
@@ -228,6 +239,16 @@ public:
     /// others), and fetching a second line for every texel costs more than it hides
     /// (docs/cache.md, "Prefetching").
     void Prefetch(uint64_t hash) const { PrefetchLine(&slots_[SlotOf(hash)]); }
+    /// Prefetch's second step, once the first slot's line has arrived: starts loading the key's
+    /// other two slots unless the first holds it. A key in another slot would otherwise cost a
+    /// miss to memory in Find (a warm frame's texels that live there are about one in seven).
+    void PrefetchOthers(uint64_t untagged, uint64_t hash) const {
+        if (!threeChoices_) return;
+        const uint64_t key = untagged | tag_.load(std::memory_order_relaxed);
+        if (slots_[SlotOf(hash)].key.load(std::memory_order_relaxed) == key) return;
+        PrefetchLine(&slots_[SlotOf(SecondHash(hash))]);
+        PrefetchLine(&slots_[SlotOf(ThirdHash(hash))]);
+    }
 
     /// Stores the payload of a claimed slot and makes it visible.
     void Publish(const SlotTicket& t, const T& value) {
@@ -296,6 +317,12 @@ private:
         }
         if (s.seq.load(std::memory_order_relaxed) != seq) return kRetry;  // a writer intervened
         return kHit;
+    }
+    // TryRead of a slot if it holds `key` (tagged), else kAbsent.
+    int ReadIfKey(const Slot& s, uint64_t key, T* out) const {
+        const uint64_t seq = s.seq.load(std::memory_order_acquire);
+        if (s.key.load(std::memory_order_acquire) != key) return kAbsent;
+        return TryRead(s, seq, out);
     }
     // Tags: the top 4 bits of a stored key; 15 of them, since kEmpty's top bits are 0xF.
     static constexpr int kTagShift = 60;

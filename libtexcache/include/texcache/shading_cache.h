@@ -400,6 +400,11 @@ public:
     void Prefetch(const TexelAddress& a) const {
         if (texels_) texels_->Prefetch(a.hash);
     }
+    /// After a Prefetch has had time to arrive: starts loading the texel's other slots unless
+    /// the first holds it, so that a FindTexel ending there finds them in the CPU cache too.
+    void PrefetchOtherSlots(const TexelAddress& a) const {
+        if (texels_) texels_->PrefetchOthers(a.key, a.hash);
+    }
 
     /// The filtered value at a hit: texel cache hit, or gather + shade missing samples + filter.
     template <typename ShadeFn, typename FilterFn>

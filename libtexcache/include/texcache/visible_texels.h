@@ -25,8 +25,12 @@
 #include <atomic>
 #include <bit>
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
+#include <new>
+#include <type_traits>
 
+#include "texcache/huge_pages.h"
 #include "texcache/prefetch.h"
 #include "texcache/texel_key.h"
 
@@ -38,9 +42,7 @@ public:
     /// most 2^32: a Probe's low 32 bits then address every word).
     explicit VisibleTexels(size_t bytes)
         : words_(std::bit_floor(std::clamp<size_t>(bytes / sizeof(uint64_t), 8, size_t(1) << 32))),
-          bits_(std::make_unique<std::atomic<uint64_t>[]>(words_)) {
-        Clear();
-    }
+          bits_(AllocateWords(words_)) {}
 
     /// Forgets every mark (not concurrently with Mark or Contains).
     void Clear() {
@@ -94,8 +96,21 @@ public:
 private:
     size_t Word(const TexelKey& k) const { return size_t(Probe(k)) & (words_ - 1); }
 
+    // The words are on huge pages like the caches' slots (texcache/huge_pages.h): a frame marks
+    // and prefetches words at random in a table of a few MB, and on 4 KB pages each of those
+    // is a TLB miss, which a virtual machine makes dear and a prefetch waits for.
+    struct Free {
+        void operator()(std::atomic<uint64_t>* p) const { std::free(p); }
+    };
+    static std::atomic<uint64_t>* AllocateWords(size_t n) {
+        static_assert(std::is_trivially_destructible_v<std::atomic<uint64_t>>);
+        auto* words = static_cast<std::atomic<uint64_t>*>(AllocateHugePages(n * sizeof(uint64_t)));
+        for (size_t i = 0; i < n; ++i) new (&words[i]) std::atomic<uint64_t>(0);
+        return words;
+    }
+
     size_t words_;
-    std::unique_ptr<std::atomic<uint64_t>[]> bits_;
+    std::unique_ptr<std::atomic<uint64_t>[], Free> bits_;
 };
 
 }  // namespace texcache
