@@ -60,8 +60,9 @@ struct ScreenSpaceDenoiser::State {
     Method method = Method::SpatialOnly;
     Demodulation demod = Demodulation::Off;
     uint32_t frameIndex = 0;
-    int stillFrames = -1;     ///< frames denoised since SetStillView(true); -1: moving
-    float blendAlpha = 0.2f;  ///< this frame's alpha of the temporal blends (BlendAlpha)
+    int stillFrames = -1;              ///< frames denoised since SetStillView(true); -1: moving
+    float blendAlpha = 0.2f;           ///< this frame's alpha of the temporal blends (BlendAlpha)
+    bool indirectAccumulates = false;  ///< this frame's FrameBuffers::indirectAccumulates
     internal::Guides guides[2];
     int cur = 0;
     FrameCamera prevCam;

@@ -123,6 +123,11 @@ struct FrameBuffers {
     int width = 0, height = 0;
     FrameCamera camera;
     float time = 0.0f;  ///< frame time (seconds)
+    /// The renderer's `indirect` (and cones) is already its own running mean over a still view
+    /// (the frame buffers' store): the stage then keeps its moving-view blend for that component
+    /// instead of a running mean of running means, which would weigh the first, worst frames as
+    /// much as the last.
+    bool indirectAccumulates = false;
 
     // The components (linear radiance, RGB).
     std::vector<glm::vec3> emitted;  ///< light seen directly (environment, emitters)

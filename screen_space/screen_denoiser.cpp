@@ -1055,6 +1055,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         }
         PrepareHalf(s, frame);
         clock.Lap(&StageTimings::prepare);
+        s.halfFrame.indirectAccumulates = frame.indirectAccumulates;
         s.half->Denoise(s.halfFrame, method, demodulation, &s.halfImage);
         clock.Charge(s.half->Timings(), s.half->CpuTimings());
         s.lastHalf = true;
@@ -1065,6 +1066,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
 
     s.lastHalf = false;
     s.blendAlpha = BlendAlpha(s.set.alpha, s.stillFrames);
+    s.indirectAccumulates = frame.indirectAccumulates;
     const bool temporal = method != Method::SpatialOnly && s.hasPrev;
     std::fill(std::begin(s.motionValid), std::end(s.motionValid), false);
     if (temporal) {

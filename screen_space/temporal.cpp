@@ -443,7 +443,10 @@ void SvgfTemporal(ScreenSpaceDenoiser::State& s, int ci, const MotionField* mf, 
                 for (int c = 0; c < nc; ++c) a.hc[c] = hp->c[c].Base();
                 a.hm1 = hp->m1.Base(), a.hm2 = hp->m2.Base(), a.hlen = hp->len.Base();
             }
-            a.alpha = s.blendAlpha, a.clampK = clampK;
+            // A component the renderer accumulates over a still view keeps the moving blend.
+            a.alpha = ci == kIndirect && s.indirectAccumulates ? std::max(s.blendAlpha, s.set.alpha)
+                                                               : s.blendAlpha;
+            a.clampK = clampK;
             a.varPerAlpha = s.stillFrames >= 0 ? 1.0f / s.set.alpha : 1e6f;
             a.clampKRow = clampKPerPixel ? clampKPerPixel->Row(y) : nullptr;
             for (int c = 0; c < nc; ++c) a.out[c] = sc.t[c].Row(y);

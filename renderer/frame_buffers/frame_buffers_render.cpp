@@ -1010,6 +1010,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     fb.width = W;
     fb.height = H;
     fb.time = opt.frameTime;
+    fb.indirectAccumulates = false;  // set below for a still view of the store
     fb.camera = MakeFrameCamera(rs.scene().camera, opt.frameTime, W, H);
     const size_t n = fb.NumPixels();
     // Sized only: every pixel writes all of its entries (ClearPixel), so a FrameBuffers reused
@@ -1073,6 +1074,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->records = tsc.HitRecords(n);
         fs->binned = tsc.BinnedHits(n);
         fs->own = tsc.StillOwnLight(W, H);
+        fb.indirectAccumulates = fs->own != nullptr;
         // A still view traces every pixel's path every frame (kStillStoreBudget).
         if (fs->own)
             fs->budget = kStillStoreBudget, fs->group = tsc.Frame() % uint32_t(kStillStoreBudget);
