@@ -222,7 +222,9 @@ inline __attribute__((always_inline)) void SvgfRowImpl(const SvgfArgs& args) {
     // Everything the loop reads is copied to locals and its results go to local arrays: then the
     // compiler sees no possible aliasing and needs no run-time checks to vectorize.
     const SvgfArgs a = args;
-    const bool stream = StreamPlanes(a.w, a.h, NC + 4);
+    // Written planes plus read ones (the current values and validity; with history, its NC + 3
+    // planes and the motion): see AtrousRowImpl in kernels.cpp.
+    const bool stream = StreamPlanes(a.w, a.h, (NC + 4) + (NC + 1) + (Hist ? NC + 5 : 0));
     const size_t size = size_t(a.stride) * size_t(a.h);
     constexpr int kC = kChunk;
     alignas(64) float o[3][kC], ovar[kC], om1[kC], om2[kC], olen[kC];
