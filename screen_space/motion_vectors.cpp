@@ -110,9 +110,7 @@ inline void TapPassPair(const TradRowArgs& a, int idx, float inL, float inR, int
 
 TEXCACHE_SCREEN_CLONES void TradRow(const TradRowArgs& args) {
     const TradRowArgs a = args;
-    // Written planes plus read ones (the row's previous position and normal, 3 each, its
-    // object id and the previous frame's 7 guides): see AtrousRowImpl in kernels.cpp.
-    const bool stream = StreamPlanes(a.w, a.h, 2 + 14);
+    const bool stream = StreamPlanes(a.w, a.h, 2);
     constexpr int kC = 256;
     alignas(64) int mask[kC];
     alignas(64) float ox[kC], oy[kC];  // local results: no aliasing with the gathers
@@ -270,11 +268,9 @@ inline float SplatBase(float t, int x) {
 TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
     const ShadowRowArgs a = args;
     // The vectors are read after the splat's box sums, which pass a dozen planes through the
-    // caches in between: streamed when large (StoreRow), counting the planes the pass reads
-    // (blocker, light sample, position and normal, 3 each, and the ids) as AtrousRowImpl in
-    // kernels.cpp does. The splat inputs are read by the very next pass, while most of them are
-    // still in the L3 cache: ordinary stores.
-    const bool stream = StreamPlanes(a.w, a.h, 3 + 14);
+    // caches in between: streamed when large (StoreRow). The splat inputs are read by the very
+    // next pass, while most of them are still in the L3 cache: ordinary stores.
+    const bool stream = StreamPlanes(a.w, a.h, 3);
     constexpr int kC = 256;
     // Two loops per chunk (geometry, then eq. 4 and the taps): one loop with everything has too
     // many conditionals for GCC's if-conversion, and then it does not vectorize.
@@ -537,9 +533,7 @@ struct GlossyRowArgs {
 
 TEXCACHE_SCREEN_CLONES void GlossyRow(const GlossyRowArgs& args) {
     const GlossyRowArgs a = args;
-    // Written planes plus read ones (both glossy hits, position and normal, 3 each, roughness
-    // and ids): see AtrousRowImpl in kernels.cpp.
-    const bool stream = StreamPlanes(a.w, a.h, 2 + 15);
+    const bool stream = StreamPlanes(a.w, a.h, 2);
     constexpr int kC = 256;
     // Two loops per chunk (eq. 5's vectors, then the lobe's jitter and the taps): one loop holds
     // more live values than there are vector registers, and its spills cost more than these
