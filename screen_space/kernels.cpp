@@ -237,8 +237,12 @@ inline __attribute__((always_inline)) void AtrousComponentChunkVar(const AtrousA
 inline __attribute__((always_inline)) void AtrousRowImpl(const AtrousArgs& a, int y) {
     const Guides& g = *a.g;
     const int w = g.depth.Width(), h = g.depth.Height();
-    int planes = 0;  // written by the level
-    for (const AtrousComponent& c : a.comp) planes += c.nc + (c.nc && c.outVar ? 1 : 0);
+    // Planes the level reads (the five guides, each component's values and variance) and
+    // writes: the level's own reads evict what it writes long before the next level reads it
+    // when they do not fit in L3 together, so the written planes' size alone is not the test.
+    int planes = 5;
+    for (const AtrousComponent& c : a.comp)
+        if (c.nc) planes += 2 * c.nc + 1 + (c.outVar ? 1 : 0);
     const bool stream = StreamPlanes(w, h, planes);
     const int s = a.step;
     const int rows[3] = {y - s >= 0 ? y - s : y, y, y + s < h ? y + s : y};
