@@ -129,7 +129,8 @@ constexpr size_t kCameraBlock = 64;
 template <typename Sample>
 void PinholeCameraRays(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int s1,
                        Cursor& gen, Sample* block, size_t n) {
-    float px[kCameraBlock], py[kCameraBlock], time[kCameraBlock];
+    // Zeroed: GCC's sanitizer builds cannot tell that GeneratePinhole reads only the first n.
+    float px[kCameraBlock] = {}, py[kCameraBlock] = {}, time[kCameraBlock];
     uint64_t seed = 0;
     for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1)) {
         if (i == 0 || gen.s == s0) seed = PixelSeed(c.opt.seed, gen.x, gen.y, c.opt.width);
