@@ -42,13 +42,24 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
             CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray, &block[i].diff);
         IntersectCameraRays(c, block, n, rays);
-        // The block's texels first, their marks and slots prefetched, then the marks and
-        // lookups. A sample on the texel of the sample before it (a pixel's samples mostly share
-        // one) takes that one's mark and lookup: nothing writes the texel cache during the
+        // The block's texels first, then their hashes and prefetches, then the marks and
+        // lookups. The surface interactions run in a loop of their own: with the slots' and
+        // marks' prefetches issued between them, the interactions' own loads (the limit patches)
+        // waited behind those misses, and a warm frame spent more in them than a frame without
+        // lookups does. A sample on the texel of the sample before it (a pixel's samples mostly
+        // share one) takes that one's mark and lookup: nothing writes the texel cache during the
         // prepass, so a lookup again would find the same.
+        for (size_t i = 0; i < n; ++i) {
+            const CameraSample& cs = block[i];
+            Texel& t = texels[i];
+            t.at = TexelAddress{};
+            if (!cs.found || cs.hit.object < 0) continue;
+            t.at.key = c.tsc->TexelKeyOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff), &t.mesh).Pack();
+        }
         // A texel whose first slot holds another key gets its other two slots prefetched too,
-        // kSecond samples later, when the first slot's line has arrived to tell.
-        constexpr size_t kSecond = 4;
+        // kSecond samples later, when the first slot's line has arrived to tell (the hashing
+        // loop is short: a few samples are not time enough).
+        constexpr size_t kSecond = 16;
         auto prefetchOthers = [&](size_t i) {
             const Texel& t = texels[i];
             if (find && t.at.key != TexelKey::kEmpty &&
@@ -57,14 +68,11 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         };
         for (size_t i = 0; i < n; ++i) {
             if (i >= kSecond) prefetchOthers(i - kSecond);
-            const CameraSample& cs = block[i];
             Texel& t = texels[i];
-            t.at = TexelAddress{};
-            if (!cs.found || cs.hit.object < 0) continue;
-            const TexelKey k = c.tsc->TexelKeyOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff), &t.mesh);
-            t.at.key = k.Pack();
             // A repeat is neither marked nor looked up again: it needs no hashes.
-            if (i > 0 && t.at.key == texels[i - 1].at.key) continue;
+            if (t.at.key == TexelKey::kEmpty || (i > 0 && t.at.key == texels[i - 1].at.key))
+                continue;
+            const TexelKey k = TexelKey::Unpack(t.at.key);
             t.at.hash = c.tsc->AddressOf(k).hash;
             t.probe = VisibleTexels::Probe(k), t.bit = VisibleTexels::Bit(k);
             visible.PrefetchAt(t.probe);
