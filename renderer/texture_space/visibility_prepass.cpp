@@ -46,9 +46,9 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         // lookups. The surface interactions run in a loop of their own: with the slots' and
         // marks' prefetches issued between them, a warm frame spent more in the interactions
         // (the limit patches) than a frame without lookups does, presumably their loads queued
-        // behind those misses. A sample on the texel of the sample before it (a pixel's samples mostly
-        // share one) takes that one's mark and lookup: nothing writes the texel cache during the
-        // prepass, so a lookup again would find the same.
+        // behind those misses. A sample on the texel of the sample before it (a pixel's samples
+        // mostly share one) takes that one's mark and lookup: nothing writes the texel cache during
+        // the prepass, so a lookup again would find the same.
         for (size_t i = 0; i < n; ++i) {
             const CameraSample& cs = block[i];
             Texel& t = texels[i];
