@@ -118,10 +118,7 @@ struct TextureSpaceOptions {
     /// pixel (frame_buffers_render.h). Off: the diffuse lobe's direct light stays per pixel.
     bool cacheDiffuseLayer = true;
     int diffuseLayerPaths = 2;
-    /// The specular lobe's light samples share it with the lobe's own ray (MIS), which carries
-    /// most of a glossy lobe's light: past a few, more samples add cost and hardly lower the
-    /// denoised error (results/preview.md).
-    int specularLightSamples = 4;
+    int specularLightSamples = 8;
     /// Screen-space frame buffers: where the diffuse lobe's cached light comes from. Hits: the
     /// one store (texcache/texture_store.h) filled from the frame's own camera hits, one pixel
     /// in frameBufferBudget a frame (a pattern that rotates over frames) plus every pixel whose

@@ -341,7 +341,7 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
                   "denoised relMSE reaches texture space's, and the CPU ratio there");
     cmd->add_option("--specular-samples", a->specularSamples,
                     "Bench with the stage: light samples a pixel of the specular lobe where the "
-                    "cache lights the diffuse base (1-32; default 4)");
+                    "cache lights the diffuse base (1-32; default 8)");
     cmd->add_option("--reference-spp", a->referenceSpp,
                     "Bench: spp of the reference (default 32 per-hit AO x 16 rays; with --denoise "
                     "128 path traced)");
