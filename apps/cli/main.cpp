@@ -76,9 +76,9 @@ std::string UnknownSubcommand(const CLI::App& app) {
 /// where the kernel gives them on advice alone (the usual "madvise" setting). The frame buffers,
 /// the store's tables and the stage's planes are tens of MB each, read and written all over
 /// every frame: on 4 KiB pages their accesses miss the TLB, whose walks cost most in a virtual
-/// machine and under load (the orbit bench's store frames on a loaded 2-core machine: render
-/// CPU -17%, stage CPU ~-60%; results/preview.md). GLIBC_TUNABLES naming the tunable already
-/// (=0 to opt out) leaves the process as it is; so does a failed exec.
+/// machine and under load (the orbit bench's store frames, 2-core machine: render CPU -13 to
+/// -17%, stage CPU -65%, the same images; results/preview.md). GLIBC_TUNABLES naming the
+/// tunable already (=0 to opt out) leaves the process as it is; so does a failed exec.
 void UseHugePages(char** argv) {
 #if defined(__linux__) && defined(__GLIBC__)
     constexpr const char* kTunable = "glibc.malloc.hugetlb";
