@@ -74,10 +74,10 @@ std::string UnknownSubcommand(const CLI::App& app) {
 /// Large allocations on 2 MiB pages: the process runs again at once, with glibc's malloc asked
 /// to advise transparent huge pages for the memory it maps (the tunable is read only at start),
 /// where the kernel gives them on advice alone (the usual "madvise" setting). The frame buffers,
-/// the store's tables and the stage's planes are tens of MB each, read and written all over
-/// every frame: on 4 KiB pages their accesses miss the TLB, whose walks cost most in a virtual
+/// the store's tables and the stage's planes, tens of MB together, are read and written all
+/// over every frame: on 4 KiB pages their accesses miss the TLB, whose walks cost most in a virtual
 /// machine and under load (the orbit bench's store frames, 2-core machine: render CPU -13 to
-/// -17%, stage CPU -65%, the same images; results/preview.md). GLIBC_TUNABLES naming the
+/// -18%, stage CPU -65 to -69%, the same images; results/preview.md). GLIBC_TUNABLES naming the
 /// tunable already (=0 to opt out) leaves the process as it is; so does a failed exec.
 void UseHugePages(char** argv) {
 #if defined(__linux__) && defined(__GLIBC__)
