@@ -177,13 +177,20 @@ int RunPasses(const Context& c, FrameCache& fc, FrameSums& sums,
     // Hit-binned diffuse light: each pixel's per-hit part of a pass (misses, lights, glossy
     // hits, unbinned direct light), written by the binning phase, added by the resolve.
     // Each eye's frame after the other's (stereo).
-    std::vector<glm::dvec3> perHit(pathHits ? size_t(eyes) * framePixels : 0);
-    std::vector<glm::dvec2> pixelNoise(pathHits ? size_t(eyes) * framePixels
-                                                : 0);  // see PathHitsTrace
+    // These per-pixel and per-sample arrays are the cache's, kept from render to render
+    // (PassScratch): cleared here, they are pages the process has.
+    std::vector<glm::dvec3> noPerHit;
+    std::vector<glm::dvec2> noPixelNoise;
+    std::vector<float> noOwnAo;
+    std::vector<glm::dvec3>& perHit = hits ? c.tsc->PassTexelScratch().perHit : noPerHit;
+    std::vector<glm::dvec2>& pixelNoise =
+        hits ? c.tsc->PassTexelScratch().pixelNoise : noPixelNoise;  // see PathHitsTrace
+    perHit.assign(pathHits ? size_t(eyes) * framePixels : 0, glm::dvec3(0.0));
+    pixelNoise.assign(pathHits ? size_t(eyes) * framePixels : 0, glm::dvec2(0.0));
     std::vector<double> rowNoise(pathHits ? 2 * size_t(y1 - y0) : 0);
     // Hit-binned AO: each camera sample's own estimate, written by the binning phase, added to
     // sums.own by the resolve (a pass binned again writes it again).
-    std::vector<float> ownAo;
+    std::vector<float>& ownAo = hits ? c.tsc->PassTexelScratch().ownAo : noOwnAo;
     if (hits)
         for (int e = 0; e < eyes; ++e) eyeSums[e]->own.assign(4 * framePixels, 0.0);
     while (done < sppCap) {
@@ -513,6 +520,10 @@ RenderResult RenderFrame(const RenderScene& rs, const RenderOptions& opt, Textur
         rightSums.rgb.assign(numPixels * 3, 0.0);
         second = {&*rightCtx, &rightSums, &rightCounts};
     }
+    // Hit binning's per-pixel own sums: the cache's arrays, lent to this render (PassScratch).
+    PassScratch* const scratch =
+        ctx.tsc && ShadesAtHits(opt) ? &ctx.tsc->PassTexelScratch() : nullptr;
+    if (scratch) sums.own.swap(scratch->own[0]), rightSums.own.swap(scratch->own[1]);
     const int done = RunPasses(ctx, frameCache, sums, counts, start, rightOpt ? &second : nullptr) -
                      opt.firstSample;
     const uint64_t passBytes =
@@ -539,7 +550,7 @@ RenderResult RenderFrame(const RenderScene& rs, const RenderOptions& opt, Textur
         // Hit binning: the pixels' own samples as the finest level (texture_space.h).
         if (!fs.own.empty())
             CombineWithOwnSamples(fs.rgb.data(), fs.own.data(), W, o.rowBegin, rowEnd, done,
-                                  er.beauty.data.data());
+                                  er.beauty.data.data(), scratch ? &scratch->combine : nullptr);
         er.aovs = AovLayers(fs.aovs, o.aovs, W, H, done);
         for (const RayCounts& rc : rays) {
             er.stats.cameraRays += rc.camera;
@@ -585,6 +596,7 @@ RenderResult RenderFrame(const RenderScene& rs, const RenderOptions& opt, Textur
         right->stats.seconds = result.stats.seconds,
         right->stats.cpuSeconds = result.stats.cpuSeconds;
     }
+    if (scratch) sums.own.swap(scratch->own[0]), rightSums.own.swap(scratch->own[1]);
     return result;
 }
 

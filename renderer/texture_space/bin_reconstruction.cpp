@@ -500,14 +500,20 @@ double StoreBlockAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
 }
 
 void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
-                           float* out) {
+                           float* out, CombineScratch* scratch) {
     if (n < 2 || y1 <= y0 || width <= 0) return;  // no spread to weigh: the reconstruction
     const size_t W = size_t(width), rows = size_t(y1 - y0), pixels = W * rows;
     const double invN = 1.0 / double(n);
     // Per pixel: the variance of its mean difference (own - reconstruction, luminance) and the
     // squared mean difference, then each summed over the window (a box, rows then columns).
-    std::vector<double> var(pixels), d2(pixels), tmp(pixels);
-    std::vector<uint8_t> odd(pixels);  // sums not finite: the pixel keeps its reconstruction
+    // Every entry is written below before it is read: no clearing.
+    CombineScratch local;
+    CombineScratch& cs = scratch ? *scratch : local;
+    for (std::vector<double>* v : {&cs.var, &cs.d2, &cs.tmp})
+        if (v->size() < pixels) v->resize(pixels);
+    if (cs.odd.size() < pixels) cs.odd.resize(pixels);
+    std::vector<double>&var = cs.var, &d2 = cs.d2, &tmp = cs.tmp;
+    std::vector<uint8_t>& odd = cs.odd;  // sums not finite: the pixel keeps its reconstruction
     for (size_t p = 0; p < pixels; ++p) {
         const size_t q = size_t(y0) * W + p;
         const double* o = &own[4 * q];

@@ -260,8 +260,13 @@ constexpr int kOwnWindowRadius = 2;
 /// 1 - CoarseWeight of their difference and of the variance of its mean, both summed over a
 /// window; written to `out` (3 a pixel). Writes nothing for n < 2 (no spread to weigh: `out`
 /// keeps the reconstruction) and the reconstruction where the result is not finite.
+/// `scratch`: its arrays, kept by the caller from render to render (null: its own).
+struct CombineScratch {
+    std::vector<double> var, d2, tmp;
+    std::vector<uint8_t> odd;
+};
 void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
-                           float* out);
+                           float* out, CombineScratch* scratch = nullptr);
 
 /// A frame-buffer pixel's own diffuse light over the frames of a still view (the frame buffers'
 /// store, frame_buffers_render.h): the mean of its traced paths' light, the sum of the squared
@@ -288,12 +293,28 @@ void PrepareOwnLight(PixelOwnLight& px, glm::vec3 bin);
 /// (`px` a width x height frame after PrepareOwnLight); the read-back where that is not finite.
 glm::vec3 BlendWithOwnLight(const PixelOwnLight* px, int width, int height, int x, int y);
 
-/// What the visibility prepass keeps of a pass for its shading pass (the renderer's PassTexels).
+/// What a render at the hits keeps from render to render (render.cpp): the visibility prepass's
+/// record of a pass for its shading pass (the renderer's PassTexels), and the per-pixel and
+/// per-sample arrays of hit binning. A warm frame (an animation's, an experiment's next budget)
+/// then writes pages it has, where fresh arrays were faulted in and zeroed by the kernel again
+/// each render (about a tenth of a 480x360 render's CPU at one path a hit).
 struct PassScratch {
-    std::vector<PassTexel> texels;  ///< per camera sample of the pass
-    std::vector<uint32_t> added;    ///< per pixel: its first samples the prepass added itself
+    std::vector<PassTexel> texels;       ///< per camera sample of the pass
+    std::vector<uint32_t> added;         ///< per pixel: its first samples the prepass added itself
+    std::vector<glm::dvec3> perHit;      ///< per pixel: hit-binned light's per-hit part of a pass
+    std::vector<glm::dvec2> pixelNoise;  ///< per pixel: its binned light's noise (PathHitsTrace)
+    std::vector<float> ownAo;            ///< per camera sample: hit-binned AO's own estimate
+    std::vector<double> own[2];          ///< each eye's FrameSums::own, lent to a render
+    CombineScratch combine;              ///< CombineWithOwnSamples' arrays
     size_t Bytes() const {
-        return texels.capacity() * sizeof(PassTexel) + added.capacity() * sizeof(uint32_t);
+        size_t n = texels.capacity() * sizeof(PassTexel) + added.capacity() * sizeof(uint32_t) +
+                   perHit.capacity() * sizeof(glm::dvec3) +
+                   pixelNoise.capacity() * sizeof(glm::dvec2) + ownAo.capacity() * sizeof(float) +
+                   combine.odd.capacity();
+        for (const std::vector<double>* v :
+             {&own[0], &own[1], &combine.var, &combine.d2, &combine.tmp})
+            n += v->capacity() * sizeof(double);
+        return n;
     }
 };
 }  // namespace internal
