@@ -76,6 +76,8 @@ TEST(FrameBuffers, TextureSpaceCacheComposes) {
         for (size_t p = 0; p < fb.NumPixels(); ++p)
             if (diffuse(p)) perHitIndirect += Luminance(fb.indirect[p]);
     }
+    std::printf("cached / per hit: indirect %.5f, composed %.5f\n", cachedIndirect / perHitIndirect,
+                cached / perHit);
     EXPECT_NEAR(cachedIndirect / perHitIndirect, 1.0, 0.06);
     EXPECT_NEAR(cached / perHit, 1.0, 0.01);
 }

@@ -75,10 +75,11 @@ std::string UnknownSubcommand(const CLI::App& app) {
 /// to advise transparent huge pages for the memory it maps (the tunable is read only at start),
 /// where the kernel gives them on advice alone (the usual "madvise" setting). The frame buffers,
 /// the store's tables and the stage's planes, tens of MB together, are read and written all
-/// over every frame: on 4 KiB pages their accesses miss the TLB, whose walks cost most in a virtual
-/// machine and under load (the orbit bench's store frames, 2-core machine: render CPU -13 to
-/// -18%, stage CPU -65 to -69%, the same images; results/preview.md). GLIBC_TUNABLES naming the
-/// tunable already (=0 to opt out) leaves the process as it is; so does a failed exec.
+/// over every frame: on 4 KiB pages their accesses miss the TLB, whose walks cost most in a
+/// virtual machine and under load (results/preview.md, "Store frames on 2 MiB pages", measures
+/// the orbit bench both ways; the images are the same). GLIBC_TUNABLES naming the tunable
+/// already (=0 to opt out) leaves the process as it is; so does a failed exec. A program that
+/// links the libraries itself sets the tunable in its own environment to get the same.
 void UseHugePages(char** argv) {
 #if defined(__linux__) && defined(__GLIBC__)
     constexpr const char* kTunable = "glibc.malloc.hugetlb";
