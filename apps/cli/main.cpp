@@ -90,8 +90,14 @@ void UseHugePages(char** argv) {
     if (!std::getline(mode, line) || line.find("[madvise]") == std::string::npos) return;
     const std::string value =
         (tunables && *tunables ? std::string(tunables) + ":" : std::string()) + kTunable + "=1";
+    // The program's own path, not /proc/self/exe: the process keeps its name ("texcache" in
+    // ps, top and perf, where /proc/self/exe would name it "exe").
+    char path[4096];
+    const ssize_t n = readlink("/proc/self/exe", path, sizeof path - 1);
+    if (n <= 0) return;
+    path[n] = '\0';
     if (setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0) return;
-    execv("/proc/self/exe", argv);
+    execv(path, argv);
 #else
     (void)argv;
 #endif
