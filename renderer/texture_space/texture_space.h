@@ -253,6 +253,11 @@ inline double OwnWeightK(int n) {
 /// The window over which CombineWithOwnSamples sums its estimates: (2R + 1)^2 pixels, so that a
 /// dark or few-sample pixel does not trust an own mean that happens to agree with itself.
 constexpr int kOwnWindowRadius = 2;
+/// CombineWithOwnSamples' per-pixel arrays, kept by its caller from render to render.
+struct CombineScratch {
+    std::vector<double> var, d2, tmp;
+    std::vector<uint8_t> odd;
+};
 /// Hit binning's finest level, each pixel's own samples (the note at the top): for rows [y0, y1)
 /// of a frame `width` pixels wide, each pixel's mean of its `n` reconstructed samples (`rgb`, 3
 /// sums a pixel) moved towards the mean of their own per-hit estimates (`own`, 4 a pixel: 3
@@ -260,11 +265,7 @@ constexpr int kOwnWindowRadius = 2;
 /// 1 - CoarseWeight of their difference and of the variance of its mean, both summed over a
 /// window; written to `out` (3 a pixel). Writes nothing for n < 2 (no spread to weigh: `out`
 /// keeps the reconstruction) and the reconstruction where the result is not finite.
-/// `scratch`: its arrays, kept by the caller from render to render (null: its own).
-struct CombineScratch {
-    std::vector<double> var, d2, tmp;
-    std::vector<uint8_t> odd;
-};
+/// `scratch`: its arrays (null: its own).
 void CombineWithOwnSamples(const double* rgb, const double* own, int width, int y0, int y1, int n,
                            float* out, CombineScratch* scratch = nullptr);
 
@@ -296,8 +297,8 @@ glm::vec3 BlendWithOwnLight(const PixelOwnLight* px, int width, int height, int 
 /// What a render at the hits keeps from render to render (render.cpp): the visibility prepass's
 /// record of a pass for its shading pass (the renderer's PassTexels), and the per-pixel and
 /// per-sample arrays of hit binning. A warm frame (an animation's, an experiment's next budget)
-/// then writes pages it has, where fresh arrays were faulted in and zeroed by the kernel again
-/// each render (about a tenth of a 480x360 render's CPU at one path a hit).
+/// then writes pages it has, where fresh arrays would be faulted in and zeroed by the kernel
+/// again each render.
 struct PassScratch {
     std::vector<PassTexel> texels;       ///< per camera sample of the pass
     std::vector<uint32_t> added;         ///< per pixel: its first samples the prepass added itself
