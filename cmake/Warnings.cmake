@@ -20,9 +20,13 @@ if(NOT TEXCACHE_SANITIZE STREQUAL "")
 endif()
 if(TEXCACHE_SANITIZE STREQUAL "address")
   # -fno-sanitize-recover: an UBSan finding aborts the program (so fails its test) instead of
-  # printing a report and going on, as ASan findings already do.
+  # printing a report and going on, as ASan findings already do. UBSan's null and
+  # pointer-overflow checks are left out: they check every member access and pointer step, which
+  # is most of UBSan's compile time (in Eigen's and the renderer's inlined code), and a null
+  # pointer that is dereferenced still stops the test under ASan, with its stack.
   target_compile_options(texcache_sanitizers INTERFACE -fsanitize=address,undefined
-                         -fno-sanitize-recover=all -fno-omit-frame-pointer)
+                         -fno-sanitize=null,pointer-overflow -fno-sanitize-recover=all
+                         -fno-omit-frame-pointer)
   target_link_options(texcache_sanitizers INTERFACE -fsanitize=address,undefined)
 elseif(TEXCACHE_SANITIZE STREQUAL "thread")
   target_compile_options(texcache_sanitizers INTERFACE -fsanitize=thread -fno-omit-frame-pointer)
@@ -47,5 +51,15 @@ target_compile_options(texcache_options INTERFACE -fno-math-errno)
 function(texcache_driver_code target)
   if(NOT TEXCACHE_SANITIZE STREQUAL "")
     target_compile_options(${target} PRIVATE -O0)
+  endif()
+endfunction()
+
+# The render tests' own code (scenes set up, checks, statistics of images) compiles at -O1 in the
+# optimized builds too: their run time is in the libraries, which keep the build type's -O3, and
+# -O1 compiles a test file in about two thirds of -O3's time. The cache library's tests keep
+# -O3: they instantiate its templates themselves.
+function(texcache_test_code target)
+  if(TEXCACHE_SANITIZE STREQUAL "" AND CMAKE_BUILD_TYPE MATCHES "^(Release|RelWithDebInfo)$")
+    target_compile_options(${target} PRIVATE -O1)
   endif()
 endfunction()

@@ -5,7 +5,8 @@
 #  3. tsan: the cache library's tests (label `cache`) under ThreadSanitizer in build-tsan/, since
 #     the caches are shared by all render threads;
 #  4. asan: the suite under AddressSanitizer + UndefinedBehaviorSanitizer in build-asan/, all but
-#     the experiments' end-to-end runs, the examples and the benchmarks' smoke runs (below);
+#     the experiments' end-to-end runs, the long convergence tests, the examples and the
+#     benchmarks' smoke runs (below);
 #  5. the whole suite in the Release build, last, so that its CTest summary closes the output.
 # Every build treats warnings in project code as errors (TEXCACHE_WERROR), here as in CI, so that
 # a run that passes here passes there; the setting stays in build/'s CMake cache. Extra arguments
@@ -58,6 +59,13 @@ phase "AddressSanitizer + UBSan: whole suite (build-asan/)"
 # UBSan findings abort in this build (-fno-sanitize-recover, cmake/Warnings.cmake); the options
 # add stack traces. Leaks are checked (the preview tests excepted: tests/CMakeLists.txt says why).
 asan_skip='Experiment\.|SpeedVsError\.'
+# Convergence tests that measure error against references of hundreds of samples a pixel: under
+# ASan they are 6-14x slower than in Release and a third of the suite's time, and they check
+# error levels, which the Release suite checks. The code they render through runs under ASan in
+# the short tests of the same files (hard cages, thread counts, the split lobes, the store).
+asan_skip+='|HitLight\.(LowerErrorThanPerHitAndConverges|GlossyMaterialsBinTheirDiffuseBase)'
+asan_skip+='|HitLight\.(DirectIntegratorBinsItsLight|NoPixelKeepsAnError)'
+asan_skip+='|FrameBuffers\.ComposeIsUnbiased|Lights\.PerHitAndTextureSpaceConverge'
 asan_skip_labels='example|bench'
 export ASAN_OPTIONS="detect_leaks=1:check_initialization_order=1:strict_init_order=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
