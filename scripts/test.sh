@@ -60,9 +60,9 @@ phase "AddressSanitizer + UBSan: whole suite (build-asan/)"
 # add stack traces. Leaks are checked (the preview tests excepted: tests/CMakeLists.txt says why).
 asan_skip='Experiment\.|SpeedVsError\.'
 # Convergence tests that measure error against references of hundreds of samples a pixel: under
-# ASan they are 6-14x slower than in Release and a third of the suite's time, and they check
-# error levels, which the Release suite checks. The code they render through runs under ASan in
-# the short tests of the same files (hard cages, thread counts, the split lobes, the store).
+# ASan they are the suite's longest tests by far, and what they check is error levels, which the
+# Release suite checks. The code they render through runs under ASan in the short tests beside
+# them (hard cages, thread counts, the split lobes, the store).
 asan_skip+='|HitLight\.(LowerErrorThanPerHitAndConverges|GlossyMaterialsBinTheirDiffuseBase)'
 asan_skip+='|HitLight\.(DirectIntegratorBinsItsLight|NoPixelKeepsAnError)'
 asan_skip+='|FrameBuffers\.ComposeIsUnbiased|Lights\.PerHitAndTextureSpaceConverge'
