@@ -240,6 +240,38 @@ TEST(Sampling, GrazingViewsBelowTheShadingNormalStillShadeDiffuse) {
     }
 }
 
+// The specular lobe's share of the reflectance (the frame buffers trace a glossy ray with this
+// probability, at least 1/4): 0 for a diffuse surface, 1 for a metal (no diffuse base), Schlick's
+// F0 over F0 plus (1 - F0) albedo for a dielectric seen head-on, rising towards grazing (where
+// Fresnel is 1: 1 over 1 plus that albedo), and in [0, 1] for views below the shading normal,
+// at any albedo (black, 1, huge). Tolerance 1e-5.
+TEST(Sampling, SpecularShareFollowsFresnelAndStaysInZeroOne) {
+    const glm::vec3 n(0.0f, 0.0f, 1.0f), head(0.0f, 0.0f, 1.0f);
+    EXPECT_EQ(
+        Bsdf(n, n, glm::vec3(0.5f), false, glm::vec2(0.3f), glm::vec3(0.04f)).SpecularShare(head),
+        0.0f);
+    EXPECT_NEAR(Bsdf(n, n, glm::vec3(0.0f), true, glm::vec2(0.3f), glm::vec3(0.9f, 0.6f, 0.3f))
+                    .SpecularShare(head),
+                1.0f, 1e-5f);
+    const Bsdf coat(n, n, glm::vec3(0.5f), true, glm::vec2(0.35f), glm::vec3(0.04f));
+    EXPECT_NEAR(coat.SpecularShare(head), 0.04f / (0.04f + 0.96f * 0.5f), 1e-5f);
+    float prev = 0.0f;
+    for (float c : {1.0f, 0.7f, 0.4f, 0.2f, 0.05f, 0.0f}) {  // towards grazing: the share rises
+        const glm::vec3 wo(std::sqrt(1.0f - c * c), 0.0f, c);
+        const float share = coat.SpecularShare(wo);
+        EXPECT_GE(share, prev) << c;
+        prev = share;
+    }
+    EXPECT_NEAR(prev, 1.0f / (1.0f + 0.96f * 0.5f), 1e-5f);  // Schlick's Fresnel is 1 at 90 degrees
+    for (float albedo : {0.0f, 1.0f, 1e30f})
+        for (const glm::vec3 wo : {glm::vec3(0.0f, 0.0f, -1.0f), glm::vec3(0.6f, 0.0f, 0.8f)}) {
+            const float share =
+                Bsdf(n, n, glm::vec3(albedo), true, glm::vec2(0.2f), glm::vec3(0.04f))
+                    .SpecularShare(wo);
+            EXPECT_TRUE(share >= 0.0f && share <= 1.0f) << albedo << " " << share;
+        }
+}
+
 TEST(Sampling, GgxNormalsAreNormalizedAndVndfMatchesItsPdf) {
     for (float alpha : {0.001f, 0.1f, 0.5f, 1.0f}) {
         // ∫ D(m) cos(m) dm = 1 (uniform-sphere estimate; narrow lobes need many samples).

@@ -531,6 +531,9 @@ struct StoreTerm {
     }
 };
 
+/// The glossy ray's least probability (FrameGlossySample): its light's weight stays at most 4x.
+constexpr float kMinGlossyProbability = 0.25f;
+
 /// The specular lobe's path of one sample into px.glossySum (and its first hit). With the
 /// texture-space cache, the diffuse lobe of the surface the ray hits takes its light from the
 /// cache, as a camera hit's does (CachedTerm; with `layered` direct light included), and only
@@ -540,12 +543,23 @@ struct StoreTerm {
 /// filled it. From the grid, the texel is chosen for a footprint of the lobe's width (alpha
 /// radians either side of the ray): what a glossy reflection blurs over anyway, and coarse
 /// texels that the camera's lookups share.
+///
+/// The ray is traced with probability p, the specular lobe's share of the surface's reflectance
+/// at wo (Bsdf::SpecularShare) but at least kMinGlossyProbability, and its light weighted by 1 / p
+/// (Russian roulette by expected contribution: the same expectation). A dielectric coat reflects
+/// a few percent of the light at its specular lobe, yet its glossy ray and the path behind it were
+/// the largest single part of a frame's render, and the stage's denoised error hardly moves with
+/// their number (results/preview.md, "The glossy ray by its share"). A metal (share 1) traces
+/// every sample.
 void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
                        const Bsdf& bsdf, glm::vec3 wo, bool layered, const FrameStore* fs, Rng& rng,
                        FramePixel& px, RayCounts& rays) {
     glm::vec3 wi, weight;
     float pdf;
-    if (!bsdf.SampleSpecular(wo, rng.Next2D(), &wi, &weight, &pdf)) return;
+    const glm::vec2 u = rng.Next2D();
+    const float p = std::clamp(bsdf.SpecularShare(wo), kMinGlossyProbability, 1.0f);
+    if (rng.Next1D() >= p || !bsdf.SampleSpecular(wo, u, &wi, &weight, &pdf)) return;
+    weight /= p;
     const Ray ray = SpawnRay(si, wi);
     Hit hit;
     ++rays.bounce;

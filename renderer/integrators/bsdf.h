@@ -167,11 +167,21 @@ public:
     /// but not the specular lobe's spends more of its samples on the latter.
     void SetMinSpecularProbability(float p) { minSpecular_ = std::clamp(p, 0.1f, 0.9f); }
 
+    /// The specular lobe's share of the surface's reflectance seen from world direction woW:
+    /// Schlick's Fresnel at woW over itself plus the diffuse base's albedo, in [0, 1] (the
+    /// weights Sample() picks its lobe by, unclamped); 0 without a specular lobe.
+    float SpecularShare(glm::vec3 woW) const {
+        return ggx_ ? ShareAt(std::max(glm::dot(woW, frame_.n), 0.0f)) : 0.0f;
+    }
+
 private:
-    float SpecularProbability(glm::vec3 wo) const {
-        const float s = Luminance(FresnelSchlick(f0_, wo.z));
+    float ShareAt(float cosWo) const {
+        const float s = Luminance(FresnelSchlick(f0_, cosWo));
         const float d = kd_ * Luminance(albedo_);
-        return std::clamp(s / std::max(s + d, 1e-6f), minSpecular_, 0.9f);
+        return s / std::max(s + d, 1e-6f);
+    }
+    float SpecularProbability(glm::vec3 wo) const {
+        return std::clamp(ShareAt(wo.z), minSpecular_, 0.9f);
     }
     static constexpr float kInvPi = 0.31830988618379067f;
 
