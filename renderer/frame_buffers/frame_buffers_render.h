@@ -65,8 +65,10 @@
 //   rotated; the environment does not move).
 // * glossy: GGX materials only (0 elsewhere; empty, with glossyHit and prevGlossyHit, when the
 //   scene has no GGX material): the specular lobe's visible-normal-sampled ray,
-//   path-traced below (light hit directly MIS-weighted, see above). glossyHit: its first hit (a
-//   surface or a quad light; NaN when it left the scene or there is no specular lobe), of the
+//   path-traced below (light hit directly MIS-weighted, see above), traced with probability the
+//   lobe's share of the reflectance (at least 1/4) and weighted by its inverse, so a dielectric
+//   coat's pixels skip most of their glossy rays. glossyHit: its first hit (a surface or a quad
+//   light; NaN when it left the scene, was not traced or there is no specular lobe), of the
 //   first sample that hit something; prevGlossyHit: moved by that hit's object or light.
 // * indirect: the diffuse lobe's cosine-sampled path (direct light at its first hit excluded),
 //   times the diffuse reflectance. GGX materials have a diffuse base too: their indirect is that
