@@ -547,10 +547,10 @@ constexpr float kMinGlossyProbability = 0.25f;
 /// The ray is traced with probability p, the specular lobe's share of the surface's reflectance
 /// at wo (Bsdf::SpecularShare) but at least kMinGlossyProbability, and its light weighted by 1 / p
 /// (Russian roulette by expected contribution: the same expectation). A dielectric coat reflects
-/// a few percent of the light at its specular lobe, yet its glossy ray and the path behind it were
-/// the largest single part of a frame's render, and the stage's denoised error hardly moves with
-/// their number (results/preview.md, "The glossy ray by its share"). A metal (share 1) traces
-/// every sample.
+/// a few percent of the light at its specular lobe, yet its glossy ray and the path behind it are
+/// among the largest parts of a frame's render; on a rough coat the roulette's noise is small
+/// against the stage's own error, on a sharp bright reflection it shows (results/preview.md, "The
+/// glossy ray by its share"). A metal (share 1) traces every sample.
 void FrameGlossySample(const Context& c, const FrameMotion& motion, const SurfaceInteraction& si,
                        const Bsdf& bsdf, glm::vec3 wo, bool layered, const FrameStore* fs, Rng& rng,
                        FramePixel& px, RayCounts& rays) {
