@@ -306,15 +306,19 @@ TEXCACHE_SCREEN_CLONES void ShadowRow(const ShadowRowArgs& args) {
             const float inl = okf > 0.0f ? 1.0f / std::sqrt(nl2) : 0.0f;
             nx *= inl, ny *= inl, nz *= inl;
             // eq. 3: the previous light sample -> blocker line against the receiver's previous
-            // tangent plane.
+            // tangent plane, parametrized from the blocker: a light at infinity is put 1e4
+            // scene extents away, where a float is off by 1e-3 extents, and a point computed
+            // from there (light + t d) would be off by as much: pixels on screen.
             const float dx = bx - lx, dy = by - ly, dz = bz - lz;
             const float den = dx * nx + dy * ny + dz * nz;
             const float dl = std::sqrt(dx * dx + dy * dy + dz * dz);
             okf *= std::fabs(den) > 1e-8f * dl ? 1.0f : 0.0f;
-            const float t =
-                okf > 0.0f ? ((px - lx) * nx + (py - ly) * ny + (pz - lz) * nz) / den : 0.0f;
-            okf *= t > 0.0f ? 1.0f : 0.0f;
-            const float vx = lx + t * dx, vy = ly + t * dy, vz = lz + t * dz;
+            // s = t - 1 for the line's parameter t from the light (t > 0: the plane is past
+            // the light).
+            const float sb =
+                okf > 0.0f ? ((px - bx) * nx + (py - by) * ny + (pz - bz) * nz) / den : 0.0f;
+            okf *= sb > -1.0f ? 1.0f : 0.0f;
+            const float vx = bx + sb * dx, vy = by + sb * dy, vz = bz + sb * dz;
             const float cx = a.pm[0] * vx + a.pm[4] * vy + a.pm[8] * vz + a.pm[12];
             const float cy = a.pm[1] * vx + a.pm[5] * vy + a.pm[9] * vz + a.pm[13];
             const float cw = a.pm[3] * vx + a.pm[7] * vy + a.pm[11] * vz + a.pm[15];
