@@ -300,13 +300,19 @@ TEST(Cli, DenoisesAnAnimation) {
     std::printf("denoised mean / path-traced mean: %.4f\n", ratio);
     EXPECT_NEAR(ratio, 1.0, 0.1);
 
-    // A single frame with the spatial method; methods that need history say so; unknown names
-    // list the valid ones; --demodulate needs --denoise. Nothing is written by a failed run.
-    EXPECT_EQ(Texcache("render " + scene + " --resolution 48x27 --denoise spatial -o " +
-                       (Dir() / "dn_single.exr").string())
-                  .code,
-              0);
+    // A single frame with the spatial method, demodulated unless --no-demodulate; methods that
+    // need history say so; unknown names list the valid ones; --demodulate and --no-demodulate
+    // need --denoise and contradict each other. Nothing is written by a failed run.
+    const CliRun single = Texcache("render " + scene + " --resolution 48x27 --denoise spatial -o " +
+                                   (Dir() / "dn_single.exr").string());
+    EXPECT_EQ(single.code, 0) << single.out;
+    EXPECT_NE(single.out.find("spatial, demodulated"), std::string::npos) << single.out;
     EXPECT_TRUE(fs::exists(Dir() / "dn_single.exr"));
+    const CliRun plain =
+        Texcache("render " + scene + " --resolution 48x27 --denoise spatial --no-demodulate -o " +
+                 (Dir() / "dn_plain.exr").string());
+    EXPECT_EQ(plain.code, 0) << plain.out;
+    EXPECT_EQ(plain.out.find("demodulated"), std::string::npos) << plain.out;
     const fs::path none = Dir() / "dn_none.exr";
     const CliRun noHistory = Texcache("render " + scene + " --denoise clamp -o " + none.string());
     EXPECT_EQ(noHistory.code, 2);
@@ -317,6 +323,12 @@ TEST(Cli, DenoisesAnAnimation) {
     EXPECT_NE(unknown.out.find("valid: spatial, baseline, clamp, reliable"), std::string::npos)
         << unknown.out;
     EXPECT_EQ(Texcache("render " + scene + " --demodulate -o " + none.string()).code, 2);
+    EXPECT_EQ(Texcache("render " + scene + " --no-demodulate -o " + none.string()).code, 2);
+    const CliRun both = Texcache("render " + scene +
+                                 " --denoise spatial --demodulate --no-demodulate -o " +
+                                 none.string());
+    EXPECT_EQ(both.code, 2);
+    EXPECT_NE(both.out.find("contradicts --demodulate"), std::string::npos) << both.out;
     EXPECT_FALSE(fs::exists(none));
 }
 

@@ -45,7 +45,7 @@ struct PreviewCliArgs {
     std::string benchOnly;  ///< a bench option given on the command line (empty: none)
     bool saveCamera = false;
     std::string denoise = "auto";
-    bool demodulate = false;
+    bool demodulate = false, noDemodulate = false;  ///< given on the command line
     bool cachedVisibility = false;
     std::string fbCache;  ///< empty: store (the bench: both)
     int fbBudget = 4;
@@ -142,9 +142,12 @@ int RunPreview(const PreviewCliArgs& a) {
     if (a.denoise == "auto")
         s.denoise = s.integrator == IntegratorKind::Path && !a.stereo &&
                     preview::StageKeepsUp(s.width, s.height);
-    s.demodulate = a.demodulate;
-    if (a.demodulate && !s.denoise)
-        throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    if (a.demodulate && a.noDemodulate)
+        throw InputError("--no-demodulate", "contradicts --demodulate: give one of them");
+    s.demodulate = !a.noDemodulate;
+    if ((a.demodulate || a.noDemodulate) && !s.denoise)
+        throw InputError(a.demodulate ? "--demodulate" : "--no-demodulate",
+                         "applies to the screen-space stage: give --denoise");
     s.cachedVisibility = a.cachedVisibility;
     const bool bothCaches = a.fbCache == "both";
     if (bothCaches && !a.bench)
@@ -283,8 +286,11 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->type_name("METHOD")
         ->capture_default_str();
     cmd->add_flag("--demodulate", a->demodulate,
-                  "With --denoise: filter glossy and diffuse indirect light divided by their "
-                  "pre-integrated BRDF / albedo");
+                  "With --denoise (the default): filter glossy and diffuse indirect light "
+                  "divided by their pre-integrated BRDF / albedo, so that the filters do not "
+                  "blur textures");
+    cmd->add_flag("--no-demodulate", a->noDemodulate,
+                  "With --denoise: filter glossy and diffuse indirect light as they are");
     cmd->add_flag("--cached-visibility", a->cachedVisibility,
                   "With --denoise and --shading texture: cache the direct light's visibility in "
                   "texture space too; the stage takes it where it has no history");

@@ -37,8 +37,11 @@ std::function<int()> PrepareRender(const RenderArgs& a) {
     // Command-line values override the scene's render settings.
     RenderSettings& s = scene.settings;
     ApplySettings(a, &s, scene.unitScale);
-    if (a.demodulate && a.denoise.empty())
-        throw InputError("--demodulate", "applies to the screen-space stage: give --denoise");
+    if (a.demodulate && a.noDemodulate)
+        throw InputError("--no-demodulate", "contradicts --demodulate: give one of them");
+    if ((a.demodulate || a.noDemodulate) && a.denoise.empty())
+        throw InputError(a.demodulate ? "--demodulate" : "--no-demodulate",
+                         "applies to the screen-space stage: give --denoise");
     CheckStereoOptions(a);
     WarnIfNothingVisible(a, scene);
     WarnIfUnlit(
@@ -273,8 +276,11 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
                     "reliable (Zeng et al. 2021); the last three need --frames")
         ->type_name("METHOD");
     cmd->add_flag("--demodulate", args->demodulate,
-                  "With --denoise: filter glossy and diffuse indirect light divided by their "
-                  "pre-integrated BRDF / albedo (Zhuang et al. 2021)");
+                  "With --denoise (the default): filter glossy and diffuse indirect light "
+                  "divided by their pre-integrated BRDF / albedo (Zhuang et al. 2021), so that "
+                  "the filters do not blur textures");
+    cmd->add_flag("--no-demodulate", args->noDemodulate,
+                  "With --denoise: filter glossy and diffuse indirect light as they are");
     cmd->add_flag("--cached-visibility", args->cachedVisibility,
                   "With --shading texture and --denoise / --frame-buffers: also cache the direct "
                   "light's visibility in texture space (--shadow-samples rays per sample) and "

@@ -78,7 +78,8 @@ struct RenderArgs {
     std::string frameBuffers;
     // Screen-space stage on the frame buffers, written as images.
     std::string denoise;
-    bool demodulate = false;
+    // Demodulation is on unless --no-demodulate; --demodulate says so explicitly.
+    bool demodulate = false, noDemodulate = false;
     bool cachedVisibility = false;
     int visibilityRadius = TextureSpaceOptions{}.visibilityRadius;
     // Stereo: both eyes through one texture-space cache (renderer/texture_space/stereo.h).

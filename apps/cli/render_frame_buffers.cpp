@@ -125,7 +125,7 @@ int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool
     CheckFiles(scene, outs);
 
     const screen::Demodulation demod =
-        a.demodulate ? screen::Demodulation::On : screen::Demodulation::Off;
+        a.noDemodulate ? screen::Demodulation::Off : screen::Demodulation::On;
     screen::ScreenSpaceDenoiser denoiser;
     std::vector<glm::vec3> denoised;
     // Over many ranks each denoises a contiguous chunk of the frames after warm-up frames that
@@ -149,12 +149,12 @@ int RunDenoised(const RenderArgs& a, const Scene& scene, RenderOptions opt, bool
             std::printf("frame %d (%d of %d, t = %.3f): %.3f s render, %.1f ms %s%s -> %s\n", f,
                         f - first + 1, last - first + 1, fo.frameTime, st.seconds,
                         denoiser.Timings().total, screen::MethodName(method),
-                        a.demodulate ? " (demodulated)" : "", out.written.front().c_str());
+                        a.noDemodulate ? "" : " (demodulated)", out.written.front().c_str());
             std::fflush(stdout);
         });
     std::printf("denoised %d frame%s of %s in %.2f s (%dx%d, %d spp, %s%s)\n", last - first + 1,
                 last > first ? "s" : "", scene.path.c_str(), total, opt.width, opt.height, opt.spp,
-                screen::MethodName(method), a.demodulate ? ", demodulated" : "");
+                screen::MethodName(method), a.noDemodulate ? "" : ", demodulated");
     return 0;
 }
 
