@@ -324,9 +324,8 @@ TEST(Cli, DenoisesAnAnimation) {
         << unknown.out;
     EXPECT_EQ(Texcache("render " + scene + " --demodulate -o " + none.string()).code, 2);
     EXPECT_EQ(Texcache("render " + scene + " --no-demodulate -o " + none.string()).code, 2);
-    const CliRun both = Texcache("render " + scene +
-                                 " --denoise spatial --demodulate --no-demodulate -o " +
-                                 none.string());
+    const CliRun both = Texcache(
+        "render " + scene + " --denoise spatial --demodulate --no-demodulate -o " + none.string());
     EXPECT_EQ(both.code, 2);
     EXPECT_NE(both.out.find("contradicts --demodulate"), std::string::npos) << both.out;
     EXPECT_FALSE(fs::exists(none));
