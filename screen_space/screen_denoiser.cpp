@@ -104,7 +104,8 @@ const char* MethodKey(Method m) {
 
 namespace {
 
-// Below this a remodulation factor (F_beta, albedo) is not divided out: nothing to recover.
+// Below this a remodulation factor (F_beta, albedo) is not divided out: nothing to recover
+// (the indirect light's albedo: PrepIndirectImpl says what such a channel takes instead).
 constexpr float kMinRemod = 1e-3f;
 
 using Clock = std::chrono::steady_clock;
@@ -541,10 +542,29 @@ inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& a
                     const float a0 = a.albedo[3 * x], a1 = a.albedo[3 * x + 1],
                                 a2 = a.albedo[3 * x + 2];
                     const float af = Fin(a0 + a1 + a2);
-                    r0 = af * (a0 > kMinRemod ? 1.0f : 0.0f) > 0.0f ? a0 : 1.0f;
-                    r1 = af * (a1 > kMinRemod ? 1.0f : 0.0f) > 0.0f ? a1 : 1.0f;
-                    r2 = af * (a2 > kMinRemod ? 1.0f : 0.0f) > 0.0f ? a2 : 1.0f;
-                    c0 /= r0, c1 /= r1, c2 /= r2;
+                    // A channel whose albedo is below kMinRemod says nothing about its light
+                    // (it is about 0 whatever the light): it takes the mean of the pixel's
+                    // other channels' light, so that it neither pulls its neighbours' light
+                    // down in the filter, and the albedo multiplies it back, so that what the
+                    // filter carries in from the neighbours stays about 0 (left undivided with a
+                    // factor of 1, a red texel's edges took its grey neighbours' green light).
+                    // With no such channel the pixel says nothing about the light: unusable,
+                    // and its result is 0 times what its neighbours give it.
+                    const float k0 = af * (a0 > kMinRemod ? 1.0f : 0.0f);
+                    const float k1 = af * (a1 > kMinRemod ? 1.0f : 0.0f);
+                    const float k2 = af * (a2 > kMinRemod ? 1.0f : 0.0f);
+                    const float e0 = k0 > 0.0f ? c0 / a0 : 0.0f, e1 = k1 > 0.0f ? c1 / a1 : 0.0f,
+                                e2 = k2 > 0.0f ? c2 / a2 : 0.0f;
+                    const float kn = k0 + k1 + k2;
+                    const float fill = kn > 0.0f ? (e0 + e1 + e2) / kn : 0.0f;
+                    c0 = k0 > 0.0f ? e0 : fill, c1 = k1 > 0.0f ? e1 : fill;
+                    c2 = k2 > 0.0f ? e2 : fill;
+                    r0 = af > 0.0f ? std::max(a0, 0.0f) : 1.0f;
+                    r1 = af > 0.0f ? std::max(a1, 0.0f) : 1.0f;
+                    r2 = af > 0.0f ? std::max(a2, 0.0f) : 1.0f;
+                    // Not finite: undivided, as without demodulation.
+                    if (!(af > 0.0f)) c0 = a.c[3 * x], c1 = a.c[3 * x + 1], c2 = a.c[3 * x + 2];
+                    cg *= af > 0.0f && kn == 0.0f ? 0.0f : 1.0f;
                 }
             }
             iv[0][i] = cg > 0.0f ? c0 : 0.0f, iv[1][i] = cg > 0.0f ? c1 : 0.0f;

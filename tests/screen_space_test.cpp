@@ -188,6 +188,54 @@ TEST(ScreenSpaceHalfResolution, ErrorStaysNearTheFullResolutionStage) {
     EXPECT_LT(rel[1], 1.15 * rel[0]) << "full " << rel[0] << ", half " << rel[1];
 }
 
+// Demodulation where a channel of the albedo is 0: a checker of 8x8-pixel cells, grey (0.8) and
+// pure red (0.8, 0, 0), lit by indirect light 1 + noise. The red cells' green and blue indirect
+// light is 0 and must stay about 0 where the filter mixes in the grey cells' light: their
+// channel's remodulation factor is the albedo floored at 1e-3, so what the filter carries in
+// comes back times 1e-3 at most (bound 2e-3: light up to 1.5 after filtering). A factor of 1
+// (the channel left undivided) lit the red cells' edges green and blue with the grey cells'
+// light (about 0.5). The grey cells keep their light within 10% on average.
+TEST(ScreenSpaceDemodulation, AChannelWithoutAlbedoStaysDark) {
+    const SynthScene sc = FullScene(96, 64);
+    FrameBuffers f = SynthRender(sc, 0, 5);
+    f.glossy.clear();
+    uint32_t rng = 12345u;
+    auto noise = [&] {
+        rng = rng * 1664525u + 1013904223u;
+        return float(rng >> 8) * (1.0f / 16777216.0f);
+    };
+    auto red = [&](size_t i) {
+        const int x = int(i % size_t(f.width)), y = int(i / size_t(f.width));
+        return ((x / 8) + (y / 8)) % 2 == 1;
+    };
+    for (size_t i = 0; i < f.NumPixels(); ++i) {
+        if (f.objectId[i] < 0) continue;
+        f.albedo[i] = red(i) ? glm::vec3(0.8f, 0.0f, 0.0f) : glm::vec3(0.8f);
+        f.indirect[i] = f.albedo[i] * (0.5f + noise());
+    }
+    ScreenSpaceDenoiser dn(DenoiserSettings{}, SharedBrdf());
+    dn.Denoise(f, Method::SpatialOnly, Demodulation::On);
+    const std::vector<glm::vec3> ind = dn.Indirect();
+    ASSERT_EQ(ind.size(), f.NumPixels());
+    float worst = 0.0f;
+    double grey = 0.0;
+    int reds = 0, greys = 0;
+    for (size_t i = 0; i < f.NumPixels(); ++i) {
+        if (f.objectId[i] < 0) continue;
+        ASSERT_TRUE(std::isfinite(ind[i].x + ind[i].y + ind[i].z)) << i;
+        if (red(i)) {
+            worst = std::max({worst, ind[i].y, ind[i].z}), ++reds;
+        } else {
+            grey += ind[i].y, ++greys;
+        }
+    }
+    std::printf("red cells' largest green or blue indirect %.3g; grey cells' mean green %.3f\n",
+                worst, grey / std::max(greys, 1));
+    ASSERT_GT(reds, 1000);
+    EXPECT_LE(worst, 2e-3f);
+    EXPECT_NEAR(grey / greys, 0.8, 0.08);
+}
+
 // Edges: diffuse indirect light 1 (demodulated) on the box and 0 everywhere else, so that what a
 // pixel's indirect differs from its own object's value is what the filters carried across an
 // objectId boundary. SVGF's a-trous stops at depth and normal, not at objects, so the
