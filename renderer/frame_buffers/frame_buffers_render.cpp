@@ -828,12 +828,15 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
                 bool layered, const FrameStore* fs, int x0, int y0, screen::FrameBuffers& fb,
                 TileScratch& ts, RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
+    // Ray differentials: the texture-space cache's texel level, and a Ptex texture's filter
+    // width (the pixel's footprint, as the path tracer's camera hits take it).
+    const bool diff = c.tsc || c.textureFootprints;
     int n = 0;
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++n) {
             // Pixel centre, lens centre, shutter open: exact guides (see the header).
             const Ray r = c.camera.Generate(float(x) + 0.5f, float(y) + 0.5f, glm::vec2(0.5f),
-                                            c.tsc ? &ts.diff[n] : nullptr);
+                                            diff ? &ts.diff[n] : nullptr);
             // Field by field: copying the whole temporary stalls on store forwarding (visible in
             // this function's profile).
             Ray& ray = ts.ray[n];
@@ -850,7 +853,7 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
     // read of it (StoreCountAt) waited on memory right after its record was known.
     for (int i = 0; i < n; ++i) {
         if (!ts.found[i] || ts.hit[i].light >= 0) continue;
-        ts.si[i] = c.rs.Interact(ts.ray[i], ts.hit[i], c.tsc ? &ts.diff[i] : nullptr);
+        ts.si[i] = c.rs.Interact(ts.ray[i], ts.hit[i], diff ? &ts.diff[i] : nullptr);
         if (!fs) continue;
         FrameHitRecord(c, ts.si[i], ts.hit[i].t, fs->bias, &ts.storeRecord[i], &ts.texelLevel[i]);
         PrefetchStoreAt(*c.tsc, *fs->store, ts.storeRecord[i]);
