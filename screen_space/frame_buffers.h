@@ -130,7 +130,10 @@ struct FrameBuffers {
     bool indirectAccumulates = false;
 
     // The components (linear radiance, RGB).
-    std::vector<glm::vec3> emitted;  ///< light seen directly (environment, emitters)
+    /// What the stage passes through unfiltered: light seen directly (environment, emitters),
+    /// and whatever else the renderer knows without noise (texcache's frame buffers: the
+    /// delta lights' shadowed direct light, exact at the pixel centre).
+    std::vector<glm::vec3> emitted;
     std::vector<glm::vec3> shading;  ///< unshadowed direct light (low noise: no ray)
     std::vector<float> visibility;   ///< shadowed / unshadowed estimate (shadow rays), >= 0
     /// Optional: a low-noise visibility from elsewhere (the renderer's texture-space cache: the

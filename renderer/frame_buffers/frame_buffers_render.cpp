@@ -135,6 +135,7 @@ struct PixelShadow {
     float weightSum, visibleWeightSum;
     float blockerWeight;  // shading luminance of the recorded blocked sample
     glm::vec3 blocker, prevBlocker, light, prevLight;
+    glm::vec3 delta;  // the delta lights' shadowed light (DeltaDirect)
 
     /// No sample yet: visible, no blocker. (Set field by field: a temporary's copy of the
     /// whole struct per pixel showed in the profile.)
@@ -142,6 +143,7 @@ struct PixelShadow {
         weightSum = visibleWeightSum = 0.0f;
         blockerWeight = -1.0f;
         blocker = prevBlocker = light = prevLight = kNaN3;
+        delta = glm::vec3(0.0f);
     }
 };
 
@@ -158,6 +160,25 @@ struct LightWeights {
     float w[kMax];
 };
 
+/// The scene's lights split for the frame buffers, as SampleLight indexes them. A delta light (a
+/// distant light without angular size, a point or spot light of radius 0) lights a pixel centre
+/// with no noise: its shadowed light is exact with one shadow ray (DeltaDirect) and goes to
+/// `emitted`, which the stage does not filter, where its 0/1 visibility in `visibility` was
+/// blurred by the stage's filters and lagged behind while the view moved. `shading` and
+/// `visibility` are those of the other lights.
+struct FrameLights {
+    std::vector<int> delta, other;
+
+    explicit FrameLights(const Context& c) {
+        for (int i = 0; i < c.numLights; ++i) (IsDelta(c, i) ? delta : other).push_back(i);
+    }
+    static bool IsDelta(const Context& c, int i) {
+        const int d = i - int(c.quads.size()), sp = i - c.FirstSphere();
+        if (d >= 0 && d < int(c.distantDir.size())) return c.suns[size_t(d)].IsDelta();
+        return sp >= 0 && sp < int(c.spheres.size()) && c.spheres[size_t(sp)].IsDelta();
+    }
+};
+
 /// The unshadowed direct light of every light, integrated in closed form, or false when some
 /// light and lobe have none here: a GGX lobe under an area light (quad or environment; LTCs and
 /// prefiltered maps would give one). The diffuse lobe under a quad light is Lambert's polygon
@@ -168,6 +189,7 @@ struct LightWeights {
 /// visibility ratio below absorbs both in expectation.
 bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
                        glm::vec3 wo, glm::vec3* out, LightWeights* weights) {
+    // Delta lights are not in `shading` (FrameLights): their terms are left out.
     // Emissive objects have none; neither has a GGX lobe under a sphere of some size.
     if (!c.emitters.empty()) return false;
     bool areaSpheres = false;
@@ -194,16 +216,18 @@ bool ClosedFormShading(const Context& c, const SurfaceInteraction& si, const Bsd
         if (c.env) add(c.numLights - 1, R * c.env->Irradiance(si.N) * kInvPi);
         const int firstDistant = int(c.quads.size());
         for (size_t i = 0; i < c.distantDir.size(); ++i) {
+            if (c.suns[i].IsDelta()) continue;
             glm::vec3 fd, fs;
             bsdf.EvalLobes(wo, c.distantDir[i], &fd, &fs);
             add(firstDistant + int(i),
                 (fd + fs) * c.distantE[i] * std::abs(glm::dot(c.distantDir[i], si.N)));
         }
-        // A point light's I cos / d^2, exact; a sphere's too while it is wholly above the
-        // horizon (a Lambertian sphere lights a plane as a point of its intensity does), with
-        // the spot's falloff taken at the centre.
+        // A sphere's I cos / d^2 while it is wholly above the horizon (a Lambertian sphere
+        // lights a plane as a point of its intensity does), with the spot's falloff taken at the
+        // centre.
         for (size_t i = 0; i < c.spheres.size(); ++i) {
             const SphereLight& l = c.spheres[i];
+            if (l.IsDelta()) continue;
             const glm::vec3 d = l.center - si.P;
             const float d2 = glm::dot(d, d);
             if (!(d2 > l.radius * l.radius)) continue;
@@ -281,6 +305,15 @@ struct PendingShadow {
     int pixel;                                 // the pixel's index in its tile
 };
 
+/// A shadow ray of DeltaDirect: towards a delta light, whose light `term` the pixel gets where the
+/// ray is not blocked.
+struct DeltaShadow {
+    Ray ray;
+    glm::vec3 term;
+    int pixel;  // the pixel's index in its tile
+};
+
+/// A shadow ray from `si` to light sample `ls`, appended to `shadows` for tile pixel `pixel`;
 /// The light sample of one frame-buffer sample: unshadowed shading into `px` from
 /// kShadingCandidates light samples, and one shadow ray to a candidate resampled in proportion to
 /// its shading's luminance, appended to `shadows` (for tile pixel `pixel`) for FinishShadow,
@@ -290,13 +323,15 @@ struct PendingShadow {
 /// expectation is the shadowed over the unshadowed light. With `specularOnly` (an object whose
 /// diffuse lobe the cache lights, CachedDiffuseLight) the shading is the specular lobe's alone,
 /// from opt.texture.specularLightSamples light samples.
-void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
-                       glm::vec3 wo, const glm::vec3* exact, const LightWeights& weights, Rng& rng,
-                       const EnvironmentSamples& envSamples, FramePixel& px, PixelShadow& sh,
-                       int pixel, std::vector<PendingShadow>& shadows, bool specularOnly = false) {
-    // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly, so a
-    // delta light's term is exact), the point on the light from the R2 sequence (Roberts 2018:
-    // any run of it is evenly spread), both randomly shifted (Cranley-Patterson: unbiased).
+void FrameDirectSample(const Context& c, const FrameLights& lights, const SurfaceInteraction& si,
+                       const Bsdf& bsdf, glm::vec3 wo, const glm::vec3* exact,
+                       const LightWeights& weights, Rng& rng, const EnvironmentSamples& envSamples,
+                       FramePixel& px, PixelShadow& sh, int pixel,
+                       std::vector<PendingShadow>& shadows, bool specularOnly = false) {
+    // Candidates: the light pick stratified over [0, 1) (each light gets its share exactly; the
+    // delta lights are DeltaDirect's, none here), the point on the light from the R2 sequence
+    // (Roberts 2018: any run of it is evenly spread), both randomly shifted (Cranley-Patterson:
+    // unbiased).
     constexpr int kMax = kShadingCandidates;
     const int kN = specularOnly ? std::clamp(c.opt.texture.specularLightSamples, 1, kMax)
                    : exact      ? kRatioCandidates
@@ -339,6 +374,12 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
             while (weights.w[light] <= 0.0f) --light;  // rounding ran past the last share
             uPick = (float(light) + 0.5f) / float(c.numLights);
             pickScale = wSum / (weights.w[light] * float(c.numLights));
+        } else if (!lights.delta.empty()) {
+            // Uniform over the lights other than the delta ones (DeltaDirect's).
+            const int m = int(lights.other.size());
+            light = lights.other[size_t(std::min(int(uPick * float(m)), m - 1))];
+            uPick = (float(light) + 0.5f) / float(c.numLights);
+            pickScale = float(m) / float(c.numLights);
         }
         // x - floor(x) is fmod(x, 1) for x >= 0, exactly, without libm's fmodf (a tenth of the
         // bench profile with 32 candidates).
@@ -431,6 +472,33 @@ void FrameDirectSample(const Context& c, const SurfaceInteraction& si, const Bsd
     q.sphere = ls.sphere;
     q.emitterObject = ls.emitter >= 0 ? c.emitters[size_t(ls.emitter)].Object() : -1;
     q.pixel = pixel;
+}
+
+/// The delta lights' light at the pixel (FrameLights): each light's unshadowed term, as the path
+/// tracer's light sample takes it, with a shadow ray of its own appended to the light's list in
+/// `shadows` (RenderTile traces each light's rays in packets and adds the term to the pixel's
+/// `delta` where the ray is not blocked).
+void DeltaDirect(const Context& c, const FrameLights& lights, const SurfaceInteraction& si,
+                 const Bsdf& bsdf, glm::vec3 wo, int pixel,
+                 std::vector<std::vector<DeltaShadow>>& shadows) {
+    for (size_t k = 0; k < lights.delta.size(); ++k) {
+        const int light = lights.delta[k];
+        LightSample ls;
+        const float uPick = (float(light) + 0.5f) / float(c.numLights);
+        if (!c.SampleLight(si.P, si.N, uPick, glm::vec2(0.5f), &ls)) continue;
+        glm::vec3 fd, fs;
+        bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
+        // SampleLight divides by the pick probability: one light of numLights, here each.
+        const glm::vec3 term =
+            FiniteOrZero((fd + fs) * ls.Li * (std::abs(glm::dot(ls.wi, si.N)) * c.PickPdf()));
+        if (!(Luminance(term) > 0.0f)) continue;
+        DeltaShadow& q = shadows[k].emplace_back();
+        const Ray r = ShadowRay(si, ls, 0.0f);
+        q.ray.org = r.org, q.ray.dir = r.dir;
+        q.ray.tnear = r.tnear, q.ray.tfar = r.tfar, q.ray.time = r.time;
+        q.term = term;
+        q.pixel = pixel;
+    }
 }
 
 /// The outcome of a queued shadow ray (blocked: `bh` is its first hit) into its pixel's `sh`.
@@ -664,16 +732,18 @@ void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& s
     fb.prevBlocker[p] = sh.prevBlocker;
     fb.lightSample[p] = sh.light;
     fb.prevLightSample[p] = sh.prevLight;
+    fb.emitted[p] += sh.delta;
 }
 
 /// Every buffer of pixel (x, y) from its camera ray and hit but the shadow rays' (see
 /// WriteShadowBuffers): the samples' shadow rays are appended to `shadows`, for pixel `pixel` of
 /// the tile, and `px` keeps what they need.
-void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
-                bool layered, const FrameStore* fs, int x, int y, int pixel, const Ray& ray,
-                bool found, const Hit& hit, const SurfaceInteraction& si,
-                const HitRecord& storeRecord, int texelLevel, screen::FrameBuffers& fb,
-                PixelShadow& sh, std::vector<PendingShadow>& shadows, RayCounts& rays) {
+void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& motion,
+                const EnvironmentSamples& envSamples, bool layered, const FrameStore* fs, int x,
+                int y, int pixel, const Ray& ray, bool found, const Hit& hit,
+                const SurfaceInteraction& si, const HitRecord& storeRecord, int texelLevel,
+                screen::FrameBuffers& fb, PixelShadow& sh, std::vector<PendingShadow>& shadows,
+                std::vector<std::vector<DeltaShadow>>& deltaShadows, RayCounts& rays) {
     const size_t p = size_t(y) * size_t(c.opt.width) + size_t(x);
     ClearPixel(fb, p);
     if (fs) fs->records[p].mesh = PassTexels::kMiss;
@@ -759,14 +829,16 @@ void ShadePixel(const Context& c, const FrameMotion& motion, const EnvironmentSa
                             Luminance(glm::abs(exactShading)) > 0.0f;
     FramePixel px;
     const int spp = std::max(c.opt.spp, 1);
+    // The delta lights' light is the same for every sample: traced once.
+    if (!layered) DeltaDirect(c, lights, si, bsdf, wo, pixel, deltaShadows);
     glm::vec3 storeSum(0.0f);
     for (int s = 0; s < spp; ++s) {
         Rng rng(PixelSeed(c.opt.seed, x, y, c.opt.width), uint64_t(s));
         // With the diffuse lobe's light all cached, only a specular lobe samples lights here
-        // (none on diffuse materials: shading 0, visible).
-        if (!layered || bsdf.HasSpecular())
-            FrameDirectSample(c, si, bsdf, wo, closedForm ? &exactShading : nullptr, weights, rng,
-                              envSamples, px, sh, pixel, shadows, layered);
+        // (none on diffuse materials: shading 0, visible); with delta lights only, none.
+        if ((!layered || bsdf.HasSpecular()) && !lights.other.empty())
+            FrameDirectSample(c, lights, si, bsdf, wo, closedForm ? &exactShading : nullptr,
+                              weights, rng, envSamples, px, sh, pixel, shadows, layered);
         if (bsdf.HasSpecular())
             FrameGlossySample(c, motion, si, bsdf, wo, layered, fs, rng, px, rays);
         if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
@@ -818,15 +890,16 @@ struct TileScratch {
     std::array<int, kTilePixels> texelLevel;
     std::array<PixelShadow, kTilePixels> shadow;
     std::vector<PendingShadow> shadows;
+    std::vector<std::vector<DeltaShadow>> deltaShadows;  ///< per delta light (FrameLights)
 };
 
 /// The tile with top-left pixel (x0, y0). Its camera rays and then its shadow rays are traced 16
 /// at a time (RenderScene::Intersect16): neighbouring pixels' camera rays share most of their
 /// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
 /// cheaper per ray for such rays than single rays.
-void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSamples& envSamples,
-                bool layered, const FrameStore* fs, int x0, int y0, screen::FrameBuffers& fb,
-                TileScratch& ts, RayCounts& rays) {
+void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& motion,
+                const EnvironmentSamples& envSamples, bool layered, const FrameStore* fs, int x0,
+                int y0, screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
     // Ray differentials: the texture-space cache's texel level, and a Ptex texture's filter
     // width (the pixel's footprint, as the path tracer's camera hits take it).
@@ -859,13 +932,30 @@ void RenderTile(const Context& c, const FrameMotion& motion, const EnvironmentSa
         PrefetchStoreAt(*c.tsc, *fs->store, ts.storeRecord[i]);
     }
     ts.shadows.clear();
+    ts.deltaShadows.resize(lights.delta.size());
+    for (auto& d : ts.deltaShadows) d.clear();
     for (int i = 0, y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++i) {
             ts.shadow[i].Reset();
-            ShadePixel(c, motion, envSamples, layered, fs, x, y, i, ts.ray[i], ts.found[i],
+            ShadePixel(c, lights, motion, envSamples, layered, fs, x, y, i, ts.ray[i], ts.found[i],
                        ts.hit[i], ts.si[i], ts.storeRecord[i], ts.texelLevel[i], fb, ts.shadow[i],
-                       ts.shadows, rays);
+                       ts.shadows, ts.deltaShadows, rays);
         }
+
+    // The delta lights' rays, light by light: a packet's rays go to one light from neighbouring
+    // pixels, and only whether they are blocked is asked.
+    for (const std::vector<DeltaShadow>& d : ts.deltaShadows) {
+        Ray packet[16];
+        bool occluded[16];
+        for (size_t i = 0; i < d.size(); i += 16) {
+            const int m = int(std::min<size_t>(16, d.size() - i));
+            for (int j = 0; j < m; ++j) packet[j] = d[i + size_t(j)].ray;
+            c.rs.Occluded16(packet, m, occluded);
+            for (int j = 0; j < m; ++j)
+                if (!occluded[j]) ts.shadow[d[i + size_t(j)].pixel].delta += d[i + size_t(j)].term;
+        }
+        rays.shadow += d.size();
+    }
 
     // In queue order: a pixel's samples finish in their order, as if traced one by one.
     Ray packet[16];
@@ -1016,6 +1106,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     FrameCache frameCache(ctx, opt, cache, FrameCache::Prepass::None);
     const FrameMotion motion(rs, opt, prevTime);
     const EnvironmentSamples envSamples(ctx, opt.seed);
+    const FrameLights lights(ctx);
     // The paths' light samples (the store's, the glossy ray's) read the frame's table too.
     if (!envSamples.Empty()) {
         ctx.envTable = &envSamples[0];
@@ -1111,7 +1202,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                           RayCounts& rc = counts.local();
                           TileScratch& ts = scratch.local();
                           for (int t = r.begin(); t < r.end(); ++t)
-                              RenderTile(ctx, motion, envSamples, layered, fs.get(),
+                              RenderTile(ctx, lights, motion, envSamples, layered, fs.get(),
                                          (t % tilesX) * kTile, (t / tilesX) * kTile, fb, ts, rc);
                       });
     size_t storeReads = 0, storeTraced = 0;

@@ -16,15 +16,21 @@
 //   (power heuristic) between the light sample (in `shading`) and the specular ray hitting the
 //   light (in `glossy`, where a highlight moves like a reflection); the diffuse ray and the paths
 //   below the first bounce do not count light they hit directly at their first hit.
+// * emitted: light seen directly (the environment, lights, emissive surfaces), and the delta
+//   lights' direct light (distant lights without angular size, point and spot lights of radius
+//   0): their unshadowed term (f Le cos) times the 0/1 of a shadow ray of its own, exact at the
+//   pixel centre, so the stage passes it through instead of filtering a visibility that has no
+//   noise (its filters blurred a sun's hard shadow and, while the view moved, lagged it).
+//   `shading` and `visibility` below are those of the other lights.
 // * shading: the unshadowed direct light (f_diffuse + w_mis f_specular) Le cos / pdf. In closed
 //   form where every light and lobe has one (ClosedFormShading in frame_buffers_render.cpp): the
 //   diffuse lobe under quad lights (Lambert's polygon formula,
 //   renderer/integrators/polygon_light.h), an environment (pi L for a constant one, degree-2
 //   spherical harmonics of a map: up to ~15% off next to a sun, which only the visibility ratio
-//   sees, EnvironmentMap::Irradiance), distant lights (E f cos, for suns of some size too) and
-//   point and spot lights (I f cos / d^2: exact for a delta light, and for a diffuse lobe under a
-//   sphere wholly above the horizon but for the spot's falloff, taken at the centre), and a GGX
-//   lobe under distant and delta point lights only; never with an emissive object in the scene;
+//   sees, EnvironmentMap::Irradiance), suns of some size (E f cos) and point and spot lights of
+//   some size (I f cos / d^2: exact for a diffuse lobe under a sphere wholly above the horizon
+//   but for the spot's falloff, taken at the centre), and a GGX lobe under those suns and
+//   spheres only; never with an emissive object in the scene;
 //   the ratio estimator of Heitz et al. 2018 ("Combining analytic direct illumination and
 //   stochastic shadows"), with the analytic term Zhuang et al. and Zeng et al. take as the
 //   noise-free factor. Elsewhere (a GGX lobe under an area light or an environment) estimated

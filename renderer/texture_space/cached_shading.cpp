@@ -360,10 +360,11 @@ ShadedSample ShadeVisibilitySample(const Context& c, const SampleRequest& r, Ray
         const glm::vec2 u = glm::min(glm::vec2(rx - std::floor(rx), ry - std::floor(ry)),
                                      glm::vec2(kOneMinusEpsilon));
         LightSample ls;
-        if (!c.SampleLight(ray.org, N, uPick, u, &ls)) continue;
+        // Delta lights are not in the frame buffers' visibility (their light is exact there).
+        if (!c.SampleLight(ray.org, N, uPick, u, &ls) || ls.delta) continue;
         const float cosi = glm::dot(ls.wi, N);
         if (!(cosi > 0.0f)) continue;  // below the horizon: no light, not a visibility question
-        const float ck = Luminance(ls.Li) * (ls.delta ? cosi : cosi / ls.pdf);
+        const float ck = Luminance(ls.Li) * cosi / ls.pdf;
         if (!(ck > 0.0f) || !std::isfinite(ck)) continue;
         all += ck;
         Ray shadow;
