@@ -333,9 +333,13 @@ void FrameDirectSample(const Context& c, const FrameLights& lights, const Surfac
     // (Roberts 2018: any run of it is evenly spread), both randomly shifted (Cranley-Patterson:
     // unbiased).
     constexpr int kMax = kShadingCandidates;
-    const int kN = specularOnly ? std::clamp(c.opt.texture.specularLightSamples, 1, kMax)
-                   : exact      ? kRatioCandidates
-                                : kShadingCandidates;
+    // Fewer samples for the specular lobe alone pay where the cache takes the diffuse lobe's
+    // light off the pixel; a material without a diffuse lobe (a metal) gives the cache nothing
+    // and keeps the full count.
+    const bool cacheLightsBase = specularOnly && bsdf.DiffuseReflectance() != glm::vec3(0.0f);
+    const int kN = cacheLightsBase ? std::clamp(c.opt.texture.specularLightSamples, 1, kMax)
+                   : exact         ? kRatioCandidates
+                                   : kShadingCandidates;
     constexpr float kG1 = 0.75487766f, kG2 = 0.56984029f;  // 1/phi_2, 1/phi_2^2
     const float pickShift = rng.Next1D();
     const glm::vec2 shift = rng.Next2D();
