@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -412,6 +413,28 @@ TEST_P(MovingHardShadow, FollowsWithShadowVectors) {
 INSTANTIATE_TEST_SUITE_P(ScreenSpaceTemporal, MovingHardShadow,
                          ::testing::Values(VisibilityOrder::Zeng, VisibilityOrder::Svgf));
 
+// The largest difference between Reliable's visibility (in `order`) and the baseline's over 8
+// frames of `sc`, each frame changed by `edit` first; every Reliable value must be finite.
+float LargestVisibilityDifference(const SynthScene& sc, VisibilityOrder order,
+                                  const std::function<void(FrameBuffers&)>& edit = {}) {
+    DenoiserSettings set;
+    set.reliableVisibilityOrder = order;
+    ScreenSpaceDenoiser base(set, SharedBrdf()), rel(set, SharedBrdf());
+    float worst = 0.0f;
+    for (int fr = 0; fr < 8; ++fr) {
+        FrameBuffers f = SynthRender(sc, fr, 7);
+        if (edit) edit(f);
+        base.Denoise(f, Method::Baseline, Demodulation::On);
+        rel.Denoise(f, Method::Reliable, Demodulation::On);
+        const std::vector<float> vb = base.Visibility(), vr = rel.Visibility();
+        for (size_t i = 0; i < vb.size(); ++i) {
+            EXPECT_TRUE(std::isfinite(vr[i]));
+            worst = std::max(worst, std::fabs(vb[i] - vr[i]));
+        }
+    }
+    return worst;
+}
+
 TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesWhereNoShadowMoves) {
     // A camera flying over a static scene (objects and light still, soft shadows, 1 spp): every
     // shadow vector is the traditional one, splatted ones included, so Reliable's visibility in
@@ -425,24 +448,8 @@ TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesWhereNoShadowMoves) {
     sc.lightVelocity = glm::vec3(0.0f);
     for (SynthObject& o : sc.objects) o.velocity = glm::vec3(0.0f);
     sc.eyeVelocity = glm::vec3(0.06f, 0.0f, -0.04f);
-    auto maxDiff = [&](VisibilityOrder order) {
-        DenoiserSettings set;
-        set.reliableVisibilityOrder = order;
-        ScreenSpaceDenoiser base(set, SharedBrdf()), rel(set, SharedBrdf());
-        float worst = 0.0f;
-        for (int fr = 0; fr < 8; ++fr) {
-            const FrameBuffers f = SynthRender(sc, fr, 7);
-            base.Denoise(f, Method::Baseline, Demodulation::On);
-            rel.Denoise(f, Method::Reliable, Demodulation::On);
-            const std::vector<float> vb = base.Visibility(), vr = rel.Visibility();
-            for (size_t i = 0; i < vb.size(); ++i) {
-                EXPECT_TRUE(std::isfinite(vr[i]));
-                worst = std::max(worst, std::fabs(vb[i] - vr[i]));
-            }
-        }
-        return worst;
-    };
-    const float svgf = maxDiff(VisibilityOrder::Svgf), zeng = maxDiff(VisibilityOrder::Zeng);
+    const float svgf = LargestVisibilityDifference(sc, VisibilityOrder::Svgf),
+                zeng = LargestVisibilityDifference(sc, VisibilityOrder::Zeng);
     std::printf("largest visibility difference from the baseline: SVGF order %.2g, Zeng's %.2g\n",
                 svgf, zeng);
     EXPECT_LE(svgf, 1e-6f);
@@ -463,31 +470,20 @@ TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesUnderALightAtInfinity
     for (SynthObject& o : sc.objects) o.velocity = glm::vec3(0.0f);
     sc.eyeVelocity = glm::vec3(0.0f);
     constexpr float kFar = 1e5f;  // 1e4 times the scene's extent of about 10
-    DenoiserSettings set;
-    set.reliableVisibilityOrder = VisibilityOrder::Svgf;
-    ScreenSpaceDenoiser base(set, SharedBrdf()), rel(set, SharedBrdf());
-    float worst = 0.0f;
     int shadowed = 0;
-    for (int fr = 0; fr < 8; ++fr) {
-        FrameBuffers f = SynthRender(sc, fr, 7);
-        for (size_t i = 0; i < f.blocker.size(); ++i) {
-            if (!std::isfinite(f.blocker[i].x)) continue;
-            // The same line through the blocker, its light point 1e5 away.
-            auto far = [](glm::vec3 blocker, glm::vec3 light) {
-                return blocker + kFar * glm::normalize(light - blocker);
-            };
-            f.lightSample[i] = far(f.blocker[i], f.lightSample[i]);
-            f.prevLightSample[i] = far(f.prevBlocker[i], f.prevLightSample[i]);
-            ++shadowed;
-        }
-        base.Denoise(f, Method::Baseline, Demodulation::On);
-        rel.Denoise(f, Method::Reliable, Demodulation::On);
-        const std::vector<float> vb = base.Visibility(), vr = rel.Visibility();
-        for (size_t i = 0; i < vb.size(); ++i) {
-            EXPECT_TRUE(std::isfinite(vr[i]));
-            worst = std::max(worst, std::fabs(vb[i] - vr[i]));
-        }
-    }
+    const float worst =
+        LargestVisibilityDifference(sc, VisibilityOrder::Svgf, [&](FrameBuffers& f) {
+            for (size_t i = 0; i < f.blocker.size(); ++i) {
+                if (!std::isfinite(f.blocker[i].x)) continue;
+                // The same line through the blocker, its light point 1e5 away.
+                auto far = [](glm::vec3 blocker, glm::vec3 light) {
+                    return blocker + kFar * glm::normalize(light - blocker);
+                };
+                f.lightSample[i] = far(f.blocker[i], f.lightSample[i]);
+                f.prevLightSample[i] = far(f.prevBlocker[i], f.prevLightSample[i]);
+                ++shadowed;
+            }
+        });
     std::printf("%d shadowed pixel samples, largest visibility difference from the baseline %.2g\n",
                 shadowed, worst);
     EXPECT_GT(shadowed, 8 * 100);  // the shadows are there
