@@ -313,7 +313,6 @@ struct DeltaShadow {
     int pixel;  // the pixel's index in its tile
 };
 
-/// A shadow ray from `si` to light sample `ls`, appended to `shadows` for tile pixel `pixel`;
 /// The light sample of one frame-buffer sample: unshadowed shading into `px` from
 /// kShadingCandidates light samples, and one shadow ray to a candidate resampled in proportion to
 /// its shading's luminance, appended to `shadows` (for tile pixel `pixel`) for FinishShadow,
