@@ -557,14 +557,15 @@ inline __attribute__((always_inline)) void PrepIndirectImpl(const IndirectRow& a
                                 e2 = k2 > 0.0f ? c2 / a2 : 0.0f;
                     const float kn = k0 + k1 + k2;
                     const float fill = kn > 0.0f ? (e0 + e1 + e2) / kn : 0.0f;
-                    c0 = k0 > 0.0f ? e0 : fill, c1 = k1 > 0.0f ? e1 : fill;
-                    c2 = k2 > 0.0f ? e2 : fill;
-                    r0 = af > 0.0f ? std::max(a0, 0.0f) : 1.0f;
-                    r1 = af > 0.0f ? std::max(a1, 0.0f) : 1.0f;
-                    r2 = af > 0.0f ? std::max(a2, 0.0f) : 1.0f;
-                    // Not finite: undivided, as without demodulation.
-                    if (!(af > 0.0f)) c0 = a.c[3 * x], c1 = a.c[3 * x + 1], c2 = a.c[3 * x + 2];
-                    cg *= af > 0.0f && kn == 0.0f ? 0.0f : 1.0f;
+                    // An albedo that is not finite: undivided, as without demodulation.
+                    const bool use = af > 0.0f;
+                    c0 = use ? (k0 > 0.0f ? e0 : fill) : c0;
+                    c1 = use ? (k1 > 0.0f ? e1 : fill) : c1;
+                    c2 = use ? (k2 > 0.0f ? e2 : fill) : c2;
+                    r0 = use ? std::max(a0, 0.0f) : 1.0f;
+                    r1 = use ? std::max(a1, 0.0f) : 1.0f;
+                    r2 = use ? std::max(a2, 0.0f) : 1.0f;
+                    cg *= use && kn == 0.0f ? 0.0f : 1.0f;
                 }
             }
             iv[0][i] = cg > 0.0f ? c0 : 0.0f, iv[1][i] = cg > 0.0f ? c1 : 0.0f;
