@@ -121,14 +121,15 @@ struct TextureSpaceOptions {
     int specularLightSamples = 8;
     /// Screen-space frame buffers: where the diffuse lobe's cached light comes from. Hits: the
     /// one store (texcache/texture_store.h) filled from the frame's own camera hits, one pixel
-    /// in frameBufferBudget a frame (a pattern that rotates over frames) plus every pixel whose
-    /// bin holds too few samples, read back by hit binning's reconstruction
+    /// in frameBufferBudget a frame (a pattern that rotates over frames) where the store holds
+    /// many samples, more where it holds few, read back by hit binning's reconstruction
     /// (frame_buffers_render.h). Grid: the paper's grid samples, each shaded lazily with paths
     /// of its own.
     TextureSamples frameBufferSamples = TextureSamples::Hits;
-    /// One pixel in this many traces its diffuse lobe's path into the store each frame (1, 2,
-    /// 4, 8 or 16: an ordered-dither pattern of the pixels).
-    int frameBufferBudget = 4;
+    /// One pixel in this many traces its diffuse lobe's path into the store each frame where the
+    /// store holds many samples (1, 2, 4, 8 or 16: an ordered-dither pattern of the pixels);
+    /// where it holds few, more do (frame_buffers_render.h).
+    int frameBufferBudget = 8;
     /// Where AO shades: see TextureSamples. --ts-samples auto|grid|hits.
     TextureSamples samples = TextureSamples::Grid;
     /// Which texels a footprint keeps: see FootprintMode. --footprint auto|visible|all.

@@ -48,7 +48,7 @@ struct PreviewCliArgs {
     bool demodulate = false, noDemodulate = false;  ///< given on the command line
     bool cachedVisibility = false;
     std::string fbCache;  ///< empty: store (the bench: both)
-    int fbBudget = 4;
+    int fbBudget = 8;
     std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
@@ -302,7 +302,8 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->type_name("CACHE");
     cmd->add_option("--fb-budget", a->fbBudget,
                     "With --fb-cache store: one pixel in this many (1, 2, 4, 8, 16) traces its "
-                    "diffuse path into the store each frame, besides those the store lacks")
+                    "diffuse path into the store each frame where the store holds many samples; "
+                    "more where it holds few, every pixel where it holds none")
         ->capture_default_str();
     cmd->add_option("--motion", a->motion,
                     "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())

@@ -550,21 +550,30 @@ struct FrameStore {
     int bias = 0;                ///< the bins' levels above a hit's texel
     float blend = 0.0f;          ///< the share of hits that read the level above (PathHitsAdd)
     int budget = 1;              ///< one pixel in `budget` a frame traces its path
-    uint32_t group = 0;          ///< this frame's pixels: those of this dither group
+    uint32_t offset = 0;         ///< this frame's shift of the pixels' dither ranks (Traces)
     double minCount = 0.0;       ///< a cell with fewer counts needs its hits' paths
+    double targetCount = 0.0;    ///< a cell with fewer counts takes paths faster (Traces)
     double termCount = 0.0;      ///< a cell with fewer counts is not read at a ray's hit
     double minPrior = 0.0;       ///< a cell with fewer counts is no traced hit's prior
     HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
     BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
     PixelOwnLight* own;          ///< a still view's own samples per pixel; null while moving
 
-    /// Whether pixel (x, y) traces its path this frame: its place in a 4x4 ordered-dither
-    /// (Bayer) matrix picks its group, and the frame's group rotates, so each pixel traces once
-    /// in `budget` frames and every frame's pixels are spread evenly over the image.
-    bool InBudget(int x, int y) const {
+    /// Whether pixel (x, y), whose cell holds `count`, traces its path this frame. Its rate is
+    /// one frame in `budget` where the cell holds budget x targetCount or more, and
+    /// targetCount / count below that, up to every frame: the paths go first where the store
+    /// holds few samples (surfaces seen anew, fine bins near the camera), and a cell nearly
+    /// empty (minCount) takes one every frame. The pixel's rank in a 4x4 ordered-dither (Bayer)
+    /// matrix, shifted by the frame's offset, falls in the rate's window or not, so a pixel at
+    /// rate 1 / budget traces once in `budget` frames and every frame's pixels are spread evenly
+    /// over the image.
+    bool Traces(int x, int y, double count) const {
+        if (count < minCount) return true;
         static constexpr uint8_t kBayer[4][4] = {
             {0, 8, 2, 10}, {12, 4, 14, 6}, {3, 11, 1, 9}, {15, 7, 13, 5}};
-        return uint32_t(kBayer[y & 3][x & 3]) * uint32_t(budget) / 16u == group;
+        const double rate = std::clamp(targetCount / count, 1.0 / double(budget), 1.0);
+        const uint32_t rank = (uint32_t(kBayer[y & 3][x & 3]) + offset) & 15u;
+        return double(rank) + 0.5 < 16.0 * rate;
     }
 };
 
@@ -800,7 +809,7 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
         // The store's count at the record (its bins prefetched by RenderTile), and for a traced
         // hit the light it holds there: BoundStoreHits' reference.
         const double count = StoreCountAt(*c.tsc, *fs->store, fs->records[p]);
-        storePath = fs->InBudget(x, y) || count < fs->minCount;
+        storePath = fs->Traces(x, y, count);
         if (storePath && count >= fs->minPrior)
             fs->binned[p].prior = Luminance(StoreLightAt(*c.tsc, *fs->store, fs->records[p]));
     } else if (cachedIndirect) {
@@ -981,9 +990,17 @@ void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& 
 }
 
 /// The samples a pixel's reconstruction needs behind it in the store (StoreCountAt) for a frame
-/// not to trace the pixel's path outside its budget: fewer, and it is a disocclusion or a first
-/// frame's.
+/// not to trace the pixel's path every frame: fewer, and it is a disocclusion or a first frame's.
 constexpr double kStoreMinSamples = 0.5;
+
+/// The rate at which a pixel traces its path, at `count` samples behind its reconstruction, is
+/// this many over `count` (FrameStore::Traces), from every frame down to the budget's. A bin's
+/// noise is its own samples' (one per path), so a path added where a bin holds few lowers the
+/// image's error far more than one added where it holds many; under the store's decay each bin
+/// settles where its paths balance what the decay forgets (about sqrt(this x its pixels x the
+/// frames the decay keeps) samples), and the fine bins near the camera, which hold the fewest
+/// and show as blotches the stage cannot tell from texture, take more of the frame's paths.
+constexpr double kStoreTargetSamples = 4.0;
 
 /// The store's budget while the view is still: one pixel in this many traces its path a frame.
 /// Every pixel: the store's running mean and the pixels' own samples then gather paths
@@ -1178,8 +1195,9 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->bias = bias;
         fs->blend = std::clamp(levels - float(bias), 0.0f, 1.0f);
         fs->budget = k;
-        fs->group = tsc.Frame() % uint32_t(k);
+        fs->offset = (tsc.Frame() * uint32_t(16 / k)) & 15u;
         fs->minCount = kStoreMinSamples * double(tsc.HitUnit());
+        fs->targetCount = kStoreTargetSamples * double(tsc.HitUnit());
         fs->termCount = kStoreTermSamples * double(tsc.HitUnit());
         fs->minPrior = double(tsc.HitUnit());
         fs->records = tsc.HitRecords(n);
@@ -1187,8 +1205,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->own = tsc.StillOwnLight(W, H);
         fb.indirectAccumulates = fs->own != nullptr;
         // A still view traces every pixel's path every frame (kStillStoreBudget).
-        if (fs->own)
-            fs->budget = kStillStoreBudget, fs->group = tsc.Frame() % uint32_t(kStillStoreBudget);
+        if (fs->own) fs->budget = kStillStoreBudget, fs->offset = 0;
         // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.
         const size_t guess =
             4 * tsc.NumFaces() + 2 * n / (size_t(16) << (2 * std::clamp(bias, 0, 8)));

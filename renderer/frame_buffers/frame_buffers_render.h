@@ -112,12 +112,15 @@
 //   visibility).
 //   Where the cached light comes from (options.texture.frameBufferSamples): by default (Hits) the
 //   one store (texcache/texture_store.h, the cache's LightStore) that the frames' own camera hits
-//   fill. Each frame, the pixels of one group of a 4x4 ordered-dither pattern (one pixel in
-//   frameBufferBudget, the group rotating with the cache's frame) trace the diffuse lobe's path at
-//   their hit (cosine-sampled, with one light sample when the cache holds direct light too:
-//   DiffuseRayLight, what a grid sample's rays estimate), and so does every pixel whose
-//   reconstruction the store backs with under half a sample (a disocclusion, a first frame: a
-//   sample is shaded only where no hit gave it one); NaN or infinite paths are dropped. Once every
+//   fill. Each frame, some pixels trace the diffuse lobe's path at their hit (cosine-sampled, with
+//   one light sample when the cache holds direct light too: DiffuseRayLight, what a grid sample's
+//   rays estimate): a pixel traces at a rate of kStoreTargetSamples over the samples behind its
+//   reconstruction, at least one frame in frameBufferBudget and at most every frame (its rank in
+//   a 4x4 ordered-dither pattern, shifted with the cache's frame, against the rate: the frame's
+//   pixels spread evenly over the image), so the paths go first where the store holds few (new
+//   surfaces, fine bins near the camera), and every pixel whose reconstruction the store backs
+//   with under half a sample traces (a disocclusion, a first frame: a sample is shaded only where
+//   no hit gave it one); NaN or infinite paths are dropped. Once every
 //   such hit is added at its bins (hit binning's two levels, chosen once per cache,
 //   kStoreFinerLevels below the still renderer's schedule, whose bias that renderer removes with
 //   each pixel's own samples; under the trivial filter too, which in the still renderer bins a hit

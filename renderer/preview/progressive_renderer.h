@@ -101,10 +101,10 @@ struct PreviewSettings {
     bool cachedVisibility = false;
     /// With the stage and texture space: where the frame buffers' cached diffuse light comes
     /// from (TextureSpaceOptions::frameBufferSamples: Hits, the store filled from one camera hit
-    /// in fbBudget a frame and wherever the store holds too few; Grid, the paper's lazily shaded
+    /// in fbBudget a frame, more where the store holds few samples; Grid, the paper's lazily shaded
     /// grid samples).
     TextureSamples fbCache = TextureSamples::Hits;
-    int fbBudget = 4;
+    int fbBudget = 8;
     /// The motion vectors the Motion view shows (the stage runs Reliable for it when off).
     screen::MotionKind motionKind = screen::MotionKind::Traditional;
     /// Stereo (renderer/texture_space/stereo.h): the beauty and debug-integrator views show both
