@@ -89,9 +89,10 @@ TEST(FrameBufferStore, FillsFromBudgetedHitsAndLazilyWhereEmpty) {
 }
 
 // Paths go first where the store holds few samples: a view's first frame traces every stored
-// pixel (an empty store), the next frames a share that falls as the bins fill, and once they
-// hold budget x kStoreTargetSamples the budget's alone. A pixel still traces at least its
-// budget's share, so the store keeps being refreshed.
+// pixel (an empty store), the next frames a share that falls as the bins fill and settles where
+// the paths a bin gains balance what the decay forgets (this small view's bins never reach
+// budget x kStoreTargetSamples, where only the budget's share would trace). A pixel still
+// traces at least its budget's share, so the store keeps being refreshed.
 TEST(FrameBufferStore, TracesMoreWhereTheStoreHoldsFew) {
     Scene s = DiffuseScene();
     RenderScene rs(s, {});
