@@ -247,7 +247,8 @@ int FilterSize(const Setup& s) {
     if (s.quick) md += "**Quick mode: test-size image; not for conclusions.**\n\n";
     md += Format(
         "Car, %dx%d, 4 spp, texture-space AO with 4 rays per sample, normal-weighted box "
-        "filter of width 1..21; render CPU time (all threads), best of %d; ratios against the 1x1 "
+        "filter of width 1..21; render CPU time (all threads), best of %d (up to 5 under a "
+        "second); ratios against the 1x1 "
         "render of this run. Two footprints: **all** texels of the window (the paper's), and the "
         "**visible** texels only (the renderer's default: a prepass traces the camera rays and "
         "marks the texels they reach; its rays are in the time).\n\n",
@@ -308,7 +309,8 @@ int Threads(const Setup& s) {
     std::string md = "# Thread scaling\n\n";
     if (s.quick) md += "**Quick mode: test-size image; not for conclusions.**\n\n";
     md += Format(
-        "Car, %dx%d, best of %d per thread count; speedup against 1 thread of the same "
+        "Car, %dx%d, best of %d (up to 5 under a second) per thread count; speedup against 1 "
+        "thread of the same "
         "workload in this run.\n\n| workload | 1 thread (s) | %d threads (s) | speedup |\n"
         "|---|---|---|---|\n",
         W, H, repeats, maxThreads);
@@ -362,7 +364,8 @@ int LodBias(const Setup& s) {
     md += Format(
         "Car, %dx%d, 4 spp, texture-space AO with 8 rays per sample, 13x13 normal filter; "
         "mip level biased by 0..3 (eq. 1 + bias: each level quarters the shading rate). "
-        "Render CPU time (all threads), best of %d.\n\n| LOD bias | CPU seconds | relative time | "
+        "Render CPU time (all threads), best of %d (up to 5 under a second).\n\n| LOD bias | CPU "
+        "seconds | relative time | "
         "samples shaded | relMSE | "
         "image |\n|---|---|---|---|---|---|\n",
         W, H, repeats);

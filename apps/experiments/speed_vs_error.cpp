@@ -442,7 +442,8 @@ int SpeedVsError(const Setup& s) {
         "rays and many shading samples: shading error alone. **image relMSE** is against a "
         "converged image (many camera samples): it adds the edge noise of %d camera samples, "
         "the same for every method. Time is the render's CPU time (all threads; best of %d, "
-        "2 threads, same process): the machine is shared, and CPU time counts only our work "
+        "of up to 5 for a render under a second, 2 threads, same process): the machine is shared, "
+        "and CPU time counts only our work "
         "(on an idle machine wall time is about half of it). Footprints are the renderer's default "
         "(`--footprint auto`): the texels the camera rays reach for AO, every texel of the window "
         "for the direct and path integrators. %s\n\n",
