@@ -317,6 +317,24 @@ glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store,
 /// Starts loading the store's bin at record `h` (a hint for StoreCountAt / StoreLightAt: the
 /// table is far larger than the caches, and a lookup stalls on memory).
 void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h);
+
+/// Stochastic reads of the store: one bin, the one holding record `h`'s point moved by `jitter`
+/// bins (each component in [-0.5, 0.5)), instead of the 2x2 bins around it. With a uniform
+/// jitter a bin is read with its bilinear weight, so that over frames (a new jitter each) the
+/// reads average to the bilinear reconstruction, at one lookup a read instead of four (and the
+/// edge crossings). A bin that holds fewer than `enough` samples (HitUnit counts, at least one)
+/// falls back to the bilinear reconstruction (StoreCountAt, StoreLightAt above): one bin's path
+/// or two would be noise that the stage's edge stopping takes the brightest out of. So does an
+/// object whose material sets a filter (its light is the filter's). The samples behind the
+/// read, its light in `light`:
+double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                    glm::vec2 jitter, double enough, glm::vec3* light);
+/// The read's light.
+glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                       glm::vec2 jitter, double enough);
+/// PrefetchStoreAt for the stochastic reads' bin.
+void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                     glm::vec2 jitter);
 /// The store's diffuse light over the block of 4x4 bins that holds record `h`'s bin at its level
 /// (the mean of their samples, in `light`; 0 without any) and the samples behind it (in HitUnit
 /// counts): one lookup for light that is smooth across a block (a ray's hit, StoreTerm).

@@ -196,12 +196,13 @@ TEST(FrameBuffers, GlossyRaysTakeTheCachedDiffuseLight) {
 // the mean indirect buffer. Three frames of the test scene, each denoised by every method: the
 // denoised indirect light on the diffuse objects keeps 60-110% of the buffer's, Reliable's frame 0
 // (no history: the a-trous alone) is within 5% of the spatial filter's (measured 0-2.5%), and the
-// image is finite. Two caches: the store under the preview's trivial filter (measured 65-87%),
-// and the grid under a Gaussian of radius 2 (measured 77-92%): the a-trous's edge stopping loses
-// some of the bright texels' light on this small scene, the more as grazing views shade their
-// diffuse lobe (bsdf.h), which puts light in silhouette pixels. The store under that Gaussian
-// keeps under 60% in some frames: it bins at the hit's own texel, about a pixel here, so its
-// first frames' bins hold a path or two each, and the edge stopping takes the brightest out.
+// image is finite. Two caches: the store under the preview's trivial filter (measured 61-85%:
+// a moving view reads one bin a pixel, noisier than the 2x2 around it), and the grid under a
+// Gaussian of radius 2 (measured 77-92%): the a-trous's edge stopping loses some of the bright
+// texels' light on this small scene, the more as grazing views shade their diffuse lobe (bsdf.h),
+// which puts light in silhouette pixels. The store under that Gaussian keeps under 60% in some
+// frames: it bins at the hit's own texel, about a pixel here, so its first frames' bins hold a path
+// or two each, and the edge stopping takes the brightest out.
 TEST(FrameBuffers, EveryDenoiserKeepsTheCachedIndirectLight) {
     Scene s = TestScene();
     RenderScene rs(s, {});

@@ -558,6 +558,17 @@ struct FrameStore {
     HitRecord* records;          ///< a pixel's record; mesh < 0: nothing to read
     BinnedHit* binned;           ///< its light to add (NaN: none) and albedo
     PixelOwnLight* own;          ///< a still view's own samples per pixel; null while moving
+    uint64_t jitterSeed = 0;     ///< this frame's seed of the pixels' store read jitters
+
+    /// Pixel (x, y)'s jitter of its stochastic store reads this frame (StoreCountAt and
+    /// StoreLightAt with a jitter): the same for its count and its light, new every frame, so
+    /// that the stage's temporal filter averages the single bins' reads into the bilinear
+    /// reconstruction. A still view reads the 2x2 bins: its running mean of the pixel's own
+    /// samples weighs them against a reconstruction whose noise its neighbours' show.
+    glm::vec2 Jitter(int x, int y, int width) const {
+        const uint64_t h = PixelSeed(jitterSeed, x, y, width);
+        return {float(h >> 40) * 0x1p-24f - 0.5f, float((h >> 8) & 0xFFFFFFu) * 0x1p-24f - 0.5f};
+    }
 
     /// Whether pixel (x, y), whose cell holds `count`, traces its path this frame. Its rate is
     /// one frame in `budget` where the cell holds budget x targetCount or more, and
@@ -806,12 +817,20 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
     if (cachedIndirect && fs) {
         fs->records[p] = storeRecord;
         fs->binned[p] = {glm::vec3(kNaN), bsdf.DiffuseReflectance(), texelLevel};
-        // The store's count at the record (its bins prefetched by RenderTile), and for a traced
+        // The store's count at the record (its bin prefetched by RenderTile), and for a traced
         // hit the light it holds there: BoundStoreHits' reference.
-        const double count = StoreCountAt(*c.tsc, *fs->store, fs->records[p]);
-        storePath = fs->Traces(x, y, count);
-        if (storePath && count >= fs->minPrior)
-            fs->binned[p].prior = Luminance(StoreLightAt(*c.tsc, *fs->store, fs->records[p]));
+        if (fs->own) {
+            const double count = StoreCountAt(*c.tsc, *fs->store, fs->records[p]);
+            storePath = fs->Traces(x, y, count);
+            if (storePath && count >= fs->minPrior)
+                fs->binned[p].prior = Luminance(StoreLightAt(*c.tsc, *fs->store, fs->records[p]));
+        } else {
+            glm::vec3 E;
+            const double count = StoreCountAt(*c.tsc, *fs->store, fs->records[p],
+                                              fs->Jitter(x, y, c.opt.width), fs->targetCount, &E);
+            storePath = fs->Traces(x, y, count);
+            if (storePath && count >= fs->minPrior) fs->binned[p].prior = Luminance(E);
+        }
     } else if (cachedIndirect) {
         const glm::vec3 E = CachedDiffuse(c, si, layered, rays);
         fb.indirect[p] = FiniteOrZero(bsdf.DiffuseReflectance() * E);
@@ -936,12 +955,17 @@ void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& 
     // The tile's surface interactions first, and with the store, each hit's record and a
     // prefetch of its bins: the store's table is far larger than the caches, and the pixel's
     // read of it (StoreCountAt) waited on memory right after its record was known.
+    const int tileWidth = x1 - x0;
     for (int i = 0; i < n; ++i) {
         if (!ts.found[i] || ts.hit[i].light >= 0) continue;
         ts.si[i] = c.rs.Interact(ts.ray[i], ts.hit[i], diff ? &ts.diff[i] : nullptr);
         if (!fs) continue;
         FrameHitRecord(c, ts.si[i], ts.hit[i].t, fs->bias, &ts.storeRecord[i], &ts.texelLevel[i]);
-        PrefetchStoreAt(*c.tsc, *fs->store, ts.storeRecord[i]);
+        if (fs->own)
+            PrefetchStoreAt(*c.tsc, *fs->store, ts.storeRecord[i]);
+        else
+            PrefetchStoreAt(*c.tsc, *fs->store, ts.storeRecord[i],
+                            fs->Jitter(x0 + i % tileWidth, y0 + i / tileWidth, c.opt.width));
     }
     ts.shadows.clear();
     ts.deltaShadows.resize(lights.delta.size());
@@ -1073,17 +1097,27 @@ void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& s
                                       pixel(x, y, size_t(y) * size_t(W) + size_t(x));
                           });
     };
+    if (!fs.own) {
+        // One bin a pixel (the stochastic read, FrameStore::Jitter): no memo to keep by tiles.
+        tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& r) {
+            for (int y = r.begin(); y < r.end(); ++y)
+                for (int x = 0; x < W; ++x) {
+                    const size_t p = size_t(y) * size_t(W) + size_t(x);
+                    if (const HitRecord& h = fs.records[p]; h.mesh >= 0)
+                        write(p,
+                              StoreLightAt(*c.tsc, store, h, fs.Jitter(x, y, W), fs.targetCount));
+                }
+        });
+        return;
+    }
     tiles([&](int, int, size_t p) {
         const HitRecord& h = fs.records[p];
-        if (!fs.own) {
-            if (h.mesh >= 0) write(p, StoreLightAt(*c.tsc, store, h));
-        } else if (h.mesh >= 0) {
+        if (h.mesh >= 0) {
             PrepareOwnLight(fs.own[p], FiniteOrZero(StoreLightAt(*c.tsc, store, h)));
         } else {
             fs.own[p] = {};  // nothing to read: nor to weigh in a neighbour's window
         }
     });
-    if (!fs.own) return;
     tiles([&](int x, int y, size_t p) {
         if (fs.records[p].mesh >= 0) write(p, BlendWithOwnLight(fs.own, W, H, x, y));
     });
@@ -1196,6 +1230,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         fs->blend = std::clamp(levels - float(bias), 0.0f, 1.0f);
         fs->budget = k;
         fs->offset = (tsc.Frame() * uint32_t(16 / k)) & 15u;
+        fs->jitterSeed = MixBits(opt.seed ^ (uint64_t(tsc.Frame()) << 32) ^ 0x5851F42D4C957F2Dull);
         fs->minCount = kStoreMinSamples * double(tsc.HitUnit());
         fs->targetCount = kStoreTargetSamples * double(tsc.HitUnit());
         fs->termCount = kStoreTermSamples * double(tsc.HitUnit());

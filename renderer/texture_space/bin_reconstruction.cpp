@@ -479,17 +479,59 @@ double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
 }
 
 namespace {
-/// The key of the bin that record `h` falls in at its level.
-TexelKey RecordBinKey(const TextureSpaceCache& tsc, const HitRecord& h) {
+/// The key of the bin that record `h` falls in at its level. Inlined, as JitteredBinKey: a key
+/// returned through the stack field by field stalls its caller's load of the whole key.
+inline __attribute__((always_inline)) TexelKey RecordBinKey(const TextureSpaceCache& tsc,
+                                                            const HitRecord& h) {
     const MeshGrids& g = tsc.Grids(h.mesh);
     const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
     return {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(QuantizeCoord(h.U(), res)),
             uint16_t(QuantizeCoord(h.V(), res))};
 }
+/// The key of the bin at record `h`'s level that holds its point moved by `jitter` bins (each
+/// component in [-0.5, 0.5)), held inside its face. With a uniform jitter, bin i0 + 1 of the
+/// 2x2 around the point comes out with probability fx, its bilinear weight (CellAt).
+inline __attribute__((always_inline)) TexelKey JitteredBinKey(const TextureSpaceCache& tsc,
+                                                              const HitRecord& h,
+                                                              glm::vec2 jitter) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
+    auto bin = [res](float u, float j) {
+        const float x = u * float(res) + j;  // in [-0.5, res + 0.5)
+        return uint16_t(std::clamp(x >= 0.0f ? int(x) : -1, 0, res - 1));
+    };
+    return {g.FaceOffset() + uint32_t(face), uint8_t(level), bin(h.U(), jitter.x),
+            bin(h.V(), jitter.y)};
+}
 }  // namespace
 
 void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h) {
     store.Samples().Prefetch(RecordBinKey(tsc, h));
+}
+
+void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                     glm::vec2 jitter) {
+    store.Samples().Prefetch(JitteredBinKey(tsc, h, jitter));
+}
+
+double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                    glm::vec2 jitter, double enough, glm::vec3* light) {
+    const RadianceBin::Value v = store.Samples().Find(JitteredBinKey(tsc, h, jitter));
+    if (v.count > 0 && double(v.count) >= enough) {
+        *light = glm::vec3(BinSum(v) / double(v.count));
+        return double(v.count);
+    }
+    *light = StoreLightAt(tsc, store, h);
+    return StoreCountAt(tsc, store, h);
+}
+
+glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
+                       glm::vec2 jitter, double enough) {
+    if (StoreFilterLevels(tsc.FilterOf(tsc.ObjectOfMesh(h.mesh)), 0) < 0) {
+        const RadianceBin::Value v = store.Samples().Find(JitteredBinKey(tsc, h, jitter));
+        if (v.count > 0 && double(v.count) >= enough) return glm::vec3(BinSum(v) / double(v.count));
+    }
+    return StoreLightAt(tsc, store, h);
 }
 
 double StoreBlockAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
