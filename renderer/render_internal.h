@@ -321,12 +321,12 @@ void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, c
 /// Stochastic reads of the store: one bin, the one holding record `h`'s point moved by `jitter`
 /// bins (each component in [-0.5, 0.5)), instead of the 2x2 bins around it. With a uniform
 /// jitter a bin is read with its bilinear weight, so that over frames (a new jitter each) the
-/// reads average to the bilinear reconstruction, at one lookup a read instead of four (and the
-/// edge crossings). A bin that holds fewer than `enough` samples (HitUnit counts, at least one)
-/// falls back to the bilinear reconstruction (StoreCountAt, StoreLightAt above): one bin's path
-/// or two would be noise that the stage's edge stopping takes the brightest out of. So does an
-/// object whose material sets a filter (its light is the filter's). The samples behind the
-/// read, its light in `light`:
+/// reads average to the bilinear reconstruction, at one lookup a read instead of four (a bin
+/// past the face's edge is its neighbour's, through the Ptex adjacency, as there). A bin that holds
+/// fewer than `enough` samples (HitUnit counts, at least one) falls back to the bilinear
+/// reconstruction (StoreCountAt, StoreLightAt above): one bin's path or two would be noise that the
+/// stage's edge stopping takes the brightest out of. So does an object whose material sets a filter
+/// (its light is the filter's). The samples behind the read, its light in `light`:
 double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
                     glm::vec2 jitter, double enough, glm::vec3* light);
 /// The read's light.

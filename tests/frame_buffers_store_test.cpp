@@ -273,41 +273,50 @@ TEST(FrameBufferStore, NonFiniteSamplesNeverEnterTheStore) {
 
 // A moving view reads one bin a pixel (StoreLightAt with a jitter) instead of the 2x2 around its
 // point: over uniform jitters a bin comes out with its bilinear weight, so that the reads
-// average to the bilinear reconstruction. An 8x8 level of a face holding a different light in
-// each bin, 8 samples each (equal counts: the bilinear read's count weighting is then its
-// weights alone): at points inside the face the mean of the reads over a 256x256 grid of
+// average to the bilinear reconstruction. Every face of the torus (closed: every edge has a
+// neighbour) holding a different light in each bin (and each face a different one), 8 samples
+// each (equal counts: the bilinear read's count weighting is then its weights alone), read at
+// the level where its first face is 8x8: at points inside that face and within half a bin of its
+// edges (where both reads take the neighbour's bins through the Ptex adjacency; a read held
+// inside the face would be up to XX % off there) the mean of the reads over a 256x256 grid of
 // jitters is within 0.5 % of the bilinear read (a weight is off by at most 1/256; measured under
 // 0.1 %). A bin with fewer samples than asked for is read bilinearly, bit for bit.
 TEST(FrameBufferStore, StochasticReadsAverageToTheBilinearReconstruction) {
     const Scene s = DiffuseScene();
     RenderScene rs(s, {});
     TextureSpaceCache cache(rs, StoreOptions().texture);
-    LightHitStore& store = cache.LightStore(1024);
-    const int mesh = cache.MeshOf(0), face = 0;
+    LightHitStore& store = cache.LightStore(4096);
+    const int mesh = cache.MeshOf(1), face = 0;
     const MeshGrids& g = cache.Grids(mesh);
     int level = 0;
     while (g.Res(face, level) > 8) ++level;
-    ASSERT_EQ(g.Res(face, level), 8) << "the ground's first face is finer than 8x8";
+    ASSERT_EQ(g.Res(face, level), 8) << "the torus's first face is coarser than 8x8";
     const uint64_t samples = 8 * cache.HitUnit();
-    auto lightOf = [](int i, int j) {
-        return glm::vec3(0.2f + 0.1f * float(i), 0.3f + 0.05f * float(j),
+    auto lightOf = [](int f, int i, int j) {
+        return glm::vec3(0.2f + 0.1f * float(i) + 0.5f * float(f),
+                         0.3f + 0.05f * float(j) + 0.25f * float(f % 3),
                          1.0f + 0.3f * float(i * j));
     };
-    for (int j = 0; j < 8; ++j)
-        for (int i = 0; i < 8; ++i) {
-            const glm::vec3 L = lightOf(i, j);
-            RadianceBin::Value v;
-            ASSERT_TRUE(RadianceBin::FromRadiance(&L.x, &v));
-            for (uint64_t& w : v.sum) w *= samples;
-            v.count *= samples;
-            ASSERT_TRUE(store.Samples().Add(
-                {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(i), uint16_t(j)}, v));
-        }
+    for (int f = 0; f < g.NumFaces(); ++f) {
+        const int fl = g.ClampMip(f, level), res = g.Res(f, fl);
+        for (int j = 0; j < res; ++j)
+            for (int i = 0; i < res; ++i) {
+                const glm::vec3 L = lightOf(f, i, j);
+                RadianceBin::Value v;
+                ASSERT_TRUE(RadianceBin::FromRadiance(&L.x, &v));
+                for (uint64_t& w : v.sum) w *= samples;
+                v.count *= samples;
+                ASSERT_TRUE(store.Samples().Add(
+                    {g.FaceOffset() + uint32_t(f), uint8_t(fl), uint16_t(i), uint16_t(j)}, v));
+            }
+    }
     store.AddsDone();
     constexpr int kN = 256;
     double worst = 0.0;
-    for (const glm::vec2 at : {glm::vec2(0.31f, 0.55f), glm::vec2(0.5f, 0.19f),
-                               glm::vec2(0.7f, 0.77f), glm::vec2(0.1f, 0.9f)}) {
+    for (const glm::vec2 at :
+         {glm::vec2(0.31f, 0.55f), glm::vec2(0.5f, 0.19f), glm::vec2(0.7f, 0.77f),
+          glm::vec2(0.1f, 0.9f), glm::vec2(0.02f, 0.4f), glm::vec2(0.6f, 0.985f),
+          glm::vec2(0.97f, 0.3f), glm::vec2(0.45f, 0.01f)}) {
         const HitRecord h{HitRecord::Quantize(at.x), HitRecord::Quantize(at.y), mesh,
                           uint32_t(face) << 4 | uint32_t(level)};
         const glm::vec3 bilinear = internal::StoreLightAt(cache, store, h);
@@ -326,7 +335,7 @@ TEST(FrameBufferStore, StochasticReadsAverageToTheBilinearReconstruction) {
         }
         // Too few samples in the bin: the bilinear read, and its count.
         glm::vec3 light;
-        const glm::vec2 jitter(0.2f, -0.3f);
+        const glm::vec2 jitter(at.x < 0.5f ? 0.2f : -0.2f, at.y < 0.5f ? 0.3f : -0.3f);  // inside
         EXPECT_EQ(internal::StoreLightAt(cache, store, h, jitter, double(samples + 1)), bilinear);
         EXPECT_EQ(internal::StoreCountAt(cache, store, h, jitter, double(samples + 1), &light),
                   internal::StoreCountAt(cache, store, h));

@@ -488,20 +488,36 @@ inline __attribute__((always_inline)) TexelKey RecordBinKey(const TextureSpaceCa
     return {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(QuantizeCoord(h.U(), res)),
             uint16_t(QuantizeCoord(h.V(), res))};
 }
-/// The key of the bin at record `h`'s level that holds its point moved by `jitter` bins (each
-/// component in [-0.5, 0.5)), held inside its face. With a uniform jitter, bin i0 + 1 of the
-/// 2x2 around the point comes out with probability fx, its bilinear weight (CellAt).
+/// The coordinates, at record `h`'s level (`res` a side), of the bin that holds its point moved
+/// by `jitter` bins (each component in [-0.5, 0.5)): up to a bin past the face's edges. With a
+/// uniform jitter, bin i0 + 1 of the 2x2 around the point comes out with probability fx, its
+/// bilinear weight (CellAt).
+inline __attribute__((always_inline)) glm::ivec2 JitteredBin(const HitRecord& h, int res,
+                                                             glm::vec2 jitter) {
+    const float x = h.U() * float(res) + jitter.x, y = h.V() * float(res) + jitter.y;
+    return {x >= 0.0f ? int(x) : -1, y >= 0.0f ? int(y) : -1};
+}
+/// JitteredBin's key, held inside the face (a hint for Prefetch).
 inline __attribute__((always_inline)) TexelKey JitteredBinKey(const TextureSpaceCache& tsc,
                                                               const HitRecord& h,
                                                               glm::vec2 jitter) {
     const MeshGrids& g = tsc.Grids(h.mesh);
     const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
-    auto bin = [res](float u, float j) {
-        const float x = u * float(res) + j;  // in [-0.5, res + 0.5)
-        return uint16_t(std::clamp(x >= 0.0f ? int(x) : -1, 0, res - 1));
-    };
-    return {g.FaceOffset() + uint32_t(face), uint8_t(level), bin(h.U(), jitter.x),
-            bin(h.V(), jitter.y)};
+    const glm::ivec2 b = glm::clamp(JitteredBin(h, res, jitter), 0, res - 1);
+    return {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(b.x), uint16_t(b.y)};
+}
+/// The bin JitteredBin names: inside the face, one lookup; past its edge, the neighbour's bin
+/// there through the Ptex adjacency, as the bilinear read's cells cross (none at a boundary or
+/// diagonally across a vertex).
+RadianceBin::Value JitteredBinValue(const TextureSpaceCache& tsc, const RadianceBins& bins,
+                                    const HitRecord& h, glm::vec2 jitter) {
+    const MeshGrids& g = tsc.Grids(h.mesh);
+    const int face = h.Face(), level = h.Level(), res = g.Res(face, level);
+    const glm::ivec2 b = JitteredBin(h, res, jitter);
+    if (b.x >= 0 && b.x < res && b.y >= 0 && b.y < res)
+        return bins.Find(
+            {g.FaceOffset() + uint32_t(face), uint8_t(level), uint16_t(b.x), uint16_t(b.y)});
+    return FindBin(g, bins, face, level, res, b.x, b.y, ThreadCells(bins).fineMemo);
 }
 }  // namespace
 
@@ -516,7 +532,7 @@ void PrefetchStoreAt(const TextureSpaceCache& tsc, const LightHitStore& store, c
 
 double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
                     glm::vec2 jitter, double enough, glm::vec3* light) {
-    const RadianceBin::Value v = store.Samples().Find(JitteredBinKey(tsc, h, jitter));
+    const RadianceBin::Value v = JitteredBinValue(tsc, store.Samples(), h, jitter);
     if (v.count > 0 && double(v.count) >= enough) {
         *light = glm::vec3(BinSum(v) / double(v.count));
         return double(v.count);
@@ -528,7 +544,7 @@ double StoreCountAt(const TextureSpaceCache& tsc, const LightHitStore& store, co
 glm::vec3 StoreLightAt(const TextureSpaceCache& tsc, const LightHitStore& store, const HitRecord& h,
                        glm::vec2 jitter, double enough) {
     if (StoreFilterLevels(tsc.FilterOf(tsc.ObjectOfMesh(h.mesh)), 0) < 0) {
-        const RadianceBin::Value v = store.Samples().Find(JitteredBinKey(tsc, h, jitter));
+        const RadianceBin::Value v = JitteredBinValue(tsc, store.Samples(), h, jitter);
         if (v.count > 0 && double(v.count) >= enough) return glm::vec3(BinSum(v) / double(v.count));
     }
     return StoreLightAt(tsc, store, h);
