@@ -272,6 +272,41 @@ TEST(Sampling, SpecularShareFollowsFresnelAndStaysInZeroOne) {
         }
 }
 
+// EvalLobesPdf (a frame-buffer light sample's BSDF and its MIS pdf, in one) gives exactly
+// EvalLobes and PdfSpecular: bit for bit, over random directions on both sides of the shading
+// and geometric normals (a tilted geometric normal: views and lights below one but above the
+// other), isotropic, anisotropic and near-mirror lobes, grazing ones, and a diffuse material.
+TEST(Sampling, EvalLobesPdfIsEvalLobesAndPdfSpecular) {
+    const glm::vec3 n(0.0f, 0.0f, 1.0f), ng = glm::normalize(glm::vec3(0.3f, 0.0f, 1.0f));
+    const Bsdf bsdfs[] = {
+        Bsdf(n, ng, glm::vec3(0.5f, 0.2f, 0.1f), true, glm::vec2(0.35f), glm::vec3(0.04f)),
+        Bsdf(n, ng, glm::vec3(0.0f), true, glm::vec2(0.1f, 0.6f), glm::vec3(0.9f, 0.6f, 0.3f),
+             glm::vec3(1.0f, 0.0f, 0.0f)),
+        Bsdf(n, ng, glm::vec3(0.3f), true, glm::vec2(0.001f), glm::vec3(0.04f)),
+        Bsdf(n, ng, glm::vec3(0.7f), false, glm::vec2(1.0f), glm::vec3(0.04f))};
+    Rng rng(7, 0);
+    auto direction = [&] {
+        const glm::vec2 u = rng.Next2D();
+        const float z = 2.0f * u.x - 1.0f, r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+        return glm::vec3(r * std::cos(6.2831853f * u.y), r * std::sin(6.2831853f * u.y), z);
+    };
+    int specular = 0;
+    for (const Bsdf& b : bsdfs)
+        for (int i = 0; i < 4096; ++i) {
+            const glm::vec3 wo = i % 64 == 0 ? glm::vec3(0.999f, 0.0f, 0.0447f) : direction();
+            const glm::vec3 wi = direction();
+            glm::vec3 d0, s0, d1, s1;
+            float pdf;
+            b.EvalLobes(wo, wi, &d0, &s0);
+            b.EvalLobesPdf(wo, wi, &d1, &s1, &pdf);
+            ASSERT_EQ(d1, d0) << i;
+            ASSERT_EQ(s1, s0) << i;
+            ASSERT_EQ(pdf, b.PdfSpecular(wo, wi)) << i;
+            specular += s0 != glm::vec3(0.0f) ? 1 : 0;
+        }
+    EXPECT_GT(specular, 1000);  // the cases cover the lobes, not only their zeros
+}
+
 TEST(Sampling, GgxNormalsAreNormalizedAndVndfMatchesItsPdf) {
     for (float alpha : {0.001f, 0.1f, 0.5f, 1.0f}) {
         // ∫ D(m) cos(m) dm = 1 (uniform-sphere estimate; narrow lobes need many samples).

@@ -432,13 +432,13 @@ void FrameDirectSample(const Context& c, const FrameLights& lights, const Surfac
             continue;
         }
         glm::vec3 fd, fs;
-        bsdf.EvalLobes(wo, ls.wi, &fd, &fs);
+        float pdfSpecular;
+        bsdf.EvalLobesPdf(wo, ls.wi, &fd, &fs, &pdfSpecular);
         if (specularOnly) fd = glm::vec3(0.0f);  // the cache's (indirect)
         // The specular ray may find this light too (in `glossy`): MIS between the two for that
         // lobe.
-        const float wSpec = ls.delta || !bsdf.HasSpecular()
-                                ? 1.0f
-                                : PowerHeuristic(1, ls.pdf, 1, bsdf.PdfSpecular(wo, ls.wi));
+        const float wSpec =
+            ls.delta || !bsdf.HasSpecular() ? 1.0f : PowerHeuristic(1, ls.pdf, 1, pdfSpecular);
         const float cosi = std::abs(glm::dot(ls.wi, si.N));
         S[k] = FiniteOrZero((fd + wSpec * fs) * ls.Li *
                             (pickScale * (ls.delta ? cosi : cosi / ls.pdf)));

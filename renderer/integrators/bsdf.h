@@ -117,6 +117,26 @@ public:
         }
     }
 
+    /// EvalLobes() and PdfSpecular() in one: the same values, sharing the local directions, the
+    /// half vector, D and wo's Smith Lambda (a light sample's BSDF and its MIS weight against
+    /// the specular lobe, for every candidate of the frame buffers' light samples).
+    void EvalLobesPdf(glm::vec3 woW, glm::vec3 wiW, glm::vec3* diffuse, glm::vec3* specular,
+                      float* pdfSpecular) const {
+        *diffuse = *specular = glm::vec3(0.0f);
+        *pdfSpecular = 0.0f;
+        const glm::vec3 wo = frame_.ToLocal(woW), wi = frame_.ToLocal(wiW);
+        const bool above = glm::dot(wiW, ng_) > 0.0f;
+        if (above && wi.z > 0.0f) *diffuse = kd_ * albedo_ * kInvPi;
+        if (!ggx_ || wo.z <= 0.0f || wi.z <= 0.0f) return;
+        const glm::vec3 wm = glm::normalize(wo + wi);
+        const float D = GgxD(wm, alpha_), lambdaWo = GgxLambda(wo, alpha_);
+        if (above)
+            *specular =
+                FresnelSchlick(f0_, glm::dot(wo, wm)) *
+                (D * (1.0f / (1.0f + lambdaWo + GgxLambda(wi, alpha_))) / (4.0f * wo.z * wi.z));
+        if (glm::dot(wo, wm) > 0.0f) *pdfSpecular = (1.0f / (1.0f + lambdaWo)) * D / (4.0f * wo.z);
+    }
+
     /// The diffuse lobe for a white albedo: 1/pi where Eval() shades wiW at all, else 0
     /// (DiffuseReflectance() x this is the diffuse lobe). It does not depend on the view.
     float DiffuseWhite(glm::vec3 wiW) const {
