@@ -123,6 +123,22 @@ struct Cursor {
 /// at a time (IntersectCameraRays).
 constexpr size_t kCameraBlock = 64;
 
+/// The surface interactions of camera samples [0, n) that hit an object, into `points` (with
+/// the samples' ray differentials when `differentials`), in a loop of their own: what a caller
+/// computes from an interaction (a texel key, a bin, AO ray directions) then reads it from
+/// memory the call wrote long before. Read right after the call returned it, its fields came
+/// through store forwarding from the call's last stores and the reads waited on them (a
+/// visible part of a warm texture-space frame and of hit-binned AO; results/bench_cache.md).
+template <typename CameraSampleT>
+void InteractAll(const Context& c, const CameraSampleT* samples, size_t n,
+                 SurfaceInteraction* points, bool differentials = false) {
+    for (size_t i = 0; i < n; ++i) {
+        const CameraSampleT& p = samples[i];
+        if (p.found && p.hit.object >= 0)
+            points[i] = c.rs.Interact(p.ray, p.hit, differentials ? &p.diff : nullptr);
+    }
+}
+
 /// CameraRay for the n <= kCameraBlock samples from `gen` on (advancing it), for a pinhole
 /// camera that does not move, without differentials: the same rays and random streams bit for
 /// bit, with the directions made together (CameraModel::GeneratePinhole).

@@ -85,15 +85,14 @@ void AoSamplesTwoPhase(const Context& c, int y0, int y1, int x0, int x1, int s0,
     points.resize(n);
     texels.resize(n);
     const bool lookups = c.opt.texture.constantTerm < 0.0f;
-    for (size_t i = 0; i < n; ++i) {
-        const Pending& p = queue[i];
-        if (!p.found || p.hit.object < 0) continue;
-        points[i] = c.rs.Interact(p.ray, p.hit, &p.diff);
-        if (lookups) {
+    InteractAll(c, queue, n, points.data(), true);
+    if (lookups)
+        for (size_t i = 0; i < n; ++i) {
+            const Pending& p = queue[i];
+            if (!p.found || p.hit.object < 0) continue;
             texels[i] = c.tsc->TexelOf(points[i]);
             c.tsc->Prefetch(texels[i]);
         }
-    }
     CacheStats& stats = c.cacheStats->local();
     for (size_t i = 0; i < n; ++i) {
         const Pending& p = queue[i];

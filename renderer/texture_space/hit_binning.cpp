@@ -101,9 +101,12 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
     thread_local std::vector<TexelKey> keys;
     thread_local AoRayBatch aoRays;
     thread_local std::vector<uint32_t> open;
+    thread_local std::vector<SurfaceInteraction> points;
     if (cs.size() < total) cs.resize(total);
+    if (points.size() < total) points.resize(total);
     keys.resize(2 * total);
     HitsCameraRays(c, r, s0, s1, cs.data(), total, false, rays);
+    InteractAll(c, cs.data(), total, points.data());
     aoRays.Clear();
     open.assign(total, 0);
     Cursor at(r, s0);
@@ -117,7 +120,7 @@ void AoHitsBin(const Context& c, const tbb::blocked_range2d<int>& r, int s0, int
             h.mesh = !p.found ? PassTexels::kMiss : PassTexels::kLight;
             continue;
         }
-        const SurfaceInteraction si = c.rs.Interact(p.ray, p.hit);
+        const SurfaceInteraction& si = points[i];
         BinHit(c, si, p.hit.t, bias, &keys[2 * i], &h);
         aoRays.Queue(c, p.ray, si, seq, seq.First(at.x, at.y, at.s), uint32_t(i));
     }

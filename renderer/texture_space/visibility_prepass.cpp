@@ -34,6 +34,7 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         uint64_t bit;    // VisibleTexels::Bit
     };
     Texel texels[kCameraBlock];
+    SurfaceInteraction points[kCameraBlock];
     CacheStats* stats = out ? &c.cacheStats->local() : nullptr;
     const bool find = out && !out->cacheEmptied;
     Cursor gen(r, s0), mark = gen;
@@ -42,19 +43,23 @@ void MarkVisibleTexels(const Context& c, VisibleTexels& visible, const tbb::bloc
         for (size_t i = 0; i < n; ++i, gen.Next(r, s0, s1))
             CameraRay(c, gen.x, gen.y, gen.s, &block[i].rng, &block[i].ray, &block[i].diff);
         IntersectCameraRays(c, block, n, rays);
-        // The block's texels first, then their hashes and prefetches, then the marks and
-        // lookups. The surface interactions run in a loop of their own: with the slots' and
-        // marks' prefetches issued between them, a warm frame spent more in the interactions
-        // (the limit patches) than a frame without lookups does, presumably their loads queued
-        // behind those misses. A sample on the texel of the sample before it (a pixel's samples
-        // mostly share one) takes that one's mark and lookup: nothing writes the texel cache during
-        // the prepass, so a lookup again would find the same.
+        // The block's surface interactions, then its texels, then their hashes and prefetches,
+        // then the marks and lookups. The interactions run in a loop of their own: with the
+        // slots' and marks' prefetches issued between them, a warm frame spent more in the
+        // interactions (the limit patches) than a frame without lookups does, presumably their
+        // loads queued behind those misses; and a key computed right after its interaction
+        // waited on the call's stores (InteractAll). Prefetching the slots one block ahead (their
+        // lookups after the next block's interactions) was slower still, in either place. A
+        // sample on the texel of the sample before it (a pixel's samples mostly share one) takes
+        // that one's mark and lookup: nothing writes the texel cache during the prepass, so a
+        // lookup again would find the same.
+        InteractAll(c, block, n, points, true);
         for (size_t i = 0; i < n; ++i) {
             const CameraSample& cs = block[i];
             Texel& t = texels[i];
             t.at = TexelAddress{};
             if (!cs.found || cs.hit.object < 0) continue;
-            t.at.key = c.tsc->TexelKeyOf(c.rs.Interact(cs.ray, cs.hit, &cs.diff), &t.mesh).Pack();
+            t.at.key = c.tsc->TexelKeyOf(points[i], &t.mesh).Pack();
         }
         // A texel whose first slot holds another key gets its other two slots prefetched too,
         // kSecond samples later, when the first slot's line has arrived to tell (the hashing
