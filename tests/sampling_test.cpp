@@ -459,6 +459,17 @@ TEST(Distribution, GuidedInversionEqualsBinarySearch) {
         ASSERT_EQ(pdf, pu * pv);
         ASSERT_EQ(d2.Pdf(got), marginal.Pdf(got.y) * row.Pdf(got.x));
     }
+    // The density kept per bin (an environment map's texels carry it) is Pdf's float anywhere
+    // in the bin, its edges included, empty bins and rows too.
+    for (int v = 0; v < nv; ++v)
+        for (int x = 0; x < nu; ++x) {
+            const float bin = d2.BinPdf(x, v);
+            for (const glm::vec2 f : {glm::vec2(0.0f), glm::vec2(0.5f), glm::vec2(0.999f)}) {
+                const glm::vec2 uv((float(x) + f.x) / float(nu), (float(v) + f.y) / float(nv));
+                if (int(uv.x * float(nu)) != x || int(uv.y * float(nv)) != v) continue;
+                ASSERT_EQ(d2.Pdf(uv), bin) << x << ", " << v;
+            }
+        }
 }
 
 std::string WriteEnv(int w, int h, int bx, int by, float bright) {

@@ -143,4 +143,10 @@ float Distribution2D::Pdf(glm::vec2 uv) const {
     return marginal_.Pdf(uv.y) * PdfCdf(rowCdf_.data() + size_t(v) * (nu_ + 1), nu_, uv.x);
 }
 
+float Distribution2D::BinPdf(int u, int v) const {
+    const float* row = rowCdf_.data() + size_t(v) * (nu_ + 1);
+    return (marginal_.cdf_[size_t(v) + 1] - marginal_.cdf_[size_t(v)]) * float(nv_) *
+           ((row[u + 1] - row[u]) * float(nu_));
+}
+
 }  // namespace texcache

@@ -51,6 +51,8 @@ public:
     /// Sample in [0,1)^2 with its density with respect to (u,v) area.
     glm::vec2 Sample(glm::vec2 u, float* pdf) const;
     float Pdf(glm::vec2 uv) const;
+    /// Pdf() anywhere in bin (u, v) (the density is constant over a bin): the same float.
+    float BinPdf(int u, int v) const;
 
 private:
     // The rows' CDFs and guide tables, each kept in one contiguous array (row v at v * (nu + 1)

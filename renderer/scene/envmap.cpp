@@ -88,7 +88,7 @@ EnvironmentMap EnvironmentMap::Load(const std::string& path, float intensity,
                 c[k] = std::isfinite(c[k])
                            ? std::min(std::max(c[k], 0.0f) * intensity, kMaxRadiance)
                            : 0.0f;
-            e.texels_[size_t(y) * img.width + x] = c;
+            e.texels_[size_t(y) * img.width + x] = glm::vec4(c, 0.0f);
             weights[size_t(y) * img.width + x] =
                 (0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z) * sinTheta;
         }
@@ -109,6 +109,9 @@ EnvironmentMap EnvironmentMap::Load(const std::string& path, float intensity,
             blurred[size_t(y) * img.width + x] = m;
         }
     e.dist_ = Distribution2D(blurred, img.width, img.height);
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x)
+            e.texels_[size_t(y) * img.width + x].w = e.dist_.BinPdf(x, y);
     return e;
 }
 
@@ -210,7 +213,11 @@ glm::vec3 EnvironmentMap::EvalPdf(glm::vec3 n, glm::vec3 dir, float* pdf) const 
 
 float EnvironmentMap::PdfUv(glm::vec2 uv) const {
     const float sinTheta = std::sin(uv.y * kPiF);
-    return sinTheta > 0.0f ? dist_.Pdf(uv) / (2.0f * kPiF * kPiF * sinTheta) : 0.0f;
+    if (!(sinTheta > 0.0f)) return 0.0f;
+    // dist_.Pdf(uv), from the texel's copy (the bins are the texels).
+    const int x = std::clamp(int(uv.x * float(width_)), 0, width_ - 1);
+    const int y = std::clamp(int(uv.y * float(height_)), 0, height_ - 1);
+    return texels_[size_t(y) * width_ + x].w / (2.0f * kPiF * kPiF * sinTheta);
 }
 
 glm::vec3 EnvironmentMap::Irradiance(glm::vec3 n) const {
@@ -259,7 +266,7 @@ const EnvironmentMap::LuminancePyramid& EnvironmentMap::Pyramid() const {
             return;
         }
         LuminancePyramid::Level l0{width_, height_, std::vector<float>(texels_.size())};
-        for (size_t i = 0; i < texels_.size(); ++i) l0.texels[i] = Luminance(texels_[i]);
+        for (size_t i = 0; i < texels_.size(); ++i) l0.texels[i] = Luminance(glm::vec3(texels_[i]));
         levels.push_back(std::move(l0));
         while (levels.back().width > 2 && levels.back().height > 1) {
             const LuminancePyramid::Level& f = levels.back();

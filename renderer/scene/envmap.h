@@ -91,10 +91,14 @@ public:
     const LuminancePyramid& Pyramid() const;
 
 private:
-    glm::vec3 Texel(int x, int y) const { return texels_[size_t(y) * width_ + x]; }
+    glm::vec3 Texel(int x, int y) const { return glm::vec3(texels_[size_t(y) * width_ + x]); }
 
     int width_ = 0, height_ = 0;
-    std::vector<glm::vec3> texels_;
+    /// RGB radiance, and in w the sampling density over (u, v) of the texel (dist_.BinPdf): a
+    /// direction's Eval and Pdf (an escaped ray's MIS weight) then read the same cache lines,
+    /// where the density from dist_ read two more (its row's and the marginal's CDF), most of
+    /// the time out of the caches.
+    std::vector<glm::vec4> texels_;
     std::string repairs_;
     glm::vec3 constant_{0.0f};
     bool isConstant_ = true;
