@@ -1055,7 +1055,8 @@ LightHitStore& GrowStore(TextureSpaceCache& tsc, size_t blocks, uint32_t keep) {
 }
 
 /// The store as a new frame of the frame buffers takes it: the previous frames' sums decayed by
-/// keep / 2^16 (eq. 6; all kept while the view is still), in place while at most half its
+/// keep / 2^16 (eq. 6; all kept while the view is still or nothing moves: FrameStoreKeep), in
+/// place while at most half its
 /// blocks are in use, else moved into a table twice the blocks in use (released the zeros);
 /// `firstBlocks` for a cache that has none yet.
 LightHitStore& DecayStore(TextureSpaceCache& tsc, size_t firstBlocks, uint32_t keep) {
@@ -1203,7 +1204,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
 
     const bool layered = CachedDiffuseLight(ctx, opt);
 
-    // The store (frame_buffers_render.h): the previous frames' bins, decayed.
+    // The store (frame_buffers_render.h): the previous frames' bins, decayed if anything moved.
     const bool useStore = ctx.tsc && opt.texture.frameBufferSamples == TextureSamples::Hits;
     std::unique_ptr<FrameStore> fs;
     if (useStore) {
@@ -1244,7 +1245,9 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.
         const size_t guess =
             4 * tsc.NumFaces() + 2 * n / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
-        fs->store = &DecayStore(tsc, std::min(2 * guess, kMaxStoreBlocks), tsc.FrameStoreKeep(k));
+        fs->store =
+            &DecayStore(tsc, std::min(2 * guess, kMaxStoreBlocks),
+                        tsc.FrameStoreKeep(k, rs.scene().MovesBetween(prevTime, opt.frameTime)));
     }
 
     const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;

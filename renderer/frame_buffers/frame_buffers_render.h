@@ -130,10 +130,12 @@
 //   median of its mesh's traced hits around it and what the store held there is scaled down to
 //   that, the rest shared by those hits (BoundBrightHits): a lone path that finds a highlight or
 //   the sun would reach every pixel reading its bin for as many frames as the decay keeps it.
-//   Between frames the store decays by 1 - (1 - temporalAlpha) / frameBufferBudget while the view
-//   moves (a bin then holds 1 / (1 - alpha) samples of each of its pixels, as a grid texel's
-//   history holds that many frames) and not at all while TextureSpaceCache::Refresh says it is
-//   still (a running mean, which converges); an edited object's bins are forgotten
+//   Between frames the store decays by 1 - (1 - temporalAlpha) / frameBufferBudget while an
+//   object or a light moves (a bin then holds 1 / (1 - alpha) samples of each of its pixels, as a
+//   grid texel's history holds that many frames, and what moved fades from the bins that saw it),
+//   and not at all while nothing does, however the camera moves, nor while
+//   TextureSpaceCache::Refresh says the view is still (a running mean, which converges: the
+//   diffuse light it holds does not depend on the view); an edited object's bins are forgotten
 //   (TextureSpaceCache::InvalidateObject). A running mean of bins converges to the bins' blurred
 //   value, not the pixel's, so while the view is still every pixel traces its path every frame
 //   (kStillStoreBudget) and also keeps its own traced paths' light

@@ -43,12 +43,10 @@ std::vector<char> MovedObjects(const Scene& scene, float a, float b, bool* light
     std::vector<char> moved(scene.objects.size(), 0);
     for (size_t o = 0; o < moved.size(); ++o) {
         const TransformTrack& t = scene.objects[o].transform;
-        moved[o] = t.IsAnimated() && t.Eval(a) != t.Eval(b);
+        moved[o] = t.MovesBetween(a, b);
     }
     *lightMoved = false;
-    auto check = [&](const TransformTrack& t) {
-        *lightMoved |= t.IsAnimated() && t.Eval(a) != t.Eval(b);
-    };
+    auto check = [&](const TransformTrack& t) { *lightMoved |= t.MovesBetween(a, b); };
     for (const QuadLight& l : scene.quadLights) check(l.transform);
     for (const DistantLight& l : scene.distantLights) check(l.transform);
     for (const PointLight& l : scene.pointLights) check(l.transform);
@@ -497,12 +495,17 @@ void ProgressiveRenderer::Run() {
                 if (scene_.materials[m].albedo.value == want) continue;
                 scene_.materials[m].albedo.value = want;
                 // What the cache holds for the objects with it was shaded with the old one
-                // (their own interreflections); the others take the change of their bounce
-                // light in over the next refreshes.
+                // (their own interreflections). Without the stage the others take the change of
+                // their bounce light in over the next refreshes; the stage's store keeps a
+                // running mean while nothing moves (TextureSpaceCache::FrameStoreKeep), which
+                // would keep their old bounce light, so every object's bins go.
                 if (cache)
-                    for (size_t o = 0; o < scene_.objects.size(); ++o)
+                    for (size_t o = 0; o < scene_.objects.size(); ++o) {
+                        bool uses = built.denoise;
                         for (const int used : scene_.objects[o].Materials())
-                            if (size_t(used) == m) cache->InvalidateObject(int(o));
+                            uses |= size_t(used) == m;
+                        if (uses) cache->InvalidateObject(int(o));
+                    }
             }
 
             if (pickX >= 0) {

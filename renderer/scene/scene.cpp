@@ -45,6 +45,18 @@ bool TransformTrack::IsAnimated() const {
     return false;
 }
 
+bool Scene::MovesBetween(float a, float b) const {
+    for (const Object& o : objects)
+        if (o.transform.MovesBetween(a, b)) return true;
+    for (const QuadLight& l : quadLights)
+        if (l.transform.MovesBetween(a, b)) return true;
+    for (const DistantLight& l : distantLights)
+        if (l.transform.MovesBetween(a, b)) return true;
+    for (const PointLight& l : pointLights)
+        if (l.transform.MovesBetween(a, b)) return true;
+    return false;
+}
+
 std::vector<int> Object::Materials() const {
     std::vector<int> ids{material};
     for (const int m : faceMaterials)

@@ -28,6 +28,8 @@ struct TransformTrack {
 
     glm::mat4 Eval(float time) const;
     bool IsAnimated() const;  ///< more than one distinct pose
+    /// Whether the pose at time `b` differs from the one at time `a`.
+    bool MovesBetween(float a, float b) const { return IsAnimated() && Eval(a) != Eval(b); }
 };
 
 struct Camera {
@@ -189,6 +191,12 @@ struct Scene {
     /// unitOrigin, times unitScale; the identity for scenes of ordinary size near the origin.
     glm::dvec3 unitOrigin{0.0};
     double unitScale = 1.0;
+
+    /// Whether an object or a light (quad, distant, point or spot) has another pose at time `b`
+    /// than at time `a`: the light falling on the scene's surfaces may differ between the two.
+    /// The environment and the camera do not count (the map does not move; the camera changes
+    /// what is seen, not the light on it).
+    bool MovesBetween(float a, float b) const;
 };
 
 }  // namespace texcache

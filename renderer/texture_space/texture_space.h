@@ -555,14 +555,20 @@ public:
     void InvalidateObject(int object);
     /// What the frame buffers' store keeps of its sums at the next frame, in 1/65536 (the
     /// store's Decay), when one pixel in `budget` adds to it a frame: all of them while the last
-    /// Refresh said the view is still (a running mean, which converges); while it moves, eq. 6's
-    /// weight temporalAlpha per pixel's sample, 1 - (1 - alpha) / budget a frame, so that a bin
-    /// holds 1 / (1 - alpha) of its pixels' samples as the grid's texels hold that many frames;
-    /// none without temporal accumulation.
-    uint32_t FrameStoreKeep(int budget) const {
+    /// Refresh said the view is still, or while nothing in the scene moves (`sceneMoves` false:
+    /// no object or light has moved since the last frame): a running mean, which converges. The
+    /// store holds diffuse light, which does not depend on the view, so while only the camera
+    /// moves every sample it holds stays an estimate of the light now, and forgetting it would
+    /// only bring its noise back (and cost a pass over the table a frame). While something moves,
+    /// eq. 6's weight temporalAlpha per pixel's sample, 1 - (1 - alpha) / budget a frame, so that
+    /// a bin holds 1 / (1 - alpha) of its pixels' samples as the grid's texels hold that many
+    /// frames and the shadows and bounce light of what moved fade from the bins that keep them.
+    /// None without temporal accumulation.
+    uint32_t FrameStoreKeep(int budget, bool sceneMoves) const {
         if (storeStill_) return 1u << 16;
         const double alpha = std::clamp(double(options_.temporalAlpha), 0.0, 1.0);
         if (!(alpha > 0.0)) return 0;
+        if (!sceneMoves) return 1u << 16;
         return uint32_t(
             std::lround((1.0 - (1.0 - alpha) / double(std::max(budget, 1))) * double(1u << 16)));
     }
