@@ -171,6 +171,49 @@ TEST(FrameBufferStore, DecaysWhileSomethingMoves) {
     EXPECT_NEAR(MeanOf(share, 40, 48), MeanOf(share, 32, 40), 0.03);
 }
 
+// A running mean keeps every bin it was given: once the store holds far more than a view's bins
+// (a long flight through a large scene), frames decay it by eq. 6 even where nothing moves, so
+// that the bins the camera no longer sees fade and the table can release them. Bins of faces no
+// camera hit reaches stand for those: 64 of them keep their sums over a still scene's frame,
+// 8192 of them (more than twice the first table of this 40x30 view) are scaled down.
+TEST(FrameBufferStore, ACrowdedStoreDecaysWhereNothingMoves) {
+    Scene s = DiffuseScene();
+    RenderScene rs(s, {});
+    for (const int faraway : {64, 8192}) {
+        SCOPED_TRACE(faraway);
+        RenderOptions o = StoreOptions();
+        TextureSpaceCache cache(rs, o.texture);
+        FrameBuffers fb;
+        // A table with room for them all, so that it does not grow (nor release anything).
+        cache.LightStore(size_t(1) << 16);
+        cache.Refresh(1, 16, false);
+        RenderFrameBuffers(rs, o, -0.04f, &fb, &cache);  // the view's bins
+        LightHitStore& store = *cache.LightStoreIfAny();
+        const size_t viewBlocks = store.Samples().BlocksUsed();
+        ASSERT_GT(viewBlocks, 0u);
+        RadianceBin::Value one;
+        const float unitLight[3] = {1.0f, 1.0f, 1.0f};
+        ASSERT_TRUE(RadianceBin::FromRadiance(unitLight, &one));
+        one.count *= cache.HitUnit();
+        auto key = [](int i) { return TexelKey{TexelKey::kMaxFaces - 1u - uint32_t(i), 0, 0, 0}; };
+        for (int i = 0; i < faraway; ++i) ASSERT_TRUE(store.Samples().Add(key(i), one));
+        store.AddsDone();
+        cache.Refresh(2, 16, false);
+        o.seed = 2;
+        RenderFrameBuffers(rs, o, -0.04f, &fb, &cache);
+        const LightHitStore& after = *cache.LightStoreIfAny();
+        const RadianceBin::Value v = after.Samples().Find(key(0));
+        std::printf("%d faraway blocks (the view's %zu): a faraway bin keeps %.4f of its count\n",
+                    faraway, viewBlocks, double(v.count) / double(one.count));
+        if (faraway == 64)
+            EXPECT_EQ(v.count, one.count);
+        else
+            EXPECT_LT(v.count, one.count);
+        EXPECT_GT(v.count, 0u);
+        for (size_t p = 0; p < fb.NumPixels(); ++p) ASSERT_TRUE(Finite(fb.indirect[p])) << p;
+    }
+}
+
 /// A floor and a wall at a right angle, both facing the camera, under a sky: the paths from each
 /// mostly reach the other where the camera sees it, so the store holds their light.
 Scene CornerScene() {

@@ -1245,9 +1245,16 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         // A first guess of four blocks per Ptex face plus the pixels' bins, 16 to a block.
         const size_t guess =
             4 * tsc.NumFaces() + 2 * n / (size_t(16) << (2 * std::clamp(bias, 0, 8)));
-        fs->store =
-            &DecayStore(tsc, std::min(2 * guess, kMaxStoreBlocks),
-                        tsc.FrameStoreKeep(k, rs.scene().MovesBetween(prevTime, opt.frameTime)));
+        const size_t firstBlocks = std::min(2 * guess, kMaxStoreBlocks);
+        // A running mean keeps every bin it was given (FrameStoreKeep). Once the store holds
+        // far more than a view's bins (twice the first table: a long flight through a large
+        // scene), the frame decays by eq. 6 as if something moved, so that the bins the camera
+        // no longer sees fade and the table releases them when it next grows, instead of
+        // growing towards kMaxStoreBlocks.
+        const LightHitStore* held = tsc.LightStoreIfAny();
+        const bool crowded = held && held->Samples().BlocksUsed() > 2 * firstBlocks;
+        const bool moves = rs.scene().MovesBetween(prevTime, opt.frameTime);
+        fs->store = &DecayStore(tsc, firstBlocks, tsc.FrameStoreKeep(k, moves || crowded));
     }
 
     const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;

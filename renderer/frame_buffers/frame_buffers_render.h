@@ -135,7 +135,9 @@
 //   grid texel's history holds that many frames, and what moved fades from the bins that saw it),
 //   and not at all while nothing does, however the camera moves, nor while
 //   TextureSpaceCache::Refresh says the view is still (a running mean, which converges: the
-//   diffuse light it holds does not depend on the view); an edited object's bins are forgotten
+//   diffuse light it holds does not depend on the view), unless the store holds more than twice
+//   its first table's blocks (a long flight: eq. 6 then lets the bins no longer seen fade and the
+//   table release them as it grows); an edited object's bins are forgotten
 //   (TextureSpaceCache::InvalidateObject). A running mean of bins converges to the bins' blurred
 //   value, not the pixel's, so while the view is still every pixel traces its path every frame
 //   (kStillStoreBudget) and also keeps its own traced paths' light
