@@ -1056,9 +1056,8 @@ LightHitStore& GrowStore(TextureSpaceCache& tsc, size_t blocks, uint32_t keep) {
 
 /// The store as a new frame of the frame buffers takes it: the previous frames' sums decayed by
 /// keep / 2^16 (eq. 6; all kept while the view is still or nothing moves: FrameStoreKeep), in
-/// place while at most half its
-/// blocks are in use, else moved into a table twice the blocks in use (released the zeros);
-/// `firstBlocks` for a cache that has none yet.
+/// place while at most half its blocks are in use, else moved into a table twice the blocks in
+/// use (released the zeros); `firstBlocks` for a cache that has none yet.
 LightHitStore& DecayStore(TextureSpaceCache& tsc, size_t firstBlocks, uint32_t keep) {
     LightHitStore* store = tsc.LightStoreIfAny();
     if (!store) return GrowStore(tsc, std::max(firstBlocks, size_t(1024)), keep);
