@@ -29,6 +29,7 @@
 #include "renderer/render_internal.h"
 #include "renderer/texture_space/cached_shading.h"
 #include "texcache/error.h"
+#include "texcache/prefetch.h"
 
 namespace texcache {
 
@@ -910,6 +911,45 @@ bool CachedDiffuseLight(const Context& c, const RenderOptions& opt) {
 constexpr int kTile = 8;
 constexpr int kTilePixels = kTile * kTile;
 
+/// What a pixel writes, plane by plane: every frame buffer and the store's record and binned
+/// hit, as {first byte, bytes a pixel}. A pixel writes about 300 bytes to some 24 planes, and a
+/// tile's rows lie a frame's width apart, a pattern the hardware prefetchers do not follow.
+/// Without a prefetch each of those lines is a demand miss for ownership; the misses fill the
+/// store buffer, and the shading stalls behind them (in a profile, on the plain stack stores
+/// that follow a pixel's buffer writes).
+struct PixelPlanes {
+    static constexpr int kMax = 32;
+    const char* base[kMax];
+    size_t bytes[kMax];
+    int n = 0;
+
+    PixelPlanes(const screen::FrameBuffers& fb, const FrameStore* fs) {
+        auto add = [&](const auto& plane, size_t perPixel = 1) {
+            if (plane.empty()) return;
+            base[n] = reinterpret_cast<const char*>(plane.data());
+            bytes[n++] = perPixel * sizeof(plane[0]);
+        };
+        for (const auto* plane : {&fb.emitted, &fb.shading, &fb.glossy, &fb.indirect, &fb.position,
+                                  &fb.normal, &fb.albedo, &fb.specular, &fb.prevPosition,
+                                  &fb.prevNormal, &fb.blocker, &fb.prevBlocker, &fb.lightSample,
+                                  &fb.prevLightSample, &fb.glossyHit, &fb.prevGlossyHit})
+            add(*plane);
+        for (const auto* plane : {&fb.visibility, &fb.cachedVisibility, &fb.depth, &fb.roughness})
+            add(*plane);
+        add(fb.objectId);
+        add(fb.cones, screen::kNumCones);
+        if (fs) {
+            base[n] = reinterpret_cast<const char*>(fs->records), bytes[n++] = sizeof(HitRecord);
+            base[n] = reinterpret_cast<const char*>(fs->binned), bytes[n++] = sizeof(BinnedHit);
+        }
+    }
+    /// Prefetches for writing planes part, part + parts, ... of pixels [p, p + count).
+    void PrefetchForWrite(size_t p, int count, int part = 0, int parts = 1) const {
+        for (int i = part; i < n; i += parts)
+            PrefetchBytesForWrite(base[i] + p * bytes[i], size_t(count) * bytes[i]);
+    }
+};
+
 /// A thread's scratch for its tiles (sized once: nothing is allocated per tile).
 struct TileScratch {
     std::array<Ray, kTilePixels> ray;
@@ -932,6 +972,11 @@ void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& 
                 const EnvironmentSamples& envSamples, bool layered, const FrameStore* fs, int x0,
                 int y0, screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
+    // The first row's buffers while the camera rays are traced, each next row's while a row is
+    // shaded (PixelPlanes).
+    const size_t W = size_t(c.opt.width);
+    const PixelPlanes planes(fb, fs);
+    planes.PrefetchForWrite(size_t(y0) * W + size_t(x0), x1 - x0);
     // Ray differentials: the texture-space cache's texel level, and a Ptex texture's filter
     // width (the pixel's footprint, as the path tracer's camera hits take it).
     const bool diff = c.tsc || c.textureFootprints;
@@ -970,13 +1015,18 @@ void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& 
     ts.shadows.clear();
     ts.deltaShadows.resize(lights.delta.size());
     for (auto& d : ts.deltaShadows) d.clear();
-    for (int i = 0, y = y0; y < y1; ++y)
+    for (int i = 0, y = y0; y < y1; ++y) {
         for (int x = x0; x < x1; ++x, ++i) {
+            // The next row's planes, a few at each pixel: all at once, the prefetches queue
+            // behind each other for the line fill buffers.
+            if (y + 1 < y1)
+                planes.PrefetchForWrite(size_t(y + 1) * W + size_t(x0), x1 - x0, x - x0, x1 - x0);
             ts.shadow[i].Reset();
             ShadePixel(c, lights, motion, envSamples, layered, fs, x, y, i, ts.ray[i], ts.found[i],
                        ts.hit[i], ts.si[i], ts.storeRecord[i], ts.texelLevel[i], fb, ts.shadow[i],
                        ts.shadows, ts.deltaShadows, rays);
         }
+    }
 
     // The delta lights' rays, light by light: a packet's rays go to one light from neighbouring
     // pixels, and only whether they are blocked is asked.
