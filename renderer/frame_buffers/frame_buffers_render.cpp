@@ -969,13 +969,13 @@ struct TileScratch {
 /// BVH nodes, and so do their shadow rays to the same light; Embree's packet traversal is
 /// cheaper per ray for such rays than single rays.
 void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& motion,
-                const EnvironmentSamples& envSamples, bool layered, const FrameStore* fs, int x0,
-                int y0, screen::FrameBuffers& fb, TileScratch& ts, RayCounts& rays) {
+                const EnvironmentSamples& envSamples, bool layered, const FrameStore* fs,
+                const PixelPlanes& planes, int x0, int y0, screen::FrameBuffers& fb,
+                TileScratch& ts, RayCounts& rays) {
     const int x1 = std::min(x0 + kTile, c.opt.width), y1 = std::min(y0 + kTile, c.opt.height);
     // The first row's buffers while the camera rays are traced, each next row's while a row is
     // shaded (PixelPlanes).
     const size_t W = size_t(c.opt.width);
-    const PixelPlanes planes(fb, fs);
     planes.PrefetchForWrite(size_t(y0) * W + size_t(x0), x1 - x0);
     // Ray differentials: the texture-space cache's texel level, and a Ptex texture's filter
     // width (the pixel's footprint, as the path tracer's camera hits take it).
@@ -1309,6 +1309,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;
     tbb::enumerable_thread_specific<RayCounts> counts;
     tbb::enumerable_thread_specific<TileScratch> scratch;
+    const PixelPlanes planes(fb, fs.get());
     tbb::parallel_for(tbb::blocked_range<int>(0, tilesX * tilesY),
                       [&](const tbb::blocked_range<int>& r) {
                           _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
@@ -1316,7 +1317,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
                           RayCounts& rc = counts.local();
                           TileScratch& ts = scratch.local();
                           for (int t = r.begin(); t < r.end(); ++t)
-                              RenderTile(ctx, lights, motion, envSamples, layered, fs.get(),
+                              RenderTile(ctx, lights, motion, envSamples, layered, fs.get(), planes,
                                          (t % tilesX) * kTile, (t / tilesX) * kTile, fb, ts, rc);
                       });
     size_t storeReads = 0, storeTraced = 0;
