@@ -208,6 +208,11 @@ struct RenderOptions {
     /// Every camera ray through its pixel's centre (no antialiasing), as the screen-space frame
     /// buffers trace them (frame_buffers_render.h): for comparing the two pixel by pixel.
     bool pixelCentre = false;
+    /// Screen-space frame buffers (RenderFrameBuffers): fill FrameBuffers::cones, six cones of
+    /// indirect light a pixel (72 bytes, the largest buffer), which only the stage's cone path
+    /// reads (screen::DenoiserSettings::indirectCones) and a frame-buffer file keeps. Off: the
+    /// buffer stays empty, and no pixel spends a write or a cone sample on it.
+    bool frameBufferCones = true;
     /// Camera samples of pixels outside the projection of the scene's bounds are not traced:
     /// they miss (internal::Context::hitRect). The image is the same either way.
     bool cullMissingPixels = true;

@@ -547,25 +547,9 @@ TEST(FrameBuffers, SeveralSamplesPerPixel) {
     EXPECT_GT(fractional, 10);
 }
 
-// Same seed, same buffers, bit for bit, for 1 and 2 threads (the tiles and their ray packets are
-// fixed whatever the thread count), and into buffers that held a larger frame of another seed
-// before: every pixel writes all of its entries, nothing of the old frame shows through.
-TEST(FrameBuffers, SameBuffersForAnyThreadCountAndReusedBuffers) {
-    Scene s = TestScene();
-    RenderScene rs(s, {});
-    RenderOptions o = FrameOptions(40, 30, 11);
-    o.spp = 2;
-    FrameBuffers one, two;
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
-        RenderFrameBuffers(rs, o, -0.04f, &one);
-    }
-    {
-        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
-        RenderFrameBuffers(rs, FrameOptions(48, 32, 12), -0.04f, &two);
-        RenderFrameBuffers(rs, o, -0.04f, &two);
-    }
-    // Bytes, not values: NaN entries must match too.
+// Every buffer of `one` and `two` the same, bytes rather than values (NaN entries must match
+// too); with `cones` false, every one but the cones.
+void ExpectSameBuffers(const FrameBuffers& one, const FrameBuffers& two, bool cones = true) {
     auto same = [](const auto& a, const auto& b, const char* name) {
         ASSERT_EQ(a.size(), b.size()) << name;
         EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(a[0])), 0) << name;
@@ -590,7 +574,29 @@ TEST(FrameBuffers, SameBuffersForAnyThreadCountAndReusedBuffers) {
     same(one.prevLightSample, two.prevLightSample, "prevLightSample");
     same(one.glossyHit, two.glossyHit, "glossyHit");
     same(one.prevGlossyHit, two.prevGlossyHit, "prevGlossyHit");
-    same(one.cones, two.cones, "cones");
+    same(one.cachedVisibility, two.cachedVisibility, "cachedVisibility");
+    if (cones) same(one.cones, two.cones, "cones");
+}
+
+// Same seed, same buffers, bit for bit, for 1 and 2 threads (the tiles and their ray packets are
+// fixed whatever the thread count), and into buffers that held a larger frame of another seed
+// before: every pixel writes all of its entries, nothing of the old frame shows through.
+TEST(FrameBuffers, SameBuffersForAnyThreadCountAndReusedBuffers) {
+    Scene s = TestScene();
+    RenderScene rs(s, {});
+    RenderOptions o = FrameOptions(40, 30, 11);
+    o.spp = 2;
+    FrameBuffers one, two;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        RenderFrameBuffers(rs, o, -0.04f, &one);
+    }
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
+        RenderFrameBuffers(rs, FrameOptions(48, 32, 12), -0.04f, &two);
+        RenderFrameBuffers(rs, o, -0.04f, &two);
+    }
+    ExpectSameBuffers(one, two);
     // The frame has background, blocked and glossy pixels: the comparison covers every branch.
     int background = 0, blocked = 0;
     for (size_t p = 0; p < one.NumPixels(); ++p) {
@@ -612,9 +618,31 @@ TEST(FrameBuffers, SameBuffersForAnyThreadCountAndReusedBuffers) {
         tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
         RenderFrameBuffers(rs, t, -0.04f, &two);
     }
-    same(one.indirect, two.indirect, "cached indirect");
-    same(one.cones, two.cones, "cached cones");
-    same(one.visibility, two.visibility, "visibility with the cache");
+    ExpectSameBuffers(one, two);
+}
+
+// Without cones (RenderOptions::frameBufferCones off, as the preview's stage asks) the buffer is
+// empty and every other buffer is the same bit for bit: per hit (whose diffuse rays fill the
+// cones otherwise), from the grid and from the store.
+TEST(FrameBuffers, WithoutConesEveryOtherBufferIsTheSame) {
+    Scene s = TestScene();
+    RenderScene rs(s, {});
+    RenderOptions o = FrameOptions(40, 30, 11);
+    o.spp = 2;
+    RenderOptions grid = o, store = o;
+    grid.texture.enabled = store.texture.enabled = true;
+    grid.texture.frameBufferSamples = TextureSamples::Grid;
+    store.texture.frameBufferSamples = TextureSamples::Hits;
+    for (const RenderOptions& with : {o, grid, store}) {
+        RenderOptions without = with;
+        without.frameBufferCones = false;
+        FrameBuffers one, two;
+        RenderFrameBuffers(rs, with, -0.04f, &one);
+        RenderFrameBuffers(rs, without, -0.04f, &two);
+        EXPECT_EQ(one.cones.size(), one.NumPixels() * screen::kNumCones);
+        EXPECT_TRUE(two.cones.empty());
+        ExpectSameBuffers(one, two, /*cones=*/false);
+    }
 }
 
 }  // namespace

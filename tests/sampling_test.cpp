@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <vector>
 
 #include "renderer/image/image.h"
@@ -272,24 +273,37 @@ TEST(Sampling, SpecularShareFollowsFresnelAndStaysInZeroOne) {
         }
 }
 
-// EvalLobesPdf (a frame-buffer light sample's BSDF and its MIS pdf, in one) gives exactly
-// EvalLobes and PdfSpecular: bit for bit, over random directions on both sides of the shading
-// and geometric normals (a tilted geometric normal: views and lights below one but above the
-// other), isotropic, anisotropic and near-mirror lobes, grazing ones, and a diffuse material.
-TEST(Sampling, EvalLobesPdfIsEvalLobesAndPdfSpecular) {
+// The lobes the EvalLobesPdf tests take: isotropic, anisotropic, near-mirror and diffuse, under
+// a geometric normal tilted off the shading one (views and lights below one but above the
+// other); `tilted` adds a lobe whose shading frame is not the axes.
+std::vector<Bsdf> LobeCases(bool tilted) {
     const glm::vec3 n(0.0f, 0.0f, 1.0f), ng = glm::normalize(glm::vec3(0.3f, 0.0f, 1.0f));
-    const Bsdf bsdfs[] = {
+    std::vector<Bsdf> bsdfs = {
         Bsdf(n, ng, glm::vec3(0.5f, 0.2f, 0.1f), true, glm::vec2(0.35f), glm::vec3(0.04f)),
         Bsdf(n, ng, glm::vec3(0.0f), true, glm::vec2(0.1f, 0.6f), glm::vec3(0.9f, 0.6f, 0.3f),
              glm::vec3(1.0f, 0.0f, 0.0f)),
         Bsdf(n, ng, glm::vec3(0.3f), true, glm::vec2(0.001f), glm::vec3(0.04f)),
         Bsdf(n, ng, glm::vec3(0.7f), false, glm::vec2(1.0f), glm::vec3(0.04f))};
+    if (tilted)
+        bsdfs.emplace_back(glm::normalize(glm::vec3(0.2f, -0.5f, 0.8f)), ng, glm::vec3(0.4f), true,
+                           glm::vec2(0.5f, 0.2f), glm::vec3(0.04f), glm::vec3(0.0f, 1.0f, 0.0f));
+    return bsdfs;
+}
+/// A direction uniform on the sphere.
+glm::vec3 UniformDirection(Rng& rng) {
+    const glm::vec2 u = rng.Next2D();
+    const float z = 2.0f * u.x - 1.0f, r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    return glm::vec3(r * std::cos(6.2831853f * u.y), r * std::sin(6.2831853f * u.y), z);
+}
+
+// EvalLobesPdf (a frame-buffer light sample's BSDF and its MIS pdf, in one) gives exactly
+// EvalLobes and PdfSpecular: bit for bit, over random directions on both sides of the shading
+// and geometric normals (a tilted geometric normal: views and lights below one but above the
+// other), isotropic, anisotropic and near-mirror lobes, grazing ones, and a diffuse material.
+TEST(Sampling, EvalLobesPdfIsEvalLobesAndPdfSpecular) {
+    const std::vector<Bsdf> bsdfs = LobeCases(false);
     Rng rng(7, 0);
-    auto direction = [&] {
-        const glm::vec2 u = rng.Next2D();
-        const float z = 2.0f * u.x - 1.0f, r = std::sqrt(std::max(0.0f, 1.0f - z * z));
-        return glm::vec3(r * std::cos(6.2831853f * u.y), r * std::sin(6.2831853f * u.y), z);
-    };
+    auto direction = [&] { return UniformDirection(rng); };
     int specular = 0;
     for (const Bsdf& b : bsdfs)
         for (int i = 0; i < 4096; ++i) {
@@ -305,6 +319,51 @@ TEST(Sampling, EvalLobesPdfIsEvalLobesAndPdfSpecular) {
             specular += s0 != glm::vec3(0.0f) ? 1 : 0;
         }
     EXPECT_GT(specular, 1000);  // the cases cover the lobes, not only their zeros
+}
+
+// EvalLobesPdfN (the frame buffers' light candidates, many at once in a loop that vectorizes)
+// gives EvalLobesPdf's values lane by lane, bit for bit: the same bsdfs and random directions,
+// in batches of 1 to 32, with the hard cases mixed in: light and view exactly on the shading
+// plane, a light so close to it that z^2 underflows, one below it but above the geometric
+// plane, a view below the shading plane, and a NaN direction (0 everywhere, as EvalLobesPdf).
+TEST(Sampling, EvalLobesPdfNIsEvalLobesPdfLaneByLane) {
+    // With a tilted shading frame: the lanes' dot products are not plain components.
+    const std::vector<Bsdf> bsdfs = LobeCases(true);
+    Rng rng(11, 0);
+    auto direction = [&] { return UniformDirection(rng); };
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    const glm::vec3 hard[] = {glm::vec3(1.0f, 0.0f, 0.0f), glm::vec3(0.6f, 0.8f, 1e-24f),
+                              glm::normalize(glm::vec3(0.9f, 0.0f, -0.1f)),
+                              glm::vec3(nan, 0.0f, 1.0f)};
+    constexpr int kMax = 32;
+    int specular = 0, lanes = 0;
+    for (const Bsdf& b : bsdfs)
+        for (int batch = 0; batch < 256; ++batch) {
+            const glm::vec3 wo = batch % 16 == 0   ? glm::vec3(0.0f, 1.0f, 0.0f)   // on the plane
+                                 : batch % 16 == 1 ? glm::vec3(0.0f, 0.6f, -0.8f)  // below
+                                                   : direction();
+            const int count = 1 + batch % kMax;
+            float wx[kMax], wy[kMax], wz[kMax];
+            glm::vec3 wi[kMax];
+            for (int k = 0; k < count; ++k) {
+                wi[k] = k % 7 == 3 ? hard[(batch + k) % 4] : direction();
+                wx[k] = wi[k].x, wy[k] = wi[k].y, wz[k] = wi[k].z;
+            }
+            float on[kMax], sr[kMax], sg[kMax], sb[kMax], pdf[kMax];
+            b.EvalLobesPdfN(wo, count, wx, wy, wz, on, sr, sg, sb, pdf);
+            for (int k = 0; k < count; ++k, ++lanes) {
+                glm::vec3 d, s;
+                float p;
+                b.EvalLobesPdf(wo, wi[k], &d, &s, &p);
+                ASSERT_EQ(on[k] != 0.0f ? b.DiffuseReflectance() * kInvPiF : glm::vec3(0.0f), d)
+                    << batch << " " << k;
+                ASSERT_EQ(glm::vec3(sr[k], sg[k], sb[k]), s) << batch << " " << k;
+                ASSERT_EQ(pdf[k], p) << batch << " " << k;
+                ASSERT_TRUE(on[k] == 0.0f || on[k] == 1.0f);
+                specular += s != glm::vec3(0.0f) ? 1 : 0;
+            }
+        }
+    EXPECT_GT(specular, lanes / 8);  // the cases cover the lobes, not only their zeros
 }
 
 TEST(Sampling, GgxNormalsAreNormalizedAndVndfMatchesItsPdf) {

@@ -139,6 +139,8 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     base.maxDepth = s.maxDepth;
     base.frameTime = time;
     base.progress = false;
+    // As the preview: cones only for a stage that reads them.
+    base.frameBufferCones = StageSettingsFor(s.height).indirectCones;
 
     setView(n);
     RenderOptions refOpt = base;

@@ -351,8 +351,15 @@ void FrameDirectSample(const Context& c, const FrameLights& lights, const Surfac
     LightSample cand[kMax];
     glm::vec3 S[kMax];
     float lum[kMax];
-    glm::vec3 sum(0.0f);
-    float lumSum = 0.0f;
+    // The candidates whose BSDF is evaluated in the loop after this one (all but the diffuse
+    // quads' closed form), packed: their light samples in structure-of-arrays form, and which
+    // candidate each is. EvalLobesPdfN and the weights below then run over all of them in loops
+    // the compiler vectorizes: one candidate at a time, the GGX lobe's divisions and square roots
+    // were most of this function's time, itself one of the largest in a store frame's profile.
+    alignas(64) float wx[kMax], wy[kMax], wz[kMax], Lr[kMax], Lg[kMax], Lb[kMax];
+    alignas(64) float pdfLight[kMax], delta[kMax], pickScales[kMax];
+    int pendingK[kMax];
+    int np = 0;
     // With closed-form shading the pick follows each light's share of it instead of being
     // uniform, so that the candidates go where the light is (none to a dim sky next to a lamp):
     // candidate k's light is where (k + shift) / kN falls in the lights' cumulative shares.
@@ -385,17 +392,21 @@ void FrameDirectSample(const Context& c, const FrameLights& lights, const Surfac
             uPick = (float(light) + 0.5f) / float(c.numLights);
             pickScale = float(m) / float(c.numLights);
         }
-        // x - floor(x) is fmod(x, 1) for x >= 0, exactly, without libm's fmodf (a tenth of the
-        // bench profile with 32 candidates).
-        const float rx = shift.x + kG1 * float(k), ry = shift.y + kG2 * float(k);
-        const glm::vec2 u(rx - std::floor(rx), ry - std::floor(ry));
+        // The point on the light, for the lights that take one (not the environment's table):
+        // x - float(int(x)) is fmod(x, 1) for 0 <= x < 2^31, exactly, without libm's fmodf (a
+        // tenth of the bench profile with 32 candidates) or the baseline x86-64's floor (no
+        // rounding instruction before SSE4.1).
+        auto r2 = [&] {
+            const float rx = shift.x + kG1 * float(k), ry = shift.y + kG2 * float(k);
+            return glm::vec2(rx - float(int(rx)), ry - float(int(ry)));
+        };
         LightSample& ls = cand[k];
         if (diffuseQuads && light < int(c.quads.size())) {
             // SampleLight's quad sample and the diffuse BSDF folded together (pdf and cosines
             // from the unnormalized direction): one square root and one division instead of
             // their six (these candidates are a large share of the frame buffers' render time).
             const Context::Quad& q = c.quads[size_t(light)];
-            const glm::vec2 v = glm::min(u, glm::vec2(kOneMinusEpsilon));
+            const glm::vec2 v = glm::min(r2(), glm::vec2(kOneMinusEpsilon));
             const glm::vec3 d = q.corner + v.x * q.e1 + v.y * q.e2 - si.P;
             const float dist2 = glm::dot(d, d);
             const float cosLight = -glm::dot(q.n, d), cosSurface = glm::dot(si.N, d);
@@ -417,7 +428,6 @@ void FrameDirectSample(const Context& c, const FrameLights& lights, const Surfac
                             (invDist * invDist) * (q.area * pickScale * float(c.numLights));
             S[k] = FiniteOrZero(diffuseF * q.L * g);
             lum[k] = Luminance(glm::abs(S[k]));
-            sum += S[k], lumSum += lum[k];
             continue;
         }
         if (!envSamples.Empty() &&
@@ -429,23 +439,53 @@ void FrameDirectSample(const Context& c, const FrameLights& lights, const Surfac
             ls.dist = INFINITY;
             ls.delta = false;
         } else if (!c.SampleLight(si.P, si.N, std::min(uPick, kOneMinusEpsilon),
-                                  glm::min(u, glm::vec2(kOneMinusEpsilon)), &ls)) {
+                                  glm::min(r2(), glm::vec2(kOneMinusEpsilon)), &ls)) {
             continue;
         }
-        glm::vec3 fd, fs;
-        float pdfSpecular;
-        bsdf.EvalLobesPdf(wo, ls.wi, &fd, &fs, &pdfSpecular);
-        if (specularOnly) fd = glm::vec3(0.0f);  // the cache's (indirect)
-        // The specular ray may find this light too (in `glossy`): MIS between the two for that
-        // lobe.
-        const float wSpec =
-            ls.delta || !bsdf.HasSpecular() ? 1.0f : PowerHeuristic(1, ls.pdf, 1, pdfSpecular);
-        const float cosi = std::abs(glm::dot(ls.wi, si.N));
-        S[k] = FiniteOrZero((fd + wSpec * fs) * ls.Li *
-                            (pickScale * (ls.delta ? cosi : cosi / ls.pdf)));
-        lum[k] = Luminance(glm::abs(S[k]));
-        sum += S[k], lumSum += lum[k];
+        wx[np] = ls.wi.x, wy[np] = ls.wi.y, wz[np] = ls.wi.z;
+        Lr[np] = ls.Li.x, Lg[np] = ls.Li.y, Lb[np] = ls.Li.z;
+        pdfLight[np] = ls.pdf, delta[np] = ls.delta ? 1.0f : 0.0f;
+        pickScales[np] = pickScale;
+        pendingK[np++] = k;
     }
+    if (np > 0) {
+        alignas(64) float diffuseOn[kMax], fr[kMax], fg[kMax], fb[kMax], pdfSpecular[kMax];
+        bsdf.EvalLobesPdfN(wo, np, wx, wy, wz, diffuseOn, fr, fg, fb, pdfSpecular);
+        // The diffuse lobe is the cache's where it lights the base (indirect).
+        const glm::vec3 fdOn = specularOnly ? glm::vec3(0.0f) : diffuseF;
+        const bool specular = bsdf.HasSpecular();
+        const glm::vec3 N = si.N;
+        alignas(64) float Sr[kMax], Sg[kMax], Sb[kMax], L[kMax];
+        for (int i = 0; i < np; ++i) {
+            const bool isDelta = delta[i] != 0.0f;
+            // The specular ray may find this light too (in `glossy`): MIS between the two for
+            // that lobe (PowerHeuristic, written so that the loop vectorizes).
+            const float f2 = pdfLight[i] * pdfLight[i], pdfS = pdfSpecular[i];
+            const float d = f2 + pdfS * pdfS;
+            const float power = std::abs(f2) == INFINITY ? 1.0f : d > 0.0f ? f2 / d : 0.0f;
+            const float wSpec = isDelta || !specular ? 1.0f : power;
+            const float cosi = std::abs(wx[i] * N.x + wy[i] * N.y + wz[i] * N.z);
+            const float scale = pickScales[i] * (isDelta ? cosi : cosi / pdfLight[i]);
+            const bool on = diffuseOn[i] != 0.0f;
+            const float r = ((on ? fdOn.x : 0.0f) + wSpec * fr[i]) * Lr[i] * scale;
+            const float gr = ((on ? fdOn.y : 0.0f) + wSpec * fg[i]) * Lg[i] * scale;
+            const float bl = ((on ? fdOn.z : 0.0f) + wSpec * fb[i]) * Lb[i] * scale;
+            // FiniteOrZero: x - x is 0 exactly when x is finite.
+            const float all = r + gr + bl;
+            const bool finite = all - all == 0.0f;
+            Sr[i] = finite ? r : 0.0f, Sg[i] = finite ? gr : 0.0f, Sb[i] = finite ? bl : 0.0f;
+            L[i] =
+                0.2126f * std::abs(Sr[i]) + 0.7152f * std::abs(Sg[i]) + 0.0722f * std::abs(Sb[i]);
+        }
+        for (int i = 0; i < np; ++i) {
+            S[pendingK[i]] = glm::vec3(Sr[i], Sg[i], Sb[i]);
+            lum[pendingK[i]] = L[i];
+        }
+    }
+    // In candidate order, as one loop summed them.
+    glm::vec3 sum(0.0f);
+    float lumSum = 0.0f;
+    for (int k = 0; k < kN; ++k) sum += S[k], lumSum += lum[k];
     if (exact) {
         px.shadingSum += *exact;
         sh.weightSum += Luminance(glm::abs(*exact));
@@ -700,10 +740,10 @@ void FrameGlossySample(const Context& c, const FrameMotion& motion, const Surfac
     }
 }
 
-/// The diffuse lobe's path of one sample: incident indirect radiance into px.diffuseSum and its
-/// cone.
+/// The diffuse lobe's path of one sample: incident indirect radiance into px.diffuseSum and,
+/// with the cones' `axes` (RenderOptions::frameBufferCones), its cone.
 void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bsdf& bsdf,
-                        const std::array<glm::vec3, screen::kNumCones>& axes, Rng& rng,
+                        const std::array<glm::vec3, screen::kNumCones>* axes, Rng& rng,
                         FramePixel& px, RayCounts& rays) {
     glm::vec3 wi;
     glm::vec3 L(0.0f);
@@ -716,8 +756,9 @@ void FrameDiffuseSample(const Context& c, const SurfaceInteraction& si, const Bs
         L = FiniteOrZero(LiPath(c, ray, hit, found, rng, c.opt.maxDepth - 1, rays, false));
     }
     px.diffuseSum += L;
+    if (!axes) return;  // no cones asked for
     // Cosine-sampled: L is this sample's estimate of irradiance / pi (see AddConeSample).
-    screen::AddConeSample(axes, wi, L, px.coneSum.data());
+    screen::AddConeSample(*axes, wi, L, px.coneSum.data());
     px.hasCones = true;
 }
 
@@ -743,7 +784,8 @@ void ClearPixel(screen::FrameBuffers& fb, size_t p) {
     fb.objectId[p] = -1;
     fb.prevPosition[p] = kNaN3;
     fb.prevNormal[p] = kNaN3;
-    for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = kNaN3;
+    if (!fb.cones.empty())
+        for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = kNaN3;
     if (!fb.cachedVisibility.empty()) fb.cachedVisibility[p] = kNaN;
 }
 
@@ -839,7 +881,8 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
         // that indirect = albedo * ShadeCones(cones) holds here too and the stage's cone
         // history (Reliable) carries the cached light instead of finding no cones.
         const glm::vec3 Epi = FiniteOrZero(E);
-        for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = Epi;
+        if (!fb.cones.empty())
+            for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = Epi;
     }
     // The diffuse lobe's visibility from the cache (view-independent, so diffuse materials
     // only; GGX ones keep NaN: none).
@@ -853,7 +896,8 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
     }
     const bool diffuseRay = diffuse && !cachedIndirect;
     std::array<glm::vec3, screen::kNumCones> axes;
-    if (diffuseRay) axes = screen::ConeAxes(si.N);
+    const bool cones = diffuseRay && !fb.cones.empty();
+    if (cones) axes = screen::ConeAxes(si.N);
     glm::vec3 exactShading;
     LightWeights weights;
     const bool closedForm = !layered &&
@@ -873,7 +917,7 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
                               weights, rng, envSamples, px, sh, pixel, shadows, layered);
         if (bsdf.HasSpecular())
             FrameGlossySample(c, motion, si, bsdf, wo, layered, fs, rng, px, rays);
-        if (diffuseRay) FrameDiffuseSample(c, si, bsdf, axes, rng, px, rays);
+        if (diffuseRay) FrameDiffuseSample(c, si, bsdf, cones ? &axes : nullptr, rng, px, rays);
         glm::vec3 wi;
         if (storePath && bsdf.SampleDiffuse(rng.Next2D(), &wi))
             storeSum += DiffuseRayLight(c, SpawnRay(si, wi), si.N, layered, rng, rays,
@@ -886,7 +930,7 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
     if (bsdf.HasSpecular()) fb.glossy[p] = px.glossySum * inv;
     if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
     if (bsdf.HasSpecular()) fb.glossyHit[p] = px.glossyHit, fb.prevGlossyHit[p] = px.prevGlossyHit;
-    if (px.hasCones)
+    if (px.hasCones && !fb.cones.empty())
         for (int k = 0; k < screen::kNumCones; ++k)
             fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
 }
@@ -1135,7 +1179,8 @@ void ResolveStore(const Context& c, const FrameStore& fs, const LightHitStore& s
     auto write = [&](size_t p, glm::vec3 E) {
         E = FiniteOrZero(E);
         fb.indirect[p] = FiniteOrZero(fs.binned[p].albedo * E);
-        for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = E;
+        if (!fb.cones.empty())
+            for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = E;
     };
     // In tiles: a thread's memo of the bins it read (ThreadCells) holds a tile's, where a row's
     // would be evicted before the next row reads them again.
@@ -1242,7 +1287,7 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         for (const int m : o.Materials())
             anyGlossy |= scene.materials[size_t(m)].type == Material::Type::GGX;
     for (auto* v : {&fb.glossy, &fb.glossyHit, &fb.prevGlossyHit}) v->resize(anyGlossy ? n : 0);
-    fb.cones.resize(n * screen::kNumCones);
+    fb.cones.resize(opt.frameBufferCones ? n * screen::kNumCones : 0);
     // Only when asked for and there is a cache to look it up in (ctx.tsc: texture shading).
     if (ctx.tsc && opt.texture.cachedVisibility && !ctx.tsc->options().cachedVisibility)
         throw InputError("frame buffers",

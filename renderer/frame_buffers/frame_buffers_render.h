@@ -184,7 +184,8 @@ namespace texcache {
 class AtomicFiles;
 
 /// Renders the frame at options.frameTime (the time `scene` was built for) into `out` (every
-/// buffer filled, sizes options.width x options.height, options.spp samples per pixel); "prev"
+/// buffer filled, the cones only with options.frameBufferCones; sizes options.width x
+/// options.height, options.spp samples per pixel); "prev"
 /// buffers are moved to `prevTime` (usually frameTime - 1/fps). options.integrator, seconds,
 /// aovs and the camera's lens and shutter are ignored. With options.texture.enabled the cache
 /// is `cache`, or one made for this frame when null. Throws InputError on bad options.

@@ -137,6 +137,59 @@ public:
         if (glm::dot(wo, wm) > 0.0f) *pdfSpecular = (1.0f / (1.0f + lambdaWo)) * D / (4.0f * wo.z);
     }
 
+    /// EvalLobesPdf() for `n` world directions at once, in structure-of-arrays form: lane k is
+    /// wi = (wx[k], wy[k], wz[k]); diffuseOn[k] is 1 where the diffuse lobe is
+    /// DiffuseReflectance() / pi there (else 0), (sr, sg, sb)[k] the specular lobe, pdf[k] its pdf.
+    /// Bit for bit EvalLobesPdf()'s values, the same operations in the same order, written
+    /// without branches (every lane computes every term, then keeps what EvalLobesPdf's branches
+    /// would) so that the compiler vectorizes the loop: the frame buffers' light candidates are
+    /// evaluated so, 8 to 32 a pixel.
+    void EvalLobesPdfN(glm::vec3 woW, int n, const float* __restrict wx, const float* __restrict wy,
+                       const float* __restrict wz, float* __restrict diffuseOn,
+                       float* __restrict sr, float* __restrict sg, float* __restrict sb,
+                       float* __restrict pdf) const {
+        const glm::vec3 wo = frame_.ToLocal(woW);
+        const glm::vec3 s = frame_.s, t = frame_.t, nz = frame_.n, ng = ng_, f0 = f0_;
+        const glm::vec2 a = alpha_;
+        // The specular lobe is 0 everywhere without GGX or with wo below the shading plane.
+        const bool specular = ggx_ && !(wo.z <= 0.0f);
+        const float lambdaWo = GgxLambda(wo, a);
+        const float dPrefix = kPiF * a.x * a.y;  // GgxD's denominator, as it multiplies
+        for (int k = 0; k < n; ++k) {
+            const float x = wx[k], y = wy[k], z = wz[k];
+            // Frame::ToLocal and the dot with ng, as glm::dot sums: (x + y) + z.
+            const float lx = x * s.x + y * s.y + z * s.z;
+            const float ly = x * t.x + y * t.y + z * t.z;
+            const float lz = x * nz.x + y * nz.y + z * nz.z;
+            const bool above = x * ng.x + y * ng.y + z * ng.z > 0.0f;
+            diffuseOn[k] = above && lz > 0.0f ? 1.0f : 0.0f;
+            // glm::normalize(wo + wi): v * (1 / sqrt(dot(v, v))).
+            const float hx = wo.x + lx, hy = wo.y + ly, hz = wo.z + lz;
+            const float inv = 1.0f / std::sqrt(hx * hx + hy * hy + hz * hz);
+            const float mx = hx * inv, my = hy * inv, mz = hz * inv;
+            // GgxD(wm, alpha).
+            const float dx = mx / a.x, dy = my / a.y;
+            const float d = dx * dx + dy * dy + mz * mz;
+            const float D = mz <= 0.0f ? 0.0f : 1.0f / (dPrefix * d * d);
+            // GgxLambda(wi, alpha).
+            const float c2 = lz * lz;
+            const float a2t2 = (a.x * a.x * lx * lx + a.y * a.y * ly * ly) / c2;
+            const float lambdaWi = c2 <= 0.0f ? 1e30f : 0.5f * (std::sqrt(1.0f + a2t2) - 1.0f);
+            // FresnelSchlick(f0, dot(wo, wm)).
+            const float cosWoM = wo.x * mx + wo.y * my + wo.z * mz;
+            const float m = std::min(std::max(1.0f - cosWoM, 0.0f), 1.0f);
+            const float m2 = m * m;
+            const float q = m2 * m2 * m;
+            const float g = D * (1.0f / (1.0f + lambdaWo + lambdaWi)) / (4.0f * wo.z * lz);
+            const bool on = specular && !(lz <= 0.0f);
+            const bool shaded = on && above;
+            sr[k] = shaded ? (f0.x + (1.0f - f0.x) * q) * g : 0.0f;
+            sg[k] = shaded ? (f0.y + (1.0f - f0.y) * q) * g : 0.0f;
+            sb[k] = shaded ? (f0.z + (1.0f - f0.z) * q) * g : 0.0f;
+            pdf[k] = on && cosWoM > 0.0f ? (1.0f / (1.0f + lambdaWo)) * D / (4.0f * wo.z) : 0.0f;
+        }
+    }
+
     /// The diffuse lobe for a white albedo: 1/pi where Eval() shades wiW at all, else 0
     /// (DiffuseReflectance() x this is the diffuse lobe). It does not depend on the view.
     float DiffuseWhite(glm::vec3 wiW) const {

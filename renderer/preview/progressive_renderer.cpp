@@ -585,6 +585,7 @@ void ProgressiveRenderer::Run() {
                 opt.maxDepth = cur.maxDepth;
                 opt.frameTime = frameTime;
                 opt.progress = false;
+                opt.frameBufferCones = ds.indirectCones;  // only the stage's cone path reads them
                 opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
                 // The cache from frame to frame: a part of it re-shaded, a still view's averaged.

@@ -318,9 +318,17 @@ size_t BoundBrightHits(int width, int height, glm::vec3* light, const int32_t* g
                 // of a warm store).
                 const float pr = prior ? prior[p] : 0.0f;
                 if (pr < INFINITY && luminance[p] <= ratio * pr) continue;
-                int k = 0;
+                int k = 0, dimmer = 0;
                 double sum = 0.0;
-                window(x, y, [&](size_t q) { others[k++] = luminance[q], sum += luminance[q]; });
+                const float L = luminance[p];
+                window(x, y, [&](size_t q) {
+                    others[k++] = luminance[q], sum += luminance[q];
+                    dimmer += ratio * luminance[q] < L ? 1 : 0;
+                });
+                // The median others[k / 2] is within the bound (ratio x it >= L) exactly when
+                // at most k / 2 of the others are under it (ratio x is monotonic): most hits of
+                // a young store, which then need no selection.
+                if (k >= kStoreBoundMinOthers && 2 * dimmer <= k) continue;
                 float reference = 0.0f;
                 if (k >= kStoreBoundMinOthers) {
                     std::nth_element(others, others + k / 2, others + k);
