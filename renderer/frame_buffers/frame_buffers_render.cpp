@@ -79,6 +79,7 @@ struct FrameMotion {
     std::vector<glm::mat4> object, light;
     size_t numQuads = 0;  // the quad lights in `light`, the point lights after them
     std::vector<glm::mat3> objectN, lightN;  // their normal matrices
+    std::vector<uint8_t> objectStill, lightStill;  // 1: the matrix is the identity
     std::vector<glm::mat3> distant;
     float infinity = 1e4f;  // distance at which points of lights at infinity are put
 
@@ -94,6 +95,7 @@ struct FrameMotion {
             const glm::mat4 now = rs.ObjectToWorld(int(o), 0.0f);
             object.push_back(scene.objects[o].transform.Eval(prevTime) * glm::inverse(now));
             objectN.push_back(normalMatrix(object.back()));
+            objectStill.push_back(object.back() == glm::mat4(1.0f));
             for (const auto& p : scene.meshes[scene.objects[o].mesh].positions)
                 extent = std::max(extent,
                                   glm::length(glm::vec3(now * glm::vec4(p[0], p[1], p[2], 1.0f))));
@@ -101,6 +103,7 @@ struct FrameMotion {
         auto addLight = [&](const TransformTrack& t) {
             light.push_back(t.Eval(prevTime) * glm::inverse(t.Eval(opt.frameTime)));
             lightN.push_back(normalMatrix(light.back()));
+            lightStill.push_back(light.back() == glm::mat4(1.0f));
         };
         for (const QuadLight& q : scene.quadLights) addLight(q.transform);
         numQuads = light.size();
@@ -117,7 +120,11 @@ struct FrameMotion {
         const glm::mat4& m = h.object >= 0 ? object[h.object] : light[h.light];
         return glm::vec3(m * glm::vec4(p, 1.0f));
     }
+    /// A unit normal on what a ray hit, turned to the previous frame: itself where that did not
+    /// move (renormalized, it could differ in the last bit, and the square root and division are
+    /// on the path of every pixel's buffer writes).
     glm::vec3 Normal(const Hit& h, glm::vec3 n) const {
+        if (h.object >= 0 ? objectStill[h.object] : lightStill[h.light]) return n;
         return glm::normalize((h.object >= 0 ? objectN[h.object] : lightN[h.light]) * n);
     }
 };

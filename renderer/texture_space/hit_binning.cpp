@@ -54,16 +54,25 @@ void BinKeys(const MeshGrids& g, int face, float u, float v, int texelLevel, int
                    uint16_t(QuantizeCoord(v, res))};
     }
 }
-/// The bins of a hit of scene object `object`: at the level its material's filter sets, one
-/// level only (that filter reads no other), or BinKeys' two at the schedule's `bias`; in the
-/// frame buffers' store (`frameStore`) at StoreFilterLevels'.
-void ObjectBinKeys(const Context& c, int object, const MeshGrids& g, int face, float u, float v,
-                   int texelLevel, int bias, TexelKey keys[2], bool frameStore = false) {
+/// The levels above `texelLevel` of a hit of scene object `object`'s bins: the one its
+/// material's filter sets, when that filter reads no other (both entries, then), or the two at
+/// the schedule's `bias` and `bias` + 1; in the frame buffers' store (`frameStore`) at
+/// StoreFilterLevels'. Returns whether there is one.
+bool ObjectBinLevels(const Context& c, int object, int bias, bool frameStore, int levels[2]) {
     const TextureFilterKind kind = c.tsc->FilterOf(object);
     const int r = c.tsc->PassRadiusOf(object);
     const int own = frameStore ? StoreFilterLevels(kind, r) : HitFilterLevels(kind, r);
-    BinKeys(g, face, u, v, texelLevel, own < 0 ? bias : own, keys);
-    if (own >= 0) keys[1] = keys[0];
+    levels[0] = own < 0 ? bias : own;
+    levels[1] = own < 0 ? bias + 1 : own;
+    return own >= 0;
+}
+/// The bins of a hit of scene object `object` (ObjectBinLevels).
+void ObjectBinKeys(const Context& c, int object, const MeshGrids& g, int face, float u, float v,
+                   int texelLevel, int bias, TexelKey keys[2], bool frameStore = false) {
+    int levels[2];
+    const bool one = ObjectBinLevels(c, object, bias, frameStore, levels);
+    BinKeys(g, face, u, v, texelLevel, levels[0], keys);
+    if (one) keys[1] = keys[0];
 }
 /// Whether camera sample (x, y, s) reads its upper bin level: with probability `blend`, the
 /// lower one otherwise (stochastic filtering: in expectation the blend of the two, for one
@@ -257,20 +266,25 @@ void PathHitsAdd(const Context& c, const tbb::blocked_range2d<int>& r, int s0, i
                 HitRecord& h = records[index];
                 if (h.mesh < 0) continue;
                 const BinnedHit& b = binnedHits[index];
-                TexelKey keys[2];
-                ObjectBinKeys(c, c.tsc->ObjectOfMesh(h.mesh), c.tsc->Grids(h.mesh), h.Face(), h.U(),
-                              h.V(), b.texelLevel, bias, keys, frameStore);
+                const MeshGrids& g = c.tsc->Grids(h.mesh);
+                int levels[2];
+                ObjectBinLevels(c, c.tsc->ObjectOfMesh(h.mesh), bias, frameStore, levels);
                 // Nothing to add for a record that only reads (the frame buffers' hits outside
-                // the frame's budget carry NaN light); finite light was checked when shaded.
+                // the frame's budget carry NaN light, most of a frame's): its level, not its
+                // bins. Finite light was checked when shaded.
                 RadianceBin::Value v;
                 if (RadianceBin::FromRadiance(&b.light.x, &v)) {
+                    TexelKey keys[2];
+                    BinKeys(g, h.Face(), h.U(), h.V(), b.texelLevel, levels[0], keys);
+                    if (levels[1] == levels[0]) keys[1] = keys[0];
                     for (uint64_t& w : v.sum) w *= unit;
                     v.count *= unit;
                     batch.Add(keys[0], v);
                     if (!(keys[1] == keys[0])) batch.Add(keys[1], v);  // not clamped
                 }
-                h.faceLevel =
-                    uint32_t(h.Face()) << 4 | keys[ReadsUpperLevel(c, x, y, s, blend) ? 1 : 0].mip;
+                const int upper = levels[1] != levels[0] && ReadsUpperLevel(c, x, y, s, blend);
+                h.faceLevel = uint32_t(h.Face()) << 4 |
+                              uint32_t(g.ClampMip(h.Face(), b.texelLevel + levels[upper]));
             }
 }
 
