@@ -78,7 +78,7 @@ const glm::vec3 kNaN3(kNaN);
 struct FrameMotion {
     std::vector<glm::mat4> object, light;
     size_t numQuads = 0;  // the quad lights in `light`, the point lights after them
-    std::vector<glm::mat3> objectN, lightN;  // their normal matrices
+    std::vector<glm::mat3> objectN, lightN;        // their normal matrices
     std::vector<uint8_t> objectStill, lightStill;  // 1: the matrix is the identity
     std::vector<glm::mat3> distant;
     float infinity = 1e4f;  // distance at which points of lights at infinity are put
