@@ -128,6 +128,11 @@ struct FrameBuffers {
     /// instead of a running mean of running means, which would weigh the first, worst frames as
     /// much as the last.
     bool indirectAccumulates = false;
+    /// Nothing but the camera moved since the previous frame (no object, no light): every
+    /// shadow lies where it lay in the world, and a shadowed pixel's shadow motion vector (Zeng
+    /// eq. 3) is its own traditional one. The stage then takes the traditional vectors for
+    /// visibility instead of computing eq. 3's (Reliable with VisibilityOrder::Svgf).
+    bool shadowsStill = false;
 
     // The components (linear radiance, RGB).
     /// What the stage passes through unfiltered: light seen directly (environment, emitters),

@@ -13,7 +13,9 @@
 //     visibility goes along the shadow vectors; where one is within a quarter pixel of the
 //     traditional vector, the traditional vector and its taps are used, unclamped, so that where
 //     no shadow moves over its receiver the visibility is exactly the baseline's; elsewhere the
-//     history is clamped at 3 sigma (TrustAgreeingShadowVectors).
+//     history is clamped at 3 sigma (TrustAgreeingShadowVectors). A frame in which only the
+//     camera moved (FrameBuffers::shadowsStill) has every shadow vector on the traditional one
+//     by construction: the traditional vectors are taken as they are, without eq. 3's passes.
 //   Zeng order (VisibilityOrder::Zeng): the current frame is filtered spatially first (c~_i, the
 //     a-trous with a spatial variance, as SpatialOnly), the history fetched with the shadow
 //     vector is clamped to mu +- 3 sigma of c~_i and blended (eq. 2 with alpha^V), then the
@@ -801,6 +803,17 @@ void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) 
 // matter as much as the position: the shadow vectors' plane test and the disocclusion test keep
 // different taps at edges, and a history averaged over other taps than the baseline's makes a
 // static scene's visibility drift from the baseline's.
+// `from` into `to` (the same size): the shadow vectors of a frame whose shadows stayed where they
+// were (FrameBuffers::shadowsStill).
+void CopyMotion(const MotionField& from, MotionField* to) {
+    ForRows(from.x.Height(), [&](int y) {
+        const int w = from.x.Width();
+        CopyRow(from.x.Row(y), w, to->x.Row(y));
+        CopyRow(from.y.Row(y), w, to->y.Row(y));
+        CopyRow(from.taps.Row(y), w, to->taps.Row(y));
+    });
+}
+
 void TrustAgreeingShadowVectors(const MotionField& trad, float k, MotionField* shadow,
                                 Plane* clampK) {
     constexpr float kTol = 0.25f;
@@ -1077,6 +1090,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         PrepareHalf(s, frame);
         clock.Lap(&StageTimings::prepare);
         s.halfFrame.indirectAccumulates = frame.indirectAccumulates;
+        s.halfFrame.shadowsStill = frame.shadowsStill;
         s.half->Denoise(s.halfFrame, method, demodulation, &s.halfImage);
         clock.Charge(s.half->Timings(), s.half->CpuTimings());
         s.lastHalf = true;
@@ -1096,8 +1110,12 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
         s.motionValid[int(MotionKind::Traditional)] = true;
         clock.Lap(&StageTimings::traditionalMotion);
         if (reliable) {
-            ShadowMotion(frame, s.G(), pf, s.trad, s.set.alpha, s.set.shadowFalloffSigma,
-                         s.set.shadowSplatRadius, &s.shadow, &s.shadowAlpha, s.splat);
+            // Zeng's order reads eq. 4's alpha^V besides the vectors: always computed there.
+            if (frame.shadowsStill && s.set.reliableVisibilityOrder == VisibilityOrder::Svgf)
+                CopyMotion(s.trad, &s.shadow);
+            else
+                ShadowMotion(frame, s.G(), pf, s.trad, s.set.alpha, s.set.shadowFalloffSigma,
+                             s.set.shadowSplatRadius, &s.shadow, &s.shadowAlpha, s.splat);
             s.motionValid[int(MotionKind::Shadow)] = true;
             if (s.comp[kGlossy].present) {
                 GlossyMotion(frame, s.G(), pf, s.trad, s.set.glossyLobeScale, s.set.maxGlossyJitter,

@@ -93,8 +93,9 @@ TEST(FrameBuffers, PrevPositionFollowsObjectMotion) {
                 EXPECT_NEAR(glm::distance(fb.prevNormal[i], fb.normal[i]), 0.0f, 1e-5f) << i;
                 ++moving;
                 break;
-            case 0:
+            case 0:  // still: its previous normal is its normal, bit for bit
                 EXPECT_NEAR(glm::distance(pp, p), 0.0f, 1e-5f) << i;
+                EXPECT_EQ(fb.prevNormal[i], fb.normal[i]) << i;
                 ++still;
                 break;
             case 2: {
@@ -111,6 +112,13 @@ TEST(FrameBuffers, PrevPositionFollowsObjectMotion) {
     EXPECT_GT(moving, 20);
     EXPECT_GT(still, 100);
     EXPECT_GT(spinning, 5);
+    // Objects move: the stage must compute the shadow vectors (FrameBuffers::shadowsStill);
+    // without the motion, only the camera could have moved, and it need not.
+    EXPECT_FALSE(fb.shadowsStill);
+    Scene staticScene = TestScene();
+    RenderScene staticRs(staticScene, {});
+    RenderFrameBuffers(staticRs, FrameOptions(48, 32), -1.0f / 8.0f, &fb);
+    EXPECT_TRUE(fb.shadowsStill);
 }
 
 // At 1 spp, visibility is 0 where the shadow ray was blocked and positive where not (1 on the

@@ -456,6 +456,47 @@ TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesWhereNoShadowMoves) {
     EXPECT_GT(zeng, 0.02f);
 }
 
+// A renderer that knows only the camera moved (FrameBuffers::shadowsStill) lets the stage take
+// the traditional vectors as the shadow vectors instead of computing eq. 3's: in SVGF order the
+// frames must come out as they do with eq. 3's vectors (the test above: they land on the
+// traditional ones), the image and the visibility within 1e-6 over 8 frames of the same
+// camera flight (measured 0), and the shadow vectors it reports are the traditional ones.
+TEST(ScreenSpaceTemporal, StillShadowsTakeTheTraditionalVectors) {
+    SynthScene sc = FullScene(96, 64);
+    sc.lightVelocity = glm::vec3(0.0f);
+    for (SynthObject& o : sc.objects) o.velocity = glm::vec3(0.0f);
+    sc.eyeVelocity = glm::vec3(0.06f, 0.0f, -0.04f);
+    ScreenSpaceDenoiser computed(DenoiserSettings{}, SharedBrdf()),
+        still(DenoiserSettings{}, SharedBrdf());
+    float worst = 0.0f;
+    int shadowed = 0;
+    for (int fr = 0; fr < 8; ++fr) {
+        FrameBuffers f = SynthRender(sc, fr, 7);
+        for (const glm::vec3& b : f.blocker) shadowed += std::isfinite(b.x) ? 1 : 0;
+        const std::vector<glm::vec3> a = computed.Denoise(f, Method::Reliable, Demodulation::On);
+        f.shadowsStill = true;
+        const std::vector<glm::vec3> b = still.Denoise(f, Method::Reliable, Demodulation::On);
+        for (size_t i = 0; i < a.size(); ++i)
+            for (int c = 0; c < 3; ++c) {
+                ASSERT_TRUE(std::isfinite(b[i][c]));
+                worst = std::max(worst, std::fabs(a[i][c] - b[i][c]));
+            }
+        const std::vector<float> va = computed.Visibility(), vb = still.Visibility();
+        for (size_t i = 0; i < va.size(); ++i) worst = std::max(worst, std::fabs(va[i] - vb[i]));
+        if (fr == 0) continue;
+        const std::vector<glm::vec2> trad = still.LastMotion(MotionKind::Traditional),
+                                     shadow = still.LastMotion(MotionKind::Shadow);
+        ASSERT_EQ(trad.size(), shadow.size());
+        for (size_t i = 0; i < trad.size(); ++i)
+            ASSERT_TRUE(trad[i] == shadow[i] || (std::isnan(trad[i].x) && std::isnan(shadow[i].x)))
+                << i;
+    }
+    std::printf("%d shadowed pixels, largest difference with still shadows %.2g\n", shadowed,
+                worst);
+    EXPECT_GT(shadowed, 8 * 100);  // the shadows are there
+    EXPECT_LE(worst, 1e-6f);
+}
+
 TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesUnderALightAtInfinity) {
     // As above with a still camera, but each shadow's light point put where the renderer puts
     // a distant light's (frame_buffers_render.cpp, FinishShadow): 1e4 scene extents from the
