@@ -1028,9 +1028,13 @@ void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& 
     // shaded (PixelPlanes).
     const size_t W = size_t(c.opt.width);
     planes.PrefetchForWrite(size_t(y0) * W + size_t(x0), x1 - x0);
-    // Ray differentials: the texture-space cache's texel level, and a Ptex texture's filter
-    // width (the pixel's footprint, as the path tracer's camera hits take it).
-    const bool diff = c.tsc || c.textureFootprints;
+    // Ray differentials: a Ptex texture's filter width (the pixel's footprint, as the path
+    // tracer's camera hits take it), and the level of the grid's texels the pixel looks up (its
+    // cached light without the store, the cached visibility). The store's records take their
+    // level from the camera's footprint at the hit's distance (FrameHitRecord): store frames
+    // without Ptex textures trace no differentials (the planes, solves and divisions of every
+    // camera hit's Interact).
+    const bool diff = c.textureFootprints || (c.tsc && (!fs || !fb.cachedVisibility.empty()));
     int n = 0;
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x, ++n) {
