@@ -796,13 +796,6 @@ void RunAtrous(ScreenSpaceDenoiser::State& s, const AtrousJob* jobs, int njobs) 
     }
 }
 
-// VisibilityOrder::Svgf: where a shadow vector lands within a quarter pixel of the
-// traditional one (no shadow moved over its receiver; in a static scene the two are the same
-// reprojection computed two ways), the traditional vector and its taps replace it and the
-// history is not clamped (k 0 in `clampK`); elsewhere the history is clamped with `k`. The taps
-// matter as much as the position: the shadow vectors' plane test and the disocclusion test keep
-// different taps at edges, and a history averaged over other taps than the baseline's makes a
-// static scene's visibility drift from the baseline's.
 // `from` into `to` (the same size): the shadow vectors of a frame whose shadows stayed where they
 // were (FrameBuffers::shadowsStill).
 void CopyMotion(const MotionField& from, MotionField* to) {
@@ -814,6 +807,13 @@ void CopyMotion(const MotionField& from, MotionField* to) {
     });
 }
 
+// VisibilityOrder::Svgf: where a shadow vector lands within a quarter pixel of the
+// traditional one (no shadow moved over its receiver; in a static scene the two are the same
+// reprojection computed two ways), the traditional vector and its taps replace it and the
+// history is not clamped (k 0 in `clampK`); elsewhere the history is clamped with `k`. The taps
+// matter as much as the position: the shadow vectors' plane test and the disocclusion test keep
+// different taps at edges, and a history averaged over other taps than the baseline's makes a
+// static scene's visibility drift from the baseline's.
 void TrustAgreeingShadowVectors(const MotionField& trad, float k, MotionField* shadow,
                                 Plane* clampK) {
     constexpr float kTol = 0.25f;

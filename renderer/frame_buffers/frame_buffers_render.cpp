@@ -1289,7 +1289,8 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
         v->resize(n);
     for (auto* v : {&fb.visibility, &fb.depth, &fb.roughness}) v->resize(n);
     fb.objectId.resize(n);
-    // Only the camera moved since prevTime: the stage's shadow vectors are its traditional ones.
+    // Whether only the camera moved since prevTime: the stage's shadow vectors are then its
+    // traditional ones.
     fb.shadowsStill = !rs.scene().MovesBetween(prevTime, opt.frameTime);
     // Only what the scene has: without a GGX material `glossy` and its hits stay empty, and the
     // stage skips that component (its motion vectors, history and a-trous channels: 17% of the
