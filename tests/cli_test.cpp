@@ -79,24 +79,27 @@ double StatsValue(const std::string& json, const std::string& key) {
 
 // --stats says how many cage faces were past Embree's limits and how many were tessellated from
 // the limit surface, as the printed scene line does: the 16-gon prism (2 caps past the limit,
-// all 18 faces tessellated) and a cage Embree takes whole (none).
+// all 18 faces tessellated), a cage Embree takes whole (none), and the same cage with
+// --geometry quads (all of it, none past the limits).
 TEST(Cli, StatsCountTheFacesPastEmbreesLimits) {
     const fs::path prism = Dir() / "stats_prism16.obj";
     test::WriteObj(test::PrismCage(16), prism.string());
     struct Case {
-        std::string obj;
+        std::string obj, args;
         double ptex, beyond, meshes, tessellated;
     };
-    for (const Case& c : {Case{prism.string(), 16 + 16 + 16, 2, 1, 18},
-                          Case{test::MeshPath("catmark_torus"), 32, 0, 0, 0}}) {
+    const std::string torus = test::MeshPath("catmark_torus");
+    for (const Case& c :
+         {Case{prism.string(), "", 16 + 16 + 16, 2, 1, 18}, Case{torus, "", 32, 0, 0, 0},
+          Case{torus, " --geometry quads", 32, 0, 1, 32}}) {
         const fs::path stats = Dir() / "stats.json", out = Dir() / "stats.exr";
         const CliRun r =
-            Texcache("render " + c.obj + " --spp 1 --resolution 16x16 --integrator ao " +
+            Texcache("render " + c.obj + c.args + " --spp 1 --resolution 16x16 --integrator ao " +
                      "-q --no-png -o " + out.string() + " --stats " + stats.string());
         ASSERT_EQ(r.code, 0) << r.out;
         std::ifstream f(stats);
         const std::string json((std::istreambuf_iterator<char>(f)), {});
-        SCOPED_TRACE(c.obj + "\n" + json);
+        SCOPED_TRACE(c.obj + c.args + "\n" + json);
         EXPECT_EQ(StatsValue(json, "ptex_faces"), c.ptex);
         EXPECT_EQ(StatsValue(json, "cage_faces_beyond_embree"), c.beyond);
         EXPECT_EQ(StatsValue(json, "limit_tessellated_meshes"), c.meshes);
@@ -537,7 +540,9 @@ INSTANTIATE_TEST_SUITE_P(
         Refusal{"BadNumber", "render {cube} --spp abc", "--spp = abc (see texcache render --help)"},
         Refusal{"UnknownOption", "render {cube} --bogus", "--bogus (see texcache render --help)"},
         Refusal{"RepeatedOption", "render {cube} --spp 1 --spp 2", "--spp"},
-        Refusal{"MissingArgument", "compare {good}", "reference"}),
+        Refusal{"MissingArgument", "compare {good}", "reference"},
+        Refusal{"UnknownGeometry", "render {cube} --geometry nurbs",
+                "--geometry: nurbs not in {subdivision,quads}"}),
     RefusalName);
 
 // compare of a PNG (sRGB-encoded) with an EXR (linear) of the same picture decodes the PNG and

@@ -50,23 +50,6 @@ TEST_P(PtexMappingTest, EncodeDecodeRoundTrip) {
     }
 }
 
-/// Drops creases and corners with fractional sharpness (< 1), which Embree and OpenSubdiv
-/// subdivide differently (see FractionalCreasesDifferBetweenEmbreeAndOpenSubdiv).
-ControlCage WithoutFractionalSharpness(ControlCage c) {
-    ControlCage out = c;
-    out.creaseEdges.clear(), out.creaseWeights.clear();
-    for (size_t i = 0; i < c.creaseEdges.size(); ++i)
-        if (c.creaseWeights[i] >= 1.0f)
-            out.creaseEdges.push_back(c.creaseEdges[i]),
-                out.creaseWeights.push_back(c.creaseWeights[i]);
-    out.cornerVertices.clear(), out.cornerWeights.clear();
-    for (size_t i = 0; i < c.cornerVertices.size(); ++i)
-        if (c.cornerWeights[i] >= 1.0f)
-            out.cornerVertices.push_back(c.cornerVertices[i]),
-                out.cornerWeights.push_back(c.cornerWeights[i]);
-    return out;
-}
-
 // rtcInterpolate (through our Ptex -> Embree mapping) must agree with OpenSubdiv's Far limit
 // evaluation, including creases, corners, holes and boundaries. Both libraries approximate the
 // limit near extraordinary vertices (OSD with Gregory end caps at isolation level 6), where they
@@ -75,7 +58,7 @@ ControlCage WithoutFractionalSharpness(ControlCage c) {
 // each library's own finite differences below: near extraordinary vertices the two libraries'
 // patch approximations differ by up to 30% in derivatives while agreeing in position.)
 TEST_P(PtexMappingTest, LimitPositionsAgreeWithOpenSubdiv) {
-    ControlCage cage = WithoutFractionalSharpness(test::LoadMesh(GetParam()));
+    ControlCage cage = test::WithoutFractionalSharpness(test::LoadMesh(GetParam()));
     const float diag = BBoxDiagonal(cage);
     const float tol = 5e-4f * diag;
     // Isolation level 10: OSD's end caps round infinitely sharp corners by ~2^-level.
@@ -161,7 +144,7 @@ TEST_P(PtexMappingTest, SelectedFacesEvaluateAsTheWholeCage) {
 // face, positions within 5e-4 of the diagonal (the two libraries' measured worst: see
 // LimitPositionsAgreeWithOpenSubdiv) and shading normals within TOL degrees.
 TEST_P(PtexMappingTest, IrregularPatchesMatchRtcInterpolate) {
-    const ControlCage cage = WithoutFractionalSharpness(test::LoadMesh(GetParam()));
+    const ControlCage cage = test::WithoutFractionalSharpness(test::LoadMesh(GetParam()));
     const float diag = BBoxDiagonal(cage);
     Scene scene = test::OneObjectScene(cage);
     RenderSceneOptions ro;
@@ -227,7 +210,7 @@ TEST_P(PtexMappingTest, IrregularPatchesUnderConcurrentQueries) {
 // Rays that hit the mesh: the decoded Ptex location's limit point lies near the tessellated hit
 // (at tessellation rate 8 the surfaces differ by well under 1% of the diagonal).
 TEST_P(PtexMappingTest, RayHitsDecodeToTheirPtexLocation) {
-    ControlCage cage = WithoutFractionalSharpness(test::LoadMesh(GetParam()));
+    ControlCage cage = test::WithoutFractionalSharpness(test::LoadMesh(GetParam()));
     const float diag = BBoxDiagonal(cage);
     const LimitSurface osd(cage);
     Scene scene = test::OneObjectScene(cage);

@@ -67,6 +67,24 @@ inline Keyframe LookAt(glm::vec3 eye, glm::vec3 target) {
     return k;
 }
 
+/// Drops creases and corners with fractional sharpness (< 1), which Embree and OpenSubdiv
+/// subdivide differently (tests/ptex_mapping_test.cpp,
+/// FractionalCreasesDifferBetweenEmbreeAndOpenSubdiv).
+inline ControlCage WithoutFractionalSharpness(ControlCage c) {
+    ControlCage out = c;
+    out.creaseEdges.clear(), out.creaseWeights.clear();
+    for (size_t i = 0; i < c.creaseEdges.size(); ++i)
+        if (c.creaseWeights[i] >= 1.0f)
+            out.creaseEdges.push_back(c.creaseEdges[i]),
+                out.creaseWeights.push_back(c.creaseWeights[i]);
+    out.cornerVertices.clear(), out.cornerWeights.clear();
+    for (size_t i = 0; i < c.cornerVertices.size(); ++i)
+        if (c.cornerWeights[i] >= 1.0f)
+            out.cornerVertices.push_back(c.cornerVertices[i]),
+                out.cornerWeights.push_back(c.cornerWeights[i]);
+    return out;
+}
+
 /// A single planar quad cage of half-size `h` in the XZ plane (boundary pinned: stays planar).
 inline ControlCage PlaneCage(float h) {
     ControlCage c;

@@ -49,6 +49,7 @@ struct PreviewCliArgs {
     bool cachedVisibility = false;
     std::string fbCache;  ///< empty: store (the bench: both)
     int fbBudget = 8;
+    std::string geometry = "quads";
     std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
@@ -134,6 +135,7 @@ int RunPreview(const PreviewCliArgs& a) {
     s.maxDepth = fromScene.maxDepth;
     s.seed = fromScene.seed;
     s.tessellationRate = scene.settings.tessellationRate;
+    s.limitQuads = a.geometry == "quads";
     // The preview's default is the benchmark's 512x512, not the scene's final-render size.
     s.width = s.height = 512;
     if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
@@ -304,6 +306,12 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
                     "With --fb-cache store: one pixel in this many (1, 2, 4, 8, 16) traces its "
                     "diffuse path into the store each frame where the store holds many samples; "
                     "more where it holds few, every pixel where it holds none")
+        ->capture_default_str();
+    cmd->add_option("--geometry", a->geometry,
+                    "quads: every mesh as quads on its limit surface, tessellated up front "
+                    "(faster rays and scene builds on irregular cages); subdivision: Embree's "
+                    "subdivision surfaces, as `texcache render` traces them")
+        ->check(CLI::IsMember({"subdivision", "quads"}))
         ->capture_default_str();
     cmd->add_option("--motion", a->motion,
                     "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())

@@ -197,6 +197,13 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--threads", args->threads, "Worker threads (0 = all cores)");
     cmd->add_option("--tessellation-rate", args->tessellationRate,
                     "Embree subdivision tessellation rate");
+    cmd->add_option("--geometry", args->geometry,
+                    "subdivision: Embree's subdivision surfaces (grids built per face); quads: "
+                    "every mesh as quads on its limit surface, tessellated up front at the "
+                    "tessellation rate (the same surface; faster rays and scene builds on "
+                    "irregular cages, more memory on large ones)")
+        ->check(CLI::IsMember({"subdivision", "quads"}))
+        ->capture_default_str();
 
     group("Texture space");
     cmd->add_option("--shading", args->shading,

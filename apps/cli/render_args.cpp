@@ -315,6 +315,7 @@ RenderSceneOptions SceneOptionsFor(const RenderArgs& a, const RenderOptions& opt
     ro.needLights = IntegratorUsesLights(opt.integrator);
     ro.needEnvironment = ro.needLights;
     ro.needTextures = true;
+    ro.tessellateAll = a.geometry == "quads";
     return ro;
 }
 

@@ -41,6 +41,7 @@ struct RenderArgs {
     int aoSamples = 0;
     float aoDistance = 0.0f;
     float tessellationRate = 0.0f;
+    std::string geometry = "subdivision";  // or "quads" (RenderSceneOptions::tessellateAll)
     float time = 0.0f;
     std::vector<std::string> aovs;
     float exposure = 0.0f;

@@ -463,6 +463,11 @@ void DrawPanel(Ui& ui, ProgressiveRenderer& r) {
         ImGui::SliderFloat("tessellation", &ui.tessellationEdit, 1.0f, 16.0f, "%.1f");
         // The Embree rebuild is slow: apply when the slider is let go.
         if (ImGui::IsItemDeactivatedAfterEdit()) s.tessellationRate = ui.tessellationEdit;
+        ImGui::Checkbox("limit quads", &s.limitQuads);
+        if (ImGui::IsItemHovered())
+            ImGui::SetTooltip(
+                "On: every mesh as quads on its limit surface, tessellated up front.\n"
+                "Off: Embree's subdivision surfaces. The same surface.");
         ImGui::SliderFloat("exposure", &s.exposure, -6.0f, 6.0f, "%.1f stops");
         ImGui::SliderInt("max frames", &s.maxFrames, 1, 4096, "%d", ImGuiSliderFlags_Logarithmic);
     }

@@ -53,6 +53,7 @@ struct BenchOrbit {
         scene.settings.tessellationRate = s.tessellationRate;
         RenderSceneOptions ro;
         ro.frameTime = time;
+        ro.tessellateAll = s.limitQuads;
         ro.needLights = ro.needEnvironment = lights;
         rs = std::make_unique<RenderScene>(scene, ro);
         home.FromScene(scene, time);

@@ -33,8 +33,8 @@ bool SameCacheContents(const PreviewSettings& a, const PreviewSettings& b) {
            a.sampleCacheMb == b.sampleCacheMb && a.texelCacheMb == b.texelCacheMb &&
            a.lodBias == b.lodBias && a.aoSamples == b.aoSamples && a.aoDistance == b.aoDistance &&
            a.maxDepth == b.maxDepth && a.tessellationRate == b.tessellationRate &&
-           a.cachedVisibility == b.cachedVisibility && a.denoise == b.denoise &&
-           a.fbCache == b.fbCache && a.fbBudget == b.fbBudget;
+           a.limitQuads == b.limitQuads && a.cachedVisibility == b.cachedVisibility &&
+           a.denoise == b.denoise && a.fbCache == b.fbCache && a.fbBudget == b.fbBudget;
 }
 
 /// Whether anything of the scene at time `a` is elsewhere at time `b`: per object, and whether a
@@ -449,7 +449,8 @@ void ProgressiveRenderer::Run() {
         }
         try {
             const float frameTime = cur.time;
-            const bool retessellate = !rs || cur.tessellationRate != built.tessellationRate;
+            const bool retessellate = !rs || cur.tessellationRate != built.tessellationRate ||
+                                      cur.limitQuads != built.limitQuads;
             // Only moving objects and lights change the RenderScene and the shading; the camera
             // is the orbit camera's (an animated one is followed by the UI).
             const bool timeChanged = rs && frameTime != builtTime && posesAnimated;
@@ -465,10 +466,12 @@ void ProgressiveRenderer::Run() {
                 scene_.settings.time = frameTime;
                 RenderSceneOptions ro;
                 ro.frameTime = frameTime;
+                ro.tessellateAll = cur.limitQuads;
                 // Lights always: the integrator can be switched to direct/path at any time.
                 rs = std::make_unique<RenderScene>(scene_, ro);
                 if (retessellate) ++sceneBuilds;
                 built.tessellationRate = cur.tessellationRate;
+                built.limitQuads = cur.limitQuads;
                 if (timeChanged && cache) {
                     bool lightMoved = false;
                     const std::vector<char> moved =

@@ -79,6 +79,10 @@ struct PreviewSettings {
     float aoDistance = 1e30f;
     int maxDepth = 4;
     float tessellationRate = 2.0f;
+    /// Every mesh traced as quads on its limit surface (RenderSceneOptions::tessellateAll): the
+    /// same surface as Embree's subdivision geometry, built faster and traced faster where a
+    /// cage's faces are irregular (results/preview.md, "Limit quads").
+    bool limitQuads = true;
     int width = 512, height = 512;
     float exposure = 0.0f;
     ViewMode view = ViewMode::Beauty;

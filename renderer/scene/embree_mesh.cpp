@@ -29,8 +29,13 @@
 // Ptex adjacency and footprints come from the cage alone and do not change. At a power-of-two
 // rate the quads are exactly Embree's grid (its grids sample the limit at the same dyadic Ptex
 // parameters): on cages both take, the same rays hit within 1e-6 of the diagonal on the same Ptex
-// face and (u,v). Cost: render time as through Embree; the scene build adds OpenSubdiv's
-// refinement and patch table (a fraction of a second for a cage of a few thousand faces).
+// face and (u,v), except where Embree approximates the limit (fractional and infinite
+// sharpness; near some of the car's extraordinary vertices and creases, up to 6e-5 of the
+// diagonal: ctest -R TessellationAgreesWithEmbree says which cages). Cost: the scene build adds
+// OpenSubdiv's refinement and patch table (a fraction of a second for a cage of a few thousand
+// faces) and holds every quad up front; rays cost less than on Embree's subdivision geometry on
+// cages with many irregular faces (the car's: `texcache preview --geometry`, results/preview.md),
+// as much elsewhere. The preview traces every mesh this way by default.
 #include "renderer/scene/embree_mesh.h"
 
 #include <cmath>

@@ -71,8 +71,13 @@ struct RenderSceneOptions {
     bool needTextures = true;  ///< load textures and face-varying uvs
     bool needEnvironment = true;
     int threads = 0;  ///< Embree build threads (0 = all)
-    /// Tessellate every mesh's limit surface with OpenSubdiv, not only the meshes Embree cannot
-    /// take (to compare the two on the same cage).
+    /// Trace every mesh as quads on its limit surface (OpenSubdiv's uniform tessellation at the
+    /// tessellation rate, embree_mesh.cpp), not only the meshes Embree cannot take. The surface
+    /// of Embree's grids at a power-of-two rate, except where Embree approximates the limit
+    /// (fractional and infinite creases, some extraordinary vertices: there the quads follow
+    /// OpenSubdiv); its rays cost less on cages with many irregular faces (results/preview.md,
+    /// "Limit quads"). The preview's default (PreviewSettings::limitQuads); `texcache render
+    /// --geometry quads`.
     bool tessellateAll = false;
     /// Limit derivatives (shading normals, the cache's surface queries) of the faces off the
     /// regular fast path from OpenSubdiv's patches; false: from rtcInterpolate, Embree's own
