@@ -590,6 +590,31 @@ TEST(Cli, PreviewBenchLooksForPerHitsCostAtTextureSpacesError) {
     EXPECT_TRUE(fs::exists(out.string() + "_stage_texture.png"));
 }
 
+// `--geometry both`: the stage bench times the texture-space frames on the limit quads and on
+// Embree's subdivision surfaces in turn, says the ratio of their render CPU and both errors,
+// and writes each picture to its own file. Only the stage's bench has it: elsewhere it is an
+// error naming the option. A 32x18 torus in 2 frames: the wiring, not the figures.
+TEST(Cli, PreviewBenchComparesTheTwoGeometries) {
+    const fs::path out = Dir() / "geometries" / "bench";
+    const std::string scene = test::MeshPath("catmark_torus");
+    const CliRun r = Texcache("preview " + scene +
+                              " --bench --denoise reliable --resolution 32x18 --bench-frames 2 "
+                              "--reference-spp 2 --fb-cache store --geometry both --bench-out " +
+                              out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("store subdiv :"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("geometry: store render CPU a frame"), std::string::npos) << r.out;
+    EXPECT_TRUE(fs::exists(out.string() + "_stage_texture.png"));
+    EXPECT_TRUE(fs::exists(out.string() + "_stage_texture_subdivision.png"));
+    for (const std::string args : {" --geometry both", " --bench --geometry both"}) {
+        const CliRun bad = Texcache("preview " + scene + args);
+        EXPECT_EQ(bad.code, 2) << args;
+        EXPECT_NE(bad.out.find("--geometry: 'both' compares the two in the stage's bench"),
+                  std::string::npos)
+            << bad.out;
+    }
+}
+
 // `bench peer` without Embree's pathtracer: one line saying so, exit 2, nothing rendered. The
 // cage check comes first: a cage the peer cannot take is named whether or not it is installed.
 TEST(Cli, BenchPeerSaysWhatItCannotRun) {

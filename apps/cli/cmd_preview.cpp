@@ -135,7 +135,11 @@ int RunPreview(const PreviewCliArgs& a) {
     s.maxDepth = fromScene.maxDepth;
     s.seed = fromScene.seed;
     s.tessellationRate = scene.settings.tessellationRate;
-    s.limitQuads = a.geometry == "quads";
+    s.limitQuads = a.geometry != "subdivision";
+    if (a.geometry == "both" && !(a.bench && s.denoise))
+        throw InputError("--geometry",
+                         "'both' compares the two in the stage's bench: give --bench --denoise, "
+                         "or quads or subdivision");
     // The preview's default is the benchmark's 512x512, not the scene's final-render size.
     s.width = s.height = 512;
     if (!a.resolution.empty()) ParseResolution(a.resolution, &s.width, &s.height);
@@ -214,6 +218,7 @@ int RunPreview(const PreviewCliArgs& a) {
         b.equalError = a.benchEqualError;
         // Both by default: the store and the grid against per hit, frame by frame in turn.
         b.bothCaches = a.fbCache.empty() || bothCaches;
+        b.bothGeometries = a.geometry == "both";
         if (b.equalError && (!s.denoise || b.still))
             throw InputError("--bench-equal-error",
                              "measures the stage's frames while orbiting: give --denoise and "
@@ -310,8 +315,9 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--geometry", a->geometry,
                     "quads: every mesh as quads on its limit surface, tessellated up front "
                     "(faster rays and scene builds on irregular cages); subdivision: Embree's "
-                    "subdivision surfaces, as `texcache render` traces them")
-        ->check(CLI::IsMember({"subdivision", "quads"}))
+                    "subdivision surfaces, as `texcache render` traces them; both: --bench "
+                    "--denoise times the texture-space frames on each, frame by frame in turn")
+        ->check(CLI::IsMember({"subdivision", "quads", "both"}))
         ->capture_default_str();
     cmd->add_option("--motion", a->motion,
                     "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())

@@ -44,6 +44,9 @@ struct BenchArgs {
     /// With the stage: the frame buffers' store and grid both (then per hit), frame by frame in
     /// turn; false: only the settings' fbCache.
     bool bothCaches = true;
+    /// With the stage: the texture-space run on Embree's subdivision geometry too (the
+    /// settings' limit quads first), frame by frame in turn (`--geometry both`).
+    bool bothGeometries = false;
 };
 
 /// Texture-space AO with a warm cache against per-hit AO at equal relMSE, while orbiting; prints

@@ -89,7 +89,8 @@ constexpr const char* kPassNames[] = {"prepare", "motion",  "reliable-motion", "
 struct StageRun {
     const char* name;
     bool textureSpace;
-    TextureSamples fbCache;  ///< texture space: the store (Hits) or the grid
+    TextureSamples fbCache;                 ///< texture space: the store (Hits) or the grid
+    const RenderScene* geometry = nullptr;  ///< another geometry's scene; null: the bench's
     std::unique_ptr<TextureSpaceCache> cache;
     screen::ScreenSpaceDenoiser denoiser;  // the preview's settings (StageSettingsFor)
     screen::FrameBuffers fb;
@@ -162,6 +163,15 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     // The texture-space runs (the settings' cache first, the other one too with bothCaches),
     // then per hit.
     using Runs = std::vector<std::unique_ptr<StageRun>>;
+    // --geometry both: the settings' cache on Embree's subdivision geometry too, the same
+    // scene and camera (RenderScene reads the orbit's scene).
+    std::unique_ptr<RenderScene> subdivision;
+    if (b.bothGeometries) {
+        RenderSceneOptions ro;
+        ro.frameTime = time;
+        ro.tessellateAll = false;
+        subdivision = std::make_unique<RenderScene>(scene, ro);
+    }
     auto makeRuns = [&] {
         Runs runs;
         const TextureSamples other =
@@ -171,6 +181,12 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             runs.push_back(std::make_unique<StageRun>(fb == TextureSamples::Hits ? "store" : "grid",
                                                       true, s.height, fb));
         }
+        if (subdivision) {
+            const bool store = s.fbCache == TextureSamples::Hits;
+            runs.push_back(std::make_unique<StageRun>(store ? "store subdiv" : "grid subdiv", true,
+                                                      s.height, s.fbCache));
+            runs.back()->geometry = subdivision.get();
+        }
         runs.push_back(std::make_unique<StageRun>("per hit", false, s.height));
         return runs;
     };
@@ -179,7 +195,7 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
             if (!r->textureSpace) continue;
             TextureSpaceOptions t = tex;
             t.frameBufferSamples = r->fbCache;
-            r->cache = std::make_unique<TextureSpaceCache>(rs, t);
+            r->cache = std::make_unique<TextureSpaceCache>(r->geometry ? *r->geometry : rs, t);
         }
         for (int i = 0; i <= last; ++i) {
             setView(b.still ? n : i);
@@ -195,7 +211,8 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
                     o.spp = hitSpp;
                 }
                 const double c0 = CpuSeconds();
-                const RenderStats st = RenderFrameBuffers(rs, o, time, &r.fb, r.cache.get());
+                const RenderStats st = RenderFrameBuffers(r.geometry ? *r.geometry : rs, o, time,
+                                                          &r.fb, r.cache.get());
                 const double c1 = CpuSeconds();
                 // As the preview does: texture-space frames only (progressive_renderer.cpp).
                 r.denoiser.SetStillView(b.still && b.stageRunningMean && r.textureSpace && i > 0);
@@ -247,7 +264,7 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
         const std::string stem = b.out + (!r.textureSpace                     ? "_stage_hit"
                                           : r.fbCache == TextureSamples::Grid ? "_stage_grid"
                                                                               : "_stage_texture");
-        WriteImage(stem + ".png", img);
+        WriteImage(stem + (r.geometry ? "_subdivision" : "") + ".png", img);
     }
     WriteImage(b.out + "_stage_ref.png", ref.beauty);
     const StageRun& t = *runs.front();
@@ -268,6 +285,16 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
         "CPU a frame, render + stage: %s %.1f ms, per hit %.1f ms: %.2f of per "
         "hit (goal <= 0.33 at equal denoised relMSE)\n",
         t.name, 1e3 * frameCpu / timed, 1e3 * hitCpu / timed, frameCpu / hitCpu);
+    for (const auto& run : runs) {
+        if (!run->geometry) continue;
+        const StageRun& g = *run;
+        std::printf(
+            "geometry: %s render CPU a frame %.1f ms on limit quads, %.1f ms on Embree's "
+            "subdivision surfaces: %.3f of it; denoised relMSE %.5f and %.5f\n",
+            t.name, 1e3 * t.renderCpu / timed, 1e3 * g.renderCpu / timed, t.renderCpu / g.renderCpu,
+            RelMSE(ToImage(t.image, s.width, s.height), ref.beauty),
+            RelMSE(ToImage(g.image, s.width, s.height), ref.beauty));
+    }
     if (b.equalError) {
         const double eTex = RelMSE(ToImage(t.image, s.width, s.height), ref.beauty);
         double eHit = RelMSE(ToImage(h.image, s.width, s.height), ref.beauty);
@@ -323,7 +350,8 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
                 screen::MethodName(method), t.Fps(timed), t.Fps(timed) >= 10.0 ? "ok" : "MISSED");
     std::printf("stage passes: %.1f ms a frame (goal < 25) %s\n", t.stageWall / timed,
                 t.stageWall / timed < 25.0 ? "ok" : "MISSED");
-    std::printf("wrote %s_stage_{ref,texture,grid,hit}.png\n", b.out.c_str());
+    std::printf("wrote %s_stage_{ref,texture,grid,hit%s}.png\n", b.out.c_str(),
+                b.bothGeometries ? ",texture_subdivision,grid_subdivision" : "");
     return 0;
 }
 
