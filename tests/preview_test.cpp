@@ -944,3 +944,22 @@ TEST(Preview, LimitQuadsShowWhatEmbreesSubdivisionShows) {
     EXPECT_TRUE(std::isfinite(geometry));
     EXPECT_LT(geometry, 0.01 * noise);
 }
+
+// `texcache preview` (--geometry auto) traces limit quads unless they would be over a million
+// (about rate^2 a subdivided cage face): the car's 1576 faces at rate 2 fit, a 300,000-face cage
+// at rate 2 (1.2 million quads) does not, nor does the car at rate 32; a plain (unsubdivided)
+// mesh's faces do not count.
+TEST(Preview, LimitQuadsOnlyWhereTheyFit) {
+    using texcache::preview::LimitQuadsFit;
+    std::vector<std::string> warnings;
+    texcache::Scene car = texcache::LoadScene(kScene, &warnings);
+    EXPECT_TRUE(LimitQuadsFit(car));
+    car.settings.tessellationRate = 32.0f;
+    EXPECT_FALSE(LimitQuadsFit(car));
+    texcache::Scene big = texcache::test::OneObjectScene(texcache::test::PrismCage(4));
+    big.meshes[0].faceVertexCounts.assign(300000, 4);
+    big.settings.tessellationRate = 2.0f;
+    EXPECT_FALSE(LimitQuadsFit(big));
+    big.objects[0].subdivide = false;
+    EXPECT_TRUE(LimitQuadsFit(big));
+}

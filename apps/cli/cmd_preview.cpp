@@ -49,7 +49,7 @@ struct PreviewCliArgs {
     bool cachedVisibility = false;
     std::string fbCache;  ///< empty: store (the bench: both)
     int fbBudget = 8;
-    std::string geometry = "quads";
+    std::string geometry = "auto";
     std::string motion = "traditional";
     bool bench = false;
     int benchFrames = 36;
@@ -135,7 +135,8 @@ int RunPreview(const PreviewCliArgs& a) {
     s.maxDepth = fromScene.maxDepth;
     s.seed = fromScene.seed;
     s.tessellationRate = scene.settings.tessellationRate;
-    s.limitQuads = a.geometry != "subdivision";
+    s.limitQuads =
+        a.geometry == "auto" ? preview::LimitQuadsFit(scene) : a.geometry != "subdivision";
     if (a.geometry == "both" && !(a.bench && s.denoise))
         throw InputError("--geometry",
                          "'both' compares the two in the stage's bench: give --bench --denoise, "
@@ -314,10 +315,11 @@ void AddPreviewCommand(CLI::App& app, int& exitCode) {
         ->capture_default_str();
     cmd->add_option("--geometry", a->geometry,
                     "quads: every mesh as quads on its limit surface, tessellated up front "
-                    "(faster rays and scene builds on irregular cages); subdivision: Embree's "
-                    "subdivision surfaces, as `texcache render` traces them; both: --bench "
-                    "--denoise times the texture-space frames on each, frame by frame in turn")
-        ->check(CLI::IsMember({"subdivision", "quads", "both"}))
+                    "(faster rays on irregular cages, more memory); subdivision: Embree's "
+                    "subdivision surfaces, as `texcache render` traces them; auto: quads unless "
+                    "they would be over a million; both: --bench --denoise times the "
+                    "texture-space frames on each, frame by frame in turn")
+        ->check(CLI::IsMember({"auto", "subdivision", "quads", "both"}))
         ->capture_default_str();
     cmd->add_option("--motion", a->motion,
                     "Motion vectors the 'motion' view shows: " + preview::MotionKindKeys())

@@ -90,6 +90,17 @@ bool StageKeepsUp(int width, int height) {
     return int64_t(width) * int64_t(height) <= int64_t(2) * 640 * 360;
 }
 
+bool LimitQuadsFit(const Scene& scene) {
+    std::vector<char> used(scene.meshes.size(), 0);
+    for (const Object& o : scene.objects)
+        if (o.subdivide && o.mesh >= 0 && size_t(o.mesh) < used.size()) used[size_t(o.mesh)] = 1;
+    double faces = 0.0;
+    for (size_t m = 0; m < used.size(); ++m)
+        if (used[m]) faces += double(scene.meshes[m].numFaces());
+    const double rate = std::max(double(scene.settings.tessellationRate), 1.0);
+    return faces * rate * rate <= kMaxAutoLimitQuads;
+}
+
 namespace {
 
 glm::vec3 HashColour(uint64_t h) {

@@ -80,8 +80,8 @@ struct PreviewSettings {
     int maxDepth = 4;
     float tessellationRate = 2.0f;
     /// Every mesh traced as quads on its limit surface (RenderSceneOptions::tessellateAll): the
-    /// same surface as Embree's subdivision geometry, built faster and traced faster where a
-    /// cage's faces are irregular (results/preview.md, "Limit quads").
+    /// surface of Embree's subdivision geometry, traced faster where a cage's faces are irregular
+    /// (results/preview.md, "Limit quads"); `texcache preview` picks it where LimitQuadsFit.
     bool limitQuads = true;
     int width = 512, height = 512;
     float exposure = 0.0f;
@@ -148,6 +148,14 @@ screen::DenoiserSettings StageSettingsFor(int height);
 /// the stage takes about 20 ms on 2 cores (results/screen_space_benchmark.md); it grows with
 /// the pixels, and at 1280x720 it alone would be most of a 10 fps frame.
 bool StageKeepsUp(int width, int height);
+
+/// Whether the limit quads of `scene`'s subdivided meshes at its tessellation rate (about
+/// rate^2 quads a cage face) stay under kMaxAutoLimitQuads: they cost ~180 bytes each up front
+/// (OpenSubdiv's refinement and patches, Embree's quads and BVH), where Embree's subdivision
+/// geometry costs about half of that on a huge cage (a 1,000,000-quad torus at rate 2: 1.46
+/// against 0.77 GiB peak; results/large_cages.md).
+bool LimitQuadsFit(const Scene& scene);
+inline constexpr double kMaxAutoLimitQuads = double(1 << 20);
 
 /// Whether the screen-space stage's history survives going from settings `a` to `b`: only what
 /// moves the view along (scene time), how it is shown (exposure, view, motion kind) and the

@@ -35,7 +35,8 @@
 // OpenSubdiv's refinement and patch table (a fraction of a second for a cage of a few thousand
 // faces) and holds every quad up front; rays cost less than on Embree's subdivision geometry on
 // cages with many irregular faces (the car's: `texcache preview --geometry`, results/preview.md),
-// as much elsewhere. The preview traces every mesh this way by default.
+// no more elsewhere. The preview traces every mesh this way unless the quads would be many
+// (preview::LimitQuadsFit).
 #include "renderer/scene/embree_mesh.h"
 
 #include <cmath>

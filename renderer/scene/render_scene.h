@@ -76,8 +76,8 @@ struct RenderSceneOptions {
     /// of Embree's grids at a power-of-two rate, except where Embree approximates the limit
     /// (fractional and infinite creases, some extraordinary vertices: there the quads follow
     /// OpenSubdiv); its rays cost less on cages with many irregular faces (results/preview.md,
-    /// "Limit quads"). The preview's default (PreviewSettings::limitQuads); `texcache render
-    /// --geometry quads`.
+    /// "Limit quads"), for about twice the memory of Embree's on a huge cage. The preview's
+    /// default where the quads fit (preview::LimitQuadsFit); `texcache render --geometry quads`.
     bool tessellateAll = false;
     /// Limit derivatives (shading normals, the cache's surface queries) of the faces off the
     /// regular fast path from OpenSubdiv's patches; false: from rtcInterpolate, Embree's own
