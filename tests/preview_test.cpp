@@ -900,12 +900,12 @@ TEST(Preview, StageEditsShowNoStaleShading) {
     }
 }
 
-// The preview traces every mesh as quads on its limit surface by default (limitQuads), the
+// The preview traces every mesh as quads on its limit surface where they fit (limitQuads), the
 // surface Embree's subdivision geometry renders: the car's stage frames (4 frames, 48x27) with
 // either differ by under a hundredth of what two seeds on one geometry differ by (3x3 block
-// means; 1e-4 of it measured: the quads' hits are Embree's within 1e-6, and only the odd ray
-// near a grid's diagonal goes elsewhere). The panel's statistics say which geometry a frame
-// traced.
+// means; 1e-4 of it measured: the quads' hits are Embree's within 6e-5 of the car's diagonal,
+// and only the odd ray lands on another face). The panel's statistics say which geometry a
+// frame traced.
 TEST(Preview, LimitQuadsShowWhatEmbreesSubdivisionShows) {
     using namespace texcache::preview;
     std::vector<std::string> warnings;

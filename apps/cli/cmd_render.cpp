@@ -200,8 +200,8 @@ void AddRenderCommand(CLI::App& app, int& exitCode) {
     cmd->add_option("--geometry", args->geometry,
                     "subdivision: Embree's subdivision surfaces (grids built per face); quads: "
                     "every mesh as quads on its limit surface, tessellated up front at the "
-                    "tessellation rate (the same surface; faster rays and scene builds on "
-                    "irregular cages, more memory on large ones)")
+                    "tessellation rate (the same surface; cheaper rays on irregular cages, about "
+                    "twice the memory on huge ones)")
         ->check(CLI::IsMember({"subdivision", "quads"}))
         ->capture_default_str();
 

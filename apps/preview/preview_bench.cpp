@@ -351,7 +351,9 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     std::printf("stage passes: %.1f ms a frame (goal < 25) %s\n", t.stageWall / timed,
                 t.stageWall / timed < 25.0 ? "ok" : "MISSED");
     std::printf("wrote %s_stage_{ref,texture,grid,hit%s}.png\n", b.out.c_str(),
-                b.bothGeometries ? ",texture_subdivision,grid_subdivision" : "");
+                !b.bothGeometries                   ? ""
+                : s.fbCache == TextureSamples::Grid ? ",grid_subdivision"
+                                                    : ",texture_subdivision");
     return 0;
 }
 
