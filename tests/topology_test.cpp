@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <random>
 #include <set>
@@ -136,6 +137,42 @@ TEST_P(TopologyTest, OneRefinerBuildsWhatTwoDid) {
             EXPECT_EQ(dv[0][k], dv[1][k]);
         }
     }
+}
+
+// The derivatives alone (a ray hit's evaluation) are Eval's bit for bit, holes included, on every
+// Ptex face at its corners, edges and inside: regular, boundary, single-crease, end-cap and n-gon
+// sub-face patches alike. Exact equality: the two share one code path, without the position.
+TEST_P(TopologyTest, DerivativesAloneAreEvalsBitForBit) {
+    const ControlCage cage = Cage(GetParam());
+    const LimitSurface surface(cage);
+    const PtexTopology topo(cage);
+    const float st[] = {0.0f, 0.25f, 0.5f, 0.999f, 1.0f};
+    int evaluated = 0;
+    for (int f = 0; f < topo.NumPtexFaces(); ++f)
+        for (float u : st)
+            for (float v : st) {
+                LimitPoint lp;
+                float du[3], dv[3];
+                const bool full = surface.Eval(f, u, v, &lp);
+                ASSERT_EQ(surface.EvalDerivatives(f, u, v, du, dv), full)
+                    << "face " << f << " (" << u << "," << v << ")";
+                if (!full) continue;  // a hole
+                ++evaluated;
+                for (int k = 0; k < 3; ++k) {
+                    ASSERT_TRUE(std::isfinite(du[k]) && std::isfinite(dv[k]));
+                    ASSERT_EQ(std::memcmp(&du[k], &lp.dPdu[k], sizeof(float)), 0)
+                        << "face " << f << " (" << u << "," << v << ") dPdu[" << k << "]";
+                    ASSERT_EQ(std::memcmp(&dv[k], &lp.dPdv[k], sizeof(float)), 0)
+                        << "face " << f << " (" << u << "," << v << ") dPdv[" << k << "]";
+                }
+            }
+    EXPECT_GT(evaluated, 0);
+    // Out of range: false from both, nothing written.
+    float du[3] = {7.0f, 7.0f, 7.0f}, dv[3] = {7.0f, 7.0f, 7.0f};
+    EXPECT_FALSE(surface.EvalDerivatives(-1, 0.5f, 0.5f, du, dv));
+    EXPECT_FALSE(surface.EvalDerivatives(topo.NumPtexFaces(), 0.5f, 0.5f, du, dv));
+    EXPECT_EQ(du[0], 7.0f);
+    EXPECT_EQ(dv[2], 7.0f);
 }
 
 // What the topology of a large cage keeps: the Ptex adjacency is two packed words per Ptex edge

@@ -1,13 +1,15 @@
 // SPDX-License-Identifier: Apache-2.0
 // Google Benchmark of RenderScene::Interact, the shading point made of each ray hit (limit
 // derivatives, shading normal, Ptex location, footprint), per camera hit: on the default scene
-// and on bundled cages with extraordinary vertices, n-gons, creases and boundaries. The hits are
+// and on bundled cages with extraordinary vertices, n-gons, creases and boundaries, on Embree's
+// subdivision surfaces and on the limit quads the preview traces (InteractQuads). The hits are
 // traced once in the fixture; the loop times Interact alone.
 #include <benchmark/benchmark.h>
 
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "renderer/scene/camera.h"
@@ -29,11 +31,12 @@ struct Hits {
     Scene scene;
     std::unique_ptr<RenderScene> rs;
     std::vector<CameraHit> hits;
-    explicit Hits(const std::string& file) {
+    Hits(const std::string& file, bool quads) {
         const std::string dir = TEXCACHE_SOURCE_DIR "/scenes/";
         scene = LoadSceneFile(dir + file, "", nullptr);
         RenderSceneOptions o;
         o.needEnvironment = false;
+        o.tessellateAll = quads;
         rs = std::make_unique<RenderScene>(scene, o);
         constexpr int kW = 320, kH = 180;
         const CameraModel cam(scene.camera, 0.0f, kW, kH);
@@ -46,15 +49,15 @@ struct Hits {
     }
 };
 
-Hits& Shared(const std::string& file) {
-    static std::map<std::string, std::unique_ptr<Hits>> scenes;
-    auto& h = scenes[file];
-    if (!h) h = std::make_unique<Hits>(file);
+Hits& Shared(const std::string& file, bool quads) {
+    static std::map<std::pair<std::string, bool>, std::unique_ptr<Hits>> scenes;
+    auto& h = scenes[{file, quads}];
+    if (!h) h = std::make_unique<Hits>(file, quads);
     return *h;
 }
 
-void BM_Interact(benchmark::State& state, const std::string& file, bool withDiff) {
-    const Hits& h = Shared(file);
+void BM_Interact(benchmark::State& state, const std::string& file, bool withDiff, bool quads) {
+    const Hits& h = Shared(file, quads);
     if (h.hits.empty()) {
         state.SkipWithError("no camera hits");
         return;
@@ -83,8 +86,11 @@ const char* const kScenes[] = {"car.json",
 [[maybe_unused]] const bool kRegistered = [] {
     for (const char* file : kScenes) {
         const std::string name = std::string(file).substr(std::string(file).rfind('/') + 1);
-        benchmark::RegisterBenchmark(("Interact/" + name).c_str(), BM_Interact, file, false);
-        benchmark::RegisterBenchmark(("InteractDiff/" + name).c_str(), BM_Interact, file, true);
+        benchmark::RegisterBenchmark(("Interact/" + name).c_str(), BM_Interact, file, false, false);
+        benchmark::RegisterBenchmark(("InteractDiff/" + name).c_str(), BM_Interact, file, true,
+                                     false);
+        benchmark::RegisterBenchmark(("InteractQuads/" + name).c_str(), BM_Interact, file, false,
+                                     true);
     }
     return true;
 }();

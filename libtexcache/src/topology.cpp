@@ -474,6 +474,9 @@ struct LimitSurface::Impl {
     std::vector<SemiSharpCurve> creases;       // per sharpness of a single-crease patch
     std::vector<int16_t> patchCrease;          // per patch: index in creases, -1 (empty: none)
 
+    /// LimitSurface::Eval, and its derivatives alone when P is null.
+    bool Evaluate(int ptexFace, float u, float v, float P[3], float dPdu[3], float dPdv[3]) const;
+
     /// Basis weights of a single-crease patch (OpenSubdiv's CPU EvaluateBasis ignores the
     /// crease: its PatchParam carries the creased edge as a boundary bit, which it would treat
     /// as a boundary). The 16 points are a regular patch's, row-major in v.
@@ -598,38 +601,65 @@ size_t LimitSurface::Bytes() const {
 LimitSurface::LimitSurface(LimitSurface&&) noexcept = default;
 LimitSurface& LimitSurface::operator=(LimitSurface&&) noexcept = default;
 
-bool LimitSurface::Eval(int ptexFace, float u, float v, LimitPoint* out) const {
-    if (ptexFace < 0 || ptexFace >= int(impl_->nonQuadPtex.size())) return false;
-    const Far::PatchTable::PatchHandle* h = impl_->map->FindPatch(ptexFace, u, v);
+namespace {
+// Points as (x, y, z, 0) in one SSE register: x and y in one 8-byte load, z in a 4-byte one.
+inline __m128 LoadPoint(const std::array<float, 3>& p) {
+    const __m128 xy = _mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(p.data()));
+    return _mm_movelh_ps(xy, _mm_load_ss(p.data() + 2));
+}
+inline void StorePoint(__m128 v, float out[3]) {
+    alignas(16) float f[4];
+    _mm_store_ps(f, v);
+    out[0] = f[0], out[1] = f[1], out[2] = f[2];
+}
+}  // namespace
+
+// The position's sums only when `P` is given. Each sum is a multiply and an add per
+// control point in point order, lane by lane as the scalar loop did (no fused multiply-adds on
+// the baseline ISA): the same values bit for bit, three lanes at once.
+bool LimitSurface::Impl::Evaluate(int ptexFace, float u, float v, float P[3], float dPdu[3],
+                                  float dPdv[3]) const {
+    if (ptexFace < 0 || ptexFace >= int(nonQuadPtex.size())) return false;
+    const Far::PatchTable::PatchHandle* h = map->FindPatch(ptexFace, u, v);
     if (!h) return false;  // hole
     float wP[20], wDu[20], wDv[20];
-    const int crease = impl_->patchCrease.empty() ? -1 : impl_->patchCrease[size_t(h->patchIndex)];
+    const int crease = patchCrease.empty() ? -1 : patchCrease[size_t(h->patchIndex)];
     if (crease >= 0)
-        impl_->SingleCreaseWeights(impl_->patches->GetPatchParam(*h),
-                                   impl_->creases[size_t(crease)], u, v, wP, wDu, wDv);
+        SingleCreaseWeights(patches->GetPatchParam(*h), creases[size_t(crease)], u, v, wP, wDu,
+                            wDv);
     else
-        impl_->patches->EvaluateBasis(*h, u, v, wP, wDu, wDv);
-    Far::ConstIndexArray cvs = impl_->patches->GetPatchVertices(*h);
-    LimitPoint r{};
+        patches->EvaluateBasis(*h, u, v, wP, wDu, wDv);  // (OSD's boundary rule needs wP)
+    Far::ConstIndexArray cvs = patches->GetPatchVertices(*h);
+    __m128 sp = _mm_setzero_ps(), su = _mm_setzero_ps(), sv = _mm_setzero_ps();
     for (int i = 0; i < cvs.size(); ++i) {
-        const auto& p = impl_->points[cvs[i]];
-        for (int k = 0; k < 3; ++k) {
-            r.P[k] += wP[i] * p[k];
-            r.dPdu[k] += wDu[i] * p[k];
-            r.dPdv[k] += wDv[i] * p[k];
-        }
+        const __m128 p = LoadPoint(points[size_t(cvs[i])]);
+        if (P) sp = _mm_add_ps(sp, _mm_mul_ps(_mm_set1_ps(wP[i]), p));
+        su = _mm_add_ps(su, _mm_mul_ps(_mm_set1_ps(wDu[i]), p));
+        sv = _mm_add_ps(sv, _mm_mul_ps(_mm_set1_ps(wDv[i]), p));
     }
     // OSD 3.5 normalizes derivatives on n-gon sub-faces to a domain twice as large as the
     // sub-face's own (u,v) (measured against finite differences: ctest -R
     // OpenSubdivDerivativesMatchFiniteDifferences): bring them to the sub-face.
-    if (impl_->nonQuadPtex[ptexFace]) {
-        for (int k = 0; k < 3; ++k) {
-            r.dPdu[k] *= 0.5f;
-            r.dPdv[k] *= 0.5f;
-        }
+    if (nonQuadPtex[size_t(ptexFace)]) {
+        su = _mm_mul_ps(su, _mm_set1_ps(0.5f));
+        sv = _mm_mul_ps(sv, _mm_set1_ps(0.5f));
     }
+    if (P) StorePoint(sp, P);
+    StorePoint(su, dPdu);
+    StorePoint(sv, dPdv);
+    return true;
+}
+
+bool LimitSurface::Eval(int ptexFace, float u, float v, LimitPoint* out) const {
+    LimitPoint r{};
+    if (!impl_->Evaluate(ptexFace, u, v, r.P.data(), r.dPdu.data(), r.dPdv.data())) return false;
     *out = r;
     return true;
+}
+
+bool LimitSurface::EvalDerivatives(int ptexFace, float u, float v, float dPdu[3],
+                                   float dPdv[3]) const {
+    return impl_->Evaluate(ptexFace, u, v, nullptr, dPdu, dPdv);
 }
 
 }  // namespace texcache

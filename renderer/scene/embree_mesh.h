@@ -77,6 +77,7 @@ struct EmbreeMesh {
         }
         // OpenSubdiv's patches: the limit tessellation's evaluator, or the irregular faces'.
         auto patches = [&](const LimitSurface& surface) {
+            if (!P) return surface.EvalDerivatives(c.face, c.u, c.v, du, dv);
             LimitPoint p;
             if (!surface.Eval(c.face, c.u, c.v, &p)) return false;
             for (int k = 0; k < 3; ++k) {

@@ -219,6 +219,9 @@ public:
     /// Limit position and derivatives at (u,v) in [0,1]^2 of a Ptex face; derivatives are with
     /// respect to that face's own (u,v), also on n-gon sub-faces. False for holes/invalid faces.
     bool Eval(int ptexFace, float u, float v, LimitPoint* out) const;
+    /// Eval's derivatives alone (what a ray hit needs: its point comes from the ray), the same
+    /// values bit for bit, without the position's weights and sums.
+    bool EvalDerivatives(int ptexFace, float u, float v, float dPdu[3], float dPdv[3]) const;
     /// Bytes held (points, patch vertices and parameters; the patch map's tree estimated).
     size_t Bytes() const;
 
