@@ -276,6 +276,12 @@ size_t RegularPatches::Bytes() const {
 }
 
 namespace {
+// A point as (x, y, z, 0) in one SSE register: x and y in one 8-byte load (__m64 may alias the
+// floats), z in a 4-byte one.
+inline __m128 LoadPoint(const std::array<float, 3>& p) {
+    const __m128 xy = _mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(p.data()));
+    return _mm_movelh_ps(xy, _mm_load_ss(p.data() + 2));
+}
 // Uniform cubic B-spline basis and its derivative at t.
 inline void BSpline(float t, float w[4], float d[4]) {
     const float s = 1.0f - t, t2 = t * t, t3 = t2 * t;
@@ -298,12 +304,7 @@ void RegularPatches::Eval(int ptexFace, float u, float v, float P[3], float dPdu
     // as floats and read back as vectors, the points stall on store forwarding (perf puts most
     // of the evaluation on those reads).
     __m128 c[16];
-    for (int i = 0; i < 16; ++i) {
-        const float* p = positions_[size_t(idx[i])].data();
-        // __m64 may alias the floats; x and y in one 8-byte load, z in a 4-byte one.
-        const __m128 xy = _mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(p));
-        c[i] = _mm_movelh_ps(xy, _mm_load_ss(p + 2));
-    }
+    for (int i = 0; i < 16; ++i) c[i] = LoadPoint(positions_[size_t(idx[i])]);
     if (boundary) {
         // Boundary patches use phantom points mirrored across the boundary (OpenSubdiv's
         // B-spline boundary rule, P0 = 2 P1 - P2), substituted here in the transposed order of
@@ -602,11 +603,6 @@ LimitSurface::LimitSurface(LimitSurface&&) noexcept = default;
 LimitSurface& LimitSurface::operator=(LimitSurface&&) noexcept = default;
 
 namespace {
-// Points as (x, y, z, 0) in one SSE register: x and y in one 8-byte load, z in a 4-byte one.
-inline __m128 LoadPoint(const std::array<float, 3>& p) {
-    const __m128 xy = _mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(p.data()));
-    return _mm_movelh_ps(xy, _mm_load_ss(p.data() + 2));
-}
 inline void StorePoint(__m128 v, float out[3]) {
     alignas(16) float f[4];
     _mm_store_ps(f, v);
@@ -628,7 +624,7 @@ bool LimitSurface::Impl::Evaluate(int ptexFace, float u, float v, float P[3], fl
         SingleCreaseWeights(patches->GetPatchParam(*h), creases[size_t(crease)], u, v, wP, wDu,
                             wDv);
     else
-        patches->EvaluateBasis(*h, u, v, wP, wDu, wDv);  // (OSD's boundary rule needs wP)
+        patches->EvaluateBasis(*h, u, v, wP, wDu, wDv);  // wP too: OSD's boundary rule writes it
     Far::ConstIndexArray cvs = patches->GetPatchVertices(*h);
     __m128 sp = _mm_setzero_ps(), su = _mm_setzero_ps(), sv = _mm_setzero_ps();
     for (int i = 0; i < cvs.size(); ++i) {
