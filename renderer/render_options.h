@@ -213,6 +213,14 @@ struct RenderOptions {
     /// reads (screen::DenoiserSettings::indirectCones) and a frame-buffer file keeps. Off: the
     /// buffer stays empty, and no pixel spends a write or a cone sample on it.
     bool frameBufferCones = true;
+    /// Screen-space frame buffers: fill the shadow rays' blocker and light points
+    /// (FrameBuffers::blocker, prevBlocker, lightSample, prevLightSample: 48 bytes a pixel), which
+    /// the stage's shadow motion vectors read. Off: in a frame whose shadows stayed where they
+    /// were (FrameBuffers::shadowsStill, only the camera moved) the four stay empty and the
+    /// shadow rays ask only whether they are blocked; the stage's default visibility order takes
+    /// the traditional vectors there and reads none of them (Zeng's order needs them:
+    /// screen::DenoiserSettings::reliableVisibilityOrder). Frames where anything moved fill them.
+    bool frameBufferShadowPoints = true;
     /// Camera samples of pixels outside the projection of the scene's bounds are not traced:
     /// they miss (internal::Context::hitRect). The image is the same either way.
     bool cullMissingPixels = true;

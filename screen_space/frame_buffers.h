@@ -165,6 +165,8 @@ struct FrameBuffers {
 
     // Shadow motion vectors (Sec. 4.1): the shadow ray's blocker and light sample, now and moved
     // to the previous frame by their own objects / lights. NaN when the shadow ray was not blocked.
+    // Empty when shadowsStill and the stage's visibility order is VisibilityOrder::Svgf, which
+    // then takes the traditional vectors and reads none of them.
     std::vector<glm::vec3> blocker, prevBlocker;
     std::vector<glm::vec3> lightSample, prevLightSample;
 

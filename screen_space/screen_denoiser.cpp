@@ -271,7 +271,7 @@ const BrdfPreintegration& ScreenSpaceDenoiser::Brdf() {
 
 namespace {
 
-void CheckInputs(const FrameBuffers& f, Method m, Demodulation d) {
+void CheckInputs(const FrameBuffers& f, Method m, Demodulation d, VisibilityOrder order) {
     const std::string where = "ScreenSpaceDenoiser::Denoise";
     auto need = [&](size_t size, const char* buffer, const char* why) {
         if (size == 0)
@@ -289,8 +289,11 @@ void CheckInputs(const FrameBuffers& f, Method m, Demodulation d) {
     need(f.prevPosition.size(), "prevPosition", "motion vectors");
     need(f.prevNormal.size(), "prevNormal", "motion vectors");
     if (m != Method::Reliable) return;
-    need(f.prevBlocker.size(), "prevBlocker", "shadow motion vectors");
-    need(f.prevLightSample.size(), "prevLightSample", "shadow motion vectors");
+    // With the shadows where they were, the SVGF order takes the traditional vectors.
+    if (!f.shadowsStill || order != VisibilityOrder::Svgf) {
+        need(f.prevBlocker.size(), "prevBlocker", "shadow motion vectors");
+        need(f.prevLightSample.size(), "prevLightSample", "shadow motion vectors");
+    }
     if (!f.glossy.empty()) {
         need(f.glossyHit.size(), "glossyHit", "glossy motion vectors");
         need(f.prevGlossyHit.size(), "prevGlossyHit", "glossy motion vectors");
@@ -1049,7 +1052,7 @@ void ScreenSpaceDenoiser::Denoise(const FrameBuffers& frame, Method method,
     State& s = *s_;
     PassClock clock(&s.timings, &s.cpuTimings);
     frame.Validate("ScreenSpaceDenoiser::Denoise");
-    CheckInputs(frame, method, demodulation);
+    CheckInputs(frame, method, demodulation, s.set.reliableVisibilityOrder);
     if (frame.width != s.w || frame.height != s.h)
         s.Resize(frame.width, frame.height);
     else if (method != s.method || demodulation != s.demod)

@@ -557,7 +557,8 @@ TEST(FrameBuffers, SeveralSamplesPerPixel) {
 
 // Every buffer of `one` and `two` the same, bytes rather than values (NaN entries must match
 // too); with `cones` false, every one but the cones.
-void ExpectSameBuffers(const FrameBuffers& one, const FrameBuffers& two, bool cones = true) {
+void ExpectSameBuffers(const FrameBuffers& one, const FrameBuffers& two, bool cones = true,
+                       bool shadowPoints = true) {
     auto same = [](const auto& a, const auto& b, const char* name) {
         ASSERT_EQ(a.size(), b.size()) << name;
         // An empty buffer's data() may be null, which memcmp must not be given.
@@ -579,10 +580,12 @@ void ExpectSameBuffers(const FrameBuffers& one, const FrameBuffers& two, bool co
     same(one.objectId, two.objectId, "objectId");
     same(one.prevPosition, two.prevPosition, "prevPosition");
     same(one.prevNormal, two.prevNormal, "prevNormal");
-    same(one.blocker, two.blocker, "blocker");
-    same(one.prevBlocker, two.prevBlocker, "prevBlocker");
-    same(one.lightSample, two.lightSample, "lightSample");
-    same(one.prevLightSample, two.prevLightSample, "prevLightSample");
+    if (shadowPoints) {
+        same(one.blocker, two.blocker, "blocker");
+        same(one.prevBlocker, two.prevBlocker, "prevBlocker");
+        same(one.lightSample, two.lightSample, "lightSample");
+        same(one.prevLightSample, two.prevLightSample, "prevLightSample");
+    }
     same(one.glossyHit, two.glossyHit, "glossyHit");
     same(one.prevGlossyHit, two.prevGlossyHit, "prevGlossyHit");
     same(one.cachedVisibility, two.cachedVisibility, "cachedVisibility");
@@ -654,6 +657,52 @@ TEST(FrameBuffers, WithoutConesEveryOtherBufferIsTheSame) {
         EXPECT_TRUE(two.cones.empty());
         ExpectSameBuffers(one, two, /*cones=*/false);
     }
+}
+
+// Without shadow points (RenderOptions::frameBufferShadowPoints off, as the preview's stage
+// asks in its default visibility order): a frame where only the camera moved leaves the four
+// buffers empty, its shadow rays only asking whether they are blocked, and every other buffer is
+// the same bit for bit (visibility included: the same rays are blocked), per hit and from the
+// store. A frame where an object moves fills them as with the option on.
+TEST(FrameBuffers, WithoutShadowPointsStillShadowsKeepEveryOtherBuffer) {
+    Scene s = TestScene();
+    RenderScene rs(s, {});
+    RenderOptions o = FrameOptions(40, 30, 11);
+    o.spp = 2;
+    RenderOptions store = o;
+    store.texture.enabled = true;
+    store.texture.frameBufferSamples = TextureSamples::Hits;
+    for (const RenderOptions& with : {o, store}) {
+        RenderOptions without = with;
+        without.frameBufferShadowPoints = false;
+        FrameBuffers one, two;
+        RenderFrameBuffers(rs, with, -0.04f, &one);
+        RenderFrameBuffers(rs, without, -0.04f, &two);
+        ASSERT_TRUE(one.shadowsStill && two.shadowsStill);
+        int blocked = 0;
+        for (const glm::vec3& b : one.blocker) blocked += Finite(b);
+        EXPECT_GT(blocked, 0);  // the frame has shadows to leave out
+        for (const auto* v :
+             {&two.blocker, &two.prevBlocker, &two.lightSample, &two.prevLightSample})
+            EXPECT_TRUE(v->empty());
+        ExpectSameBuffers(one, two, /*cones=*/true, /*shadowPoints=*/false);
+        EXPECT_NO_THROW(two.Validate("test"));
+    }
+    Scene moving = TestScene();
+    Translate(&moving, 2, glm::vec3(0.5f, 0.0f, 0.0f));  // the occluder
+    RenderSceneOptions ro;
+    ro.frameTime = 0.5f;
+    RenderScene movingRs(moving, ro);
+    RenderOptions m = FrameOptions(40, 30, 11);
+    m.frameTime = 0.5f;
+    RenderOptions without = m;
+    without.frameBufferShadowPoints = false;
+    FrameBuffers one, two;
+    RenderFrameBuffers(movingRs, m, 0.45f, &one);
+    RenderFrameBuffers(movingRs, without, 0.45f, &two);
+    EXPECT_FALSE(two.shadowsStill);
+    EXPECT_EQ(two.prevBlocker.size(), two.NumPixels());
+    ExpectSameBuffers(one, two);
 }
 
 }  // namespace

@@ -460,14 +460,19 @@ TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesWhereNoShadowMoves) {
 // the traditional vectors as the shadow vectors instead of computing eq. 3's: in SVGF order the
 // frames must come out as they do with eq. 3's vectors (the test above: they land on the
 // traditional ones), the image and the visibility within 1e-6 over 8 frames of the same
-// camera flight (measured 0), and the shadow vectors it reports are the traditional ones.
+// camera flight (measured 0), and the shadow vectors it reports are the traditional ones. The
+// same holds without the shadow points, which such a frame may leave out
+// (RenderOptions::frameBufferShadowPoints); Zeng's order, which reads them, refuses the frame.
 TEST(ScreenSpaceTemporal, StillShadowsTakeTheTraditionalVectors) {
     SynthScene sc = FullScene(96, 64);
     sc.lightVelocity = glm::vec3(0.0f);
     for (SynthObject& o : sc.objects) o.velocity = glm::vec3(0.0f);
     sc.eyeVelocity = glm::vec3(0.06f, 0.0f, -0.04f);
     ScreenSpaceDenoiser computed(DenoiserSettings{}, SharedBrdf()),
-        still(DenoiserSettings{}, SharedBrdf());
+        still(DenoiserSettings{}, SharedBrdf()), withoutPoints(DenoiserSettings{}, SharedBrdf());
+    DenoiserSettings zengOrder;
+    zengOrder.reliableVisibilityOrder = VisibilityOrder::Zeng;
+    ScreenSpaceDenoiser zeng(zengOrder, SharedBrdf());
     float worst = 0.0f;
     int shadowed = 0;
     for (int fr = 0; fr < 8; ++fr) {
@@ -476,13 +481,25 @@ TEST(ScreenSpaceTemporal, StillShadowsTakeTheTraditionalVectors) {
         const std::vector<glm::vec3> a = computed.Denoise(f, Method::Reliable, Demodulation::On);
         f.shadowsStill = true;
         const std::vector<glm::vec3> b = still.Denoise(f, Method::Reliable, Demodulation::On);
+        for (auto* v : {&f.blocker, &f.prevBlocker, &f.lightSample, &f.prevLightSample}) v->clear();
+        const std::vector<glm::vec3> e =
+            withoutPoints.Denoise(f, Method::Reliable, Demodulation::On);
+        try {
+            zeng.Denoise(f, Method::Reliable, Demodulation::On);
+            ADD_FAILURE() << "Zeng's order denoised a frame without shadow points";
+        } catch (const InputError& err) {
+            EXPECT_NE(std::string(err.what()).find("prevBlocker"), std::string::npos) << err.what();
+        }
         for (size_t i = 0; i < a.size(); ++i)
             for (int c = 0; c < 3; ++c) {
                 ASSERT_TRUE(std::isfinite(b[i][c]));
                 worst = std::max(worst, std::fabs(a[i][c] - b[i][c]));
+                worst = std::max(worst, std::fabs(a[i][c] - e[i][c]));
             }
-        const std::vector<float> va = computed.Visibility(), vb = still.Visibility();
-        for (size_t i = 0; i < va.size(); ++i) worst = std::max(worst, std::fabs(va[i] - vb[i]));
+        const std::vector<float> va = computed.Visibility(), vb = still.Visibility(),
+                                 ve = withoutPoints.Visibility();
+        for (size_t i = 0; i < va.size(); ++i)
+            worst = std::max({worst, std::fabs(va[i] - vb[i]), std::fabs(va[i] - ve[i])});
         if (fr == 0) continue;
         const std::vector<glm::vec2> trad = still.LastMotion(MotionKind::Traditional),
                                      shadow = still.LastMotion(MotionKind::Shadow);

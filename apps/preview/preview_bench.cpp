@@ -143,6 +143,8 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     base.progress = false;
     // As the preview: cones only for a stage that reads them.
     base.frameBufferCones = StageSettingsFor(s.height).indirectCones;
+    base.frameBufferShadowPoints =
+        StageSettingsFor(s.height).reliableVisibilityOrder == screen::VisibilityOrder::Zeng;
 
     setView(n);
     RenderOptions refOpt = base;

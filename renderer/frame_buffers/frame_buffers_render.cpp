@@ -800,12 +800,13 @@ void ClearPixel(screen::FrameBuffers& fb, size_t p) {
 /// without any: visible, NaN points).
 void WriteShadowBuffers(screen::FrameBuffers& fb, size_t p, const PixelShadow& sh) {
     fb.visibility[p] = sh.weightSum > 0.0f ? sh.visibleWeightSum / sh.weightSum : 1.0f;
+    fb.emitted[p] += sh.delta;
+    if (fb.blocker.empty()) return;  // no shadow points asked for (frameBufferShadowPoints)
     // NaN unless a sample was blocked (the ratio can be < 1 without).
     fb.blocker[p] = sh.blocker;
     fb.prevBlocker[p] = sh.prevBlocker;
     fb.lightSample[p] = sh.light;
     fb.prevLightSample[p] = sh.prevLight;
-    fb.emitted[p] += sh.delta;
 }
 
 /// Every buffer of pixel (x, y) from its camera ray and hit but the shadow rays' (see
@@ -1098,18 +1099,27 @@ void RenderTile(const Context& c, const FrameLights& lights, const FrameMotion& 
         rays.shadow += d.size();
     }
 
-    // In queue order: a pixel's samples finish in their order, as if traced one by one.
+    // In queue order: a pixel's samples finish in their order, as if traced one by one. Without
+    // shadow points only whether a ray is blocked is asked: Embree stops at any hit.
     Ray packet[16];
     Hit hits[16];
     bool blocked[16];
     const size_t ns = ts.shadows.size();
+    const bool points = !fb.blocker.empty();
     for (size_t i = 0; i < ns; i += 16) {
         const int m = int(std::min<size_t>(16, ns - i));
         for (int j = 0; j < m; ++j) packet[j] = ts.shadows[i + size_t(j)].ray;
-        c.rs.Intersect16(packet, m, hits, blocked);
+        if (points)
+            c.rs.Intersect16(packet, m, hits, blocked);
+        else
+            c.rs.Occluded16(packet, m, blocked);
         for (int j = 0; j < m; ++j) {
             const PendingShadow& s = ts.shadows[i + size_t(j)];
-            FinishShadow(motion, s, blocked[j], hits[j], ts.shadow[s.pixel]);
+            PixelShadow& sh = ts.shadow[s.pixel];
+            if (points)
+                FinishShadow(motion, s, blocked[j], hits[j], sh);
+            else if (!blocked[j])
+                sh.visibleWeightSum += s.w;
         }
     }
     rays.shadow += ns;
@@ -1284,14 +1294,20 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     // Sized only: every pixel writes all of its entries (ClearPixel), so a FrameBuffers reused
     // across frames is neither cleared nor reallocated.
     for (auto* v : {&fb.emitted, &fb.shading, &fb.indirect, &fb.position, &fb.normal, &fb.albedo,
-                    &fb.specular, &fb.prevPosition, &fb.prevNormal, &fb.blocker, &fb.prevBlocker,
-                    &fb.lightSample, &fb.prevLightSample})
+                    &fb.specular, &fb.prevPosition, &fb.prevNormal})
         v->resize(n);
     for (auto* v : {&fb.visibility, &fb.depth, &fb.roughness}) v->resize(n);
     fb.objectId.resize(n);
     // Whether only the camera moved since prevTime: the stage's shadow vectors are then its
     // traditional ones.
     fb.shadowsStill = !rs.scene().MovesBetween(prevTime, opt.frameTime);
+    // The shadow rays' blocker and light points, unless the frame's shadows stayed where they
+    // were and the caller's stage takes the traditional vectors there
+    // (RenderOptions::frameBufferShadowPoints): then the shadow rays only ask whether they are
+    // blocked.
+    const bool shadowPoints = opt.frameBufferShadowPoints || !fb.shadowsStill;
+    for (auto* v : {&fb.blocker, &fb.prevBlocker, &fb.lightSample, &fb.prevLightSample})
+        v->resize(shadowPoints ? n : 0);
     // Only what the scene has: without a GGX material `glossy` and its hits stay empty, and the
     // stage skips that component (its motion vectors, history and a-trous channels: 17% of the
     // stage's CPU time on anim_shadow at 640x360, `texcache preview --bench --denoise reliable`).

@@ -68,7 +68,9 @@
 //   environment) get the point 1e4 scene extents from the blocker along the light direction.
 //   prevBlocker / prevLightSample: moved to `prevTime` by the blocker's object (or light) and by
 //   the light's keyframes (an emissive object's: its object's; distant lights: the direction
-//   rotated; the environment does not move).
+//   rotated; the environment does not move). All four are left empty, and the shadow rays
+//   traced as occlusion rays, when the frame's shadows did not move (shadowsStill) and
+//   RenderOptions::frameBufferShadowPoints is off.
 // * glossy: GGX materials only (0 elsewhere; empty, with glossyHit and prevGlossyHit, when the
 //   scene has no GGX material): the specular lobe's visible-normal-sampled ray,
 //   path-traced below (light hit directly MIS-weighted, see above), traced with probability the

@@ -600,6 +600,9 @@ void ProgressiveRenderer::Run() {
                 opt.frameTime = frameTime;
                 opt.progress = false;
                 opt.frameBufferCones = ds.indirectCones;  // only the stage's cone path reads them
+                // Only Zeng's visibility order reads the shadow points while shadows stay put.
+                opt.frameBufferShadowPoints =
+                    ds.reliableVisibilityOrder == screen::VisibilityOrder::Zeng;
                 opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
                 // The cache from frame to frame: a part of it re-shaded, a still view's averaged.
