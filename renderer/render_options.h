@@ -221,6 +221,11 @@ struct RenderOptions {
     /// the traditional vectors there and reads none of them (Zeng's order needs them:
     /// screen::DenoiserSettings::reliableVisibilityOrder). Frames where anything moved fill them.
     bool frameBufferShadowPoints = true;
+    /// Screen-space frame buffers: fill prevPosition, prevNormal and prevGlossyHit in a frame
+    /// where only the camera moved (FrameBuffers::shadowsStill), where each is its current
+    /// buffer. Off: they stay empty there, and the stage reads the current buffers in their place
+    /// (FrameBuffers::PrevPositionPlane); frames where anything moved fill them.
+    bool frameBufferPrevPoints = true;
     /// Camera samples of pixels outside the projection of the scene's bounds are not traced:
     /// they miss (internal::Context::hitRect). The image is the same either way.
     bool cullMissingPixels = true;

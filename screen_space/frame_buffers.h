@@ -160,6 +160,8 @@ struct FrameBuffers {
     std::vector<int32_t> objectId;    ///< scene object (-1: background)
 
     // Traditional motion (Zeng eq. 1): the primary hit moved to the previous frame by its object.
+    // With shadowsStill (nothing but the camera moved) both may be empty: each is then the
+    // current frame's (PrevPositionPlane, PrevNormalPlane), as is prevGlossyHit.
     std::vector<glm::vec3> prevPosition;  ///< T^-1 s_i, world, previous frame
     std::vector<glm::vec3> prevNormal;    ///< its normal in the previous frame
 
@@ -179,6 +181,18 @@ struct FrameBuffers {
     std::vector<glm::vec3> cones;
 
     size_t NumPixels() const { return size_t(width) * size_t(height); }
+    /// prevPosition, or position where it was left empty (shadowsStill: nothing moved).
+    const std::vector<glm::vec3>& PrevPositionPlane() const {
+        return prevPosition.empty() ? position : prevPosition;
+    }
+    /// prevNormal, or normal where it was left empty.
+    const std::vector<glm::vec3>& PrevNormalPlane() const {
+        return prevNormal.empty() ? normal : prevNormal;
+    }
+    /// prevGlossyHit, or glossyHit where it was left empty.
+    const std::vector<glm::vec3>& PrevGlossyHitPlane() const {
+        return prevGlossyHit.empty() ? glossyHit : prevGlossyHit;
+    }
     /// The composed image: emitted + shading * visibility + glossy + indirect.
     std::vector<glm::vec3> Compose() const;
     /// Throws InputError naming the buffer when a non-empty buffer has the wrong size, a required

@@ -170,8 +170,8 @@ void TraditionalMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame
     ForRows(h, [&](int y) {
         TradRowArgs a;
         a.w = w, a.h = h, a.stride = int(pg.depth.Stride());
-        a.pp = &f.prevPosition[size_t(y) * size_t(w)].x;
-        a.pn = &f.prevNormal[size_t(y) * size_t(w)].x;
+        a.pp = &f.PrevPositionPlane()[size_t(y) * size_t(w)].x;
+        a.pn = &f.PrevNormalPlane()[size_t(y) * size_t(w)].x;
         a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
         a.gx = pg.px.Base(), a.gy = pg.py.Base(), a.gz = pg.pz.Base();
         a.gnx = pg.nx.Base(), a.gny = pg.ny.Base(), a.gnz = pg.nz.Base();
@@ -469,7 +469,7 @@ void ShadowMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& pre
         const size_t row = size_t(y) * size_t(w);
         a.w = w, a.h = h, a.stride = int(pg.depth.Stride()), a.y = y;
         a.pb = &f.prevBlocker[row].x, a.pl = &f.prevLightSample[row].x;
-        a.pp = &f.prevPosition[row].x, a.pn = &f.prevNormal[row].x;
+        a.pp = &f.PrevPositionPlane()[row].x, a.pn = &f.PrevNormalPlane()[row].x;
         a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
         a.gx = pg.px.Base(), a.gy = pg.py.Base(), a.gz = pg.pz.Base();
         a.gid = pg.objectId.Base();
@@ -498,7 +498,7 @@ void ShadowMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& pre
         a.w = w, a.h = h, a.stride = int(pg.depth.Stride()), a.y = y;
         a.cnt = scratch[0].Row(y), a.sdx = scratch[1].Row(y), a.sdy = scratch[2].Row(y);
         a.sal = scratch[3].Row(y);
-        a.pp = &f.prevPosition[row].x, a.pn = &f.prevNormal[row].x;
+        a.pp = &f.PrevPositionPlane()[row].x, a.pn = &f.PrevNormalPlane()[row].x;
         a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
         a.gx = pg.px.Base(), a.gy = pg.py.Base(), a.gz = pg.pz.Base();
         a.gid = pg.objectId.Base();
@@ -690,8 +690,8 @@ void GlossyMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& pre
         GlossyRowArgs a;
         const size_t row = size_t(y) * size_t(w);
         a.w = w, a.h = h, a.stride = int(pg.depth.Stride()), a.y = y;
-        a.phg = &f.prevGlossyHit[row].x, a.hg = &f.glossyHit[row].x;
-        a.pp = &f.prevPosition[row].x, a.pn = &f.prevNormal[row].x;
+        a.phg = &f.PrevGlossyHitPlane()[row].x, a.hg = &f.glossyHit[row].x;
+        a.pp = &f.PrevPositionPlane()[row].x, a.pn = &f.PrevNormalPlane()[row].x;
         a.rough = &f.roughness[row];
         a.valid = cur.valid.Row(y), a.id = cur.objectId.Row(y);
         a.cx = cur.px.Row(y), a.cy = cur.py.Row(y), a.cz = cur.pz.Row(y);
@@ -801,7 +801,7 @@ void OcclusionMotion(const FrameBuffers& f, const Guides& cur, const PrevFrame& 
                 }
                 if (slot < 0) continue;
                 const size_t i = size_t(y) * size_t(w) + size_t(x);
-                const glm::vec3 p = f.prevPosition[i], c = f.position[i];
+                const glm::vec3 p = f.PrevPositionPlane()[i], c = f.position[i];
                 if (!Finite(p) || !Finite(c)) continue;
                 fits[size_t(slot)].Add(glm::dvec3(p) - origin, glm::dvec3(c) - origin);
             }

@@ -286,8 +286,11 @@ void CheckInputs(const FrameBuffers& f, Method m, Demodulation d, VisibilityOrde
         if (!f.indirect.empty()) need(f.albedo.size(), "albedo", "albedo demodulation");
     }
     if (m == Method::SpatialOnly) return;
-    need(f.prevPosition.size(), "prevPosition", "motion vectors");
-    need(f.prevNormal.size(), "prevNormal", "motion vectors");
+    // Left empty where nothing but the camera moved: the current frame's then.
+    if (!f.shadowsStill) {
+        need(f.prevPosition.size(), "prevPosition", "motion vectors");
+        need(f.prevNormal.size(), "prevNormal", "motion vectors");
+    }
     if (m != Method::Reliable) return;
     // With the shadows where they were, the SVGF order takes the traditional vectors.
     if (!f.shadowsStill || order != VisibilityOrder::Svgf) {
@@ -296,7 +299,7 @@ void CheckInputs(const FrameBuffers& f, Method m, Demodulation d, VisibilityOrde
     }
     if (!f.glossy.empty()) {
         need(f.glossyHit.size(), "glossyHit", "glossy motion vectors");
-        need(f.prevGlossyHit.size(), "prevGlossyHit", "glossy motion vectors");
+        if (!f.shadowsStill) need(f.prevGlossyHit.size(), "prevGlossyHit", "glossy motion vectors");
         need(f.roughness.size(), "roughness", "glossy motion vectors");
     }
     if (!f.indirect.empty() && !f.cones.empty())

@@ -163,6 +163,21 @@ TEST(FrameBuffers, ExrRoundTrip) {
     const std::vector<glm::vec3> c = fb.Compose();
     for (size_t p = 0; p < c.size(); ++p)
         for (int k = 0; k < 3; ++k) ASSERT_EQ(rgb.data[3 * p + k], c[p][k]);
+    // A frame where only the camera moved, rendered without its previous points
+    // (RenderOptions::frameBufferPrevPoints off), is written with the current ones in their
+    // place: the file reads back whole.
+    Scene still = TestScene();
+    RenderScene stillRs(still, {});
+    RenderOptions lean = FrameOptions(21, 13, 2);
+    lean.frameBufferPrevPoints = false;
+    FrameBuffers leanFb;
+    RenderFrameBuffers(stillRs, lean, -0.04f, &leanFb);
+    ASSERT_TRUE(leanFb.prevPosition.empty() && leanFb.shadowsStill);
+    WriteFrameBuffers(path, leanFb);
+    const FrameBuffers leanBack = ReadFrameBuffers(path);
+    ExpectSameBuffer(leanBack.prevPosition, leanFb.position, "prevPosition");
+    ExpectSameBuffer(leanBack.prevNormal, leanFb.normal, "prevNormal");
+    ExpectSameBuffer(leanBack.prevGlossyHit, leanFb.glossyHit, "prevGlossyHit");
 }
 
 // Bad input: a roughness texture that does not exist (scene file and key named), one that is not

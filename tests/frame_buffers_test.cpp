@@ -663,8 +663,11 @@ TEST(FrameBuffers, WithoutConesEveryOtherBufferIsTheSame) {
 // asks in its default visibility order): a frame where only the camera moved leaves the four
 // buffers empty, its shadow rays only asking whether they are blocked, and every other buffer is
 // the same bit for bit (visibility included: the same rays are blocked), per hit and from the
-// store. A frame where an object moves fills them as with the option on.
-TEST(FrameBuffers, WithoutShadowPointsStillShadowsKeepEveryOtherBuffer) {
+// store. Without previous points (frameBufferPrevPoints off) it leaves prevPosition, prevNormal
+// and prevGlossyHit empty, and the stage's planes for them are the current ones, which they
+// equal within 1e-5 of the scene's size. A frame where an object moves fills all of them as
+// with the options on.
+TEST(FrameBuffers, WithoutShadowAndPrevPointsStillFramesKeepEveryOtherBuffer) {
     Scene s = TestScene();
     RenderScene rs(s, {});
     RenderOptions o = FrameOptions(40, 30, 11);
@@ -672,9 +675,21 @@ TEST(FrameBuffers, WithoutShadowPointsStillShadowsKeepEveryOtherBuffer) {
     RenderOptions store = o;
     store.texture.enabled = true;
     store.texture.frameBufferSamples = TextureSamples::Hits;
+    auto near = [](const std::vector<glm::vec3>& a, const std::vector<glm::vec3>& b,
+                   const char* name) {
+        ASSERT_EQ(a.size(), b.size()) << name;
+        for (size_t i = 0; i < a.size(); ++i) {
+            if (!Finite(a[i])) {
+                EXPECT_TRUE(AllNaN(b[i])) << name << " " << i;
+                continue;
+            }
+            EXPECT_LE(glm::distance(a[i], b[i]), 1e-5f) << name << " " << i;
+        }
+    };
     for (const RenderOptions& with : {o, store}) {
         RenderOptions without = with;
         without.frameBufferShadowPoints = false;
+        without.frameBufferPrevPoints = false;
         FrameBuffers one, two;
         RenderFrameBuffers(rs, with, -0.04f, &one);
         RenderFrameBuffers(rs, without, -0.04f, &two);
@@ -682,10 +697,18 @@ TEST(FrameBuffers, WithoutShadowPointsStillShadowsKeepEveryOtherBuffer) {
         int blocked = 0;
         for (const glm::vec3& b : one.blocker) blocked += Finite(b);
         EXPECT_GT(blocked, 0);  // the frame has shadows to leave out
+        ASSERT_FALSE(one.glossyHit.empty());
         for (const auto* v :
-             {&two.blocker, &two.prevBlocker, &two.lightSample, &two.prevLightSample})
+             {&two.blocker, &two.prevBlocker, &two.lightSample, &two.prevLightSample,
+              &two.prevPosition, &two.prevNormal, &two.prevGlossyHit})
             EXPECT_TRUE(v->empty());
-        ExpectSameBuffers(one, two, /*cones=*/true, /*shadowPoints=*/false);
+        near(one.prevPosition, two.PrevPositionPlane(), "prevPosition");
+        near(one.prevNormal, two.PrevNormalPlane(), "prevNormal");
+        near(one.prevGlossyHit, two.PrevGlossyHitPlane(), "prevGlossyHit");
+        FrameBuffers expected = one;
+        expected.prevPosition.clear(), expected.prevNormal.clear();
+        expected.prevGlossyHit.clear();
+        ExpectSameBuffers(expected, two, /*cones=*/true, /*shadowPoints=*/false);
         EXPECT_NO_THROW(two.Validate("test"));
     }
     Scene moving = TestScene();
@@ -697,11 +720,13 @@ TEST(FrameBuffers, WithoutShadowPointsStillShadowsKeepEveryOtherBuffer) {
     m.frameTime = 0.5f;
     RenderOptions without = m;
     without.frameBufferShadowPoints = false;
+    without.frameBufferPrevPoints = false;
     FrameBuffers one, two;
     RenderFrameBuffers(movingRs, m, 0.45f, &one);
     RenderFrameBuffers(movingRs, without, 0.45f, &two);
     EXPECT_FALSE(two.shadowsStill);
     EXPECT_EQ(two.prevBlocker.size(), two.NumPixels());
+    EXPECT_EQ(two.prevPosition.size(), two.NumPixels());
     ExpectSameBuffers(one, two);
 }
 

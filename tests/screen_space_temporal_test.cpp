@@ -461,8 +461,9 @@ TEST(ScreenSpaceTemporal, SvgfOrderVisibilityIsTheBaselinesWhereNoShadowMoves) {
 // frames must come out as they do with eq. 3's vectors (the test above: they land on the
 // traditional ones), the image and the visibility within 1e-6 over 8 frames of the same
 // camera flight (measured 0), and the shadow vectors it reports are the traditional ones. The
-// same holds without the shadow points, which such a frame may leave out
-// (RenderOptions::frameBufferShadowPoints); Zeng's order, which reads them, refuses the frame.
+// same holds without the shadow points and the previous points, which such a frame may leave
+// out (RenderOptions::frameBufferShadowPoints, frameBufferPrevPoints: the previous points are
+// the current ones here); Zeng's order, which reads the shadow points, refuses the frame.
 TEST(ScreenSpaceTemporal, StillShadowsTakeTheTraditionalVectors) {
     SynthScene sc = FullScene(96, 64);
     sc.lightVelocity = glm::vec3(0.0f);
@@ -481,7 +482,9 @@ TEST(ScreenSpaceTemporal, StillShadowsTakeTheTraditionalVectors) {
         const std::vector<glm::vec3> a = computed.Denoise(f, Method::Reliable, Demodulation::On);
         f.shadowsStill = true;
         const std::vector<glm::vec3> b = still.Denoise(f, Method::Reliable, Demodulation::On);
-        for (auto* v : {&f.blocker, &f.prevBlocker, &f.lightSample, &f.prevLightSample}) v->clear();
+        for (auto* v : {&f.blocker, &f.prevBlocker, &f.lightSample, &f.prevLightSample,
+                        &f.prevPosition, &f.prevNormal, &f.prevGlossyHit})
+            v->clear();
         const std::vector<glm::vec3> e =
             withoutPoints.Denoise(f, Method::Reliable, Demodulation::On);
         try {

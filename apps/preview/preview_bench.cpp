@@ -145,6 +145,7 @@ int RunStageBench(const Scene& sceneIn, const PreviewSettings& s, const PreviewA
     base.frameBufferCones = StageSettingsFor(s.height).indirectCones;
     base.frameBufferShadowPoints =
         StageSettingsFor(s.height).reliableVisibilityOrder == screen::VisibilityOrder::Zeng;
+    base.frameBufferPrevPoints = false;
 
     setView(n);
     RenderOptions refOpt = base;

@@ -111,7 +111,17 @@ void WriteFrameBuffers(const std::string& path, const screen::FrameBuffers& fbIn
     if (!dir.empty() && !fs::is_directory(dir))
         throw InputError(
             path, "cannot write frame buffers: directory '" + dir.string() + "' does not exist");
-    const screen::FrameBuffers& fb = fbIn;
+    // A frame that left its previous points out (RenderOptions::frameBufferPrevPoints: nothing
+    // but the camera moved) is written with the current ones in their place, so that the file
+    // does not depend on how it was rendered.
+    screen::FrameBuffers filled;
+    const bool fill = fbIn.shadowsStill && fbIn.prevPosition.empty() && !fbIn.position.empty();
+    if (fill) {
+        filled = fbIn;
+        filled.prevPosition = filled.position, filled.prevNormal = filled.normal;
+        filled.prevGlossyHit = filled.glossyHit;
+    }
+    const screen::FrameBuffers& fb = fill ? filled : fbIn;
     std::vector<float> ids;
     const auto layers = Layers(fb, false, &ids);
     const std::vector<glm::vec3> beauty = fb.Compose();

@@ -779,7 +779,7 @@ void ClearPixel(screen::FrameBuffers& fb, size_t p) {
     if (!fb.glossy.empty()) {
         fb.glossy[p] = zero;
         fb.glossyHit[p] = kNaN3;
-        fb.prevGlossyHit[p] = kNaN3;
+        if (!fb.prevGlossyHit.empty()) fb.prevGlossyHit[p] = kNaN3;
     }
     fb.indirect[p] = zero;
     fb.position[p] = kNaN3;
@@ -789,8 +789,7 @@ void ClearPixel(screen::FrameBuffers& fb, size_t p) {
     fb.albedo[p] = zero;
     fb.specular[p] = zero;
     fb.objectId[p] = -1;
-    fb.prevPosition[p] = kNaN3;
-    fb.prevNormal[p] = kNaN3;
+    if (!fb.prevPosition.empty()) fb.prevPosition[p] = kNaN3, fb.prevNormal[p] = kNaN3;
     if (!fb.cones.empty())
         for (int k = 0; k < screen::kNumCones; ++k) fb.cones[p * screen::kNumCones + k] = kNaN3;
     if (!fb.cachedVisibility.empty()) fb.cachedVisibility[p] = kNaN;
@@ -834,8 +833,8 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
         fb.position[p] = P;
         fb.normal[p] = n;
         fb.depth[p] = hit.t;
-        fb.prevPosition[p] = motion.Point(hit, P);
-        fb.prevNormal[p] = motion.Normal(hit, n);
+        if (!fb.prevPosition.empty())
+            fb.prevPosition[p] = motion.Point(hit, P), fb.prevNormal[p] = motion.Normal(hit, n);
         return;
     }
     const Bsdf bsdf = MakeBsdf(c, si);
@@ -848,8 +847,8 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
     fb.albedo[p] = bsdf.DiffuseReflectance();
     fb.specular[p] = bsdf.HasSpecular() ? c.rs.Specular(si) : glm::vec3(0.0f);
     fb.objectId[p] = si.object;
-    fb.prevPosition[p] = motion.Point(hit, si.P);
-    fb.prevNormal[p] = motion.Normal(hit, si.N);
+    if (!fb.prevPosition.empty())
+        fb.prevPosition[p] = motion.Point(hit, si.P), fb.prevNormal[p] = motion.Normal(hit, si.N);
     if (c.opt.maxDepth < 1) return;  // the path tracer sees emission only
 
     const glm::vec3 wo = -ray.dir;
@@ -937,7 +936,10 @@ void ShadePixel(const Context& c, const FrameLights& lights, const FrameMotion& 
     fb.shading[p] = px.shadingSum * inv;
     if (bsdf.HasSpecular()) fb.glossy[p] = px.glossySum * inv;
     if (!cachedIndirect) fb.indirect[p] = bsdf.DiffuseReflectance() * px.diffuseSum * inv;
-    if (bsdf.HasSpecular()) fb.glossyHit[p] = px.glossyHit, fb.prevGlossyHit[p] = px.prevGlossyHit;
+    if (bsdf.HasSpecular()) {
+        fb.glossyHit[p] = px.glossyHit;
+        if (!fb.prevGlossyHit.empty()) fb.prevGlossyHit[p] = px.prevGlossyHit;
+    }
     if (px.hasCones && !fb.cones.empty())
         for (int k = 0; k < screen::kNumCones; ++k)
             fb.cones[p * screen::kNumCones + k] = px.coneSum[k] * inv;
@@ -1294,13 +1296,18 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     // Sized only: every pixel writes all of its entries (ClearPixel), so a FrameBuffers reused
     // across frames is neither cleared nor reallocated.
     for (auto* v : {&fb.emitted, &fb.shading, &fb.indirect, &fb.position, &fb.normal, &fb.albedo,
-                    &fb.specular, &fb.prevPosition, &fb.prevNormal})
+                    &fb.specular})
         v->resize(n);
     for (auto* v : {&fb.visibility, &fb.depth, &fb.roughness}) v->resize(n);
     fb.objectId.resize(n);
     // Whether only the camera moved since prevTime: the stage's shadow vectors are then its
     // traditional ones.
     fb.shadowsStill = !rs.scene().MovesBetween(prevTime, opt.frameTime);
+    // The points moved to the previous frame, unless nothing but the camera moved and the caller
+    // takes the current ones for them (RenderOptions::frameBufferPrevPoints).
+    const bool prevPoints = opt.frameBufferPrevPoints || !fb.shadowsStill;
+    fb.prevPosition.resize(prevPoints ? n : 0);
+    fb.prevNormal.resize(prevPoints ? n : 0);
     // The shadow rays' blocker and light points, unless the frame's shadows stayed where they
     // were and the caller's stage takes the traditional vectors there
     // (RenderOptions::frameBufferShadowPoints): then the shadow rays only ask whether they are
@@ -1316,7 +1323,8 @@ RenderStats RenderFrameBuffers(const RenderScene& rs, const RenderOptions& optio
     for (const Object& o : scene.objects)
         for (const int m : o.Materials())
             anyGlossy |= scene.materials[size_t(m)].type == Material::Type::GGX;
-    for (auto* v : {&fb.glossy, &fb.glossyHit, &fb.prevGlossyHit}) v->resize(anyGlossy ? n : 0);
+    for (auto* v : {&fb.glossy, &fb.glossyHit}) v->resize(anyGlossy ? n : 0);
+    fb.prevGlossyHit.resize(anyGlossy && prevPoints ? n : 0);
     fb.cones.resize(opt.frameBufferCones ? n * screen::kNumCones : 0);
     // Only when asked for and there is a cache to look it up in (ctx.tsc: texture shading).
     if (ctx.tsc && opt.texture.cachedVisibility && !ctx.tsc->options().cachedVisibility)

@@ -71,6 +71,8 @@
 //   rotated; the environment does not move). All four are left empty, and the shadow rays
 //   traced as occlusion rays, when the frame's shadows did not move (shadowsStill) and
 //   RenderOptions::frameBufferShadowPoints is off.
+// * prevPosition, prevNormal, prevGlossyHit: left empty in such a frame with
+//   RenderOptions::frameBufferPrevPoints off (each would be its current buffer).
 // * glossy: GGX materials only (0 elsewhere; empty, with glossyHit and prevGlossyHit, when the
 //   scene has no GGX material): the specular lobe's visible-normal-sampled ray,
 //   path-traced below (light hit directly MIS-weighted, see above), traced with probability the

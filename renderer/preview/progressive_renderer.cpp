@@ -603,6 +603,7 @@ void ProgressiveRenderer::Run() {
                 // Only Zeng's visibility order reads the shadow points while shadows stay put.
                 opt.frameBufferShadowPoints =
                     ds.reliableVisibilityOrder == screen::VisibilityOrder::Zeng;
+                opt.frameBufferPrevPoints = false;  // the stage reads the current ones instead
                 opt.texture = cache ? cache->options() : TextureOptionsOf(cur);
                 opt.texture.enabled = cur.textureSpace && cache != nullptr;
                 // The cache from frame to frame: a part of it re-shaded, a still view's averaged.
